@@ -1,0 +1,1 @@
+"""The `vstig` command line (installed as the `vstig_cli` package)."""

@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Installs the Debian packages that the real-peer tests use, when we are root and
+# they are missing. Elsewhere it says what is missing; those tests then skip with
+# the reason (or fail, under CI=true / VSTIG_REQUIRE_*).
+set -u
+want=()
+command -v gcc >/dev/null || want+=(gcc)
+command -v linux.uml >/dev/null || [ -x /usr/bin/linux.uml ] || want+=(user-mode-linux)
+command -v modprobe >/dev/null || [ -x /sbin/modprobe ] || want+=(kmod)
+command -v cansend >/dev/null || want+=(can-utils)
+command -v tshark >/dev/null || want+=(tshark)
+[ ${#want[@]} -eq 0 ] && exit 0
+if [ "$(id -u)" -ne 0 ]; then
+  echo "sysdeps: not root, cannot install: ${want[*]} (their tests will skip)" >&2
+  exit 0
+fi
+echo "sysdeps: installing ${want[*]}" >&2
+export DEBIAN_FRONTEND=noninteractive
+echo "wireshark-common wireshark-common/install-setuid boolean false" | debconf-set-selections 2>/dev/null || true
+apt-get update -qq >/dev/null 2>&1 || true
+apt-get install -y -qq --no-install-recommends "${want[@]}" >/dev/null 2>&1 \
+  || echo "sysdeps: apt-get could not install ${want[*]} (their tests will skip)" >&2
+exit 0

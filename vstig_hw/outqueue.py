@@ -1,0 +1,71 @@
+"""The outgoing queue: one pending message per key, newest wins, PUTs first.
+
+The paper keeps "only the most up-to-date message for a key" so that frequent
+reads cannot build a backlog. A replaced message keeps its place in line, so a
+key that changes every step still gets its turn instead of starving.
+
+This sits on the receive hot path, so it reads messages as their wire words
+(`msg[0]` is op<<15 | key, `msg[2]` the timestamp) rather than by property.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+from .timestamps import is_newer
+from .wire import KEY_MAX, Message
+
+_GET_BIT = 0x8000
+
+
+class OutQueue:
+    def __init__(self) -> None:
+        self._puts: OrderedDict[int, Message] = OrderedDict()
+        self._gets: OrderedDict[int, Message] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._puts) + len(self._gets)
+
+    def pending(self, key: int) -> Message | None:
+        return self._puts.get(key) or self._gets.get(key)
+
+    def push(self, msg: Message, resolved: bool = False) -> bool:
+        """Queue `msg` unless a newer one for its key is pending; True if queued.
+
+        Same timestamp: a PUT replaces a GET (it says at least as much), and a
+        conflict's `resolved` winner replaces whatever is pending, so the stale
+        loser is never sent.
+        """
+        head = msg[0]
+        key = head & KEY_MAX
+        is_get = head & _GET_BIT
+        puts = self._puts
+        pending = puts.get(key)
+        if pending is None:
+            pending = self._gets.get(key)
+        if pending is not None:
+            if msg[2] == pending[2]:
+                pending_is_get = pending[0] & _GET_BIT
+                if not (resolved or (pending_is_get and not is_get)):
+                    return False
+            elif not is_newer(msg[2], pending[2]):
+                return False
+            if pending[0] & _GET_BIT != is_get:
+                (self._gets if is_get == 0 else puts).pop(key)
+        (self._gets if is_get else puts)[key] = msg
+        return True
+
+    def drain(self, budget: int | None = None) -> list[Message]:
+        """Up to `budget` messages (all if None), PUTs before GETs, oldest first."""
+        if budget is None:
+            out = [*self._puts.values(), *self._gets.values()]
+            self._puts.clear()
+            self._gets.clear()
+            return out
+        if budget < 0:
+            raise ValueError(f"budget must be >= 0, got {budget}")
+        out = []
+        for queue in (self._puts, self._gets):
+            while queue and len(out) < budget:
+                out.append(queue.popitem(last=False)[1])
+        return out
