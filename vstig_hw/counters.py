@@ -1,0 +1,15 @@
+"""Named counters for everything dropped or moved: CRC failures, stale fragments...
+
+Every framing, transport and link owns one; `sniff` and `bridge` show them.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+
+class Counters(Counter[str]):
+    """A Counter of event names ("crc", "bad_length", "rx", ...) with a terse summary."""
+
+    def summary(self) -> str:
+        return " ".join(f"{name}={count}" for name, count in sorted(self.items()) if count) or "-"

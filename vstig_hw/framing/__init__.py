@@ -1,0 +1,1 @@
+"""Framings: each turns one kind of link unit into Messages and back."""

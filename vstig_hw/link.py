@@ -1,0 +1,68 @@
+"""A link: one transport plus one framing, the unit the gateway wires together."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
+
+from .counters import Counters
+from .framing.base import Framing
+from .transports.base import Transport
+from .wire import Message
+
+Unit = TypeVar("Unit")
+
+
+@dataclass(frozen=True, slots=True)
+class Heard:
+    """One message received on a link, with when and (where the medium tells) from whom."""
+
+    message: Message
+    link: str
+    t: float
+    sender: int | None = None
+
+
+class Link(Generic[Unit]):
+    def __init__(self, name: str, transport: Transport[Unit], framing: Framing[Unit]) -> None:
+        self.name = name
+        self.transport = transport
+        self.framing = framing
+        self.counters = Counters()
+
+    def open(self) -> None:
+        self.transport.open()
+
+    def close(self) -> None:
+        self.transport.close()
+
+    def send(self, msg: Message) -> None:
+        for unit in self.framing.encode(msg):
+            self.transport.write(unit)
+        self.counters["out"] += 1
+
+    def receive(self, timeout: float) -> list[Heard]:
+        """Messages completed within `timeout` seconds."""
+        heard: list[Heard] = []
+        for unit in self.transport.read(timeout):
+            now = time.time()
+            sender = self.sender_of(unit)
+            heard.extend(Heard(msg, self.name, now, sender) for msg in self.framing.feed(unit))
+        self.counters["in"] += len(heard)
+        return heard
+
+    def sender_of(self, unit: Any) -> int | None:
+        """The transmitting node, where the medium names it (CAN IDs do); None otherwise."""
+        sender = getattr(self.framing, "sender_of", None)
+        return sender(unit) if sender else None
+
+    def tick(self) -> None:
+        self.framing.tick()
+
+    def stats(self) -> Counters:
+        """in/out plus the framing's drops and the transport's counters, in one place."""
+        merged = Counters(self.counters)
+        merged.update({f"drop_{reason}": n for reason, n in self.framing.drops.items()})
+        merged.update(self.transport.counters)
+        return merged

@@ -1,0 +1,1 @@
+"""Transports: thin owners of devices (pyserial ports, python-can buses)."""
