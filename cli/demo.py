@@ -14,7 +14,7 @@ from vstig_hw.engine import larger_value_wins
 @click.option("--robots", default=10, show_default=True, type=click.IntRange(2, 1000))
 @click.option("--drop", default=0.5, show_default=True, type=click.FloatRange(0, 0.99), help="drop probability")
 @click.option("--seed", default=1, show_default=True, type=int)
-def demo(robots: int, drop: float, seed: int) -> None:
+def command(robots: int, drop: float, seed: int) -> None:
     """Fully connected robots agree on the highest id (the paper's task)."""
     rng = random.Random(seed)
     swarm = [Stigmergy(robot_id, onconflict=larger_value_wins) for robot_id in range(1, robots + 1)]
