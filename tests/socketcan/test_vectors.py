@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import pytest
+from can_vectors import FrameVector, load
 
 from vstig_hw.framing.can import CanFraming
-
-from can_vectors import FrameVector, load
 
 VECTORS = load()
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import can
 import pytest
 from hypothesis import given, settings
@@ -30,13 +32,13 @@ def test_defaults_and_bad_parameters_name_the_input() -> None:
         CanIdScheme(base=0x100)
     with pytest.raises(ValueError, match="no stigmergy field"):
         CanIdScheme(stigmergy=1)
-    with pytest.raises(ValueError, match="bits 28..25"):
+    with pytest.raises(ValueError, match=re.escape("bits 28..25")):
         CanIdScheme(extended=True, base=0x18000001)
-    with pytest.raises(ValueError, match="stigmergy must be 0..255"):
+    with pytest.raises(ValueError, match=re.escape("stigmergy must be 0..255")):
         CanIdScheme(extended=True, stigmergy=256)
-    with pytest.raises(ValueError, match="11-bit CAN bus must be a node id in 0..255, got 256"):
+    with pytest.raises(ValueError, match=re.escape("11-bit CAN bus must be a node id in 0..255, got 256")):
         CanFraming(CanIdScheme(), sender=256)
-    with pytest.raises(ValueError, match="0..65535"):
+    with pytest.raises(ValueError, match=re.escape("0..65535")):
         CanFraming(CanIdScheme(extended=True), sender=-1)
 
 
