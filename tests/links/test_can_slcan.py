@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import queue
+import select
 import threading
 import time
 from collections.abc import Iterator
@@ -27,16 +28,20 @@ class SlcanAdapter:
         self.path = os.ttyname(slave)
         self._slave = slave  # kept open so the pty survives until python-can opens it
         self.commands: queue.Queue[str] = queue.Queue()  # every line the host wrote
-        self._stop = threading.Event()
+        # Closing an fd does not wake a thread blocked reading it: unplug() wakes it through this pipe.
+        self._wake_r, self._wake_w = os.pipe()
         self._thread = threading.Thread(target=self._serve, daemon=True)
         self._thread.start()
 
     def _serve(self) -> None:
         pending = b""
-        while not self._stop.is_set():
+        while True:
+            readable, _, _ = select.select([self.master, self._wake_r], [], [])
+            if self._wake_r in readable:
+                return
             try:
                 chunk = os.read(self.master, 4096)
-            except OSError:  # the host side closed, or we did
+            except OSError:  # the host side closed
                 return
             pending += chunk
             *lines, pending = pending.split(b"\r")
@@ -65,18 +70,18 @@ class SlcanAdapter:
         raise AssertionError("the host sent no frame within the deadline")
 
     def unplug(self) -> None:
-        self._stop.set()
-        os.close(self.master)
-        os.close(self._slave)
-        self._thread.join(timeout=10)
+        os.write(self._wake_w, b"x")
+        self._thread.join(timeout=20)
+        assert not self._thread.is_alive(), "the adapter thread did not stop"
+        for fd in (self.master, self._slave, self._wake_r, self._wake_w):
+            os.close(fd)
 
 
 @pytest.fixture
 def adapter() -> Iterator[SlcanAdapter]:
     adapter = SlcanAdapter()
     yield adapter
-    if adapter._thread.is_alive():
-        adapter.unplug()
+    adapter.unplug()
 
 
 def _receive_until(link: Link[can.Message], want: int, deadline_s: float = 20.0) -> list[Message]:
