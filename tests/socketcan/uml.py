@@ -103,8 +103,9 @@ def unavailable_reason() -> str | None:
         return "User-Mode Linux is not installed (apt-get install user-mode-linux; tests/sysdeps.sh does it as root)"
     if not any(UML_MODULES.glob("*/kernel/drivers/net/can/vcan.ko")):
         return f"no vcan.ko under {UML_MODULES} (the user-mode-linux package ships it)"
+    search = os.pathsep.join([os.environ.get("PATH", ""), "/usr/sbin", "/sbin", "/usr/bin"])  # as the guest's
     for tool in ("modprobe", "ip", "cansend", "candump"):
-        if shutil.which(tool) is None:
+        if shutil.which(tool, path=search) is None:
             return f"`{tool}` is missing (apt-get install kmod iproute2 can-utils)"
     if not os.access("/dev/shm", os.W_OK):
         return "/dev/shm is not writable: UML keeps the guest's memory there"
