@@ -114,7 +114,8 @@ def unavailable_reason() -> str | None:
 
 def _env_script() -> str:
     env = {k: v for k, v in os.environ.items() if k in _PASSED_ENV or k.startswith(_PASSED_PREFIXES)}
-    env.update(VSTIG_IN_UML="1", PYTHONDONTWRITEBYTECODE="1", PYTHONUNBUFFERED="1")
+    env.update(VSTIG_IN_UML="1", PYTHONDONTWRITEBYTECODE="1", PYTHONUNBUFFERED="1",
+               PATH=os.pathsep.join([env.get("PATH", ""), "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"]))
     return "".join(f"export {k}={shlex.quote(v)}\n" for k, v in sorted(env.items()))
 
 
