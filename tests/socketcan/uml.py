@@ -31,6 +31,7 @@ UML_MODULES = Path("/usr/lib/uml/modules")
 # Only these reach the guest (the kernel command line cannot carry an environment).
 _PASSED_ENV = ("PATH", "HOME", "LANG", "LC_ALL", "TMPDIR", "VIRTUAL_ENV", "CI")
 _PASSED_PREFIXES = ("VSTIG_", "HYPOTHESIS")
+_STANDARD_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
 
 _INIT = """#!/bin/sh
 # PID 1 inside User-Mode Linux, written by tests/socketcan/uml.py for one run.
@@ -115,7 +116,7 @@ def unavailable_reason() -> str | None:
 def _env_script() -> str:
     env = {k: v for k, v in os.environ.items() if k in _PASSED_ENV or k.startswith(_PASSED_PREFIXES)}
     env.update(VSTIG_IN_UML="1", PYTHONDONTWRITEBYTECODE="1", PYTHONUNBUFFERED="1",
-               PATH=os.pathsep.join([env.get("PATH", ""), "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"]))
+               PATH=os.pathsep.join([env.get("PATH", ""), _STANDARD_PATH]))
     return "".join(f"export {k}={shlex.quote(v)}\n" for k, v in sorted(env.items()))
 
 
