@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import random
@@ -37,10 +38,8 @@ def pty() -> Iterator[tuple[int, str]]:
     master, slave = os.openpty()
     yield master, os.ttyname(slave)
     for fd in (master, slave):
-        try:
+        with contextlib.suppress(OSError):  # the test closed it on purpose
             os.close(fd)
-        except OSError:
-            pass  # the test closed it on purpose
 
 
 def hear(link: Link[bytes], until: int, deadline_s: float = 10.0) -> list[Message]:
