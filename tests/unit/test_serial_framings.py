@@ -7,6 +7,7 @@ import random
 import zlib
 from functools import reduce
 from operator import xor
+from pathlib import Path
 
 import pytest
 
@@ -231,3 +232,29 @@ def test_epuck_delivery_ratio_is_one_minus_p_cubed(p: float, n: int) -> None:
     expected = (1 - p) ** 3
     tolerance = 5 * math.sqrt(expected * (1 - expected) / n) + 1e-9  # five binomial standard deviations
     assert abs(delivered / n - expected) <= tolerance, (delivered / n, expected)
+
+
+# --- firmware_spec/serial.md test vectors ---------------------------------------------------------------
+
+def test_spec_vectors_are_what_the_code_produces() -> None:
+    spec = (Path(__file__).resolve().parents[2] / "firmware_spec" / "serial.md").read_text()
+    spec = " ".join(spec.split())  # vectors may wrap across lines
+
+    def hexed(data: bytes) -> str:
+        return data.hex(" ")
+
+    put = Message(Op.PUT, 0x1234, 0xBEEF, 7, 42)
+    expected = [
+        hexed(encode(put)),
+        hexed(make_serial_framing("cobs8").encode(put)[0]),
+        *(hexed(w) for w in EpuckFragmenter().fragment(put)),
+        *(hexed(u) for u in make_serial_framing("epuck4").encode(put)),
+        hexed(make_serial_framing("kilobot").encode(put)[0]),
+        hexed(make_serial_framing("kilobot-ohc").encode(put)[0][:12]),
+        hexed(make_serial_framing("cobs8").encode(Message(Op.GET, 5, 0, 0, 0x0100))[0]),
+    ]
+    for vector in expected:
+        assert f"`{vector}`" in spec, vector
+    packet = make_serial_framing("kilobot-ohc").encode(put)[0]
+    assert f"then `{packet[131]:02x}`" in spec
+    assert f"0x{crc16_mcrf4xx(encode(put)):04X}" in spec and f"0x{zlib.crc32(encode(put)):08x}" in spec
