@@ -369,7 +369,8 @@ def cobs8_vectors() -> dict[str, object]:
         stream_case("code byte runs past the delimiter", bytes.fromhex("05112200"), [], {"cobs": 1}),
         stream_case("an epuck4 word (4-byte payload) is not a cobs8 frame", epuck_word, [], {"bad_length": 1}),
         stream_case("a kilobot payload (10 bytes) is not a cobs8 frame", kilobot_payload, [], {"bad_length": 1}),
-        stream_case("1 decoded byte: too short to hold a CRC", bytes.fromhex("024200"), [], {"bad_length": 1}),
+        stream_case("1 decoded byte: too short to hold a CRC fails it", bytes.fromhex("024200"), [], {"crc": 1}),
+        stream_case("0 decoded bytes fail the CRC", bytes.fromhex("0100"), [], {"crc": 1}),
         stream_case("CRC-valid empty payload", serial_frame(b""), [], {"bad_length": 1}),
         stream_case("64 non-zero bytes then a delimiter: a (bad) frame, not overlong",
                     b"\x41" * 64 + b"\x00", [], {"cobs": 1}),
@@ -420,9 +421,7 @@ def _deframe_model(stream: bytes, want: int) -> tuple[list[bytes], dict[str, int
         buf.clear()
         if decoded is None:
             drop("cobs")
-        elif len(decoded) < 2:
-            drop("bad_length")
-        elif crc16_mcrf4xx(decoded) != 0:
+        elif len(decoded) < 2 or crc16_mcrf4xx(decoded) != 0:
             drop("crc")
         elif len(decoded) - 2 != want:
             drop("bad_length")
@@ -485,22 +484,32 @@ def epuck4_vectors() -> dict[str, object]:
     cases = [
         ("in order", [w(wa[0]), w(wa[1]), w(wa[2])], [a], {}),
         ("any order", [w(wa[2]), w(wa[0]), w(wa[1])], [a], {}),
-        ("duplicates are ignored", [w(wa[0]), w(wa[0]), w(wa[1]), w(wa[1]), w(wa[2])], [a], {}),
+        ("identical duplicates are counted and ignored", [w(wa[0]), w(wa[0]), w(wa[1]), w(wa[1]), w(wa[2])],
+         [a], {"duplicate": 2}),
         ("a retransmission after delivery assembles again", [w(x) for x in wa + wa], [a, a], {}),
-        ("two messages interleaved", [w(wa[0]), w(wo[0]), w(wo[1]), w(wa[1]), w(wa[2]), w(wo[2])], [a, other],
-         {}),
+        ("two messages in different groups interleave", [w(wa[0]), w(wo[0]), w(wo[1]), w(wa[1]), w(wa[2]),
+                                                         w(wo[2])], [a, other], {}),
         ("index 3 is reserved", [w(reserved)], [], {"bad_index": 1}),
         ("a flipped check bit fails the check", [w(x) for x in bad_check], [], {"check": 1}),
         ("a flipped message bit fails the check", [w(x) for x in bad_body], [], {"check": 1}),
-        ("fragments of two messages in one group collide; the newer one completes",
+        ("a clash evicts the older fragment; the newer message completes",
          [w(wa[0]), w(wb[0]), w(wb[1]), w(wb[2])], [b], {"collision": 1}),
-        ("a mixed-up set (same group, same indices never clash) fails the check",
-         [w(wa[0]), w(wb[1]), w(wa[2])], [], {"check": 1}),
-        ("a partial survives expiry_ticks ticks", [w(wa[0]), tick, tick, tick, w(wa[1]), w(wa[2])], [a], {}),
-        ("a partial is stale after expiry_ticks + 1 ticks",
+        ("a clash evicts everything older than the clashing fragment",
+         [w(wa[0]), w(wa[1]), w(wb[1]), w(wb[0]), w(wb[2])], [b], {"collision": 1}),
+        ("a clash keeps fragments newer than the clashing one",
+         [w(wa[1]), w(wb[0]), w(wb[1]), w(wb[2])], [b], {"collision": 1}),
+        ("a failed check evicts only the oldest fragment: the leftover goes, the new message completes",
+         [w(wa[0]), w(wb[1]), w(wb[2]), w(wb[0])], [b], {"check": 1}),
+        ("a mixed-up set fails the check", [w(wa[0]), w(wb[1]), w(wa[2])], [], {"check": 1}),
+        ("a fragment survives expiry_ticks ticks", [w(wa[0]), tick, tick, tick, w(wa[1]), w(wa[2])], [a], {}),
+        ("a fragment is stale after expiry_ticks + 1 ticks",
          [w(wa[0]), tick, tick, tick, tick, w(wa[1]), w(wa[2])], [], {"stale": 1}),
-        ("each partial ages from its first fragment", [w(wa[0]), tick, tick, w(wa[1]), tick, tick, w(wa[2])],
-         [], {"stale": 1}),
+        ("fragments age one by one; one stale count per partial per tick",
+         [w(wa[0]), tick, tick, w(wa[1]), tick, tick, w(wa[2])], [], {"stale": 1}),
+        ("two fragments expiring on the same tick count once",
+         [w(wa[0]), w(wa[1]), tick, tick, tick, tick, w(wa[2])], [], {"stale": 1}),
+        ("after the stale fragment goes, the rest of a retransmission completes",
+         [w(wa[0]), tick, tick, w(wa[1]), tick, tick, w(wa[2]), w(wa[0])], [a], {"stale": 1}),
     ]
     reassembly = []
     for name, events, delivered, drops in cases:
@@ -520,43 +529,54 @@ def epuck4_vectors() -> dict[str, object]:
 
 
 def _reassemble_model(events: list[dict[str, object]], expiry: int) -> tuple[list[bytes], dict[str, int]]:
-    partials: dict[int, dict[str, object]] = {}
+    """SPEC.md section 6.2's reassembly procedure, step by step (confirms the hand-stated outcomes)."""
+    partials: dict[int, dict[int, tuple[int, int, int]]] = {}  # group -> index -> (chunk, arrival, tick)
     out: list[bytes] = []
     drops: dict[str, int] = {}
+    now = arrivals = 0
 
     def drop(reason: str) -> None:
         drops[reason] = drops.get(reason, 0) + 1
 
     for event in events:
         if "tick" in event:
-            for group in list(partials):
-                partials[group]["age"] += 1  # type: ignore[operator]
-                if partials[group]["age"] > expiry:  # type: ignore[operator]
-                    del partials[group]
+            now += 1
+            for group, held in list(partials.items()):
+                old = [i for i, (_, _, born) in held.items() if now - born > expiry]
+                if old:
                     drop("stale")
+                    for i in old:
+                        del held[i]
+                if not held:
+                    del partials[group]
             continue
         word = int(str(event["word"]), 16)
         index, group, chunk = word >> 30, (word >> 26) & 0xF, word & 0x3FFFFFF
         if index == 3:
             drop("bad_index")
             continue
-        part = partials.setdefault(group, {"age": 0, "chunks": {}})
-        chunks: dict[int, int] = part["chunks"]  # type: ignore[assignment]
-        if index in chunks and chunks[index] != chunk:
+        held = partials.setdefault(group, {})
+        if index in held:
+            if held[index][0] == chunk:
+                drop("duplicate")
+                continue
             drop("collision")
-            part = partials[group] = {"age": 0, "chunks": {}}
-            chunks = part["chunks"]  # type: ignore[assignment]
-        chunks[index] = chunk
-        if len(chunks) < 3:
+            cut = held[index][1]
+            for i in [i for i, (_, arrival, _) in held.items() if arrival <= cut]:
+                del held[i]
+        arrivals += 1
+        held[index] = (chunk, arrivals, now)
+        if len(held) < 3:
             continue
-        del partials[group]
-        p = (chunks[0] << 52) | (chunks[1] << 26) | chunks[2]
+        p = (held[0][0] << 52) | (held[1][0] << 26) | held[2][0]
         msg = (p >> 14).to_bytes(8, "big")
         c = crc32_iso_hdlc(msg)
         if c >> 28 == group and (c >> 14) & 0x3FFF == p & 0x3FFF:
             out.append(msg)
+            del partials[group]
         else:
             drop("check")
+            del held[min(held, key=lambda i: held[i][1])]
     return out, drops
 
 
@@ -590,12 +610,24 @@ def kilobot_vectors() -> dict[str, object]:
     system_type = SAMPLE + bytes([KILO_VERSION, 0x80])
     streams = [
         stream_case("one message", serial_frame(SAMPLE + b"\x01\x56"), [SAMPLE], {}),
-        stream_case("format version 2 is not ours", serial_frame(wrong_version), [], {"version": 1}),
+        stream_case("format version 2 is not ours", serial_frame(wrong_version), [], {"bad_version": 1}),
         stream_case("another message type is another program's traffic", serial_frame(wrong_type), [],
-                    {"type": 1}),
-        stream_case("a system type (>= 0x80) is never ours", serial_frame(system_type), [], {"type": 1}),
+                    {"foreign_type": 1}),
+        stream_case("a system type (>= 0x80) is never ours", serial_frame(system_type), [], {"foreign_type": 1}),
+        stream_case("the type is checked before the version", serial_frame(SAMPLE + bytes([0x02, 0x57])), [],
+                    {"foreign_type": 1}),
         stream_case("a cobs8 frame is not a kilobot frame", serial_frame(SAMPLE), [], {"bad_length": 1}),
     ]
+    for case in streams:
+        payloads, drops = _deframe_model(bytes.fromhex(str(case["stream"])), 10)
+        delivered = []
+        for payload in payloads:
+            reason = "foreign_type" if payload[9] != KILO_TYPE else "bad_version" if payload[8] != 1 else None
+            if reason:
+                drops[reason] = drops.get(reason, 0) + 1
+            else:
+                delivered.append(payload[:8])
+        assert (delivered, drops) == ([bytes.fromhex(m) for m in case["messages"]], case["drops"]), case["name"]
     return {
         "description": "kilobot (SPEC.md section 6.3): kilolib message_t {data[9], type, crc}; data[0..7] is "
                        "the message, data[8] = 0x01 (format version), type = 0x56 unless configured; crc is "
