@@ -61,8 +61,8 @@ typedef enum {
     VSTIG_DROP_CHECK,      /* epuck4: complete set failed the CRC-32 check */
     VSTIG_DROP_STALE,      /* epuck4: fragments expired */
     VSTIG_DROP_DUPLICATE,  /* epuck4: identical fragment already held */
-    VSTIG_DROP_VERSION,    /* kilobot: data[8] is not format version 1 */
-    VSTIG_DROP_TYPE,       /* kilobot: message type is not the configured one */
+    VSTIG_DROP_FOREIGN_TYPE, /* kilobot: another message type (other Kilobot traffic) */
+    VSTIG_DROP_BAD_VERSION,  /* kilobot: data[8] is not format version 1 */
     VSTIG_DROP_REASONS
 } vstig_drop_t;
 
@@ -113,16 +113,17 @@ uint8_t vstig_epuck4_uart_feed(vstig_deframer_t *d, uint8_t byte, uint32_t *word
 
 typedef struct {
     uint32_t chunk[3];
-    uint8_t order[3]; /* arrival sequence number of each held fragment */
-    uint8_t held;     /* bit i: chunk[i] holds a fragment */
+    uint16_t order[3]; /* arrival number of each held fragment (compared modulo 2^16) */
+    uint8_t born[3];   /* tick count when each fragment arrived (compared modulo 2^8) */
+    uint8_t held;      /* bit i: chunk[i] holds a fragment; 0: the slot is free */
     uint8_t group;
-    uint8_t age; /* ticks since the oldest held fragment arrived */
 } vstig_epuck4_partial_t;
 
 typedef struct {
     vstig_epuck4_partial_t slot[VSTIG_EPUCK4_SLOTS];
-    uint8_t expiry_ticks;
-    uint8_t seq;
+    uint16_t arrivals;
+    uint8_t now;
+    uint8_t expiry_ticks; /* 1..254 */
     vstig_drops_t drops;
 } vstig_epuck4_reassembler_t;
 
