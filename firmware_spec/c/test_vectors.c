@@ -22,7 +22,7 @@
 
 #include "vstig_wire.h"
 
-#define MAX_BYTES 1024
+#define MAX_BYTES 65536
 
 static size_t parse_hex(const char *text, uint8_t *out) {
     size_t n = 0;
@@ -51,12 +51,12 @@ static void print_msg_hex(const vstig_msg_t *m) {
 
 /* Collected results of a receive run, printed as msgs=... drops=... */
 typedef struct {
-    vstig_msg_t msgs[64];
+    vstig_msg_t msgs[4096];
     unsigned n;
 } results_t;
 
 static void add(results_t *r, const vstig_msg_t *m) {
-    if (r->n < 64) r->msgs[r->n++] = *m;
+    if (r->n < 4096) r->msgs[r->n++] = *m;
 }
 
 static void print_results(const results_t *r, const vstig_drops_t *drops) {
@@ -83,7 +83,7 @@ static void run(char *line) {
     char *arg[4] = {0, 0, 0, 0};
     size_t n, i;
     vstig_msg_t m;
-    results_t res;
+    static results_t res;
     res.n = 0;
     if (!cmd) return;
     for (i = 0; i < 4; i++) arg[i] = strtok(NULL, " \t\r\n");
@@ -191,7 +191,7 @@ static void run(char *line) {
 }
 
 int main(void) {
-    static char line[16384];
+    static char line[2 * MAX_BYTES + 256];
     while (fgets(line, sizeof line, stdin)) {
         run(line);
         fputs("\n", stdout);
