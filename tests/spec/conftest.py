@@ -75,3 +75,11 @@ def results(messages: list[str], drops: dict[str, int]) -> str:
     shown = [f"{name}:{drops[name]}" for name in order if drops.get(name)]
     assert set(drops) <= set(order), f"a vector names an unknown drop reason: {set(drops) - set(order)}"
     return f"msgs={','.join(messages) or '-'} drops={','.join(shown) or '-'}"
+
+
+def can_id_fields(can_id: int, extended: bool) -> dict[str, int]:
+    """The fields SPEC.md section 6.5 puts in an arbitration ID (default bases)."""
+    if extended:
+        return {"base": can_id & 0x1E000000, "stigmergy": (can_id >> 17) & 0xFF, "op": (can_id >> 16) & 1,
+                "sender": can_id & 0xFFFF}
+    return {"base": can_id & 0x600, "stigmergy": 0, "op": (can_id >> 8) & 1, "sender": can_id & 0xFF}
