@@ -10,7 +10,7 @@ Expected outcomes of the protocol and reassembly cases are written out by hand i
 the tables below; the small models in this file only confirm them.
 
 Usage: python firmware_spec/tools/make_vectors.py [OUTDIR]   (default: ../vectors)
-Only the standard library is used, so it runs anywhere Python 3.8+ does.
+Only the standard library is used (Python 3.10+).
 """
 
 from __future__ import annotations
@@ -176,7 +176,8 @@ def wire_vectors() -> dict[str, object]:
     for name, hexbytes, (op, key, value, ts, robot) in WIRE_BY_HAND:
         raw = bytes.fromhex(hexbytes)
         assert pack(op, key, value, ts, robot) == raw, name  # shifts agree with the hand-worked hex
-        assert fields(raw) == dict(zip(("op", "key", "value", "timestamp", "robot"), (op, key, value, ts, robot)))
+        names = ("op", "key", "value", "timestamp", "robot")
+        assert fields(raw) == dict(zip(names, (op, key, value, ts, robot), strict=True))
         valid.append({"name": name, "hex": hexbytes, "fields": fields(raw)})
     invalid = [
         {"name": "empty buffer", "hex": "", "outcome": "drop", "reason": "bad_length"},
@@ -284,6 +285,9 @@ RECEIVE_BY_HAND = [
 ]
 
 
+ENTRY = ("value", "timestamp", "robot")
+
+
 def receive_vectors() -> dict[str, object]:
     cases = []
     for name, me, local, (op, key, value, ts, robot), outcome, after, queued in RECEIVE_BY_HAND:
@@ -291,10 +295,10 @@ def receive_vectors() -> dict[str, object]:
         cases.append({
             "name": name,
             "self": me,
-            "local": None if local is None else dict(zip(("value", "timestamp", "robot"), local)),
+            "local": None if local is None else dict(zip(ENTRY, local, strict=True)),
             "incoming": pack(op, key, value, ts, robot).hex(),
             "outcome": outcome,
-            "entry_after": None if after is None else dict(zip(("value", "timestamp", "robot"), after)),
+            "entry_after": None if after is None else dict(zip(ENTRY, after, strict=True)),
             "queued": [pack(*q).hex() for q in queued],
         })
     return {

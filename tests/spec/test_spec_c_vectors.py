@@ -21,8 +21,9 @@ def test_wire(driver: Driver) -> None:
     cases = []
     for v in vectors["valid"]:
         f = v["fields"]
-        cases.append((v["name"], f"decode {v['hex']}", f"{f['op']} {f['key']} {f['value']} {f['timestamp']} {f['robot']}"))
-        cases.append((v["name"], f"encode {f['op']} {f['key']} {f['value']} {f['timestamp']} {f['robot']}", v["hex"]))
+        text = f"{f['op']} {f['key']} {f['value']} {f['timestamp']} {f['robot']}"
+        cases.append((v["name"], f"decode {v['hex']}", text))
+        cases.append((v["name"], f"encode {text}", v["hex"]))
     for v in vectors["invalid"]:
         cases.append((v["name"], f"decode {v['hex'] or '-'}", f"{v['outcome']} {v['reason']}"))
     _check(driver, cases)
