@@ -26,8 +26,8 @@ def test_tools_never_import_the_code_they_check() -> None:
 
 
 def test_generator_reproduces_committed_vectors(tmp_path: Path) -> None:
-    # -I: isolated from the venv's site-packages and the working directory.
-    subprocess.run([sys.executable, "-I", str(TOOLS / "make_vectors.py"), str(tmp_path)], check=True, timeout=120)
+    # -I -S: no site-packages, no working directory: the standard library alone.
+    subprocess.run([sys.executable, "-I", "-S", str(TOOLS / "make_vectors.py"), str(tmp_path)], check=True, timeout=120)
     written = sorted(p.name for p in tmp_path.glob("*.json"))
     assert written, "the generator wrote nothing"
     for name in written:
