@@ -73,7 +73,7 @@ typedef struct {
 /* The reason's name as SPEC.md spells it ("crc", "bad_length", ...). */
 const char *vstig_drop_name(vstig_drop_t reason);
 
-/* ---- the serial frame (SPEC.md section 6): COBS(payload || crc16_le) || 0x00 */
+/* ---- the serial frame (SPEC.md 6.0): COBS(payload || crc16_le) || 0x00 --- */
 #define VSTIG_FRAME_MAX 64u /* longest run of non-zero bytes a receiver buffers */
 /* Bytes a frame of a len-byte payload takes on the wire (len <= 60). */
 #define VSTIG_FRAME_SIZE(len) ((len) + 4u)

@@ -9,7 +9,8 @@ DBC cannot describe as a signal. So each DBC message stands for a block of IDs:
 
 * 11-bit, base B:      VSTIG_PUT / VSTIG_GET at B | op << 8; the low 8 bits (sender) vary.
 * 29-bit, base 0x18000000: VSTIGX_PUT_n / VSTIGX_GET_n at base | op << 16 | n << 8, n = 0..7;
-  bits 24..17 (stigmergy) and 7..0 (sender low byte) vary.
+  bits 24..17 (stigmergy) and the sender's bits 15..11 and 7..0 vary, so VSTIGX_*_n
+  stands for every sender whose bits 10..8 are n.
 
 Load it with the mask that ignores the varying bits, and every sender's frame
 decodes: `cantools.database.load_file("vstig.dbc", frame_id_mask=0x1E010700)`.
@@ -54,7 +55,8 @@ def messages(base11: int, enumerate_senders: bool) -> list[tuple[int, str, str]]
     for op, name in enumerate(OPS):
         for high in range(8):
             out.append((EXTENDED | BASE_29BIT | op << 16 | high << 8, f"VSTIGX_{name}_{high}",
-                        f"{name}, 29-bit base 0x{BASE_29BIT:08X}, senders 0x{high}00-0x{high}FF of any stigmergy: "
+                        f"{name}, 29-bit base 0x{BASE_29BIT:08X}, senders with ID bits 10..8 = {high} "
+                        f"(0x{high}00-0x{high}FF, 0x{high + 8:X}00-0x{high + 8:X}FF, ...) of any stigmergy: "
                         f"stigmergy = ID bits 24..17, sender = ID bits 15..0 (load with frame_id_mask "
                         f"0x{FRAME_ID_MASK:08X})"))
     return out

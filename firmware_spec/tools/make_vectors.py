@@ -396,7 +396,7 @@ def cobs8_vectors() -> dict[str, object]:
 
 
 def _deframe_model(stream: bytes, want: int) -> tuple[list[bytes], dict[str, int]]:
-    """The receive procedure of SPEC.md section 6, step by step (confirms hand-stated drops)."""
+    """The receive procedure of SPEC.md section 6.0.4, step by step (confirms hand-stated drops)."""
     out: list[bytes] = []
     drops: dict[str, int] = {}
     buf = bytearray()

@@ -2,7 +2,7 @@
 
 It uses the `cobs` package, crccheck's CRC-16/MCRF4XX and zlib directly, so a
 round trip through a pty checks vstig_hw against a second implementation of
-firmware_spec/serial.md rather than against itself.
+firmware_spec/SPEC.md (section 6) rather than against itself.
 """
 
 from __future__ import annotations

@@ -99,7 +99,7 @@ def test_slcan_driver_carries_our_frames_both_ways(adapter: SlcanAdapter) -> Non
         setup = [adapter.commands.get(timeout=20) for _ in range(4)]
         assert "S6" in setup and setup[-1] == "O"  # 500 kbit/s, then open: python-can drove the adapter
         link.send(Message(Op.PUT, 1, 42, 3, 1))
-        # firmware_spec/can.md: 0x600 | PUT << 8 | node 1, DLC 8, the 8 wire bytes
+        # firmware_spec/SPEC.md 6.5.2: 0x600 | PUT << 8 | node 1, DLC 8, the 8 wire bytes
         assert adapter.next_frame_line() == "t60180001002A00030001"
         adapter.inject("t7058812CBEEF01020009")  # vector: GET from node 5 carrying robot 9's entry
         adapter.inject("t1058812CBEEF01020009")  # not our scheme: filtered out by python-can
