@@ -13,7 +13,7 @@ bits P = message (64) || C[27..14] (14) are cut into three 26-bit chunks from th
 top. Index 3 is reserved. 4 + 14 = 18 check bits: a set of fragments mixed up
 from different messages is accepted with probability 2^-18.
 
-Reassembly (firmware_spec/serial.md is normative): partials keyed by group; each
+Reassembly (firmware_spec/SPEC.md 6.2.3 is normative): partials keyed by group; each
 fragment remembers when it came. A clash on a filled slot evicts that fragment
 and everything older in the partial; a complete set whose check fails loses its
 oldest fragment; fragments older than `expiry_ticks` ticks are dropped as stale.
