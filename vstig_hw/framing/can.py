@@ -71,7 +71,8 @@ class CanIdScheme:
         if self.extended:
             base = DEFAULT_BASE_29BIT if self.base is None else self.base
             _require(isinstance(base, int) and base == base & BASE_MASK_29BIT,
-                     f"a 29-bit id_base may use bits 28..25 only (0x00000000..0x1E000000 in steps of 0x02000000), got {self.base!r}")
+                     "a 29-bit id_base may use bits 28..25 only "
+                     f"(0x00000000..0x1E000000 in steps of 0x02000000), got {self.base!r}")
             _require(isinstance(self.stigmergy, int) and 0 <= self.stigmergy <= 0xFF,
                      f"stigmergy must be 0..255 for 29-bit IDs, got {self.stigmergy!r}")
             derived = (base, 0x1FFE0000, base | self.stigmergy << 17, 16, 0xFFFF)
