@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import enum
 import struct
-from collections.abc import Iterator
 from operator import itemgetter
 from typing import Any
 
@@ -133,12 +132,11 @@ def decode(data: bytes | bytearray | memoryview) -> Message:
         raise DecodeError(f"a message is exactly {MESSAGE_SIZE} bytes, got {len(data)}") from None
 
 
-def decode_many(data: bytes | bytearray | memoryview) -> Iterator[Message]:
-    """Messages packed back to back (CAN FD batches, bulk files)."""
+def decode_many(data: bytes | bytearray | memoryview) -> list[Message]:
+    """Messages packed back to back (CAN FD batches, bulk files), decoded in one C-level pass."""
     if len(data) % MESSAGE_SIZE:
         raise DecodeError(f"packed messages need a multiple of {MESSAGE_SIZE} bytes, got {len(data)}")
-    for words in _STRUCT.iter_unpack(data):
-        yield _new(Message, words)
+    return [_new(Message, words) for words in _STRUCT.iter_unpack(data)]
 
 
 def decode_schema(data: bytes) -> Message:
