@@ -64,10 +64,11 @@ class CanSpec:
         """A short, space-free name for status lines and captures."""
         return _safe_name(self.channel)
 
-    def build(self, name: str | None = None, *, listen_only: bool = False) -> Link[Any]:
+    def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
+        """The Link (not yet open); `robot_id` is the sender field a CAN link transmits under."""
         from .links import can_link_from_spec
 
-        return can_link_from_spec(self, name or self.name, listen_only=listen_only)
+        return can_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,10 +86,11 @@ class SerialSpec:
         tail = self.port.split("://", 1)[-1].split("?", 1)[0].rstrip("/")
         return _safe_name(tail.rsplit("/", 1)[-1] or tail)
 
-    def build(self, name: str | None = None, *, listen_only: bool = False) -> Link[Any]:
+    def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
+        """The Link (not yet open); `robot_id` is the sender field a CAN link transmits under."""
         from .links import serial_link_from_spec
 
-        return serial_link_from_spec(self, name or self.name, listen_only=listen_only)
+        return serial_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
 
 
 LinkSpec = CanSpec | SerialSpec

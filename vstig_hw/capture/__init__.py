@@ -1,0 +1,1 @@
+"""Captures: timestamped link units to and from files."""
