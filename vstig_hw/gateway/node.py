@@ -95,7 +95,13 @@ class Node:
         self._next_tick = time.monotonic() + self.period
 
     def close(self) -> None:
+        """Stop reading, hand every unit already read to the listeners (no frame lost), close the links."""
         self._readers.stop()
+        arrivals = self._readers.arrivals
+        while not arrivals.empty():
+            item = arrivals.get_nowait()
+            if item is not None:
+                self._arrive(*item)
         while self._opened:
             link = self._opened.pop()
             try:
