@@ -46,5 +46,11 @@ def can_framing(id_base: int | None = None, extended: bool = False, fd: bool = F
     return can.CanFraming(can.CanIdScheme(extended=extended, base=id_base), sender=LISTENER_ID, fd=fd)
 
 
+def can_framing_for(robot_id: int, id_base: int | None = None, extended: bool = False) -> Any:
+    """The CAN framing a robot with this id transmits and receives with."""
+    can = _module("framing.can")
+    return can.CanFraming(can.CanIdScheme(extended=extended, base=id_base), sender=robot_id)
+
+
 def serial_framing(name: str) -> Any:
     return _module("framing").make_serial_framing(name)
