@@ -49,6 +49,7 @@ def command(link: LinkSpec, output: str, max_bytes: str | None, duration: float 
         capture.write(Record(t, source.name, framing, unit))
 
     node.on_unit.append(write)
+    node.on_tick.append(lambda _: capture.flush())
     try:
         with node:
             click.echo(f"recording {node.links[0].name} to {output}; Ctrl-C stops", err=True)

@@ -27,6 +27,7 @@ _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cos
 class CaptureWriter(Protocol):
     def write(self, record: Record) -> None: ...
     def size(self) -> int: ...
+    def flush(self) -> None: ...
     def close(self) -> None: ...
 
 
@@ -57,6 +58,11 @@ class CanCaptureWriter:
             return int(file.tell()) if file is not None else os.path.getsize(self.path)
         except (OSError, ValueError):
             return 0
+
+    def flush(self) -> None:
+        file = getattr(self.writer, "file", None)
+        if file is not None and hasattr(file, "flush") and not isinstance(self.writer, can.BLFWriter):
+            file.flush()  # BLF compresses whole blocks: flushing mid-block would write a short one
 
     def close(self) -> None:
         self.writer.stop()
@@ -94,6 +100,10 @@ class RotatingCapture:
             path = rotated_name(self.base, self.index)
             self.files.append(path)
             self._writer = self._open(path)
+
+    def flush(self) -> None:
+        """Push what is written to the file (the recorder does this every tick, so `tail -f` works)."""
+        self._writer.flush()
 
     def close(self) -> None:
         self._writer.close()

@@ -39,6 +39,9 @@ class SerialCaptureWriter:
     def size(self) -> int:
         return self.file.tell()
 
+    def flush(self) -> None:
+        self.file.flush()
+
     def close(self) -> None:
         self.file.close()
 
