@@ -46,7 +46,7 @@ def _report(report: DemoReport) -> None:
 
 @click.command()
 @click.option("--robots", default=30, show_default=True, type=click.IntRange(6, 240))
-@click.option("--drop", default=0.25, show_default=True, type=click.FloatRange(0, 0.95),
+@click.option("--drop", default=0.75, show_default=True, type=click.FloatRange(0, 0.95),
               help="Probability that a robot (or the gateway, on a radio) misses a message.")
 @click.option("--seed", default=1, show_default=True, type=int)
 @click.option("--step", default=0.1, show_default=True, type=click.FloatRange(0.01, 1.0),

@@ -40,7 +40,7 @@ GATEWAY_ID = 250
 @dataclass(frozen=True)
 class DemoConfig:
     robots: int = 30
-    drop: float = 0.25
+    drop: float = 0.75  # the paper's Figure 3 setting
     seed: int = 1
     step: float = 0.1  # seconds per control step, robots and gateway alike
     max_steps: int = 300

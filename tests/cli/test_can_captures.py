@@ -38,7 +38,7 @@ def test_record_decode_replay_round_trip(tmp_path: Path) -> None:
         adapter.inject(can.Message(arbitration_id=0x123, data=b"\x01", is_extended_id=False))  # not ours
         wait_for(lambda: capture.exists() and capture.read_text().count("\n") >= len(MESSAGES), 20)
     finally:
-        out, err = stop(recorder)
+        _out, err = stop(recorder)
         adapter.close()
     assert recorder.returncode == 0, err
     assert f"{len(MESSAGES)} units" in err  # the kernel-side filter kept the foreign frame out, or it is counted
