@@ -76,5 +76,6 @@ def test_links_lists_the_grammar_with_examples() -> None:
 
 def test_every_command_is_listed() -> None:
     code, output = invoke("--help")
+    assert code == 0
     for name in ("bridge", "sniff", "record", "replay", "decode", "put", "get", "links", "demo"):
         assert name in output

@@ -74,9 +74,10 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
                 tail, chunk = data[cut:], data[:cut]
             if chunk:
                 lines = chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
+                dropped_before = sum(fast_drops.values())
                 fast = chunk_to_jsonl(chunk, classify, fast_drops)
                 if fast is not None:
-                    count += fast.count(b"\n")
+                    count += lines - sum(fast_drops.values()) + dropped_before
                     if raw_out is not None:
                         out.flush()
                         raw_out.write(fast)

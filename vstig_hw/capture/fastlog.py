@@ -41,14 +41,21 @@ def _hex(cols: U8) -> npt.NDArray[np.int64] | None:
     return value
 
 
+def _decimal_table() -> U8:
+    """Row v = the decimal digits of v (0..65535), right-aligned in 5 columns, leading spaces."""
+    text = "".join(f"{v:5d}" for v in range(0x10000)).encode()
+    return np.frombuffer(text, dtype=np.uint8).reshape(0x10000, 5)
+
+
+_DECIMAL: U8 | None = None
+
+
 def _digits(out: U8, col: int, values: npt.NDArray[np.int64], width: int) -> None:
-    """Right-aligned decimal digits of `values` into out[:, col:col+width], leading zeros as spaces."""
-    for i in range(width):
-        power = 10 ** (width - 1 - i)
-        digit = (values // power) % 10 + 48
-        if i < width - 1:
-            digit = np.where(values < power, 32, digit)
-        out[:, col + i] = digit
+    """Right-aligned decimal digits of `values` (< 10**width, <= 65535) into out[:, col:col+width]."""
+    global _DECIMAL
+    if _DECIMAL is None:
+        _DECIMAL = _decimal_table()
+    out[:, col:col + width] = _DECIMAL[values][:, 5 - width:]
 
 
 def chunk_to_jsonl(chunk: bytes, classify: Classify, drops: dict[str, int]) -> bytes | None:
@@ -103,10 +110,10 @@ def chunk_to_jsonl(chunk: bytes, classify: Classify, drops: dict[str, int]) -> b
 def _render(stamp: U8, link: bytes, can_id: npt.NDArray[np.int64], op: npt.NDArray[np.int64],
             *fields: npt.NDArray[np.int64]) -> bytes:
     n = len(stamp)
-    head = b'{"t": '
-    parts = [head, b'STAMP', b', "link": "' + link.replace(b'"', b"") + b'", "can_id": ', b"CAN_ID",
-             b', "op": "', b"OPS", b'", "key": ', b"F0", b', "value": ', b"F1", b', "timestamp": ', b"F2",
-             b', "robot": ', b"F3", b"}\n"]
+    head = b'{"t":'
+    parts = [head, b"STAMP", b',"link":"' + link.replace(b'"', b"") + b'","can_id":', b"CAN_ID",
+             b',"op":"', b"OPS", b'","key":', b"F0", b',"value":', b"F1", b',"timestamp":', b"F2",
+             b',"robot":', b"F3", b"}\n"]
     widths = {b"STAMP": stamp.shape[1], b"CAN_ID": 4, b"OPS": 3, b"F0": 5, b"F1": 5, b"F2": 5, b"F3": 5}
     total = sum(widths.get(p, len(p)) for p in parts)
     out = np.empty((n, total), dtype=np.uint8)
@@ -116,8 +123,9 @@ def _render(stamp: U8, link: bytes, can_id: npt.NDArray[np.int64], op: npt.NDArr
             width = stamp.shape[1]
             out[:, col:col + width] = stamp
             integer = int(np.argmax(stamp[0] == 46))  # digits before the point
-            leading = np.cumprod(stamp[:, :integer - 1] == 48, axis=1).astype(bool)
-            out[:, col:col + integer - 1][leading] = 32  # JSON numbers have no leading zeros
+            if (stamp[:, 0] == 48).any():  # candump pads seconds with zeros; JSON numbers have none
+                leading = np.cumprod(stamp[:, :integer - 1] == 48, axis=1).astype(bool)
+                out[:, col:col + integer - 1][leading] = 32
         elif part == b"CAN_ID":
             _digits(out, col, can_id, 4)
         elif part == b"OPS":
