@@ -17,7 +17,7 @@ fi
 echo "sysdeps: installing ${want[*]}" >&2
 export DEBIAN_FRONTEND=noninteractive
 echo "wireshark-common wireshark-common/install-setuid boolean false" | debconf-set-selections 2>/dev/null || true
-apt-get update -qq >/dev/null 2>&1 || true
-apt-get install -y -qq --no-install-recommends "${want[@]}" >/dev/null 2>&1 \
+apt-get -o DPkg::Lock::Timeout=300 update -qq >/dev/null 2>&1 || true
+apt-get -o DPkg::Lock::Timeout=300 install -y -qq --no-install-recommends "${want[@]}" >/dev/null 2>&1 \
   || echo "sysdeps: apt-get could not install ${want[*]} (their tests will skip)" >&2
 exit 0

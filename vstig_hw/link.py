@@ -42,6 +42,17 @@ class Link(Generic[Unit]):
             self.transport.write(unit)
         self.counters["out"] += 1
 
+    def send_many(self, messages: list[Message]) -> None:
+        """Send a control period's messages; framings that batch (CAN FD) pack them into fewer units."""
+        encode_batch = getattr(self.framing, "encode_batch", None)
+        if encode_batch is None:
+            for msg in messages:
+                self.send(msg)
+            return
+        for unit in encode_batch(messages):
+            self.transport.write(unit)
+        self.counters["out"] += len(messages)
+
     def receive(self, timeout: float) -> list[Heard]:
         """Messages completed within `timeout` seconds."""
         heard: list[Heard] = []

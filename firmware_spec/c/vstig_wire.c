@@ -1,0 +1,362 @@
+/* vstig_wire: reference C99 codec for vstig-hw robot firmware. See vstig_wire.h and SPEC.md. */
+#include "vstig_wire.h"
+
+/* ---- message ------------------------------------------------------------- */
+
+static void put16(uint8_t *out, uint16_t v) {
+    out[0] = (uint8_t)(v >> 8);
+    out[1] = (uint8_t)(v & 0xFFu);
+}
+
+static uint16_t get16(const uint8_t *in) { return (uint16_t)(((uint16_t)in[0] << 8) | in[1]); }
+
+void vstig_msg_encode(const vstig_msg_t *msg, uint8_t out[VSTIG_MESSAGE_SIZE]) {
+    put16(out, (uint16_t)(((uint16_t)(msg->op & 1u) << 15) | (msg->key & VSTIG_KEY_MAX)));
+    put16(out + 2, msg->value);
+    put16(out + 4, msg->timestamp);
+    put16(out + 6, msg->robot);
+}
+
+void vstig_msg_decode(const uint8_t in[VSTIG_MESSAGE_SIZE], vstig_msg_t *msg) {
+    msg->op = (uint8_t)(in[0] >> 7);
+    msg->key = (uint16_t)(get16(in) & VSTIG_KEY_MAX);
+    msg->value = get16(in + 2);
+    msg->timestamp = get16(in + 4);
+    msg->robot = get16(in + 6);
+}
+
+/* ---- timestamps ---------------------------------------------------------- */
+
+uint8_t vstig_ts_newer(uint16_t a, uint16_t b) {
+    uint16_t distance;
+    if (b == VSTIG_TS_NONE) return (uint8_t)(a != VSTIG_TS_NONE);
+    if (a == VSTIG_TS_NONE) return 0;
+    distance = (uint16_t)(a - b); /* modulo 2^16 */
+    if (distance == 0x8000u) return (uint8_t)(a > b); /* half-way: the larger number is newer */
+    return (uint8_t)(distance != 0 && distance < 0x8000u);
+}
+
+uint16_t vstig_ts_next(uint16_t ts) { return ts == 0xFFFFu ? 1u : (uint16_t)(ts + 1u); }
+
+/* ---- CRCs ---------------------------------------------------------------- */
+
+uint16_t vstig_crc16_update(uint16_t crc, uint8_t byte) {
+    /* Reflected poly 0x8408 processed a byte at a time: the same shift/xor identity
+     * avr-libc documents for _crc_ccitt_update. */
+    uint8_t x = (uint8_t)(byte ^ (uint8_t)(crc & 0xFFu));
+    x = (uint8_t)(x ^ (uint8_t)(x << 4));
+    return (uint16_t)((((uint16_t)x << 8) | (crc >> 8)) ^ (uint8_t)(x >> 4) ^ ((uint16_t)x << 3));
+}
+
+uint16_t vstig_crc16(const uint8_t *data, size_t len) {
+    uint16_t crc = VSTIG_CRC16_INIT;
+    while (len--) crc = vstig_crc16_update(crc, *data++);
+    return crc;
+}
+
+uint32_t vstig_crc32(const uint8_t *data, size_t len) {
+    uint32_t crc = 0xFFFFFFFFul;
+    uint8_t bit;
+    while (len--) {
+        crc ^= *data++;
+        for (bit = 0; bit < 8; bit++) crc = (crc & 1u) ? (crc >> 1) ^ 0xEDB88320ul : crc >> 1;
+    }
+    return crc ^ 0xFFFFFFFFul;
+}
+
+/* ---- drops --------------------------------------------------------------- */
+
+static const char *const drop_names[VSTIG_DROP_REASONS] = {
+    "cobs", "crc", "bad_length", "overlong", "bad_index", "collision",
+    "check", "stale", "duplicate", "foreign_type", "bad_version",
+};
+
+const char *vstig_drop_name(vstig_drop_t reason) {
+    return (unsigned)reason < VSTIG_DROP_REASONS ? drop_names[reason] : "?";
+}
+
+static void count(vstig_drops_t *drops, vstig_drop_t reason) {
+    if (drops->count[reason] != 0xFFFFu) drops->count[reason]++;
+}
+
+/* ---- serial frame -------------------------------------------------------- */
+
+uint8_t vstig_frame_encode(const uint8_t *payload, uint8_t len, uint8_t *out) {
+    /* COBS over payload || crc_lo || crc_hi, written straight into out. With at most
+     * 62 bytes to stuff no block reaches 254 bytes, so codes never need splitting. */
+    uint16_t crc = vstig_crc16(payload, len);
+    uint8_t code_at = 0, w = 1, i, byte;
+    for (i = 0; i < (uint8_t)(len + 2u); i++) {
+        byte = i < len ? payload[i] : (i == len ? (uint8_t)(crc & 0xFFu) : (uint8_t)(crc >> 8));
+        if (byte == 0) {
+            out[code_at] = (uint8_t)(w - code_at);
+            code_at = w++;
+        } else {
+            out[w++] = byte;
+        }
+    }
+    out[code_at] = (uint8_t)(w - code_at);
+    out[w++] = 0;
+    return w;
+}
+
+void vstig_deframer_init(vstig_deframer_t *d) {
+    uint8_t i;
+    d->len = 0;
+    d->discarding = 0;
+    for (i = 0; i < VSTIG_DROP_REASONS; i++) d->drops.count[i] = 0;
+}
+
+/* Decodes COBS in place (output never overtakes input); returns the decoded length or -1. */
+static int16_t cobs_decode_in_place(uint8_t *buf, uint8_t len) {
+    uint8_t r = 0, w = 0, code, i;
+    while (r < len) {
+        code = buf[r];
+        if (code == 0 || (uint16_t)r + code > len) return -1;
+        r++;
+        for (i = 1; i < code; i++) buf[w++] = buf[r++];
+        if (code != 0xFFu && r < len) buf[w++] = 0;
+    }
+    return w;
+}
+
+uint8_t vstig_deframer_feed(vstig_deframer_t *d, uint8_t byte, uint8_t want) {
+    int16_t n;
+    if (byte != 0) {
+        if (d->discarding) return 0;
+        if (d->len == VSTIG_FRAME_MAX) { /* no delimiter in sight: drop, resync at the next 0x00 */
+            count(&d->drops, VSTIG_DROP_OVERLONG);
+            d->discarding = 1;
+            d->len = 0;
+            return 0;
+        }
+        d->buf[d->len++] = byte;
+        return 0;
+    }
+    if (d->discarding) { /* the end of an overlong frame, already counted */
+        d->discarding = 0;
+        return 0;
+    }
+    if (d->len == 0) return 0; /* idle line */
+    n = cobs_decode_in_place(d->buf, d->len);
+    d->len = 0;
+    if (n < 0) {
+        count(&d->drops, VSTIG_DROP_COBS);
+        return 0;
+    }
+    if (n < 2 || vstig_crc16(d->buf, (size_t)n) != 0) { /* over payload || crc_le the residue is 0 */
+        count(&d->drops, VSTIG_DROP_CRC);
+        return 0;
+    }
+    if (n - 2 != want) {
+        count(&d->drops, VSTIG_DROP_BAD_LENGTH);
+        return 0;
+    }
+    return 1;
+}
+
+/* ---- cobs8 --------------------------------------------------------------- */
+
+uint8_t vstig_cobs8_encode(const vstig_msg_t *msg, uint8_t out[VSTIG_COBS8_FRAME_SIZE]) {
+    uint8_t raw[VSTIG_MESSAGE_SIZE];
+    vstig_msg_encode(msg, raw);
+    return vstig_frame_encode(raw, VSTIG_MESSAGE_SIZE, out);
+}
+
+uint8_t vstig_cobs8_feed(vstig_deframer_t *d, uint8_t byte, vstig_msg_t *out) {
+    if (!vstig_deframer_feed(d, byte, VSTIG_MESSAGE_SIZE)) return 0;
+    vstig_msg_decode(d->buf, out);
+    return 1;
+}
+
+/* ---- epuck4 -------------------------------------------------------------- */
+/* P = message (64 bits) || check (14 bits) is cut into three 26-bit chunks from the top.
+ * Done byte by byte so that no 64-bit arithmetic is needed on small targets. */
+
+#define CHUNK_MASK 0x03FFFFFFul
+#define CHECK_MASK 0x3FFFu
+
+void vstig_epuck4_encode(const vstig_msg_t *msg, uint32_t words[3]) {
+    uint8_t m[VSTIG_MESSAGE_SIZE];
+    uint32_t c, group;
+    uint16_t check;
+    vstig_msg_encode(msg, m);
+    c = vstig_crc32(m, VSTIG_MESSAGE_SIZE);
+    group = (c >> 28) << 26;
+    check = (uint16_t)((c >> 14) & CHECK_MASK);
+    words[0] = group | ((uint32_t)m[0] << 18) | ((uint32_t)m[1] << 10) | ((uint32_t)m[2] << 2) | (m[3] >> 6);
+    words[1] = (1ul << 30) | group | ((uint32_t)(m[3] & 0x3Fu) << 20) | ((uint32_t)m[4] << 12) |
+               ((uint32_t)m[5] << 4) | (m[6] >> 4);
+    words[2] = (2ul << 30) | group | ((uint32_t)(m[6] & 0x0Fu) << 22) | ((uint32_t)m[7] << 14) | check;
+}
+
+uint8_t vstig_epuck4_word_frame(uint32_t word, uint8_t out[VSTIG_EPUCK4_FRAME_SIZE]) {
+    uint8_t w[4];
+    w[0] = (uint8_t)(word >> 24);
+    w[1] = (uint8_t)(word >> 16);
+    w[2] = (uint8_t)(word >> 8);
+    w[3] = (uint8_t)word;
+    return vstig_frame_encode(w, 4, out);
+}
+
+uint8_t vstig_epuck4_uart_feed(vstig_deframer_t *d, uint8_t byte, uint32_t *word) {
+    if (!vstig_deframer_feed(d, byte, 4)) return 0;
+    *word = ((uint32_t)d->buf[0] << 24) | ((uint32_t)d->buf[1] << 16) | ((uint32_t)d->buf[2] << 8) | d->buf[3];
+    return 1;
+}
+
+void vstig_epuck4_init(vstig_epuck4_reassembler_t *r, uint8_t expiry_ticks) {
+    uint8_t i;
+    for (i = 0; i < VSTIG_EPUCK4_SLOTS; i++) r->slot[i].held = 0;
+    for (i = 0; i < VSTIG_DROP_REASONS; i++) r->drops.count[i] = 0;
+    r->arrivals = 0;
+    r->now = 0;
+    r->expiry_ticks = expiry_ticks;
+}
+
+/* a arrived before (or is) b, with arrival numbers compared modulo 2^16 */
+static uint8_t arrived_no_later(uint16_t a, uint16_t b) { return (uint8_t)((uint16_t)(b - a) < 0x8000u); }
+
+static uint8_t oldest_index(const vstig_epuck4_partial_t *p) {
+    uint8_t i, best = 3;
+    for (i = 0; i < 3; i++)
+        if ((p->held & (1u << i)) && (best == 3 || !arrived_no_later(p->order[best], p->order[i]))) best = i;
+    return best;
+}
+
+static vstig_epuck4_partial_t *partial_for(vstig_epuck4_reassembler_t *r, uint8_t group) {
+    vstig_epuck4_partial_t *free_slot = 0, *victim = 0;
+    uint8_t i;
+    for (i = 0; i < VSTIG_EPUCK4_SLOTS; i++) {
+        vstig_epuck4_partial_t *p = &r->slot[i];
+        if (!p->held) {
+            if (!free_slot) free_slot = p;
+        } else if (p->group == group) {
+            return p;
+        } else if (!victim || !arrived_no_later(victim->order[oldest_index(victim)], p->order[oldest_index(p)])) {
+            victim = p;
+        }
+    }
+    if (!free_slot) { /* fewer slots than groups, all busy: the oldest partial makes room */
+        count(&r->drops, VSTIG_DROP_STALE);
+        victim->held = 0;
+        free_slot = victim;
+    }
+    free_slot->group = group;
+    return free_slot;
+}
+
+uint8_t vstig_epuck4_feed(vstig_epuck4_reassembler_t *r, uint32_t word, vstig_msg_t *out) {
+    uint8_t index = (uint8_t)(word >> 30), group = (uint8_t)((word >> 26) & 0x0Fu), i;
+    uint32_t chunk = word & CHUNK_MASK, c;
+    uint8_t m[VSTIG_MESSAGE_SIZE];
+    vstig_epuck4_partial_t *p;
+    if (index == 3) {
+        count(&r->drops, VSTIG_DROP_BAD_INDEX);
+        return 0;
+    }
+    p = partial_for(r, group);
+    if (p->held & (1u << index)) {
+        uint16_t cut = p->order[index];
+        if (p->chunk[index] == chunk) {
+            count(&r->drops, VSTIG_DROP_DUPLICATE);
+            return 0;
+        }
+        /* the clashing fragment and everything older belong to an earlier, lost message */
+        count(&r->drops, VSTIG_DROP_COLLISION);
+        for (i = 0; i < 3; i++)
+            if ((p->held & (1u << i)) && arrived_no_later(p->order[i], cut)) p->held &= (uint8_t)~(1u << i);
+    }
+    p->chunk[index] = chunk;
+    p->order[index] = ++r->arrivals;
+    p->born[index] = r->now;
+    p->held |= (uint8_t)(1u << index);
+    if (p->held != 7u) return 0;
+    m[0] = (uint8_t)(p->chunk[0] >> 18);
+    m[1] = (uint8_t)(p->chunk[0] >> 10);
+    m[2] = (uint8_t)(p->chunk[0] >> 2);
+    m[3] = (uint8_t)(((p->chunk[0] & 3u) << 6) | (p->chunk[1] >> 20));
+    m[4] = (uint8_t)(p->chunk[1] >> 12);
+    m[5] = (uint8_t)(p->chunk[1] >> 4);
+    m[6] = (uint8_t)(((p->chunk[1] & 0x0Fu) << 4) | (p->chunk[2] >> 22));
+    m[7] = (uint8_t)(p->chunk[2] >> 14);
+    c = vstig_crc32(m, VSTIG_MESSAGE_SIZE);
+    if ((uint8_t)(c >> 28) != group || (uint16_t)((c >> 14) & CHECK_MASK) != (uint16_t)(p->chunk[2] & CHECK_MASK)) {
+        count(&r->drops, VSTIG_DROP_CHECK);
+        p->held &= (uint8_t)~(1u << oldest_index(p)); /* most likely the leftover of a lost message */
+        return 0;
+    }
+    p->held = 0;
+    vstig_msg_decode(m, out);
+    return 1;
+}
+
+void vstig_epuck4_tick(vstig_epuck4_reassembler_t *r) {
+    uint8_t i, j, stale;
+    r->now++;
+    for (i = 0; i < VSTIG_EPUCK4_SLOTS; i++) {
+        vstig_epuck4_partial_t *p = &r->slot[i];
+        stale = 0;
+        for (j = 0; j < 3; j++) {
+            if ((p->held & (1u << j)) && (uint8_t)(r->now - p->born[j]) > r->expiry_ticks) {
+                p->held &= (uint8_t)~(1u << j);
+                stale = 1;
+            }
+        }
+        if (stale) count(&r->drops, VSTIG_DROP_STALE);
+    }
+}
+
+/* ---- kilobot ------------------------------------------------------------- */
+
+static void kilobot_head(const vstig_msg_t *msg, uint8_t type, uint8_t head[10]) {
+    vstig_msg_encode(msg, head);
+    head[8] = VSTIG_KILOBOT_VERSION;
+    head[9] = type;
+}
+
+uint16_t vstig_kilobot_crc(const uint8_t head[10]) { return vstig_crc16(head, 10); }
+
+void vstig_kilobot_encode(const vstig_msg_t *msg, uint8_t type, uint8_t out[12]) {
+    uint16_t crc;
+    kilobot_head(msg, type, out);
+    crc = vstig_kilobot_crc(out);
+    out[10] = (uint8_t)(crc & 0xFFu);
+    out[11] = (uint8_t)(crc >> 8);
+}
+
+uint8_t vstig_kilobot_accept(const uint8_t head[10], uint8_t type, vstig_msg_t *out, vstig_drops_t *drops) {
+    if (head[9] != type) {
+        count(drops, VSTIG_DROP_FOREIGN_TYPE);
+        return 0;
+    }
+    if (head[8] != VSTIG_KILOBOT_VERSION) {
+        count(drops, VSTIG_DROP_BAD_VERSION);
+        return 0;
+    }
+    vstig_msg_decode(head, out);
+    return 1;
+}
+
+uint8_t vstig_kilobot_frame(const vstig_msg_t *msg, uint8_t type, uint8_t out[VSTIG_KILOBOT_FRAME_SIZE]) {
+    uint8_t head[10];
+    kilobot_head(msg, type, head);
+    return vstig_frame_encode(head, 10, out);
+}
+
+uint8_t vstig_kilobot_uart_feed(vstig_deframer_t *d, uint8_t byte, uint8_t type, vstig_msg_t *out) {
+    if (!vstig_deframer_feed(d, byte, 10)) return 0;
+    return vstig_kilobot_accept(d->buf, type, out, &d->drops);
+}
+
+/* ---- kilobot-ohc --------------------------------------------------------- */
+
+void vstig_ohc_packet(const vstig_msg_t *msg, uint8_t packet_type, uint8_t type, uint8_t out[VSTIG_OHC_PACKET_SIZE]) {
+    uint8_t i, x = 0;
+    for (i = 0; i < VSTIG_OHC_PACKET_SIZE; i++) out[i] = 0;
+    out[0] = 0x55u;
+    out[1] = packet_type;
+    kilobot_head(msg, type, out + 2);
+    for (i = 0; i < VSTIG_OHC_PACKET_SIZE - 1u; i++) x ^= out[i];
+    out[VSTIG_OHC_PACKET_SIZE - 1u] = x;
+}

@@ -1,0 +1,748 @@
+#!/usr/bin/env python3
+"""Writes firmware_spec/vectors/*.json from SPEC.md alone.
+
+THIS SCRIPT MUST NEVER IMPORT vstig_hw (nor anything else from this repository).
+The vectors check our implementations; vectors produced by the code they check
+would prove nothing. Everything here is re-implemented from the spec text in the
+plainest form: CRCs bit by bit (and checked against the published catalogue
+values before anything is written), COBS by hand, fields packed with shifts.
+Expected outcomes of the protocol and reassembly cases are written out by hand in
+the tables below; the small models in this file only confirm them.
+
+Usage: python firmware_spec/tools/make_vectors.py [OUTDIR]   (default: ../vectors)
+Only the standard library is used (Python 3.10+).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+# --------------------------------------------------------------------------
+# CRCs, bit by bit, from their catalogue parameters
+# --------------------------------------------------------------------------
+
+
+def crc16_mcrf4xx(data: bytes) -> int:
+    """CRC-16/MCRF4XX: poly 0x1021 reflected (0x8408), init 0xFFFF, refin/refout, xorout 0."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
+    return crc
+
+
+def crc16_avr_ccitt_update(crc: int, byte: int) -> int:
+    """The byte-wise shift/xor form documented for avr-libc's _crc_ccitt_update.
+
+    A second, differently derived formula for the same CRC: the generator
+    insists that both agree before using either.
+    """
+    data = (byte ^ crc) & 0xFF
+    data = (data ^ (data << 4)) & 0xFF
+    return ((data << 8) | (crc >> 8)) ^ (data >> 4) ^ (data << 3) & 0xFFFF
+
+
+def crc32_iso_hdlc(data: bytes) -> int:
+    """CRC-32/ISO-HDLC: poly 0x04C11DB7 reflected (0xEDB88320), init/xorout 0xFFFFFFFF."""
+    crc = 0xFFFFFFFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xEDB88320 if crc & 1 else crc >> 1
+    return crc ^ 0xFFFFFFFF
+
+
+CHECK = b"123456789"
+assert crc16_mcrf4xx(CHECK) == 0x6F91, "CRC-16/MCRF4XX catalogue check value"
+assert crc32_iso_hdlc(CHECK) == 0xCBF43926, "CRC-32/ISO-HDLC catalogue check value"
+_acc = 0xFFFF
+for _b in CHECK:
+    _acc = crc16_avr_ccitt_update(_acc, _b)
+assert _acc == 0x6F91, "avr-libc formula disagrees with the catalogue"
+
+# --------------------------------------------------------------------------
+# COBS by hand (0x00 delimiter, blocks of at most 254 data bytes)
+# --------------------------------------------------------------------------
+
+
+def cobs_encode(data: bytes) -> bytes:
+    out = bytearray()
+    block = bytearray()
+    for byte in data:
+        if byte == 0:
+            out += bytes([len(block) + 1]) + block
+            block = bytearray()
+        else:
+            block.append(byte)
+            if len(block) == 254:
+                out += b"\xff" + block
+                block = bytearray()
+    out += bytes([len(block) + 1]) + block
+    return bytes(out)
+
+
+def cobs_decode(data: bytes) -> bytes | None:
+    """None when the bytes are not valid COBS."""
+    out = bytearray()
+    i = 0
+    while i < len(data):
+        code = data[i]
+        if code == 0 or i + code > len(data):
+            return None
+        out += data[i + 1 : i + code]
+        i += code
+        if code != 0xFF and i < len(data):
+            out.append(0)
+    return bytes(out)
+
+
+assert cobs_encode(b"\x11\x22\x00\x33") == bytes.fromhex("0311220233")  # the classic worked example
+assert cobs_encode(b"\x00") == bytes.fromhex("0101")
+assert cobs_decode(bytes.fromhex("0311220233")) == b"\x11\x22\x00\x33"
+
+
+def serial_frame(payload: bytes) -> bytes:
+    crc = crc16_mcrf4xx(payload)
+    return cobs_encode(payload + bytes([crc & 0xFF, crc >> 8])) + b"\x00"
+
+
+# --------------------------------------------------------------------------
+# The 8-byte message, with shifts
+# --------------------------------------------------------------------------
+OPS = ("PUT", "GET")
+
+
+def pack(op: str, key: int, value: int, ts: int, robot: int) -> bytes:
+    head = (OPS.index(op) << 15) | key
+    return bytes([head >> 8, head & 0xFF, value >> 8, value & 0xFF, ts >> 8, ts & 0xFF, robot >> 8, robot & 0xFF])
+
+
+def fields(raw: bytes) -> dict[str, object]:
+    return {
+        "op": OPS[raw[0] >> 7],
+        "key": ((raw[0] & 0x7F) << 8) | raw[1],
+        "value": (raw[2] << 8) | raw[3],
+        "timestamp": (raw[4] << 8) | raw[5],
+        "robot": (raw[6] << 8) | raw[7],
+    }
+
+
+# --------------------------------------------------------------------------
+# Timestamps: serial-number arithmetic as SPEC.md words it
+# --------------------------------------------------------------------------
+
+
+def is_newer(a: int, b: int) -> bool:
+    if b == 0:
+        return a != 0
+    if a == 0:
+        return False
+    d = (a - b) % 65536
+    return 0 < d < 32768 or (d == 32768 and a > b)
+
+
+def next_ts(ts: int) -> int:
+    return 1 if ts == 65535 else ts + 1
+
+
+# --------------------------------------------------------------------------
+# wire.json
+# --------------------------------------------------------------------------
+# Hand-worked: (name, hex written out by hand, the fields it must decode to).
+WIRE_BY_HAND = [
+    ("all zero: PUT key 0 (ts 0 is reserved, but the codec still carries it)", "0000000000000000",
+     ("PUT", 0, 0, 0, 0)),
+    ("GET bit alone", "8000000000000000", ("GET", 0, 0, 0, 0)),
+    ("PUT, every other field at its maximum", "7fffffffffffffff", ("PUT", 0x7FFF, 0xFFFF, 0xFFFF, 0xFFFF)),
+    ("all ones: GET key 0x7FFF", "ffffffffffffffff", ("GET", 0x7FFF, 0xFFFF, 0xFFFF, 0xFFFF)),
+    ("key 1 value 0x1234 ts 1 robot 42", "000112340001002a", ("PUT", 1, 0x1234, 1, 42)),
+    ("key high byte and GET bit share byte 0", "8102abcd800000ff", ("GET", 0x0102, 0xABCD, 0x8000, 0x00FF)),
+    ("key 0x7FFF PUT value 0", "7fff000000010001", ("PUT", 0x7FFF, 0, 1, 1)),
+    ("key 0 GET value 0xFFFF", "8000ffff00020003", ("GET", 0, 0xFFFF, 2, 3)),
+    ("timestamp at the wrap: 0xFFFF", "00050007ffff0009", ("PUT", 5, 7, 0xFFFF, 9)),
+    ("timestamp just after the wrap: 1", "0005000700010009", ("PUT", 5, 7, 1, 9)),
+    ("key 0x4000: the bit right below the op bit", "4000000100010001", ("PUT", 0x4000, 1, 1, 1)),
+    ("key 0x0080: bit 7 of byte 1, not the op bit", "0080000100010001", ("PUT", 0x80, 1, 1, 1)),
+    ("robot 0xFFFF", "000a000a000affff", ("PUT", 10, 10, 10, 0xFFFF)),
+    ("empty GET as an unknown key is asked for", "8007000000000011", ("GET", 7, 0, 0, 0x11)),
+]
+
+
+def wire_vectors() -> dict[str, object]:
+    valid = []
+    for name, hexbytes, (op, key, value, ts, robot) in WIRE_BY_HAND:
+        raw = bytes.fromhex(hexbytes)
+        assert pack(op, key, value, ts, robot) == raw, name  # shifts agree with the hand-worked hex
+        names = ("op", "key", "value", "timestamp", "robot")
+        assert fields(raw) == dict(zip(names, (op, key, value, ts, robot), strict=True))
+        valid.append({"name": name, "hex": hexbytes, "fields": fields(raw)})
+    invalid = [
+        {"name": "empty buffer", "hex": "", "outcome": "drop", "reason": "bad_length"},
+        {"name": "7 bytes", "hex": "00010002000300", "outcome": "drop", "reason": "bad_length"},
+        {"name": "9 bytes", "hex": "000100020003000400", "outcome": "drop", "reason": "bad_length"},
+        {"name": "16 bytes: two messages are not one", "hex": "0001000200030004" * 2,
+         "outcome": "drop", "reason": "bad_length"},
+    ]
+    return {
+        "description": "The 8-byte message (SPEC.md section 2). `hex` decodes to `fields`, and `fields` "
+                       "encode to `hex`. Any 8 bytes are a message; only the length can be wrong.",
+        "valid": valid,
+        "invalid": invalid,
+    }
+
+
+# --------------------------------------------------------------------------
+# timestamps.json
+# --------------------------------------------------------------------------
+# (a, b, is a strictly newer than b?) decided by hand from SPEC.md section 3.
+COMPARE_BY_HAND = [
+    (2, 1, True, "one step"),
+    (1, 2, False, "one step back"),
+    (7, 7, False, "equal is not newer"),
+    (1, 65535, True, "across the wrap: 65535 -> 1 is one step (0 is skipped)"),
+    (65535, 1, False, "across the wrap, backwards"),
+    (3, 65530, True, "a few steps across the wrap"),
+    (65530, 3, False, "a few steps across the wrap, backwards"),
+    (32768, 1, True, "32767 ahead: the farthest that still counts as newer"),
+    (32769, 1, True, "exactly half-way (32768 apart): the larger number is newer"),
+    (1, 32769, False, "exactly half-way, other way round: the smaller number is not newer"),
+    (40000, 10, False, "more than half the space ahead is behind"),
+    (10, 40000, True, "more than half the space behind is ahead"),
+    (1, 0, True, "anything is newer than the reserved 0"),
+    (65535, 0, True, "0 is not 65535 + 1"),
+    (0, 1, False, "0 is never newer"),
+    (0, 65535, False, "0 is never newer, even after 65535"),
+    (0, 0, False, "0 against 0"),
+    (32768, 0, True, "0 is reserved, not a position on the circle"),
+]
+
+NEXT_BY_HAND = [(1, 2), (0x7FFF, 0x8000), (0xFFFE, 0xFFFF), (0xFFFF, 1)]
+
+
+def timestamp_vectors() -> dict[str, object]:
+    compare = []
+    for a, b, newer, why in COMPARE_BY_HAND:
+        assert is_newer(a, b) is newer, (a, b, why)
+        compare.append({"a": a, "b": b, "a_is_newer": newer, "why": why})
+    nexts = []
+    for ts, nxt in NEXT_BY_HAND:
+        assert next_ts(ts) == nxt
+        nexts.append({"timestamp": ts, "next": nxt})
+    return {
+        "description": "16-bit Lamport timestamps (SPEC.md section 3): is `a` strictly newer than `b` "
+                       "by serial-number arithmetic, and the timestamp a local put gives after `timestamp`.",
+        "compare": compare,
+        "next": nexts,
+    }
+
+
+# --------------------------------------------------------------------------
+# receive.json: the receive rules, one case per row of SPEC.md's table
+# --------------------------------------------------------------------------
+# (name, self id, local entry (value, ts, robot) or None, incoming (op, key, value, ts, robot),
+#  outcome, entry after, queued messages). Written by hand; key 4 throughout. Conflicts use the
+#  default rule (higher robot id wins; the winner keeps the local timestamp).
+RECEIVE_BY_HAND = [
+    ("PUT for an unknown key: store, relay", 1, None, ("PUT", 4, 9, 3, 2),
+     "STORED", (9, 3, 2), [("PUT", 4, 9, 3, 2)]),
+    ("newer PUT: store, relay", 1, (5, 2, 7), ("PUT", 4, 9, 3, 2),
+     "STORED", (9, 3, 2), [("PUT", 4, 9, 3, 2)]),
+    ("older PUT: ignore, no answer", 1, (9, 3, 2), ("PUT", 4, 1, 2, 5),
+     "STALE", (9, 3, 2), []),
+    ("same PUT again: nothing", 1, (9, 3, 2), ("PUT", 4, 9, 3, 2),
+     "SAME", (9, 3, 2), []),
+    ("same ts and robot, other value: still nothing", 1, (9, 3, 2), ("PUT", 4, 8, 3, 2),
+     "SAME", (9, 3, 2), []),
+    ("PUT conflict, remote robot higher: remote wins", 1, (9, 3, 2), ("PUT", 4, 1, 3, 5),
+     "CONFLICT", (1, 3, 5), [("PUT", 4, 1, 3, 5)]),
+    ("PUT conflict, remote robot lower: local wins and is re-sent", 1, (9, 3, 5), ("PUT", 4, 8, 3, 3),
+     "CONFLICT", (9, 3, 5), [("PUT", 4, 9, 3, 5)]),
+    ("PUT with reserved ts 0: malformed", 1, None, ("PUT", 4, 9, 0, 2),
+     "INVALID", None, []),
+    ("PUT with reserved ts 0 over a held key: malformed", 1, (9, 3, 2), ("PUT", 4, 1, 0, 2),
+     "INVALID", (9, 3, 2), []),
+    ("newer PUT across the wrap (1 after 65535)", 1, (9, 65535, 2), ("PUT", 4, 10, 1, 2),
+     "STORED", (10, 1, 2), [("PUT", 4, 10, 1, 2)]),
+    ("older PUT across the wrap (65535 before 1)", 1, (10, 1, 2), ("PUT", 4, 9, 65535, 2),
+     "STALE", (10, 1, 2), []),
+    ("GET older than ours: answer with a PUT of ours", 1, (9, 3, 2), ("GET", 4, 0, 1, 8),
+     "ANSWERED", (9, 3, 2), [("PUT", 4, 9, 3, 2)]),
+    ("empty GET (ts 0) for a key we hold: answer", 1, (9, 1, 1), ("GET", 4, 0, 0, 8),
+     "ANSWERED", (9, 1, 1), [("PUT", 4, 9, 1, 1)]),
+    ("empty GET for a key we lack: drop, do not relay", 1, None, ("GET", 4, 0, 0, 8),
+     "UNKNOWN", None, []),
+    ("GET newer than ours: store its view, relay as PUT", 1, (9, 1, 1), ("GET", 4, 77, 5, 8),
+     "STORED", (77, 5, 8), [("PUT", 4, 77, 5, 8)]),
+    ("GET with data for a key we lack: store, relay as PUT", 1, None, ("GET", 4, 77, 5, 8),
+     "STORED", (77, 5, 8), [("PUT", 4, 77, 5, 8)]),
+    ("GET with our very view: nothing", 1, (9, 3, 2), ("GET", 4, 9, 3, 2),
+     "SAME", (9, 3, 2), []),
+    ("GET conflict, remote robot higher: remote wins, sent as PUT", 1, (9, 3, 2), ("GET", 4, 5, 3, 6),
+     "CONFLICT", (5, 3, 6), [("PUT", 4, 5, 3, 6)]),
+]
+
+
+ENTRY = ("value", "timestamp", "robot")
+
+
+def receive_vectors() -> dict[str, object]:
+    cases = []
+    for name, me, local, (op, key, value, ts, robot), outcome, after, queued in RECEIVE_BY_HAND:
+        assert outcome == _receive_model(local, op, value, ts, robot)[0], name
+        cases.append({
+            "name": name,
+            "self": me,
+            "local": None if local is None else dict(zip(ENTRY, local, strict=True)),
+            "incoming": pack(op, key, value, ts, robot).hex(),
+            "outcome": outcome,
+            "entry_after": None if after is None else dict(zip(ENTRY, after, strict=True)),
+            "queued": [pack(*q).hex() for q in queued],
+        })
+    return {
+        "description": "Receive rules (SPEC.md section 4): a robot `self` holding `local` for the key (or "
+                       "nothing) hears `incoming`. It must reach `outcome`, hold `entry_after`, and queue "
+                       "exactly `queued` (wire hex). Conflicts use the default rule: higher robot id wins, "
+                       "the winner keeps the local timestamp.",
+        "key": 4,
+        "cases": cases,
+    }
+
+
+def _receive_model(local: tuple[int, int, int] | None, op: str, value: int, ts: int,
+                   robot: int) -> tuple[str]:
+    """Just the outcome, from the table in SPEC.md: confirms the hand-written column."""
+    if ts == 0:
+        if op == "PUT":
+            return ("INVALID",)
+        if local is None:
+            return ("UNKNOWN",)
+    if local is None or is_newer(ts, local[1]):
+        return ("STORED",)
+    if ts != local[1]:
+        return ("ANSWERED",) if op == "GET" else ("STALE",)
+    return ("SAME",) if robot == local[2] else ("CONFLICT",)
+
+
+# --------------------------------------------------------------------------
+# cobs8.json
+# --------------------------------------------------------------------------
+SAMPLE = pack("PUT", 1, 0x1234, 1, 42)  # 00 01 12 34 00 01 00 2a: three zero bytes to stuff
+
+
+def crc_catalogue() -> list[dict[str, object]]:
+    return [
+        {"algorithm": "CRC-16/MCRF4XX", "ascii": "123456789", "hex": CHECK.hex(), "crc": "6f91",
+         "source": "reveng CRC catalogue check value"},
+        {"algorithm": "CRC-32/ISO-HDLC", "ascii": "123456789", "hex": CHECK.hex(), "crc": "cbf43926",
+         "source": "reveng CRC catalogue check value"},
+        {"algorithm": "CRC-16/MCRF4XX", "ascii": "", "hex": "", "crc": "ffff", "source": "init, no input"},
+        {"algorithm": "CRC-32/ISO-HDLC", "ascii": "", "hex": "", "crc": "00000000",
+         "source": "init xor xorout, no input"},
+    ]
+
+
+def stream_case(name: str, stream: bytes, messages: list[bytes], drops: dict[str, int]) -> dict[str, object]:
+    return {"name": name, "stream": stream.hex(), "messages": [m.hex() for m in messages], "drops": drops}
+
+
+def cobs8_vectors() -> dict[str, object]:
+    frames = []
+    for name, hexbytes, _ in WIRE_BY_HAND:
+        raw = bytes.fromhex(hexbytes)
+        crc = crc16_mcrf4xx(raw)
+        frames.append({"name": name, "message": hexbytes, "fields": fields(raw), "crc": f"{crc:04x}",
+                       "frame": serial_frame(raw).hex()})
+    good = serial_frame(SAMPLE)
+    bad_crc = bytearray(good)
+    bad_crc[3] ^= 0x01  # a payload bit flipped on the line, COBS still valid
+    swapped_crc = SAMPLE + bytes([crc16_mcrf4xx(SAMPLE) >> 8, crc16_mcrf4xx(SAMPLE) & 0xFF])  # big-endian CRC
+    epuck_word = serial_frame(bytes.fromhex("12345678"))
+    kilobot_payload = serial_frame(SAMPLE + b"\x01\x56")
+    streams = [
+        stream_case("one frame", good, [SAMPLE], {}),
+        stream_case("idle zeros around a frame are not drops", b"\x00\x00" + good + b"\x00", [SAMPLE], {}),
+        stream_case("two frames back to back", good + serial_frame(pack("GET", 0x7FFF, 0, 0, 1)),
+                    [SAMPLE, pack("GET", 0x7FFF, 0, 0, 1)], {}),
+        stream_case("joined mid-frame: the tail before the first delimiter is garbage", good[5:] + good,
+                    [SAMPLE], {"crc": 1}),
+        stream_case("a flipped bit fails the CRC", bytes(bad_crc), [], {"crc": 1}),
+        stream_case("CRC stored big-endian is wrong", cobs_encode(swapped_crc) + b"\x00", [], {"crc": 1}),
+        stream_case("code byte runs past the delimiter", bytes.fromhex("05112200"), [], {"cobs": 1}),
+        stream_case("an epuck4 word (4-byte payload) is not a cobs8 frame", epuck_word, [], {"bad_length": 1}),
+        stream_case("a kilobot payload (10 bytes) is not a cobs8 frame", kilobot_payload, [], {"bad_length": 1}),
+        stream_case("1 decoded byte: too short to hold a CRC fails it", bytes.fromhex("024200"), [], {"crc": 1}),
+        stream_case("0 decoded bytes fail the CRC", bytes.fromhex("0100"), [], {"crc": 1}),
+        stream_case("CRC-valid empty payload", serial_frame(b""), [], {"bad_length": 1}),
+        stream_case("64 non-zero bytes then a delimiter: a (bad) frame, not overlong",
+                    b"\x41" * 64 + b"\x00", [], {"cobs": 1}),
+        stream_case("65 non-zero bytes: overlong, counted once, resync at the next 0x00",
+                    b"\x41" * 65 + b"\x41" * 100 + b"\x00" + good, [SAMPLE], {"overlong": 1}),
+    ]
+    for case in streams:
+        assert _deframe_model(bytes.fromhex(case["stream"]), 8) == (
+            [bytes.fromhex(m) for m in case["messages"]], case["drops"]), case["name"]
+    return {
+        "description": "cobs8 (SPEC.md section 6.1): frame = COBS(message || CRC-16/MCRF4XX little-endian) "
+                       "|| 0x00. `frames`: message -> frame. `streams`: bytes fed to a fresh receiver -> "
+                       "messages delivered in order, and drops counted by reason.",
+        "crc_check_values": crc_catalogue(),
+        "max_frame": 64,
+        "frames": frames,
+        "streams": streams,
+    }
+
+
+def _deframe_model(stream: bytes, want: int) -> tuple[list[bytes], dict[str, int]]:
+    """The receive procedure of SPEC.md section 6, step by step (confirms hand-stated drops)."""
+    out: list[bytes] = []
+    drops: dict[str, int] = {}
+    buf = bytearray()
+    discarding = False
+
+    def drop(reason: str) -> None:
+        drops[reason] = drops.get(reason, 0) + 1
+
+    for byte in stream:
+        if byte != 0:
+            if discarding:
+                continue
+            if len(buf) == 64:
+                drop("overlong")
+                discarding = True
+                buf.clear()
+                continue
+            buf.append(byte)
+            continue
+        if discarding:
+            discarding = False
+            continue
+        if not buf:
+            continue
+        decoded = cobs_decode(bytes(buf))
+        buf.clear()
+        if decoded is None:
+            drop("cobs")
+        elif len(decoded) < 2 or crc16_mcrf4xx(decoded) != 0:
+            drop("crc")
+        elif len(decoded) - 2 != want:
+            drop("bad_length")
+        else:
+            out.append(decoded[:-2])
+    return out, drops
+
+
+# --------------------------------------------------------------------------
+# epuck4.json
+# --------------------------------------------------------------------------
+
+
+def epuck_words(msg: bytes) -> list[int]:
+    c = crc32_iso_hdlc(msg)
+    group = c >> 28
+    p = (int.from_bytes(msg, "big") << 14) | ((c >> 14) & 0x3FFF)
+    return [(i << 30) | (group << 26) | ((p >> (52 - 26 * i)) & 0x3FFFFFF) for i in range(3)]
+
+
+def _hex32(word: int) -> str:
+    return f"{word:08x}"
+
+
+def _same_group_pair() -> tuple[bytes, bytes]:
+    """Two different messages whose CRC-32 share the top nibble (for collision cases)."""
+    a = pack("PUT", 1, 1, 1, 1)
+    group = crc32_iso_hdlc(a) >> 28
+    for key in range(2, 1000):  # key (word 0) and timestamp (word 1) differ from a
+        b = pack("PUT", key, 1, key, 1)
+        if crc32_iso_hdlc(b) >> 28 == group:
+            return a, b
+    raise AssertionError("no pair found")
+
+
+def epuck4_vectors() -> dict[str, object]:
+    messages = []
+    for name, hexbytes, _ in WIRE_BY_HAND:
+        raw = bytes.fromhex(hexbytes)
+        c = crc32_iso_hdlc(raw)
+        words = epuck_words(raw)
+        messages.append({"name": name, "message": hexbytes, "crc32": f"{c:08x}",
+                         "words": [_hex32(w) for w in words],
+                         "uart": [serial_frame(w.to_bytes(4, "big")).hex() for w in words]})
+    a, b = _same_group_pair()
+    wa, wb = epuck_words(a), epuck_words(b)
+    other = pack("GET", 0x7FFF, 0xFFFF, 0xFFFF, 0xFFFF)
+    wo = epuck_words(other)
+    bad_check = list(wa)
+    bad_check[2] ^= 0x1  # last bit of the 14-bit check (P bit 0)
+    bad_body = list(wa)
+    bad_body[1] ^= 1 << 20  # a message bit inside word 1
+    reserved = (3 << 30) | (wa[0] & 0x3FFFFFFF)
+
+    def w(word: int) -> dict[str, str]:
+        return {"word": _hex32(word)}
+
+    tick = {"tick": 1}
+    # (name, events, messages delivered, drops): outcomes decided by hand from SPEC.md section 6.2.
+    cases = [
+        ("in order", [w(wa[0]), w(wa[1]), w(wa[2])], [a], {}),
+        ("any order", [w(wa[2]), w(wa[0]), w(wa[1])], [a], {}),
+        ("identical duplicates are counted and ignored", [w(wa[0]), w(wa[0]), w(wa[1]), w(wa[1]), w(wa[2])],
+         [a], {"duplicate": 2}),
+        ("a retransmission after delivery assembles again", [w(x) for x in wa + wa], [a, a], {}),
+        ("two messages in different groups interleave", [w(wa[0]), w(wo[0]), w(wo[1]), w(wa[1]), w(wa[2]),
+                                                         w(wo[2])], [a, other], {}),
+        ("index 3 is reserved", [w(reserved)], [], {"bad_index": 1}),
+        ("a flipped check bit fails the check", [w(x) for x in bad_check], [], {"check": 1}),
+        ("a flipped message bit fails the check", [w(x) for x in bad_body], [], {"check": 1}),
+        ("a clash evicts the older fragment; the newer message completes",
+         [w(wa[0]), w(wb[0]), w(wb[1]), w(wb[2])], [b], {"collision": 1}),
+        ("a clash evicts everything older than the clashing fragment",
+         [w(wa[0]), w(wa[1]), w(wb[1]), w(wb[0]), w(wb[2])], [b], {"collision": 1}),
+        ("a clash keeps fragments newer than the clashing one",
+         [w(wa[1]), w(wb[0]), w(wb[1]), w(wb[2])], [b], {"collision": 1}),
+        ("a failed check evicts only the oldest fragment: the leftover goes, the new message completes",
+         [w(wa[0]), w(wb[1]), w(wb[2]), w(wb[0])], [b], {"check": 1}),
+        ("a mixed-up set fails the check", [w(wa[0]), w(wb[1]), w(wa[2])], [], {"check": 1}),
+        ("a fragment survives expiry_ticks ticks", [w(wa[0]), tick, tick, tick, w(wa[1]), w(wa[2])], [a], {}),
+        ("a fragment is stale after expiry_ticks + 1 ticks",
+         [w(wa[0]), tick, tick, tick, tick, w(wa[1]), w(wa[2])], [], {"stale": 1}),
+        ("fragments age one by one; one stale count per partial per tick",
+         [w(wa[0]), tick, tick, w(wa[1]), tick, tick, w(wa[2])], [], {"stale": 1}),
+        ("two fragments expiring on the same tick count once",
+         [w(wa[0]), w(wa[1]), tick, tick, tick, tick, w(wa[2])], [], {"stale": 1}),
+        ("after the stale fragment goes, the rest of a retransmission completes",
+         [w(wa[0]), tick, tick, w(wa[1]), tick, tick, w(wa[2]), w(wa[0])], [a], {"stale": 1}),
+    ]
+    reassembly = []
+    for name, events, delivered, drops in cases:
+        assert _reassemble_model(events, 3) == (delivered, drops), name
+        reassembly.append({"name": name, "events": events, "messages": [m.hex() for m in delivered],
+                           "drops": drops})
+    return {
+        "description": "epuck4 (SPEC.md section 6.2): one message in three 32-bit radio words "
+                       "`index:2 | group:4 | chunk:26`; on the UART each word is a serial frame with a "
+                       "4-byte big-endian payload. `reassembly`: events fed to a fresh reassembler with "
+                       "expiry_ticks = 3 ({\"word\"} or {\"tick\"}), messages delivered in order, drops by "
+                       "reason; partials still incomplete at the end are not counted.",
+        "expiry_ticks": 3,
+        "messages": messages,
+        "reassembly": reassembly,
+    }
+
+
+def _reassemble_model(events: list[dict[str, object]], expiry: int) -> tuple[list[bytes], dict[str, int]]:
+    """SPEC.md section 6.2's reassembly procedure, step by step (confirms the hand-stated outcomes)."""
+    partials: dict[int, dict[int, tuple[int, int, int]]] = {}  # group -> index -> (chunk, arrival, tick)
+    out: list[bytes] = []
+    drops: dict[str, int] = {}
+    now = arrivals = 0
+
+    def drop(reason: str) -> None:
+        drops[reason] = drops.get(reason, 0) + 1
+
+    for event in events:
+        if "tick" in event:
+            now += 1
+            for group, held in list(partials.items()):
+                old = [i for i, (_, _, born) in held.items() if now - born > expiry]
+                if old:
+                    drop("stale")
+                    for i in old:
+                        del held[i]
+                if not held:
+                    del partials[group]
+            continue
+        word = int(str(event["word"]), 16)
+        index, group, chunk = word >> 30, (word >> 26) & 0xF, word & 0x3FFFFFF
+        if index == 3:
+            drop("bad_index")
+            continue
+        held = partials.setdefault(group, {})
+        if index in held:
+            if held[index][0] == chunk:
+                drop("duplicate")
+                continue
+            drop("collision")
+            cut = held[index][1]
+            for i in [i for i, (_, arrival, _) in held.items() if arrival <= cut]:
+                del held[i]
+        arrivals += 1
+        held[index] = (chunk, arrivals, now)
+        if len(held) < 3:
+            continue
+        p = (held[0][0] << 52) | (held[1][0] << 26) | held[2][0]
+        msg = (p >> 14).to_bytes(8, "big")
+        c = crc32_iso_hdlc(msg)
+        if c >> 28 == group and (c >> 14) & 0x3FFF == p & 0x3FFF:
+            out.append(msg)
+            del partials[group]
+        else:
+            drop("check")
+            del held[min(held, key=lambda i: held[i][1])]
+    return out, drops
+
+
+# --------------------------------------------------------------------------
+# kilobot.json and ohc.json
+# --------------------------------------------------------------------------
+KILO_VERSION = 0x01
+KILO_TYPE = 0x56
+
+
+def kilobot_message_t(msg: bytes, msg_type: int = KILO_TYPE) -> bytes:
+    """kilolib message_t: data[9] (our message + version), type, crc (little-endian)."""
+    head = msg + bytes([KILO_VERSION, msg_type])
+    acc = 0xFFFF
+    for byte in head:
+        acc = crc16_avr_ccitt_update(acc, byte)
+    assert acc == crc16_mcrf4xx(head)
+    return head + bytes([acc & 0xFF, acc >> 8])
+
+
+def kilobot_vectors() -> dict[str, object]:
+    messages = []
+    for name, hexbytes, _ in WIRE_BY_HAND:
+        raw = bytes.fromhex(hexbytes)
+        message_t = kilobot_message_t(raw)
+        messages.append({"name": name, "message": hexbytes, "type": KILO_TYPE, "message_t": message_t.hex(),
+                         "kilobot_crc": message_t[10:].hex(), "uart": serial_frame(message_t[:10]).hex()})
+    custom_type = kilobot_message_t(SAMPLE, 0x21)
+    wrong_version = SAMPLE + bytes([0x02, KILO_TYPE])
+    wrong_type = SAMPLE + bytes([KILO_VERSION, 0x57])
+    system_type = SAMPLE + bytes([KILO_VERSION, 0x80])
+    streams = [
+        stream_case("one message", serial_frame(SAMPLE + b"\x01\x56"), [SAMPLE], {}),
+        stream_case("format version 2 is not ours", serial_frame(wrong_version), [], {"bad_version": 1}),
+        stream_case("another message type is another program's traffic", serial_frame(wrong_type), [],
+                    {"foreign_type": 1}),
+        stream_case("a system type (>= 0x80) is never ours", serial_frame(system_type), [], {"foreign_type": 1}),
+        stream_case("the type is checked before the version", serial_frame(SAMPLE + bytes([0x02, 0x57])), [],
+                    {"foreign_type": 1}),
+        stream_case("a cobs8 frame is not a kilobot frame", serial_frame(SAMPLE), [], {"bad_length": 1}),
+    ]
+    for case in streams:
+        payloads, drops = _deframe_model(bytes.fromhex(str(case["stream"])), 10)
+        delivered = []
+        for payload in payloads:
+            reason = "foreign_type" if payload[9] != KILO_TYPE else "bad_version" if payload[8] != 1 else None
+            if reason:
+                drops[reason] = drops.get(reason, 0) + 1
+            else:
+                delivered.append(payload[:8])
+        assert (delivered, drops) == ([bytes.fromhex(m) for m in case["messages"]], case["drops"]), case["name"]
+    return {
+        "description": "kilobot (SPEC.md section 6.3): kilolib message_t {data[9], type, crc}; data[0..7] is "
+                       "the message, data[8] = 0x01 (format version), type = 0x56 unless configured; crc is "
+                       "CRC-16/MCRF4XX over the first 10 bytes, little-endian (kilolib's message_crc). On the "
+                       "UART the frame payload is those 10 bytes, so the frame CRC is the Kilobot CRC. "
+                       "`streams`: UART bytes to a receiver configured with type 0x56.",
+        "version": KILO_VERSION,
+        "default_type": KILO_TYPE,
+        "crc_check_values": crc_catalogue()[:1],
+        "messages": messages,
+        "custom_type": {"message": SAMPLE.hex(), "type": 0x21, "message_t": custom_type.hex()},
+        "streams": streams,
+    }
+
+
+OHC_TYPES = {"STOP": 0, "LEDTOGGLE": 1, "FORWARDMSG": 2, "FORWARDRAWMSG": 3, "BOOTPAGE": 4, "GPSFRAME": 5,
+             "FORWARDMSGSINGLE": 6}
+
+
+def ohc_packet(packet_type: int, payload: bytes) -> bytes:
+    body = bytearray(132)
+    body[0] = 0x55
+    body[1] = packet_type
+    body[2 : 2 + len(payload)] = payload
+    x = 0
+    for byte in body[:131]:
+        x ^= byte
+    body[131] = x
+    return bytes(body)
+
+
+def ohc_vectors() -> dict[str, object]:
+    packets = []
+    for name, hexbytes, _ in WIRE_BY_HAND[:6]:
+        raw = bytes.fromhex(hexbytes)
+        for kind in ("FORWARDMSGSINGLE", "FORWARDMSG"):
+            pkt = ohc_packet(OHC_TYPES[kind], raw + bytes([KILO_VERSION, KILO_TYPE]))
+            x = 0
+            for byte in pkt:
+                x ^= byte
+            assert x == 0  # the OHC accepts a packet when the XOR of all 132 bytes is 0
+            packets.append({"name": f"{name}, {kind}", "message": hexbytes, "packet_type": kind,
+                            "type": KILO_TYPE, "packet": pkt.hex()})
+    return {
+        "description": "kilobot-ohc (SPEC.md section 6.4): PC -> overhead controller, 38400 8N1, 132-byte "
+                       "packets: 0x55, packet type, data[9] (message + version 0x01), message type, zeros, "
+                       "XOR of bytes 0..130. Packet types from kilolib ohc.h / kilogui packet.h. The OHC adds "
+                       "the Kilobot CRC itself. The link is one-way (the OHC has no IR receiver).",
+        "packet_types": OHC_TYPES,
+        "packets": packets,
+    }
+
+
+# --------------------------------------------------------------------------
+# can_frames.json (the ID scheme is SPEC.md section 6.5; can.json from the CAN framing is the
+# reference for its drops, this file feeds the DBC and dissector tests)
+# --------------------------------------------------------------------------
+
+
+def can_vectors() -> dict[str, object]:
+    frames = []
+
+    def add(name: str, can_id: int, extended: bool, msg: bytes, sender: int, stigmergy: int) -> None:
+        f = fields(msg)
+        op = 0 if f["op"] == "PUT" else 1
+        frames.append({"name": name, "id": f"{can_id:x}", "extended": extended, "data": msg.hex(),
+                       "id_op": OPS[op], "sender": sender, "stigmergy": stigmergy, "fields": f})
+
+    for name, hexbytes, (op, *_rest) in WIRE_BY_HAND:
+        raw = bytes.fromhex(hexbytes)
+        o = OPS.index(op)
+        add(f"11-bit base 0x600, sender 0x2a: {name}", 0x600 | o << 8 | 0x2A, False, raw, 0x2A, 0)
+        add(f"29-bit base 0x18000000, stigmergy 3, sender 0x1234: {name}",
+            0x18000000 | 3 << 17 | o << 16 | 0x1234, True, raw, 0x1234, 3)
+    put, get = pack("PUT", 9, 1, 1, 1), pack("GET", 9, 1, 1, 1)
+    add("11-bit sender 0", 0x600, False, put, 0, 0)
+    add("11-bit sender 0xff", 0x7FF, False, get, 0xFF, 0)
+    add("29-bit sender 0, stigmergy 0", 0x18000000, True, put, 0, 0)
+    add("29-bit sender 0xffff, stigmergy 255", 0x18000000 | 255 << 17 | 1 << 16 | 0xFFFF, True, get, 0xFFFF, 255)
+    add("29-bit sender 0x0500 (above the 11-bit range)", 0x18000500, True, put, 0x500, 0)
+    for f in frames:
+        can_id = int(str(f["id"]), 16)
+        if f["extended"]:
+            assert can_id >> 25 == 0xC and (can_id >> 16) & 1 == OPS.index(str(f["id_op"]))
+        else:
+            assert can_id >> 9 == 3 and (can_id >> 8) & 1 == OPS.index(str(f["id_op"]))
+    return {
+        "description": "CAN frames in the default bases (SPEC.md section 6.5): 11-bit id = 0x600 | op << 8 | "
+                       "sender; 29-bit id = 0x18000000 | stigmergy << 17 | op << 16 | sender. Classic CAN, "
+                       "DLC 8, data = one message. Used by the DBC and dissector tests.",
+        "frames": frames,
+    }
+
+
+def main(argv: list[str]) -> int:
+    outdir = Path(argv[1]) if len(argv) > 1 else Path(__file__).resolve().parent.parent / "vectors"
+    outdir.mkdir(parents=True, exist_ok=True)
+    files = {
+        "wire.json": wire_vectors(),
+        "timestamps.json": timestamp_vectors(),
+        "receive.json": receive_vectors(),
+        "cobs8.json": cobs8_vectors(),
+        "epuck4.json": epuck4_vectors(),
+        "kilobot.json": kilobot_vectors(),
+        "ohc.json": ohc_vectors(),
+        "can_frames.json": can_vectors(),
+    }
+    for name, content in files.items():
+        (outdir / name).write_text(json.dumps(content, indent=1) + "\n", encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))

@@ -1,0 +1,238 @@
+"""Real SocketCAN through python-can's `socketcan` interface, with can-utils as independent peers.
+
+Needs vcan0 (classic) and vcan1 (CAN FD, MTU 72). `test_in_uml.py` boots User-Mode
+Linux to provide them and runs this module inside it; on a host that already has
+them, this module runs directly.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import queue
+import shutil
+import signal
+import socket
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import can
+import pytest
+from can_vectors import FrameVector, load
+
+from vstig_hw import Message, Op, encode
+from vstig_hw.framing.can import CanFraming, CanIdScheme, can_link
+from vstig_hw.link import Link
+from vstig_hw.transports.base import TransportError
+
+IN_UML = os.environ.get("VSTIG_IN_UML") == "1"
+CLASSIC, FD = "vcan0", "vcan1"
+
+
+def _missing() -> str | None:
+    for dev in (CLASSIC, FD):
+        if not Path(f"/sys/class/net/{dev}").exists():
+            return f"no {dev} here"
+    if Path(f"/sys/class/net/{FD}/mtu").read_text().strip() != "72":
+        return f"{FD} is not CAN FD capable (`ip link set {FD} mtu 72`)"
+    try:
+        socket.socket(socket.AF_CAN, socket.SOCK_RAW, socket.CAN_RAW).close()
+    except OSError as exc:
+        return f"this kernel has no SocketCAN ({exc})"
+    for tool in ("cansend", "candump"):
+        if shutil.which(tool) is None:
+            return f"can-utils' {tool} is missing"
+    return None
+
+
+_REASON = _missing()
+if _REASON and IN_UML:
+    raise RuntimeError(f"the UML guest should provide SocketCAN, but: {_REASON}")
+if _REASON:
+    pytest.skip(f"{_REASON}: tests/socketcan/test_in_uml.py runs this module inside User-Mode Linux",
+                allow_module_level=True)
+
+pytestmark = pytest.mark.socketcan
+VECTORS = load()
+DEADLINE_S = 30.0  # generous: system calls inside UML are about 10x slower
+SYNC = "5A5#53594E43"  # "SYNC" under base 0x400, which no vector uses: proves candump is listening
+SENTINEL = Message(Op.PUT, 0x7ABC, 0, 1, 0x42)  # sent after each vector: once it arrives, the vector has too
+
+
+def _channel(vector: FrameVector) -> str:
+    return FD if vector.frame.is_fd else CLASSIC
+
+
+def _cansend(channel: str, frame: str) -> None:
+    subprocess.run(["cansend", channel, frame], check=True, timeout=DEADLINE_S)
+
+
+def _id_text(scheme: CanIdScheme, ident: int) -> str:
+    return f"{ident:08X}" if scheme.extended else f"{ident:03X}"
+
+
+def _sentinel_frame(scheme: CanIdScheme) -> str:
+    return f"{_id_text(scheme, scheme.can_id(Op.PUT, SENTINEL.robot))}#{encode(SENTINEL).hex().upper()}"
+
+
+def _link(vector: FrameVector, sender: int) -> Link[can.Message]:
+    scheme = vector.scheme
+    link = can_link("socketcan", _channel(vector), robot_id=sender, fd=vector.frame.is_fd, id_base=scheme.base,
+                    extended=scheme.extended, stigmergy=scheme.stigmergy)
+    link.open()
+    return link
+
+
+def test_cansend_frames_decode_to_the_vector_messages() -> None:
+    for vector in VECTORS:
+        link = _link(vector, sender=1)
+        try:
+            _cansend(_channel(vector), vector.cansend)
+            _cansend(_channel(vector), _sentinel_frame(vector.scheme))
+            heard = []
+            deadline = time.monotonic() + DEADLINE_S
+            while SENTINEL not in [h.message for h in heard] and time.monotonic() < deadline:
+                heard.extend(link.receive(0.1))
+            assert heard and heard[-1].message == SENTINEL, f"{vector.name}: the sentinel never arrived"
+            before = heard[:-1]
+            assert [h.message for h in before] == vector.messages, vector.name
+            assert all(h.sender == vector.sender for h in before), vector.name
+            drops = dict(link.framing.drops)
+            if vector.drop == "unknown_id":  # the kernel filter kept it from us: only the sentinel was read
+                assert drops == {} and link.transport.counters["rx"] == 1, vector.name
+            else:
+                assert drops == ({} if vector.drop is None else {vector.drop: 1}), vector.name
+        finally:
+            link.close()
+
+
+def _without_fdf(frame: str) -> str:
+    """ID##<flags>DATA with the kernel's CANFD_FDF flag (0x4, set on every FD frame since Linux 6.0) cleared."""
+    ident, sep, rest = frame.partition("##")
+    return f"{ident}##{int(rest[0], 16) & ~0x4:X}{rest[1:]}" if sep else frame
+
+
+class Candump:
+    """can-utils' candump as a subprocess whose output lines we can wait for."""
+
+    def __init__(self, *args: str, cwd: Path | None = None) -> None:
+        self.proc = subprocess.Popen(["candump", *args], stdout=subprocess.PIPE, text=True, cwd=cwd)
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.seen: list[str] = []
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.put(line.rstrip("\n"))
+
+    def frames(self) -> list[tuple[str, str]]:
+        """(interface, ID#DATA) of every line so far, from `-L` output, FD flags as cansend writes them."""
+        while True:
+            try:
+                self.seen.append(self.lines.get_nowait())
+            except queue.Empty:
+                break
+        return [(fields[1], _without_fdf(fields[2])) for fields in (line.split() for line in self.seen)
+                if len(fields) == 3]
+
+    def wait_for(self, channel: str, frame: str, resend: bool = False) -> None:
+        deadline = time.monotonic() + DEADLINE_S
+        while (channel, frame) not in self.frames():
+            assert time.monotonic() < deadline, f"candump never showed {channel} {frame}: {self.seen}"
+            if resend:  # candump may not have bound its socket yet: send again until it shows
+                _cansend(channel, frame)
+            with contextlib.suppress(queue.Empty):
+                self.seen.append(self.lines.get(timeout=0.2))
+
+    def stop(self) -> None:
+        self.proc.send_signal(signal.SIGINT)
+        self.proc.wait(timeout=DEADLINE_S)
+
+
+@pytest.fixture
+def candump_ready(tmp_path: Path) -> Iterator[Candump]:
+    """candump -l (a log file in tmp_path) -s 0 -L (the same frames on stdout), listening on both buses."""
+    dump = Candump("-l", "-s", "0", "-L", CLASSIC, FD, cwd=tmp_path)
+    try:
+        for channel in (CLASSIC, FD):
+            dump.wait_for(channel, SYNC, resend=True)
+        yield dump
+    finally:
+        if dump.proc.poll() is None:
+            dump.stop()
+
+
+def test_our_frames_show_up_in_candump_with_the_spec_ids_and_bytes(candump_ready: Candump) -> None:
+    expected = []
+    for vector in VECTORS:
+        if vector.drop is None:
+            assert vector.sender is not None
+            link = _link(vector, sender=vector.sender)
+            try:
+                link.send_many(vector.messages)
+                assert link.transport.counters["tx"] == 1
+            finally:
+                link.close()
+            expected.append((_channel(vector), vector.cansend))
+            candump_ready.wait_for(*expected[-1])
+    ours = [f for f in candump_ready.frames() if f[1] != SYNC]
+    assert ours == expected
+
+
+def test_a_candump_log_file_decodes_through_our_framing(candump_ready: Candump, tmp_path: Path) -> None:
+    for vector in VECTORS:
+        _cansend(_channel(vector), vector.cansend)
+    candump_ready.wait_for(_channel(VECTORS[-1]), VECTORS[-1].cansend)
+    candump_ready.stop()
+    (log_file,) = tmp_path.glob("candump-*.log")
+    frames = [f for f in can.LogReader(log_file) if f.data != b"SYNC"]
+    assert len(frames) == len(VECTORS)
+    for vector, frame in zip(VECTORS, frames, strict=True):
+        assert frame.channel == _channel(vector)
+        framing = CanFraming(vector.scheme, sender=1, fd=True)
+        assert framing.feed(frame) == vector.messages, vector.name
+        # no kernel filter here: foreign IDs reach the framing and are counted as unknown_id
+        assert dict(framing.drops) == ({} if vector.drop is None else {vector.drop: 1}), vector.name
+
+
+def test_missing_channel_is_one_clear_line() -> None:
+    with pytest.raises(TransportError) as caught:
+        can_link("socketcan", "vcan9", robot_id=1).open()
+    assert str(caught.value) == "no such CAN interface vcan9: create it with `ip link add vcan9 type vcan`"
+
+
+def _ip(*args: str) -> None:
+    subprocess.run(["ip", "link", *args], check=True, timeout=DEADLINE_S, capture_output=True)
+
+
+@pytest.mark.skipif(os.geteuid() != 0 and not IN_UML, reason="creating and deleting vcan interfaces needs root")
+def test_a_deleted_interface_is_reported_and_reconnected_when_it_returns() -> None:
+    _ip("add", "dev", "vcan2", "type", "vcan")
+    _ip("set", "up", "vcan2")
+    link = can_link("socketcan", "vcan2", robot_id=1)
+    link.open()
+    try:
+        _ip("delete", "vcan2")  # the adapter is unplugged
+        deadline = time.monotonic() + DEADLINE_S
+        while link.transport.connected and time.monotonic() < deadline:
+            link.receive(0.1)
+        assert not link.transport.connected and link.transport.counters["lost"] == 1
+        link.send(SENTINEL)  # dropped and counted while the device is gone
+        assert link.transport.counters["tx_dropped"] == 1
+        _ip("add", "dev", "vcan2", "type", "vcan")
+        _ip("set", "up", "vcan2")
+        heard: list[Message] = []
+        deadline = time.monotonic() + DEADLINE_S
+        while not heard and time.monotonic() < deadline:
+            if link.transport.connected:
+                _cansend("vcan2", "602#0001000500010002")
+            heard = [h.message for h in link.receive(0.1)]
+        assert heard == [Message(Op.PUT, 1, 5, 1, 2)]
+        assert link.transport.counters["reconnects"] == 1
+    finally:
+        link.close()
+        subprocess.run(["ip", "link", "delete", "vcan2"], check=False, capture_output=True)

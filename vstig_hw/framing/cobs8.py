@@ -1,0 +1,35 @@
+"""`cobs8`: one 8-byte wire message per serial frame (12 bytes on the wire).
+
+The default for UART radios that carry whole messages (Kilobot/marXbot style
+bridges, generic serial radios).
+"""
+
+from __future__ import annotations
+
+from ..counters import Counters
+from ..wire import MESSAGE_SIZE, Message, decode, encode
+from .cobsframe import CobsFrameReader, encode_frame
+
+__all__ = ["Cobs8Framing"]
+
+
+class Cobs8Framing:
+    name = "cobs8"
+    default_baud = 115200
+    transmit_only = False
+
+    def __init__(self) -> None:
+        self.drops = Counters()
+        self._reader = CobsFrameReader(MESSAGE_SIZE, self.drops)
+
+    def encode(self, msg: Message) -> list[bytes]:
+        return [encode_frame(encode(msg))]
+
+    def feed(self, unit: bytes) -> list[Message]:
+        return [decode(payload) for payload in self._reader.feed(unit)]
+
+    def tick(self) -> None:
+        """Nothing ages in a cobs8 stream."""
+
+    def reset(self) -> None:
+        self._reader.reset()

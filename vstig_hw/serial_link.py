@@ -1,0 +1,31 @@
+"""One call to a serial Link: `serial_link("/dev/ttyUSB0", "epuck4")`."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from .framing import make_serial_framing
+from .link import Link
+from .transports.serial import SerialTransport
+
+__all__ = ["serial_link"]
+
+
+def serial_link(port: str, framing: str = "cobs8", baud: int | None = None, *, name: str | None = None,
+                connect: bool = True, transport_options: Mapping[str, Any] | None = None,
+                **framing_options: Any) -> Link[bytes]:
+    """A Link over `port` (a device path or any pyserial URL) speaking `framing`.
+
+    `baud` defaults to the framing's own (38400 for kilobot-ohc, 115200 otherwise).
+    `transport_options` go to SerialTransport (parity, stopbits, rtscts, backoff_max...),
+    the other keyword options to the framing (e.g. expiry_ticks=5, msg_type=0x42).
+    With `connect` the port is opened now, so a bad port fails here with a TransportError.
+    Unknown framings or options raise ValueError naming them.
+    """
+    codec = make_serial_framing(framing, **framing_options)
+    transport = SerialTransport(port, baud or codec.default_baud, name=name, **dict(transport_options or {}))
+    link: Link[bytes] = Link(name or port, transport, codec)
+    if connect:
+        link.open()
+    return link

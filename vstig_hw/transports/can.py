@@ -1,0 +1,225 @@
+"""CanTransport: a python-can bus that survives its adapter vanishing.
+
+Any python-can interface works unchanged (socketcan, slcan, pcan, kvaser,
+virtual, udp_multicast, socketcand...): interface, channel, bitrate and any other
+option go to `can.Bus` as given. Units are `can.Message` frames, passed up as
+received (error frames too, so captures keep them; the framing counts them).
+
+Counters: `rx`, `tx`, `tx_dropped` (device gone or TX queue full), `bus_errors`
+(error frames and failed bus calls), `bus_off`, `lost` (outages) and `reconnects`.
+An outage is logged once; the bus is reopened with exponential backoff from
+`read`/`write`, which never raise into the caller's loop.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import time
+from typing import Any
+
+import can
+
+from ..counters import Counters
+from .base import TransportError
+
+__all__ = ["CanTransport"]
+
+log = logging.getLogger(__name__)
+
+# Linux error-frame class bit for bus-off (linux/can/error.h CAN_ERR_BUSOFF); python-can hands
+# SocketCAN error frames up with the kernel's class bits as the arbitration id.
+_CAN_ERR_BUSOFF = 0x40
+_DRAIN_LIMIT = 512  # frames taken per read() after the first, so one busy bus cannot starve the loop
+_STATE_POLL_S = 1.0  # how often to ask interfaces that report it (pcan, kvaser...) for bus-off
+# Send failures that mean "the bus is busy", not "the device is gone".
+_TRANSIENT_ERRNOS = frozenset({errno.ENOBUFS, errno.EAGAIN})
+
+
+def _errno_of(exc: BaseException) -> int | None:
+    """The OS error number behind a python-can or OS exception, following the cause chain."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        for attr in ("errno", "error_code"):
+            code = getattr(seen, attr, None)
+            if isinstance(code, int):
+                return code
+        seen = seen.__cause__ or seen.__context__
+    return None
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+class CanTransport:
+    """A python-can bus as a Transport[can.Message]."""
+
+    def __init__(
+        self,
+        interface: str,
+        channel: str,
+        *,
+        bitrate: int | None = None,
+        fd: bool = False,
+        can_filters: list[dict[str, Any]] | None = None,
+        name: str | None = None,
+        backoff: tuple[float, float] = (0.1, 5.0),
+        send_timeout: float = 0.1,
+        **options: Any,
+    ) -> None:
+        self.interface = interface
+        self.channel = channel
+        self.name = name or f"{interface}:{channel}"
+        self.counters = Counters()
+        self.last_error: str | None = None
+        self.send_timeout = send_timeout
+        self._bus_kwargs: dict[str, Any] = {"interface": interface, "channel": channel, **options}
+        if bitrate is not None:
+            self._bus_kwargs["bitrate"] = bitrate
+        if fd:  # only when asked: some interfaces reject an `fd` keyword they do not support
+            self._bus_kwargs["fd"] = True
+        if can_filters is not None:
+            self._bus_kwargs["can_filters"] = can_filters
+        self._backoff_min, self._backoff_max = backoff
+        self._bus: can.BusABC | None = None
+        self._opened = False
+        self._delay = self._backoff_min
+        self._next_try = 0.0
+        self._next_state_poll = 0.0
+
+    # -- lifecycle -----------------------------------------------------------
+    def open(self) -> None:
+        self._bus = self._make_bus()
+        self._opened = True
+        self.last_error = None
+
+    def close(self) -> None:
+        self._opened = False
+        self._drop_bus()
+
+    @property
+    def connected(self) -> bool:
+        return self._bus is not None
+
+    @property
+    def bus(self) -> can.BusABC | None:
+        """The python-can bus while connected (for captures and diagnostics)."""
+        return self._bus
+
+    def _make_bus(self) -> can.BusABC:
+        try:
+            return can.Bus(**self._bus_kwargs)
+        except can.CanInterfaceNotImplementedError as exc:
+            raise TransportError(f"CAN interface {self.interface!r} cannot be used here: {_one_line(exc)}") from None
+        except (can.CanError, OSError, ValueError, TypeError) as exc:
+            raise TransportError(self._explain(exc)) from None
+
+    def _explain(self, exc: BaseException) -> str:
+        code = _errno_of(exc)
+        channel = self.channel
+        if code == errno.ENODEV:
+            if str(channel).startswith("vcan"):
+                return f"no such CAN interface {channel}: create it with `ip link add {channel} type vcan`"
+            return f"no such CAN interface {channel}: is the adapter plugged in? (`ip link show` lists CAN interfaces)"
+        if code == errno.EAFNOSUPPORT:
+            return (f"cannot open {self.interface} channel {channel}: this kernel has no SocketCAN "
+                    "(socket(AF_CAN) is not supported); load the `can` modules or use another interface")
+        if code == errno.ENETDOWN:
+            return f"CAN interface {channel} is down: bring it up with `ip link set up {channel}`"
+        return f"cannot open CAN {self.interface} channel {channel}: {_one_line(exc)}"
+
+    # -- moving frames -------------------------------------------------------
+    def read(self, timeout: float) -> list[can.Message]:
+        bus = self._bus or self._reconnect(timeout)
+        if bus is None:
+            return []
+        frames: list[can.Message] = []
+        try:
+            frame = bus.recv(timeout)
+            while frame is not None:
+                frames.append(frame)
+                if frame.is_error_frame:
+                    self._error_frame(frame)
+                if len(frames) > _DRAIN_LIMIT or self._bus is None:
+                    break
+                frame = bus.recv(0)
+            if self._bus is not None:
+                self._poll_state(bus)
+        except (can.CanError, OSError) as exc:
+            self._lost(_one_line(exc))
+        self.counters["rx"] += len(frames)
+        return frames
+
+    def write(self, unit: can.Message) -> None:
+        bus = self._bus or self._reconnect(0.0)
+        if bus is None:
+            self.counters["tx_dropped"] += 1
+            return
+        try:
+            bus.send(unit, timeout=self.send_timeout)
+        except (can.CanError, OSError) as exc:
+            self.counters["tx_dropped"] += 1
+            self.counters["bus_errors"] += 1
+            if _errno_of(exc) not in _TRANSIENT_ERRNOS and "buffer full" not in str(exc).lower():
+                self._lost(_one_line(exc))
+            return
+        self.counters["tx"] += 1
+
+    # -- errors and reconnection ---------------------------------------------
+    def _error_frame(self, frame: can.Message) -> None:
+        self.counters["bus_errors"] += 1
+        if self.interface == "socketcan" and frame.arbitration_id & _CAN_ERR_BUSOFF:
+            self.counters["bus_off"] += 1
+            self._lost("bus-off")
+
+    def _poll_state(self, bus: can.BusABC) -> None:
+        now = time.monotonic()
+        if now < self._next_state_poll:
+            return
+        self._next_state_poll = now + _STATE_POLL_S
+        try:
+            state = bus.state
+        except (NotImplementedError, can.CanError, OSError):
+            return
+        if state is can.BusState.ERROR:
+            self.counters["bus_off"] += 1
+            self._lost("bus-off")
+
+    def _drop_bus(self) -> None:
+        bus, self._bus = self._bus, None
+        if bus is not None:
+            try:
+                bus.shutdown()
+            except Exception as exc:  # a half-dead adapter may fail any way while closing
+                log.debug("%s: error while closing: %s", self.name, exc)
+
+    def _lost(self, reason: str) -> None:
+        """The device failed: report once, then reopen it with backoff from read/write."""
+        self._drop_bus()
+        self.counters["lost"] += 1
+        self.last_error = reason
+        log.warning("%s: CAN device lost (%s); reconnecting with backoff", self.name, reason)
+        self._delay = self._backoff_min
+        self._next_try = time.monotonic() + self._delay
+
+    def _reconnect(self, timeout: float) -> can.BusABC | None:
+        if not self._opened:
+            return None
+        wait = self._next_try - time.monotonic()
+        if wait > timeout:
+            time.sleep(max(timeout, 0.0))  # nothing can arrive while the device is gone
+            return None
+        if wait > 0:
+            time.sleep(wait)
+        try:
+            self._bus = self._make_bus()
+        except TransportError as exc:
+            self.last_error = str(exc)
+            self._delay = min(self._delay * 2, self._backoff_max)
+            self._next_try = time.monotonic() + self._delay
+            return None
+        self.counters["reconnects"] += 1
+        log.warning("%s: CAN device back", self.name)
+        self.last_error = None
+        return self._bus

@@ -1,0 +1,201 @@
+"""SerialTransport: a pyserial port that survives its device vanishing.
+
+Anything `serial.serial_for_url` opens works unchanged: a device path
+(/dev/ttyUSB0, a pty), socket://host:port, rfc2217://host:port, loop://.
+It moves raw byte chunks and never interprets them.
+
+When the device disappears (a USB dongle pulled out, a server gone) the loss is
+logged once, `read` returns nothing and `write` drops and counts, while the port
+is retried with exponential backoff; when it comes back, traffic resumes and
+`reconnects` counts it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import logging
+import time
+from typing import Any
+
+import serial
+
+from ..counters import Counters
+from .base import TransportError
+
+__all__ = ["SerialTransport", "open_error"]
+
+log = logging.getLogger(__name__)
+
+_MISSING = {errno.ENOENT, errno.ENODEV, errno.ENXIO}
+_DENIED = {errno.EACCES, errno.EPERM}
+_BUSY = {errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK}
+
+
+def _errno_of(exc: BaseException) -> int | None:
+    """The OS error behind a pyserial exception (pyserial keeps it in .errno or in the chained cause)."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        code = getattr(seen, "errno", None)
+        if isinstance(code, int):
+            return code
+        seen = seen.__cause__ or seen.__context__
+    return None
+
+
+def open_error(port: str, exc: BaseException) -> TransportError:
+    """One clear line, naming the port, for why it cannot be opened."""
+    code = _errno_of(exc)
+    if code in _MISSING:
+        reason = "no such device (is it plugged in? `ls /dev/serial/by-id/` lists attached adapters)"
+    elif code in _DENIED:
+        reason = ("permission denied: add your user to the 'dialout' group "
+                  "(sudo usermod -aG dialout $USER), then log out and back in")
+    elif code in _BUSY:
+        reason = f"port busy: another program has it open (`fuser {port}` names it)"
+    elif code == errno.ECONNREFUSED:
+        reason = "connection refused: is the server at that address running?"
+    else:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return TransportError(f"serial port {port}: {reason}")
+
+
+class SerialTransport:
+    """Transport[bytes] over pyserial: read() returns the byte chunks that arrived."""
+
+    def __init__(self, port: str, baudrate: int = 115200, *, bytesize: int = 8, parity: str = "N",
+                 stopbits: float = 1, rtscts: bool = False, xonxoff: bool = False, write_timeout: float = 1.0,
+                 backoff_initial: float = 0.1, backoff_max: float = 2.0, name: str | None = None) -> None:
+        self.port = port
+        self.name = name or port
+        self.settings: dict[str, Any] = {
+            "baudrate": baudrate, "bytesize": bytesize, "parity": parity, "stopbits": stopbits,
+            "rtscts": rtscts, "xonxoff": xonxoff, "write_timeout": write_timeout,
+        }
+        self.backoff_initial = backoff_initial
+        self.backoff_max = backoff_max
+        self.counters = Counters()
+        self._serial: serial.Serial | None = None
+        self._wanted = False  # open() was called and close() was not
+        self._timeout: float | None = None  # the read timeout the port is configured with
+        self._backoff = backoff_initial
+        self._retry_at = 0.0
+        self._lost_at = 0.0
+
+    @property
+    def connected(self) -> bool:
+        return self._serial is not None
+
+    def open(self) -> None:
+        """Open the port now; TransportError (one line naming the port) if it cannot be."""
+        self._serial = self._connect()
+        self._wanted = True
+
+    def close(self) -> None:
+        self._wanted = False
+        self._drop_port()
+
+    def read(self, timeout: float) -> list[bytes]:
+        port = self._serial
+        if port is None:
+            self._require_open()
+            self._reconnect_within(timeout)
+            return []
+        try:
+            if self._timeout != timeout:
+                port.timeout = self._timeout = timeout
+            waiting = port.in_waiting
+            data = port.read(waiting) if waiting else port.read(1)
+            if data and not waiting:
+                more = port.in_waiting
+                if more:
+                    data += port.read(more)
+        except (serial.SerialException, OSError) as exc:
+            self._lose(exc)
+            return []
+        if not data:
+            return []
+        self.counters["rx"] += 1
+        self.counters["rx_bytes"] += len(data)
+        return [bytes(data)]
+
+    def write(self, unit: bytes) -> None:
+        port = self._serial
+        if port is None:
+            self._require_open()
+            port = self._reconnect_now()
+            if port is None:
+                self.counters["tx_dropped"] += 1
+                return
+        try:
+            port.write(unit)
+        except serial.SerialTimeoutException:
+            self.counters["tx_timeout"] += 1  # flow control held us off: drop, the line stays ours
+            return
+        except (serial.SerialException, OSError) as exc:
+            self._lose(exc)
+            self.counters["tx_dropped"] += 1
+            return
+        self.counters["tx"] += 1
+        self.counters["tx_bytes"] += len(unit)
+
+    def __enter__(self) -> SerialTransport:
+        self.open()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "connected" if self.connected else ("reconnecting" if self._wanted else "closed")
+        return f"SerialTransport({self.port!r}, {self.settings['baudrate']}, {state})"
+
+    def _connect(self) -> serial.Serial:
+        try:
+            return serial.serial_for_url(self.port, exclusive=True, timeout=self._timeout, **self.settings)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise open_error(self.port, exc) from None
+
+    def _require_open(self) -> None:
+        if not self._wanted:
+            raise TransportError(f"serial port {self.name}: not open (call open() first)")
+
+    def _drop_port(self) -> None:
+        port, self._serial = self._serial, None
+        if port is not None:
+            with contextlib.suppress(serial.SerialException, OSError):  # the device may be gone already
+                port.close()
+
+    def _lose(self, exc: BaseException) -> None:
+        self._drop_port()
+        self.counters["disconnects"] += 1
+        self._lost_at = time.monotonic()
+        self._backoff = self.backoff_initial
+        self._retry_at = self._lost_at + self._backoff
+        log.warning("serial port %s: lost (%s); reconnecting in the background", self.name, exc)
+
+    def _reconnect_now(self) -> serial.Serial | None:
+        """One attempt if the backoff allows it; the port, or None while it stays away."""
+        now = time.monotonic()
+        if now < self._retry_at:
+            return None
+        try:
+            self._serial = self._connect()
+        except TransportError as exc:
+            self._backoff = min(self._backoff * 2, self.backoff_max)
+            self._retry_at = now + self._backoff
+            log.debug("%s (retrying in %.1f s)", exc, self._backoff)
+            return None
+        self.counters["reconnects"] += 1
+        log.warning("serial port %s: back after %.1f s", self.name, now - self._lost_at)
+        return self._serial
+
+    def _reconnect_within(self, timeout: float) -> None:
+        """Retry the port during `timeout` seconds, sleeping between attempts instead of spinning."""
+        deadline = time.monotonic() + timeout
+        while self._reconnect_now() is None:
+            pause = min(deadline, self._retry_at) - time.monotonic()
+            if time.monotonic() >= deadline:
+                return
+            if pause > 0:
+                time.sleep(pause)
