@@ -89,7 +89,7 @@ def test_candump_capture_written_by_python_can_reads_back(tmp_path: Path) -> Non
     assert bytes(back[2].unit.data) == bytes(range(2, 10))
 
 
-@pytest.mark.parametrize("ext", [".asc", ".blf", ".csv"])
+@pytest.mark.parametrize("ext", [".asc", ".blf", ".csv", ".pcap"])
 def test_python_can_formats_by_extension(tmp_path: Path, ext: str) -> None:
     path = str(tmp_path / f"bus{ext}")
     writer = RotatingCapture(path, "can")

@@ -8,13 +8,38 @@ from collections.abc import Callable
 
 import can
 import pytest
-from gateway_fakes import BusRobot, PlainCanFraming, bus_link
 
-from vstig_hw import Message, Op
+from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.gateway import Mode, Node, SendWindow
-from vstig_hw.link import Heard
+from vstig_hw.link import Heard, Link
+from vstig_hw.links import can_framing_for
+from vstig_hw.linkspec import parse
 
 _ids = itertools.count()
+
+
+def bus_link(channel: str, name: str | None = None, robot_id: int = 100) -> Link[can.Message]:
+    return parse(f"can:virtual:{channel}").build(name or channel, robot_id=robot_id)
+
+
+class BusRobot:
+    """A robot on a virtual bus: an engine, a bus handle, and one control step at a time."""
+
+    def __init__(self, robot_id: int, channel: str) -> None:
+        self.engine = Stigmergy(robot_id)
+        self.framing = can_framing_for(robot_id)
+        self.bus = can.Bus(interface="virtual", channel=channel)
+
+    def step(self) -> None:
+        while (frame := self.bus.recv(0)) is not None:
+            for msg in self.framing.feed(frame):
+                self.engine.receive(msg)
+        for msg in self.engine.drain():
+            for frame in self.framing.encode(msg):
+                self.bus.send(frame)
+
+    def close(self) -> None:
+        self.bus.shutdown()
 
 
 @pytest.fixture
@@ -52,7 +77,7 @@ def test_raw_mode_relays_every_frame_without_an_engine(channels: tuple[str, str]
     a, b = channels
     tap = can.Bus(interface="virtual", channel=a)
     far = can.Bus(interface="virtual", channel=b)
-    framing = PlainCanFraming()
+    framing = can_framing_for(7)
     sent = [Message(Op.PUT, 1, v, 1, 7) for v in range(20)]  # same key and timestamp: an engine would keep one
     with Node([bus_link(a), bus_link(b)], mode=Mode.RAW, budget=None) as node:
         assert node.engine is None
@@ -80,7 +105,7 @@ def test_listen_mode_never_transmits_and_reports_what_it_heard(channels: tuple[s
     node = Node([bus_link(a)], mode=Mode.LISTEN)
     node.on_heard.append(heard.append)
     with node:
-        for frame in PlainCanFraming().encode(Message(Op.GET, 2, 0, 0, 42)):
+        for frame in can_framing_for(42).encode(Message(Op.GET, 2, 0, 0, 42)):
             tap.send(frame)
         run_until(node, lambda: bool(heard))
         node.run(duration=0.3)  # a few ticks in which a robot would have answered or re-broadcast
@@ -126,7 +151,7 @@ def test_send_window_slides() -> None:
 def test_per_link_queue_keeps_the_newest_message_per_key(channels: tuple[str, str]) -> None:
     a, _ = channels
     observer = can.Bus(interface="virtual", channel=a)
-    framing = PlainCanFraming()
+    framing = can_framing_for(7)
     with Node([bus_link(a)], robot_id=1, period=10.0, budget=1) as node:
         node.put(1, 10)  # goes out at once: the window is open
         node.put(1, 11)  # waits: the window is full for 10 s

@@ -1,6 +1,7 @@
 """Capture files chosen by extension: writers (with rotation by size) and readers.
 
-CAN: python-can's own formats, by extension (.log candump, .asc, .blf, .csv, ...).
+CAN: python-can's own formats, by extension (.log candump, .asc, .blf, .csv, ...), and .pcap
+(vstig_hw.capture.pcap, registered with python-can by extension too).
 Serial: our line format (`serial_log`). A reader tells them apart by the
 serial header, then by extension.
 """
@@ -20,7 +21,7 @@ from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capt
 
 __all__ = ["CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "read_capture", "rotated_name"]
 
-CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".trc", ".log.gz", ".asc.gz")
+CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
 _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
 
 
