@@ -96,3 +96,24 @@ def _readable(fd: int) -> bool:
     import select
 
     return bool(select.select([fd], [], [], 0.01)[0])
+
+
+def test_bytes_from_a_transmit_only_link_are_counted_not_raised() -> None:
+    master, slave, path = _pty()
+    node = Node([parse(f"kilobot-ohc:{path}").build("ohc")], 3)
+    with node:
+        os.write(master, b"\x55" * 200)  # an overhead controller has nothing to say; if it did, we could not decode it
+        end = time.monotonic() + 10
+        while not node.stats()["ohc"]["drop_undecodable"]:
+            assert time.monotonic() < end
+            node.run(duration=0.05)
+        node.put(1, 2)  # and sending still works: one 132-byte controller packet
+        data = b""
+        while len(data) < 132:
+            assert time.monotonic() < end + 10
+            node.run(duration=0.05)
+            if _readable(master):
+                data += os.read(master, 4096)
+    assert data[0] == 0x55 and len(data) == 132
+    os.close(master)
+    os.close(slave)

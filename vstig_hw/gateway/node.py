@@ -175,7 +175,11 @@ class Node:
         for unit in units:
             for listener in self.on_unit:
                 listener(link, t, unit)
-            messages = feed(unit)
+            try:
+                messages = feed(unit)
+            except Exception:  # a transmit-only framing (kilobot-ohc) or a framing bug: count, keep looping
+                link.counters["drop_undecodable"] += 1
+                continue
             if not messages:
                 continue
             heard_count += len(messages)
