@@ -117,10 +117,7 @@ class PtyRadio:
             codec.tick()
 
     def drops(self) -> Counters:
-        total = Counters()
-        for codec in self.codecs:
-            total.update({f"drop_{reason}": n for reason, n in codec.drops.items()})
-        return total
+        return _drops(self.codecs)
 
     def close(self) -> None:
         os.close(self.master)
@@ -155,14 +152,19 @@ class CanRobots:
                     bus.send(frame)
 
     def drops(self) -> Counters:
-        total = Counters()
-        for codec in self.codecs:
-            total.update({f"drop_{reason}": n for reason, n in codec.drops.items()})
-        return total
+        return _drops(self.codecs)
 
     def close(self) -> None:
         for bus in self.buses:
             bus.shutdown()
+
+
+def _drops(codecs: list[Any]) -> Counters:
+    """Every robot framing's drops, by reason, summed over a medium."""
+    total = Counters()
+    for codec in codecs:
+        total.update({f"drop_{reason}": n for reason, n in codec.drops.items()})
+    return total
 
 
 def _split(config: DemoConfig) -> tuple[list[int], list[int], list[int]]:

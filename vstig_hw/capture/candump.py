@@ -10,10 +10,11 @@ This per-line parser is the reference and the one that reports file:line errors;
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import IO
 
 import can
 
-from .records import CAN_FRAMING, CaptureError, Record
+from .records import CAN_FRAMING, CaptureError, Record, parse_lines
 
 __all__ = ["parse_line", "read_candump"]
 
@@ -67,26 +68,14 @@ def parse_line(path: str, number: int, line: str) -> can.Message | None:
     )
 
 
-def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
-                 first_line: int = 1) -> Iterator[Record]:
-    opener = _open_text(path)
-    with opener as file:
-        for number, line in enumerate(file, 1):
-            if number < first_line:
-                continue
-            try:
-                frame = parse_line(path, number, line)
-            except CaptureError as error:
-                if not skip_bad:
-                    raise
-                if bad is not None:
-                    bad.append(error)
-                continue
-            if frame is not None:
-                yield Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)
+def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+    """Records in file order (.log or .log.gz); bad lines raise CaptureError, or with `skip_bad` go to `bad`."""
+    with _open_text(path) as file:
+        for frame in parse_lines(path, file, parse_line, skip_bad, bad):
+            yield Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)
 
 
-def _open_text(path: str):  # type: ignore[no-untyped-def]
+def _open_text(path: str) -> IO[str]:
     if path.endswith(".gz"):
         import gzip
 

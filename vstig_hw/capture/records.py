@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
-__all__ = ["CAN_FRAMING", "CaptureError", "Record"]
+__all__ = ["CAN_FRAMING", "CaptureError", "Record", "parse_lines"]
+
+T = TypeVar("T")
 
 CAN_FRAMING = "can"  # the framing name CAN records carry (CAN logs have no framing field)
 
@@ -28,3 +31,19 @@ class Record:
     framing: str
     unit: Any
     direction: str = "rx"
+
+
+def parse_lines(path: str, lines: Iterable[str], parse: Callable[[str, int, str], T | None], skip_bad: bool,
+                bad: list[CaptureError] | None) -> Iterator[T]:
+    """Parse numbered lines (1-based); a bad line raises, or with `skip_bad` is collected in `bad`."""
+    for number, line in enumerate(lines, 1):
+        try:
+            item = parse(path, number, line)
+        except CaptureError as error:
+            if not skip_bad:
+                raise
+            if bad is not None:
+                bad.append(error)
+            continue
+        if item is not None:
+            yield item

@@ -14,7 +14,7 @@ import re
 from collections.abc import Iterator
 from typing import IO
 
-from .records import CaptureError, Record
+from .records import CaptureError, Record, parse_lines
 
 __all__ = ["HEADER", "SerialCaptureWriter", "format_line", "read_serial_capture"]
 
@@ -62,17 +62,7 @@ def parse_line(path: str, number: int, line: str) -> Record | None:
 def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
     """Records in file order; a malformed line raises CaptureError, or with `skip_bad` is collected in `bad`."""
     with open(path, encoding="utf-8", errors="replace") as file:
-        for number, line in enumerate(file, 1):
-            try:
-                record = parse_line(path, number, line)
-            except CaptureError as error:
-                if not skip_bad:
-                    raise
-                if bad is not None:
-                    bad.append(error)
-                continue
-            if record is not None:
-                yield record
+        yield from parse_lines(path, file, parse_line, skip_bad, bad)
 
 
 def is_serial_capture(path: str) -> bool:
