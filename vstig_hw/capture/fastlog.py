@@ -35,9 +35,10 @@ def _hex(cols: U8) -> npt.NDArray[np.int64] | None:
     nibbles = _HEX[cols]
     if (nibbles == 255).any():
         return None
-    value = np.zeros(cols.shape[0], dtype=np.int64)
-    for i in range(cols.shape[1]):
-        value = value << 4 | nibbles[:, i]
+    wide = nibbles.astype(np.int64)
+    value = wide[:, 0]
+    for i in range(1, cols.shape[1]):
+        value = value << 4 | wide[:, i]
     return value
 
 
@@ -109,14 +110,14 @@ def chunk_to_jsonl(chunk: bytes, classify: Classify, drops: dict[str, int]) -> b
 
 def _render(stamp: U8, link: bytes, can_id: npt.NDArray[np.int64], op: npt.NDArray[np.int64],
             *fields: npt.NDArray[np.int64]) -> bytes:
-    n = len(stamp)
-    head = b'{"t":'
-    parts = [head, b"STAMP", b',"link":"' + link.replace(b'"', b"") + b'","can_id":', b"CAN_ID",
+    parts = [b'{"t":', b"STAMP", b',"link":"' + link.replace(b'"', b"") + b'","can_id":', b"CAN_ID",
              b',"op":"', b"OPS", b'","key":', b"F0", b',"value":', b"F1", b',"timestamp":', b"F2",
              b',"robot":', b"F3", b"}\n"]
     widths = {b"STAMP": stamp.shape[1], b"CAN_ID": 4, b"OPS": 3, b"F0": 5, b"F1": 5, b"F2": 5, b"F3": 5}
-    total = sum(widths.get(p, len(p)) for p in parts)
-    out = np.empty((n, total), dtype=np.uint8)
+    # One template row (constants in place, blanks for the fields), copied to every row in one go;
+    # then only the variable columns are written.
+    template = b"".join(b" " * widths[p] if p in widths else p for p in parts)
+    out = np.broadcast_to(np.frombuffer(template, np.uint8), (len(stamp), len(template))).copy()
     col = 0
     for part in parts:
         if part == b"STAMP":
@@ -129,11 +130,12 @@ def _render(stamp: U8, link: bytes, can_id: npt.NDArray[np.int64], op: npt.NDArr
         elif part == b"CAN_ID":
             _digits(out, col, can_id, 4)
         elif part == b"OPS":
-            out[:, col:col + 3] = np.where(op[:, None] == 1, np.frombuffer(b"GET", np.uint8),
-                                           np.frombuffer(b"PUT", np.uint8))
+            get = op == 1
+            if get.any():
+                out[get, col:col + 3] = np.frombuffer(b"GET", np.uint8)
+            if not get.all():
+                out[~get, col:col + 3] = np.frombuffer(b"PUT", np.uint8)
         elif part in (b"F0", b"F1", b"F2", b"F3"):
             _digits(out, col, fields[int(part[1:])], 5)
-        else:
-            out[:, col:col + len(part)] = np.frombuffer(part, np.uint8)
         col += widths.get(part, len(part))
     return out.tobytes()
