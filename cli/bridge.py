@@ -7,7 +7,7 @@ import sys
 import click
 
 from vstig_hw.engine import larger_value_wins
-from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node
+from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, favour_latency
 from vstig_hw.linkspec import LinkSpec
 
 from ._common import build_links, print_counters, run_until_stopped
@@ -40,6 +40,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
                 period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
                 onconflict=larger_value_wins if larger else None)
     live = sys.stderr.isatty()
+    favour_latency()
 
     def status() -> None:
         line = node.summary()
