@@ -1,37 +1,78 @@
-"""`vstig demo`: a virtual swarm converging on screen (in-process engines for now)."""
+"""`vstig demo`: about 30 robots on a virtual CAN bus and two pty radios, the gateway bridging them."""
 
 from __future__ import annotations
 
-import random
+import sys
+from typing import Any
 
 import click
 
-from vstig_hw import Stigmergy
-from vstig_hw.engine import larger_value_wins
+from vstig_hw.demo_swarm import DemoConfig, DemoReport, Medium, run_demo
+from vstig_hw.gateway import stop_on_signals
+
+from .errors import reports_errors
+
+
+def _live_table(step: int, media: list[Medium], agreed: int, total: int) -> Any:
+    from rich.table import Table
+
+    table = Table(title=f"step {step}: {agreed}/{total} robots hold the highest id")
+    for column in ("medium", "robots", "agree", "messages", "bytes", "drops"):
+        table.add_column(column, justify="left" if column in ("medium", "drops") else "right")
+    highest = total
+    for medium in media:
+        agree = sum(robot.entry(1) is not None and robot.entry(1).value == highest  # type: ignore[union-attr]
+                    for robot in medium.robots)
+        drops = " ".join(f"{k[5:]}={v}" for k, v in sorted(medium.counters.items()) if k.startswith("drop_"))
+        table.add_row(medium.name, str(len(medium.robots)), str(agree), str(medium.counters["messages"]),
+                      str(medium.counters["bytes"]), drops or "-")
+    return table
+
+
+def _report(report: DemoReport) -> None:
+    if report.converged_at is not None:
+        click.echo(f"converged: all {sum(len(m.robots) for m in report.media)} robots hold {report.highest} "
+                   f"after {report.converged_at} steps ({report.seconds:.1f} s)")
+    else:
+        click.echo(f"not converged after {report.steps} steps ({report.seconds:.1f} s)")
+    click.echo(f"{'medium':<8} {'robots':>6} {'messages':>9} {'bytes':>8}  drops by reason")
+    for medium in report.media:
+        drops = " ".join(f"{k[5:]}={v}" for k, v in sorted(medium.counters.items()) if k.startswith("drop_"))
+        click.echo(f"{medium.name:<8} {len(medium.robots):>6} {medium.counters['messages']:>9} "
+                   f"{medium.counters['bytes']:>8}  {drops or '-'}")
+    for name, counters in report.gateway.items():
+        click.echo(f"gateway {name}: {counters.summary()}")
 
 
 @click.command()
-@click.option("--robots", default=10, show_default=True, type=click.IntRange(2, 1000))
-@click.option("--drop", default=0.5, show_default=True, type=click.FloatRange(0, 0.99), help="drop probability")
+@click.option("--robots", default=30, show_default=True, type=click.IntRange(6, 240))
+@click.option("--drop", default=0.75, show_default=True, type=click.FloatRange(0, 0.95),
+              help="Probability that a robot (or the gateway, on a radio) misses a message.")
 @click.option("--seed", default=1, show_default=True, type=int)
-def command(robots: int, drop: float, seed: int) -> None:
-    """Fully connected robots agree on the highest id (the paper's task)."""
-    rng = random.Random(seed)
-    swarm = [Stigmergy(robot_id, onconflict=larger_value_wins) for robot_id in range(1, robots + 1)]
-    for engine in swarm:
-        engine.put(1, engine.robot_id)
-    for step in range(1, 201):
-        outgoing = [(sender, engine.drain(1)) for sender, engine in enumerate(swarm)]
-        for sender, messages in outgoing:
-            for receiver, engine in enumerate(swarm):
-                if receiver != sender:
-                    for msg in messages:
-                        if rng.random() >= drop:
-                            engine.receive(msg)
-        values = [engine.get(1) for engine in swarm]
-        agreed = sum(v == robots for v in values)
-        click.echo(f"step {step:3d}: {agreed:3d}/{robots} robots hold {robots}")
-        if agreed == robots:
-            click.echo(f"converged in {step} steps")
-            return
-    raise click.ClickException("did not converge in 200 steps")
+@click.option("--step", default=0.1, show_default=True, type=click.FloatRange(0.01, 1.0),
+              help="Seconds per control step.")
+@click.option("--max-steps", default=300, show_default=True, type=click.IntRange(1, 10_000))
+@reports_errors
+def command(robots: int, drop: float, seed: int, step: float, max_steps: int) -> None:
+    """Robots split over a virtual CAN bus, a cobs8 radio and an epuck4 radio agree on the highest id.
+
+    Everything below the robots is real: python-can's virtual bus, two ptys opened through pyserial,
+    the real framings, and the gateway bridging them.
+    """
+    config = DemoConfig(robots=robots, drop=drop, seed=seed, step=step, max_steps=max_steps)
+    with stop_on_signals() as stop:
+        if sys.stdout.isatty():
+            from rich.live import Live
+
+            with Live(refresh_per_second=8, transient=False) as live:
+                report = run_demo(config, lambda s, media, agreed: live.update(
+                    _live_table(s, media, agreed, robots)), stop)
+        else:
+            def line(s: int, media: list[Medium], agreed: int) -> None:
+                if s % 5 == 0 or agreed == robots:
+                    click.echo(f"step {s:3d}: {agreed:3d}/{robots} robots hold {robots}")
+
+            report = run_demo(config, line, stop)
+    _report(report)
+    if report.converged_at is None and not stop.is_set():
+        raise click.ClickException(f"the swarm did not converge in {max_steps} steps")

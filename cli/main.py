@@ -33,8 +33,11 @@ class CommandFolder(click.Group):
 
 @click.group(cls=CommandFolder, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="vstig")
-def cli() -> None:
+@click.option("--debug", is_flag=True, help="On failure, show the traceback too.")
+@click.pass_context
+def cli(ctx: click.Context, debug: bool) -> None:
     """Put this PC into a robot swarm's virtual stigmergy through real radios."""
+    ctx.obj = {"debug": debug}
 
 
 def main() -> None:

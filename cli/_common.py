@@ -1,0 +1,44 @@
+"""Helpers the commands share: building links from specs, running a node until stopped."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import click
+
+from vstig_hw.gateway import Node, stop_on_signals
+from vstig_hw.link import Link
+from vstig_hw.linkspec import LinkSpec
+
+
+def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool = False) -> list[Link[Any]]:
+    """One Link per spec, named after its device (made unique: radio, radio-2...)."""
+    links: list[Link[Any]] = []
+    seen: dict[str, int] = {}
+    for spec in specs:
+        name = spec.name
+        seen[name] = seen.get(name, 0) + 1
+        if seen[name] > 1:
+            name = f"{name}-{seen[name]}"
+        links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
+    return links
+
+
+def run_until_stopped(node: Node, status: Any = None, duration: float | None = None) -> None:
+    """Run the node until Ctrl-C/SIGTERM (or `duration`), refreshing `status()` every half second."""
+    with stop_on_signals() as stop:
+        if status is None:
+            node.run(stop=stop, duration=duration)
+            return
+        import time
+
+        end = None if duration is None else time.monotonic() + duration
+        while not stop.is_set() and (end is None or time.monotonic() < end):
+            node.run(stop=stop, duration=0.5 if end is None else max(0.0, min(0.5, end - time.monotonic())))
+            status()
+
+
+def print_counters(node: Node) -> None:
+    for name, counters in node.stats().items():
+        click.echo(f"{name}: {counters.summary()}", err=True)

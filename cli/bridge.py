@@ -1,0 +1,58 @@
+"""`vstig bridge LINK LINK... --robot-id N`: the PC joins the swarm on every link."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from vstig_hw.engine import larger_value_wins
+from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, favour_latency
+from vstig_hw.linkspec import LinkSpec
+
+from ._common import build_links, print_counters, run_until_stopped
+from .errors import LINK, reports_errors
+
+
+@click.command()
+@click.argument("links", nargs=-1, required=True, type=LINK)
+@click.option("--robot-id", type=click.IntRange(0, 0xFFFF), help="The PC's robot id (required unless --raw).")
+@click.option("--tick", type=click.FloatRange(0.001, 60), default=DEFAULT_PERIOD, show_default=True,
+              help="Control period in seconds.")
+@click.option("--budget", type=click.IntRange(1, 1_000_000), default=DEFAULT_BUDGET, show_default=True,
+              help="Messages per link per tick.")
+@click.option("--raw", is_flag=True, help="Relay every frame between links, translating framings, with no engine.")
+@click.option("--larger-value-wins", "larger", is_flag=True,
+              help="Resolve conflicts by the larger value (the paper's Figure 1) instead of the higher robot id.")
+@click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@reports_errors
+def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
+            larger: bool, duration: float | None) -> None:
+    """Run the gateway: one engine on every LINK, until Ctrl-C.
+
+    Example: vstig bridge can:socketcan:can0 serial:/dev/ttyUSB0?framing=epuck4 --robot-id 200
+    """
+    if robot_id is None and not raw:
+        raise click.UsageError("--robot-id is required (the PC's id in the swarm), or use --raw")
+    if raw and len(links) < 2:
+        raise click.UsageError("--raw needs at least two links to bridge")
+    node = Node(build_links(links, robot_id or 0), robot_id or 0, mode=Mode.RAW if raw else Mode.ENGINE,
+                period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
+                onconflict=larger_value_wins if larger else None)
+    live = sys.stderr.isatty()
+    favour_latency()
+
+    def status() -> None:
+        line = node.summary()
+        if live:
+            click.echo(f"\r\x1b[K{line}", nl=False, err=True)
+
+    with node:
+        click.echo(f"bridging {', '.join(link.name for link in node.links)} "
+                   f"({'raw' if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
+        try:
+            run_until_stopped(node, status, duration)
+        finally:
+            if live:
+                click.echo(err=True)
+    print_counters(node)

@@ -1,0 +1,77 @@
+"""One place for how every command fails: usage errors exit 2, runtime failures exit 1.
+
+Each failure is one clear line naming the input; `vstig --debug ...` (or
+VSTIG_DEBUG=1) shows the traceback too.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+import traceback
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import click
+
+from vstig_hw import linkspec
+from vstig_hw.capture.records import CaptureError
+from vstig_hw.transports.base import TransportError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+RUNTIME_ERRORS = (TransportError, CaptureError, OSError, ValueError, RuntimeError)
+
+
+def debugging() -> bool:
+    ctx = click.get_current_context(silent=True)
+    root = ctx.find_root() if ctx else None
+    return bool(os.environ.get("VSTIG_DEBUG")) or bool(root and (root.obj or {}).get("debug"))
+
+
+def one_line(error: BaseException) -> str:
+    text = " ".join(str(error).split()) or type(error).__name__
+    return text
+
+
+def reports_errors(fn: F) -> F:
+    """Turn the runtime errors a user can cause into one line and exit status 1."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except (click.ClickException, click.exceptions.Exit, click.Abort):
+            raise
+        except KeyboardInterrupt:
+            click.echo("interrupted", err=True)
+            sys.exit(130)
+        except RUNTIME_ERRORS as error:
+            if debugging():
+                traceback.print_exc()
+            raise click.ClickException(one_line(error)) from None
+        except Exception as error:  # a bug, not the user's fault: still one line unless debugging
+            if debugging():
+                traceback.print_exc()
+            raise click.ClickException(f"unexpected {type(error).__name__}: {one_line(error)} "
+                                       "(run `vstig --debug ...` for the traceback)") from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+class LinkSpecType(click.ParamType):
+    """A link spec on the command line; a bad one is a usage error (exit 2) naming the bad part."""
+
+    name = "LINK"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> linkspec.LinkSpec:
+        if isinstance(value, linkspec.CanSpec | linkspec.SerialSpec):
+            return value
+        try:
+            return linkspec.parse(value)
+        except ValueError as error:
+            self.fail(str(error), param, ctx)
+
+
+LINK = LinkSpecType()

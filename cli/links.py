@@ -1,0 +1,21 @@
+"""`vstig links`: the link-spec grammar, with examples."""
+
+from __future__ import annotations
+
+import click
+
+from vstig_hw.linkspec import EXAMPLES, GRAMMAR
+
+
+@click.command()
+def command() -> None:
+    """List the link-spec grammar every command accepts, with examples."""
+    click.echo("A LINK names a transport, a device and a framing in one string:\n")
+    for rule in GRAMMAR:
+        click.echo(f"  {rule}")
+    click.echo("\nExamples:")
+    for examples in EXAMPLES.values():
+        for example in examples:
+            click.echo(f"  {example}")
+    click.echo("\nThe query after the last '?' is ours; keys we do not know stay with a pyserial URL "
+               "(socket://, rfc2217://). Defaults: baud=115200, framing=cobs8; kilobot-ohc runs at 38400.")

@@ -1,0 +1,106 @@
+"""`vstig replay FILE --onto LINK` (faithful timing) or `--table [--at T]` (an offline engine)."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from typing import Any
+
+import click
+
+from vstig_hw.capture.decoded import Decoder
+from vstig_hw.capture.files import read_capture
+from vstig_hw.capture.records import CAN_FRAMING, Record
+from vstig_hw.capture.replay import replay
+from vstig_hw.engine import Stigmergy
+from vstig_hw.gateway import stop_on_signals
+from vstig_hw.link import Link
+from vstig_hw.linkspec import CanSpec, LinkSpec
+from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
+
+from ._common import build_links
+from .errors import LINK, reports_errors
+
+_OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
+
+
+def _sender(link: Link[Any], is_can: bool) -> Any:
+    """Write a record as is when the medium and framing match; otherwise re-encode its messages."""
+    decoder = Decoder()
+
+    def send(record: Record) -> None:
+        same = (record.framing == CAN_FRAMING) if is_can else (record.framing == link.framing.name)
+        if same:
+            link.transport.write(_fresh(record.unit) if is_can else record.unit)
+            link.counters["out_units"] += 1
+            return
+        for decoded in decoder.decode(record):
+            link.send(decoded.message)
+
+    return send
+
+
+def _fresh(frame: Any) -> Any:
+    import can
+
+    return can.Message(arbitration_id=frame.arbitration_id, is_extended_id=frame.is_extended_id, data=frame.data,
+                       is_fd=frame.is_fd, bitrate_switch=frame.bitrate_switch, is_remote_frame=frame.is_remote_frame,
+                       dlc=frame.dlc, check=False)
+
+
+def _table(path: str, at: float | None, value_type: ValueType) -> None:
+    engine = Stigmergy(_OBSERVER_ID)
+    decoder = Decoder()
+    t0 = None
+    for decoded in decoder.decode_all(read_capture(path)):
+        t0 = decoded.t if t0 is None else t0
+        if at is not None and decoded.t - t0 > at:
+            break
+        engine.receive(decoded.message)
+    when = "the end" if at is None else f"t={at:g} s"
+    click.echo(f"what the swarm believed at {when} of {path}:")
+    click.echo(f"{'key':>6} {'value':>8} {'ts':>6} {'robot':>6}")
+    for key, entry in sorted(engine.entries()):
+        click.echo(f"{key:>6} {from_raw(entry.value, value_type)!s:>8} {entry.timestamp:>6} {entry.robot:>6}")
+
+
+@click.command()
+@click.argument("file", type=click.Path(exists=True, dir_okay=False))
+@click.option("--onto", type=LINK, help="Send the capture onto this link with its original timing.")
+@click.option("--speed", type=click.FloatRange(0.001, 1000), default=1.0, show_default=True)
+@click.option("--loop", is_flag=True, help="Start again at the end, until Ctrl-C.")
+@click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=0, show_default=True,
+              help="Sender id for messages re-encoded onto another medium.")
+@click.option("--table", is_flag=True, help="Feed an offline engine instead and print its table.")
+@click.option("--at", type=click.FloatRange(0.0), help="With --table: stop at T seconds after the first record.")
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@reports_errors
+def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, robot_id: int, table: bool,
+            at: float | None, value_type: ValueType) -> None:
+    """Replay FILE onto a live link, or show what the swarm believed (--table).
+
+    Examples: vstig replay swarm.log --onto can:socketcan:vcan0 --speed 2;  vstig replay radio.cap --table --at 30
+    """
+    if table == (onto is not None):
+        raise click.UsageError("give exactly one of --onto LINK or --table")
+    if table:
+        _table(file, at, value_type)
+        return
+    if at is not None:
+        raise click.UsageError("--at goes with --table")
+    assert onto is not None
+    link = build_links([onto], robot_id)[0]
+    send = _sender(link, isinstance(onto, CanSpec))
+    link.open()
+    try:
+        with stop_on_signals() as stop:
+            passes: Iterator[int] = itertools.count() if loop else iter([0])
+            for _ in passes:
+                done = replay(read_capture(file), send, speed=speed, stop=stop)
+                click.echo(f"replayed {done.frames} units in {done.took:.3f} s (logged {done.logged:.3f} s)",
+                           err=True)
+                if stop.is_set() or done.frames == 0:
+                    break
+    finally:
+        link.close()
+    click.echo(f"{link.name}: {link.stats().summary()}", err=True)

@@ -1,0 +1,73 @@
+"""`vstig sniff LINK`: watch the swarm's traffic, decoded; never transmits."""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any
+
+import click
+
+from vstig_hw.gateway import Mode, Node
+from vstig_hw.gateway.swarmview import SwarmView
+from vstig_hw.link import Heard
+from vstig_hw.linkspec import LinkSpec
+from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
+
+from ._common import build_links, print_counters, run_until_stopped
+from .errors import LINK, reports_errors
+
+
+def _table(view: SwarmView, value_type: ValueType) -> Any:
+    from rich.table import Table
+
+    table = Table(title=f"vstig sniff: {view.messages} messages")
+    for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders"):
+        table.add_column(column, justify="left" if column == "stale senders" else "right")
+    now = time.time()
+    for key in sorted(view.keys):
+        k = view.keys[key]
+        stale = k.stale_senders()
+        table.add_row(str(key), str(from_raw(k.value, value_type)), str(k.timestamp), str(k.robot),
+                      f"{now - k.last_seen:.1f}s ago", str(k.puts), str(k.gets), str(k.conflicts),
+                      ", ".join(map(str, stale[:12])) + (" ..." if len(stale) > 12 else ""))
+    return table
+
+
+@click.command()
+@click.argument("link", type=LINK)
+@click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@reports_errors
+def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float | None) -> None:
+    """Decode LINK's traffic live, per key; passive: never transmits.
+
+    Example: vstig sniff can:socketcan:can0 --jsonl | jq .
+    """
+    node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN)
+    view = SwarmView()
+    node.on_heard.append(view.add)
+    if jsonl:
+        import json
+
+        out = sys.stdout
+
+        def emit(heard: Heard) -> None:
+            m = heard.message
+            row = {"t": round(heard.t, 6), "link": heard.link, "op": m.op.name, "key": m.key,
+                   "value": from_raw(m.value, value_type), "timestamp": m.timestamp, "robot": m.robot,
+                   "sender": heard.sender}
+            out.write(json.dumps(row) + "\n")
+            out.flush()
+
+        node.on_heard.append(emit)
+        with node:
+            run_until_stopped(node, duration=duration)
+        print_counters(node)
+        return
+    from rich.live import Live
+
+    with node, Live(_table(view, value_type), refresh_per_second=4, transient=False) as live:
+        run_until_stopped(node, lambda: live.update(_table(view, value_type)), duration)
+    print_counters(node)

@@ -1,0 +1,113 @@
+"""Real peers on ptys for the subprocess tests: an slcan adapter and a serial radio.
+
+`SlcanAdapter` plays a USB-CAN adapter on a pty's master side, so the `vstig`
+under test runs python-can's real slcan driver on the slave (FACTS.md, section
+4): it acknowledges every command with `\\r` and exchanges `t<id><dlc><data>\\r`
+lines. `PtyPeer` is the far end of a serial radio: raw bytes in and out.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import subprocess
+import sys
+import threading
+import time
+import tty
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import can
+
+VSTIG = str(Path(sys.executable).with_name("vstig"))
+
+
+class PtyPeer:
+    def __init__(self) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        tty.setraw(self.master)
+        self.path = os.ttyname(self.slave)
+
+    def read(self, timeout: float = 0.05) -> bytes:
+        if select.select([self.master], [], [], timeout)[0]:
+            try:
+                return os.read(self.master, 65536)
+            except OSError:
+                return b""
+        return b""
+
+    def write(self, data: bytes) -> None:
+        os.write(self.master, data)
+
+    def close(self) -> None:
+        os.close(self.master)
+        os.close(self.slave)
+
+
+class SlcanAdapter(PtyPeer):
+    """The adapter side of slcan: frames the driver sends land in `sent`; `inject` puts frames on its bus."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.sent: list[can.Message] = []
+        self.commands: list[str] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        buffer = b""
+        while not self._stop.is_set():
+            buffer += self.read(0.02)
+            *lines, buffer = buffer.split(b"\r")
+            for raw in lines:
+                line = raw.decode("ascii", "replace").strip()
+                if line[:1] in ("t", "T"):
+                    width = 3 if line[0] == "t" else 8
+                    can_id = int(line[1:1 + width], 16)
+                    dlc = int(line[1 + width], 16)
+                    data = bytes.fromhex(line[2 + width:2 + width + 2 * dlc])
+                    self.sent.append(can.Message(arbitration_id=can_id, data=data, is_extended_id=width == 8,
+                                                 timestamp=time.time()))
+                    self.write(b"z\r" if line[0] == "t" else b"Z\r")
+                elif line:
+                    self.commands.append(line)
+                    self.write(b"\r")
+
+    def inject(self, frame: can.Message) -> None:
+        head = f"T{frame.arbitration_id:08X}" if frame.is_extended_id else f"t{frame.arbitration_id:03X}"
+        self.write(f"{head}{len(frame.data)}{bytes(frame.data).hex().upper()}\r".encode())
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2)
+        super().close()
+
+
+def start_vstig(*args: str, **kwargs: Any) -> subprocess.Popen[str]:
+    return subprocess.Popen([VSTIG, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+
+
+def run_vstig(*args: str, timeout: float = 60, **kwargs: Any) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([VSTIG, *args], capture_output=True, text=True, timeout=timeout, check=False, **kwargs)
+
+
+def wait_for(done: Callable[[], bool], deadline: float = 20.0, step: Callable[[], None] | None = None) -> None:
+    end = time.monotonic() + deadline
+    while not done():
+        if time.monotonic() > end:
+            raise AssertionError("timed out waiting")
+        if step:
+            step()
+        else:
+            time.sleep(0.01)
+
+
+def stop(process: subprocess.Popen[str], timeout: float = 10) -> tuple[str, str]:
+    """SIGTERM, as Ctrl-C would, and collect the output."""
+    process.terminate()
+    out, err = process.communicate(timeout=timeout)
+    return out, err

@@ -1,0 +1,81 @@
+"""Parsing and errors through CliRunner: usage errors exit 2, runtime failures 1, one line, no traceback."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from vstig_cli.main import cli
+
+
+def invoke(*args: str) -> tuple[int, str]:
+    result = CliRunner().invoke(cli, list(args))
+    return result.exit_code, result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (["bridge", "usb:/dev/x", "--robot-id", "1"], "unknown kind 'usb'"),
+        (["bridge", "can:virtual:x"], "--robot-id is required"),
+        (["bridge", "can:virtual:x", "--raw"], "--raw needs at least two links"),
+        (["sniff", "serial:/dev/null?framing=hdlc"], "framing='hdlc'"),
+        (["sniff", "serial:/dev/null", "--value-type", "int8"], "'int8' is not one of"),
+        (["put", "3", "70000", "--on", "can:virtual:x"], "outside uint16"),
+        (["put", "40000", "1", "--on", "can:virtual:x"], "40000 is not in the range"),
+        (["get", "1"], "Missing option '--on'"),
+        (["record", "can:virtual:x", "-o", "out.txt"], "chosen by extension"),
+        (["record", "serial:/dev/null", "-o", "o.cap", "--max-bytes", "lots"], "not a size"),
+        (["replay", "README.md"], "exactly one of --onto LINK or --table"),
+        (["decode", "README.md", "--id-base", "zz"], "'zz' is not an integer"),
+    ],
+)
+def test_usage_errors_exit_2_with_one_clear_line(args: list[str], says: str) -> None:
+    code, output = invoke(*args)
+    assert code == 2, output
+    assert says in output and "Traceback" not in output
+
+
+def test_runtime_failures_exit_1_in_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.log"
+    bad.write_text("(1.000000) can0 600#0001000200030004\nnot a frame\n")
+    result = CliRunner().invoke(cli, ["decode", str(bad)])
+    assert result.exit_code == 1 and "bad.log:2: not a candump line" in result.stderr
+    assert result.stderr.strip().count("\n") == 0 and "Traceback" not in result.output
+    code, output = invoke("sniff", "serial:/dev/vstig-no-such-port", "--jsonl", "--for", "1")
+    assert code == 1 and "vstig-no-such-port" in output and "Traceback" not in output
+    code, output = invoke("decode", str(tmp_path / "missing.log"))
+    assert code == 2 and "does not exist" in output
+
+
+def test_skip_bad_counts_and_continues(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.log"
+    bad.write_text("(1.000000) can0 600#0001000200030004\nnot a frame\n(2.000000) can0 600#0001000200030005\n")
+    result = CliRunner().invoke(cli, ["decode", str(bad), "--skip-bad", "--format", "csv"])
+    assert result.exit_code == 0
+    assert result.stdout.splitlines()[0] == "t,link,can_id,op,key,value,timestamp,robot"
+    assert len(result.stdout.splitlines()) == 3 and "1 bad lines skipped" in result.stderr
+
+
+def test_debug_shows_the_traceback(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.log"
+    bad.write_text("nonsense\n")
+    result = CliRunner().invoke(cli, ["--debug", "decode", str(bad)])
+    assert result.exit_code == 1 and "Traceback" in result.output
+
+
+def test_links_lists_the_grammar_with_examples() -> None:
+    code, output = invoke("links")
+    assert code == 0
+    for text in ("can:<python-can interface>:<channel>", "serial:<port or pyserial URL>", "kilobot-ohc:",
+                 "can:socketcan:vcan0", "serial:socket://localhost:7000?framing=epuck4"):
+        assert text in output
+
+
+def test_every_command_is_listed() -> None:
+    code, output = invoke("--help")
+    assert code == 0
+    for name in ("bridge", "sniff", "record", "replay", "decode", "put", "get", "links", "demo"):
+        assert name in output

@@ -1,0 +1,168 @@
+"""Capture files: our serial format, candump lines, rotation, and the replayer's timing rule."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from pathlib import Path
+
+import can
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from vstig_hw.capture import candump
+from vstig_hw.capture.fastlog import chunk_to_jsonl
+from vstig_hw.capture.files import RotatingCapture, read_capture, rotated_name
+from vstig_hw.capture.records import CaptureError, Record
+from vstig_hw.capture.replay import replay
+from vstig_hw.capture.serial_log import HEADER, parse_line
+
+
+def test_serial_capture_round_trip(tmp_path: Path) -> None:
+    path = str(tmp_path / "radio.cap")
+    records = [Record(1700000000.25 + i / 8, "radio0", "cobs8", bytes([i, 0, 255]), "rx") for i in range(5)]
+    writer = RotatingCapture(path, "serial")
+    for record in records:
+        writer.write(record)
+    writer.close()
+    text = Path(path).read_text()
+    assert text.startswith(HEADER + "\n") and "(1700000000.250000) radio0 cobs8 rx 0000ff" in text
+    back = list(read_capture(path))
+    assert [(r.link, r.framing, r.unit, r.direction) for r in back] == [
+        (r.link, r.framing, r.unit, r.direction) for r in records]
+    assert [round(r.t, 6) for r in back] == [round(r.t, 6) for r in records]
+
+
+def test_serial_capture_bad_line_names_file_and_line(tmp_path: Path) -> None:
+    path = tmp_path / "bad.cap"
+    path.write_text(f"{HEADER}\n(1.000000) r cobs8 rx 00\n(2.0) r cobs8 sideways 00\n(3.000000) r cobs8 rx 0\n")
+    with pytest.raises(CaptureError, match=r"bad.cap:3: not a serial capture line"):
+        list(read_capture(str(path)))
+    bad: list[CaptureError] = []
+    assert len(list(read_capture(str(path), skip_bad=True, bad=bad))) == 1
+    assert [e.line for e in bad] == [3, 4]
+
+
+@given(st.text(max_size=80))
+def test_serial_line_parser_only_raises_capture_error(line: str) -> None:
+    try:
+        parse_line("f", 1, line)
+    except CaptureError as error:
+        assert str(error).startswith("f:1: ")
+
+
+def test_candump_lines_classic_fd_remote_extended() -> None:
+    frame = candump.parse_line("f", 1, "(1700000000.500000) can0 601#8001000200030004\n")
+    assert frame is not None and frame.arbitration_id == 0x601 and not frame.is_extended_id
+    assert bytes(frame.data) == bytes.fromhex("8001000200030004") and frame.channel == "can0"
+    fd = candump.parse_line("f", 2, "(1.0) vcan0 18000005##1" + "00" * 16)
+    assert fd is not None and fd.is_fd and fd.bitrate_switch and fd.is_extended_id and len(fd.data) == 16
+    remote = candump.parse_line("f", 3, "(1.0) can0 123#R")
+    assert remote is not None and remote.is_remote_frame
+    assert candump.parse_line("f", 4, "   \n") is None
+
+
+@pytest.mark.parametrize("line", ["1.0 can0 600#00", "(x) can0 600#00", "(1.0) can0 6000#00", "(1.0) can0 600#0",
+                                  "(1.0) can0 600#" + "00" * 9, "(1.0) can0", "(1.0) can0 60G#00"])
+def test_candump_bad_lines(line: str) -> None:
+    with pytest.raises(CaptureError, match=r"^log:7: not a candump line"):
+        candump.parse_line("log", 7, line)
+
+
+@given(st.text(max_size=80))
+def test_candump_parser_only_raises_capture_error(line: str) -> None:
+    with contextlib.suppress(CaptureError):
+        candump.parse_line("f", 1, line)
+
+
+def test_candump_capture_written_by_python_can_reads_back(tmp_path: Path) -> None:
+    path = str(tmp_path / "bus.log")
+    writer = RotatingCapture(path, "can")
+    for i in range(3):
+        frame = can.Message(timestamp=1700000000 + i, arbitration_id=0x600 + i, data=bytes(range(i, i + 8)),
+                            is_extended_id=False)
+        writer.write(Record(frame.timestamp, "lab", "can", frame))
+    writer.close()
+    back = list(read_capture(path))
+    assert [r.unit.arbitration_id for r in back] == [0x600, 0x601, 0x602] and back[0].link == "lab"
+    assert bytes(back[2].unit.data) == bytes(range(2, 10))
+
+
+@pytest.mark.parametrize("ext", [".asc", ".blf", ".csv", ".pcap"])
+def test_python_can_formats_by_extension(tmp_path: Path, ext: str) -> None:
+    path = str(tmp_path / f"bus{ext}")
+    writer = RotatingCapture(path, "can")
+    frames = [can.Message(timestamp=1700000000.5 + i, arbitration_id=0x600 | i, data=bytes([i] * 8),
+                          is_extended_id=False) for i in range(4)]
+    for frame in frames:
+        writer.write(Record(frame.timestamp, "lab", "can", frame))
+    writer.close()
+    back = [r.unit for r in read_capture(path)]
+    assert [(f.arbitration_id, bytes(f.data)) for f in back] == [(f.arbitration_id, bytes(f.data)) for f in frames]
+
+
+def test_rotation_by_size_keeps_every_record(tmp_path: Path) -> None:
+    path = str(tmp_path / "big.cap")
+    writer = RotatingCapture(path, "serial", max_bytes=2000)
+    for i in range(1000):
+        writer.write(Record(1.0 + i, "r", "cobs8", bytes([i & 0xFF] * 10)))
+    writer.close()
+    assert len(writer.files) > 3 and writer.files[1] == rotated_name(path, 1) == str(tmp_path / "big_001.cap")
+    total = [r for f in writer.files for r in read_capture(f)]
+    assert len(total) == 1000 and total[-1].unit == bytes([999 & 0xFF] * 10)
+
+
+def test_unknown_capture_type_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "x.bin"
+    path.write_bytes(b"\x01\x02")
+    with pytest.raises(CaptureError, match=r"unknown capture type '\.bin'"):
+        list(read_capture(str(path)))
+
+
+def test_replay_keeps_absolute_deadlines() -> None:
+    clock = [0.0]
+    sent: list[float] = []
+
+    def fake_clock() -> float:
+        clock[0] += 0.0001  # every clock read costs 0.1 ms of "time"
+        return clock[0]
+
+    records = [Record(100.0 + i * 0.01, "r", "cobs8", b"") for i in range(200)]
+    result = replay(records, lambda r: sent.append(clock[0]), speed=2.0, clock=fake_clock,
+                    keep_lateness=True)
+    assert result.frames == 200 and abs(result.logged - 199 * 0.005) < 1e-9
+    # per-frame overhead never accumulates: the last frame leaves on its deadline, not 200 overheads late
+    assert max(result.lateness) < 0.0005
+    assert abs(result.took - result.logged) < 0.001
+
+
+def _classify(can_id: int) -> int | None:
+    return (can_id >> 8) & 1 if can_id & 0x600 == 0x600 else None
+
+
+def test_fast_candump_path_matches_the_line_parser() -> None:
+    lines = [f"({1700000000 + i}.{i * 7 % 1000000:06d}) can0 {0x600 | (i % 2) << 8 | i % 50:03X}#"
+             f"{(i % 2) << 15 | i % 3000:04X}{i * 13 % 65536:04X}{i % 65535 + 1:04X}{i % 50:04X}\n" for i in range(300)]
+    lines.append("(0000000012.000100) can0 200#0001000200030004\n")  # an unknown id: dropped
+    lines.append("(0000000012.000200) can0 700#0001000200030004\n")  # a PUT under a GET id: op mismatch
+    drops: dict[str, int] = {}
+    fast = chunk_to_jsonl("".join(lines).encode(), _classify, drops)
+    assert fast is not None and drops == {"unknown_id": 1, "op_mismatch": 1}
+    rows = [json.loads(line) for line in fast.decode().splitlines()]
+    assert len(rows) == 300
+    for row, line in zip(rows, lines, strict=False):
+        frame = candump.parse_line("f", 1, line)
+        assert frame is not None
+        word0, value, ts, robot = (int.from_bytes(frame.data[i:i + 2], "big") for i in range(0, 8, 2))
+        assert row == {"t": pytest.approx(frame.timestamp, abs=1e-6), "link": "can0", "can_id": frame.arbitration_id,
+                       "op": "GET" if word0 >> 15 else "PUT", "key": word0 & 0x7FFF, "value": value,
+                       "timestamp": ts, "robot": robot}
+
+
+def test_fast_path_declines_mixed_or_bad_chunks() -> None:
+    good = "(1700000000.000000) can0 600#0001000200030004\n"
+    assert chunk_to_jsonl((good + "(1700000000.000000) can0 600#00010002000300\n").encode(), _classify, {}) is None
+    assert chunk_to_jsonl((good + "(1700000000.000000) can0 600#000100020003000Z\n").encode(), _classify, {}) is None
+    assert chunk_to_jsonl(good.replace("600#", "600 ").encode(), _classify, {}) is None
+    assert chunk_to_jsonl(good.encode() * 3, _classify, {}) is not None

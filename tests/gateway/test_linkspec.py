@@ -1,0 +1,82 @@
+"""The link-spec grammar: examples parse to the right fields, bad specs say what is wrong."""
+
+from __future__ import annotations
+
+import contextlib
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from vstig_hw.linkspec import EXAMPLES, CanSpec, SerialSpec, parse
+
+
+def test_can_specs() -> None:
+    assert parse("can:socketcan:vcan0") == CanSpec("socketcan", "vcan0")
+    spec = parse("can:slcan:/dev/ttyACM0?bitrate=500000")
+    assert spec == CanSpec("slcan", "/dev/ttyACM0", bitrate=500000)
+    assert spec.name == "dev_ttyACM0"
+    spec = parse("can:socketcan:can0?fd=1&id_base=0x18000000&extended=1")
+    assert spec == CanSpec("socketcan", "can0", fd=True, id_base=0x18000000, extended=True)
+
+
+def test_serial_specs() -> None:
+    assert parse("serial:/dev/ttyUSB0") == SerialSpec("/dev/ttyUSB0", 115200, "cobs8")
+    assert parse("serial:/dev/ttyUSB0?baud=9600&framing=kilobot") == SerialSpec("/dev/ttyUSB0", 9600, "kilobot")
+    spec = parse("serial:socket://localhost:7000?framing=epuck4")
+    assert spec == SerialSpec("socket://localhost:7000", 115200, "epuck4")
+    assert spec.name == "localhost:7000"
+
+
+def test_url_keeps_its_own_options() -> None:
+    spec = parse("serial:socket://h:7000?logging=debug&framing=epuck4")
+    assert spec == SerialSpec("socket://h:7000?logging=debug", 115200, "epuck4")
+
+
+def test_kilobot_ohc() -> None:
+    spec = parse("kilobot-ohc:/dev/ttyUSB1")
+    assert spec == SerialSpec("/dev/ttyUSB1", 38400, "kilobot-ohc") and spec.kind == "kilobot-ohc"
+
+
+def test_every_documented_example_parses() -> None:
+    for examples in EXAMPLES.values():
+        for example in examples:
+            parse(example)
+
+
+@pytest.mark.parametrize(
+    ("spec", "names"),
+    [
+        ("usb:/dev/ttyUSB0", "unknown kind 'usb'"),
+        ("serial:/dev/ttyUSB0?buad=9600", "unknown parameter 'buad=9600'"),
+        ("serial:/dev/ttyUSB0?baud=fast", "baud='fast' is not an integer"),
+        ("serial:/dev/ttyUSB0?framing=hdlc", "framing='hdlc'"),
+        ("serial:?baud=9600", "the port is missing"),
+        ("can:virtual", "expected can:<interface>:<channel>"),
+        ("can:virtual:lab?fd=yes", "fd='yes' must be 0 or 1"),
+        ("can:virtual:lab?id_base=0x800", "id_base=0x800 is outside"),
+        ("can:vir tual:lab", "interface 'vir tual'"),
+        ("can:virtual:lab?bitrate", "parameter 'bitrate' needs a value"),
+    ],
+)
+def test_bad_specs_name_the_bad_part_and_show_an_example(spec: str, names: str) -> None:
+    with pytest.raises(ValueError) as caught:
+        parse(spec)
+    text = str(caught.value)
+    assert names in text and "(e.g. " in text and "\n" not in text
+
+
+@given(st.text(max_size=60))
+def test_fuzz_only_value_error(spec: str) -> None:
+    try:
+        parsed = parse(spec)
+    except ValueError as error:
+        assert "\n" not in str(error).replace(repr(spec), "")
+    else:
+        assert parsed.kind in ("can", "serial", "kilobot-ohc")
+
+
+@given(st.sampled_from(["can:virtual:", "serial:", "serial:socket://x:1", "kilobot-ohc:"]), st.text(max_size=40))
+def test_fuzz_after_a_valid_prefix(prefix: str, tail: str) -> None:
+    with contextlib.suppress(ValueError):
+        parse(prefix + tail)

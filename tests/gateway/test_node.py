@@ -1,0 +1,173 @@
+"""The gateway Node on real python-can virtual buses: engine, raw and listen modes."""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable
+
+import can
+import pytest
+
+from vstig_hw import Message, Op, Stigmergy
+from vstig_hw.gateway import Mode, Node, SendWindow
+from vstig_hw.link import Heard, Link
+from vstig_hw.links import can_framing_for
+from vstig_hw.linkspec import parse
+
+_ids = itertools.count()
+
+
+def bus_link(channel: str, name: str | None = None, robot_id: int = 100) -> Link[can.Message]:
+    return parse(f"can:virtual:{channel}").build(name or channel, robot_id=robot_id)
+
+
+class BusRobot:
+    """A robot on a virtual bus: an engine, a bus handle, and one control step at a time."""
+
+    def __init__(self, robot_id: int, channel: str) -> None:
+        self.engine = Stigmergy(robot_id)
+        self.framing = can_framing_for(robot_id)
+        self.bus = can.Bus(interface="virtual", channel=channel)
+
+    def step(self) -> None:
+        while (frame := self.bus.recv(0)) is not None:
+            for msg in self.framing.feed(frame):
+                self.engine.receive(msg)
+        for msg in self.engine.drain():
+            for frame in self.framing.encode(msg):
+                self.bus.send(frame)
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+
+@pytest.fixture
+def channels() -> tuple[str, str]:
+    n = next(_ids)
+    return f"gw-a-{n}", f"gw-b-{n}"
+
+
+def run_until(node: Node, done: Callable[[], bool], robots: list[BusRobot] = (), deadline: float = 10.0) -> None:  # type: ignore[assignment]
+    end = time.monotonic() + deadline
+    while not done():
+        assert time.monotonic() < end, "timed out"
+        for robot in robots:
+            robot.step()
+        node.run(duration=0.02)
+
+
+def test_engine_mode_carries_a_put_across_buses(channels: tuple[str, str]) -> None:
+    a, b = channels
+    left, right = BusRobot(5, a), BusRobot(9, b)
+    with Node([bus_link(a), bus_link(b)], robot_id=100) as node:
+        left.engine.put(3, 1234)
+        run_until(node, lambda: right.engine.entry(3) is not None, [left, right])
+        assert right.engine.entry(3) == (1234, 1, 5)
+        assert node.engine is not None and node.engine.entry(3) == (1234, 1, 5)
+        node.put(4, 77)  # and the PC's own writes reach both sides
+        run_until(node, lambda: left.engine.has(4) and right.engine.has(4), [left, right])
+        stats = node.stats()
+        assert stats[a]["in"] >= 1 and stats[b]["out"] >= 2
+    left.close()
+    right.close()
+
+
+def test_raw_mode_relays_every_frame_without_an_engine(channels: tuple[str, str]) -> None:
+    a, b = channels
+    tap = can.Bus(interface="virtual", channel=a)
+    far = can.Bus(interface="virtual", channel=b)
+    framing = can_framing_for(7)
+    sent = [Message(Op.PUT, 1, v, 1, 7) for v in range(20)]  # same key and timestamp: an engine would keep one
+    with Node([bus_link(a), bus_link(b)], mode=Mode.RAW, budget=None) as node:
+        assert node.engine is None
+        for msg in sent:
+            for frame in framing.encode(msg):
+                tap.send(frame)
+        got: list[Message] = []
+
+        def all_arrived() -> bool:
+            while (frame := far.recv(0)) is not None:
+                got.extend(framing.feed(frame))
+            return len(got) >= len(sent)
+
+        run_until(node, all_arrived)
+    assert got == sent
+    tap.shutdown()
+    far.shutdown()
+
+
+def test_listen_mode_never_transmits_and_reports_what_it_heard(channels: tuple[str, str]) -> None:
+    a, _ = channels
+    tap = can.Bus(interface="virtual", channel=a)
+    observer = can.Bus(interface="virtual", channel=a)
+    heard: list[Heard] = []
+    node = Node([bus_link(a)], mode=Mode.LISTEN)
+    node.on_heard.append(heard.append)
+    with node:
+        for frame in can_framing_for(42).encode(Message(Op.GET, 2, 0, 0, 42)):
+            tap.send(frame)
+        run_until(node, lambda: bool(heard))
+        node.run(duration=0.3)  # a few ticks in which a robot would have answered or re-broadcast
+    assert heard[0].sender == 42 and heard[0].message.op is Op.GET
+    assert observer.recv(0) is not None  # the GET itself
+    assert observer.recv(0) is None  # and nothing from the sniffer
+    with pytest.raises(RuntimeError):
+        node.put(1, 1)
+    tap.shutdown()
+    observer.shutdown()
+
+
+def test_budget_holds_each_link_to_k_messages_per_tick(channels: tuple[str, str]) -> None:
+    a, _ = channels
+    observer = can.Bus(interface="virtual", channel=a)
+    with Node([bus_link(a)], robot_id=1, period=0.2, budget=5) as node:
+        for key in range(12):
+            node.put(key, key)
+        arrivals: list[float] = []
+
+        def drained() -> bool:
+            while observer.recv(0) is not None:
+                arrivals.append(time.monotonic())
+            return len(arrivals) >= 12
+
+        run_until(node, drained)
+    first = arrivals[0]
+    assert sum(t - first < 0.15 for t in arrivals) == 5  # the first window sends exactly the budget
+    observer.shutdown()
+
+
+def test_send_window_slides() -> None:
+    window = SendWindow(3, 1.0)
+    assert window.allowance(0.0) == 3
+    window.record(0.0, 2)
+    window.record(0.5, 1)
+    assert window.allowance(0.9) == 0 and window.next_free() == 1.0
+    assert window.allowance(1.0) == 2 and window.allowance(1.5) == 3
+    with pytest.raises(ValueError, match="budget"):
+        SendWindow(0, 1.0)
+
+
+def test_per_link_queue_keeps_the_newest_message_per_key(channels: tuple[str, str]) -> None:
+    a, _ = channels
+    observer = can.Bus(interface="virtual", channel=a)
+    framing = can_framing_for(7)
+    with Node([bus_link(a)], robot_id=1, period=10.0, budget=1) as node:
+        node.put(1, 10)  # goes out at once: the window is open
+        node.put(1, 11)  # waits: the window is full for 10 s
+        node.put(1, 12)  # replaces 11 in the link's queue
+        assert node.stats()[a]["queued"] == 1
+    frames = [observer.recv(0) for _ in range(3)]
+    values = [framing.feed(f)[0].value for f in frames if f is not None]
+    assert values == [10]
+    observer.shutdown()
+
+
+def test_node_rejects_bad_wiring() -> None:
+    with pytest.raises(ValueError, match="at least one link"):
+        Node([])
+    with pytest.raises(ValueError, match="differ"):
+        Node([bus_link("x", "same"), bus_link("y", "same")])
+    with pytest.raises(ValueError, match="raw bridge"):
+        Node([bus_link("x")], mode=Mode.RAW)
+

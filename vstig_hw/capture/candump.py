@@ -1,0 +1,83 @@
+"""candump `-l` logs (can-utils, and python-can's .log writer), one line at a time.
+
+    (1700000000.250000) can0 600#0001000200030004
+    (1700000000.250100) can0 18000001##1<up to 64 data bytes>     (CAN FD)
+
+This per-line parser is the reference and the one that reports file:line errors;
+`fastlog` decodes well-formed stretches of the same files in bulk.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import IO
+
+import can
+
+from .records import CAN_FRAMING, CaptureError, Record, parse_lines
+
+__all__ = ["parse_line", "read_candump"]
+
+_ERROR_FLAG = 0x20000000
+_FD_LENGTHS = frozenset((0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64))
+
+
+def _hex_int(text: str) -> int:
+    if not text or not all(c in "0123456789abcdefABCDEF" for c in text):
+        raise ValueError
+    return int(text, 16)
+
+
+def parse_line(path: str, number: int, line: str) -> can.Message | None:
+    """The frame on one candump line (None for a blank line); CaptureError naming file:line otherwise."""
+    text = line.strip()
+    if not text:
+        return None
+    try:
+        stamp, channel, frame = text.split()[:3]
+        if not (stamp[0] == "(" and stamp[-1] == ")"):
+            raise ValueError
+        timestamp = float(stamp[1:-1])
+        ident, sep, payload = frame.partition("#")
+        if not sep or len(ident) not in (3, 8):
+            raise ValueError
+        can_id = _hex_int(ident)
+        extended = len(ident) == 8
+        fd = payload.startswith("#")
+        flags = 0
+        if fd:
+            flags = _hex_int(payload[1:2])
+            payload = payload[2:]
+        remote = payload[:1] in ("R", "r") and not fd
+        if remote:
+            dlc = int(payload[1:2] or 0)
+            data = b""
+        else:
+            payload = payload.split("_", 1)[0]  # a classic frame's optional _<len8_dlc>
+            data = bytes.fromhex(payload) if len(payload) % 2 == 0 else b"\x00" * 99
+            if len(data) > 8 and not (fd and len(data) in _FD_LENGTHS):
+                raise ValueError
+            dlc = len(data)
+    except (ValueError, IndexError):
+        raise CaptureError(path, number, f"not a candump line: {text[:60]!r} "
+                           "(expected '(<time>) <iface> <id>#<hex data>')") from None
+    return can.Message(
+        timestamp=timestamp, arbitration_id=can_id & 0x1FFFFFFF, is_extended_id=extended, dlc=dlc, data=data,
+        is_remote_frame=remote, is_error_frame=bool(extended and can_id & _ERROR_FLAG), is_fd=fd,
+        bitrate_switch=bool(flags & 1), error_state_indicator=bool(flags & 2), channel=channel, check=False,
+    )
+
+
+def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+    """Records in file order (.log or .log.gz); bad lines raise CaptureError, or with `skip_bad` go to `bad`."""
+    with _open_text(path) as file:
+        for frame in parse_lines(path, file, parse_line, skip_bad, bad):
+            yield Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)
+
+
+def _open_text(path: str) -> IO[str]:
+    if path.endswith(".gz"):
+        import gzip
+
+        return gzip.open(path, "rt", encoding="utf-8", errors="replace")
+    return open(path, encoding="utf-8", errors="replace")

@@ -1,0 +1,112 @@
+"""Decode a whole capture to text, JSON lines or CSV, fast where the file allows.
+
+candump logs are read in chunks of whole lines; a uniform chunk goes through
+the vectorised `fastlog` path (JSON lines only), any other chunk line by line.
+Every other capture type goes record by record through the framings.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import IO, Any
+
+from ..counters import Counters
+from ..values import ValueType
+from . import candump
+from .decoded import CSV_HEADER, Decoder, as_csv, as_json, as_text, default_framings
+from .fastlog import chunk_to_jsonl
+from .files import read_capture
+from .records import CAN_FRAMING, CaptureError, Record
+from .serial_log import is_serial_capture
+
+__all__ = ["FORMATS", "decode_file"]
+
+FORMATS = {"text": as_text, "jsonl": as_json, "csv": as_csv}
+CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small enough for a smooth progress bar
+
+
+def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
+                skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
+                progress: Callable[[int], None] | None = None) -> tuple[int, Counters, list[CaptureError]]:
+    """Write every message in `path` to `out`; returns (messages, drops by reason, bad lines skipped)."""
+    formatter = FORMATS[fmt]
+    decoder = Decoder(default_framings(id_base, extended))
+    bad: list[CaptureError] = []
+    if fmt == "csv":
+        out.write(CSV_HEADER)
+    if (path.endswith(".log") and fmt == "jsonl" and value_type == "uint16" and not extended
+            and not is_serial_capture(path)):
+        count, drops = _candump_chunks(path, out, decoder, value_type, skip_bad, bad, id_base, progress)
+        drops.update(decoder.drops())
+        return count, drops, bad
+    count = 0
+    for record in read_capture(path, skip_bad, bad):
+        for decoded in decoder.decode(record):
+            out.write(formatter(decoded, value_type) + "\n")
+            count += 1
+    return count, decoder.drops(), bad
+
+
+def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: ValueType, skip_bad: bool,
+                    bad: list[CaptureError], id_base: int | None,
+                    progress: Callable[[int], None] | None) -> tuple[int, Counters]:
+    from ..links import can_framing
+
+    scheme = can_framing(id_base, False).scheme
+
+    def classify(can_id: int) -> int | None:
+        parsed = scheme.parse(can_id, False)
+        return None if parsed is None else int(parsed[0])
+
+    fast_drops: dict[str, int] = {}
+    count = 0
+    line_no = 1
+    tail = b""
+    raw_out: Any = getattr(out, "buffer", None)
+    with open(path, "rb") as file:
+        while True:
+            block = file.read(CHUNK)
+            data = tail + block
+            if not block:
+                tail, chunk = b"", data
+            else:
+                cut = data.rfind(b"\n") + 1
+                tail, chunk = data[cut:], data[:cut]
+            if chunk:
+                lines = chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
+                dropped_before = sum(fast_drops.values())
+                fast = chunk_to_jsonl(chunk, classify, fast_drops)
+                if fast is not None:
+                    count += lines - sum(fast_drops.values()) + dropped_before
+                    if raw_out is not None:
+                        out.flush()
+                        raw_out.write(fast)
+                    else:
+                        out.write(fast.decode())
+                else:
+                    count += _slow(path, chunk, line_no, out, decoder, value_type, skip_bad, bad)
+                line_no += lines
+                if progress:
+                    progress(len(chunk))
+            if not block:
+                break
+    return count, Counters(fast_drops)
+
+
+def _slow(path: str, chunk: bytes, first_line: int, out: IO[str], decoder: Decoder, value_type: ValueType,
+          skip_bad: bool, bad: list[CaptureError]) -> int:
+    count = 0
+    for offset, line in enumerate(chunk.decode("utf-8", "replace").splitlines()):
+        try:
+            frame = candump.parse_line(path, first_line + offset, line)
+        except CaptureError as error:
+            if not skip_bad:
+                raise
+            bad.append(error)
+            continue
+        if frame is None:
+            continue
+        for decoded in decoder.decode(Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)):
+            out.write(as_json(decoded, value_type) + "\n")
+            count += 1
+    return count

@@ -1,0 +1,134 @@
+"""Capture files chosen by extension: writers (with rotation by size) and readers.
+
+CAN: python-can's own formats, by extension (.log candump, .asc, .blf, .csv, ...), and .pcap
+(vstig_hw.capture.pcap, registered with python-can by extension too).
+Serial: our line format (`serial_log`). A reader tells them apart by the
+serial header, then by extension.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, Protocol
+
+import can
+
+from .candump import read_candump
+from .records import CAN_FRAMING, CaptureError, Record
+from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
+
+__all__ = ["CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "read_capture", "rotated_name"]
+
+CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
+_SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
+
+
+class CaptureWriter(Protocol):
+    def write(self, record: Record) -> None: ...
+    def size(self) -> int: ...
+    def flush(self) -> None: ...
+    def close(self) -> None: ...
+
+
+def _suffix(path: str) -> str:
+    suffixes = Path(path).suffixes
+    return "".join(suffixes[-2:]).lower() if suffixes[-1:] == [".gz"] else "".join(suffixes[-1:]).lower()
+
+
+class CanCaptureWriter:
+    """python-can's writer for the extension; frames keep their own timestamps, channel = link name."""
+
+    def __init__(self, path: str) -> None:
+        if _suffix(path) not in CAN_EXTENSIONS:
+            raise ValueError(f"{path}: CAN captures are {', '.join(CAN_EXTENSIONS)} (chosen by extension)")
+        self.path = path
+        self.writer: Any = can.Logger(path)
+
+    def write(self, record: Record) -> None:
+        frame: can.Message = record.unit
+        if frame.timestamp < 1e9:  # an interface with a monotonic clock: use the wall time we stamped
+            frame.timestamp = record.t
+        frame.channel = record.link
+        self.writer.on_message_received(frame)
+
+    def size(self) -> int:
+        file = getattr(self.writer, "file", None)
+        try:
+            return int(file.tell()) if file is not None else os.path.getsize(self.path)
+        except (OSError, ValueError):
+            return 0
+
+    def flush(self) -> None:
+        file = getattr(self.writer, "file", None)
+        if file is not None and hasattr(file, "flush") and not isinstance(self.writer, can.BLFWriter):
+            file.flush()  # BLF compresses whole blocks: flushing mid-block would write a short one
+
+    def close(self) -> None:
+        self.writer.stop()
+
+
+def rotated_name(path: str, index: int) -> str:
+    """capture.log, capture_001.log, capture_002.log... (the extension stays last, so formats still match)."""
+    if index == 0:
+        return path
+    suffix = _suffix(path)
+    return f"{path[: len(path) - len(suffix)]}_{index:03d}{suffix}"
+
+
+class RotatingCapture:
+    """Writes records to `path`, starting a new numbered file whenever one exceeds `max_bytes`."""
+
+    def __init__(self, path: str, medium: str, max_bytes: int | None = None) -> None:
+        if medium not in ("can", "serial"):
+            raise ValueError(f"medium must be can or serial, got {medium!r}")
+        self.base, self.medium, self.max_bytes = path, medium, max_bytes
+        self.index = 0
+        self.files = [path]
+        self.records = 0
+        self._writer = self._open(path)
+
+    def _open(self, path: str) -> CaptureWriter:
+        return CanCaptureWriter(path) if self.medium == "can" else SerialCaptureWriter(path)
+
+    def write(self, record: Record) -> None:
+        self._writer.write(record)
+        self.records += 1
+        if self.max_bytes and self.records % _SIZE_CHECK_EVERY == 0 and self._writer.size() >= self.max_bytes:
+            self._writer.close()
+            self.index += 1
+            path = rotated_name(self.base, self.index)
+            self.files.append(path)
+            self._writer = self._open(path)
+
+    def flush(self) -> None:
+        """Push what is written to the file (the recorder does this every tick, so `tail -f` works)."""
+        self._writer.flush()
+
+    def close(self) -> None:
+        self._writer.close()
+
+
+def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+    """Every record of a capture: ours (serial), candump logs, or any python-can format."""
+    if not os.path.isfile(path):
+        raise CaptureError(path, None, "no such file")
+    if is_serial_capture(path):
+        yield from read_serial_capture(path, skip_bad, bad)
+        return
+    suffix = _suffix(path)
+    if suffix in (".log", ".log.gz"):
+        yield from read_candump(path, skip_bad, bad)
+        return
+    if suffix not in CAN_EXTENSIONS:
+        raise CaptureError(path, None, f"unknown capture type {suffix or '(no extension)'!r}: expected a "
+                           f"serial capture or one of {', '.join(CAN_EXTENSIONS)}")
+    options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}
+    try:
+        for frame in can.LogReader(path, **options):
+            yield Record(frame.timestamp, str(frame.channel or "can"), CAN_FRAMING, frame)
+    except CaptureError:
+        raise
+    except Exception as error:  # python-can's readers raise many kinds; all mean the file is bad
+        raise CaptureError(path, None, f"cannot read as {suffix}: {error}") from None

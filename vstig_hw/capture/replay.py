@@ -1,0 +1,62 @@
+"""Faithful-timing replay: every record leaves at its own absolute deadline.
+
+Each deadline is `start + (t - t0) / speed`, computed from the first record,
+never from the previous send, so per-frame sleep error does not accumulate
+(python-can's MessageSync sleeps per gap and drifts: its issue #1372). Waiting
+is hybrid: sleep until `spin` seconds before the deadline (OS sleeps overshoot
+by ~0.1 ms), then spin on the clock for the rest; a short spin also
+leaves the CPU to others, so a loaded machine preempts us less.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+from .records import Record
+
+__all__ = ["ReplayResult", "replay"]
+
+SPIN = 0.0002  # seconds before a deadline at which sleeping stops and spinning starts (sleep overshoots ~0.1 ms)
+
+
+@dataclass
+class ReplayResult:
+    frames: int = 0
+    logged: float = 0.0  # logged duration, first to last record, divided by speed
+    took: float = 0.0  # first send to last send
+    lateness: list[float] = field(default_factory=list)  # per frame, send time minus deadline (if asked)
+
+
+def replay(records: Iterable[Record], send: Callable[[Record], None], *, speed: float = 1.0,
+           stop: threading.Event | None = None, keep_lateness: bool = False,
+           clock: Callable[[], float] = time.perf_counter) -> ReplayResult:
+    if speed <= 0:
+        raise ValueError(f"speed must be positive, got {speed}")
+    result = ReplayResult()
+    sleep = stop.wait if stop is not None else time.sleep
+    start = t0 = None
+    first_sent = last_sent = 0.0
+    for record in records:
+        if stop is not None and stop.is_set():
+            break
+        if t0 is None or start is None:
+            t0, start = record.t, clock()
+        deadline = start + (record.t - t0) / speed
+        remaining = deadline - clock()
+        if remaining > SPIN:
+            sleep(remaining - SPIN)
+        while clock() < deadline:
+            pass
+        send(record)
+        last_sent = clock()
+        if result.frames == 0:
+            first_sent = last_sent
+        if keep_lateness:
+            result.lateness.append(last_sent - deadline)
+        result.frames += 1
+        result.logged = (record.t - t0) / speed
+    result.took = last_sent - first_sent
+    return result

@@ -1,0 +1,248 @@
+"""The PC's seat in the swarm: one engine attached to any number of links.
+
+Modes:
+
+* ENGINE: the Node is a robot. What any link hears goes into its engine; what
+  the engine queues goes out on every link (its own queue per link, see
+  `outlet`). Data crosses media because the protocol re-broadcasts what is new
+  and answers stale GETs, not because the gateway relays.
+* RAW: a transparent bridge. Every message heard on one link is re-encoded in
+  each other link's framing and sent as is: no engine, no merging.
+* LISTEN: a sniffer or recorder. Nothing is ever written to any link.
+
+One event loop: `run` (or `poll`, one step of it) drains the reader threads'
+queue, ticks every `period`, and flushes the outlets whenever their budget
+window allows.
+"""
+
+from __future__ import annotations
+
+import enum
+import queue
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from ..counters import Counters
+from ..engine import ConflictResolver, Stigmergy
+from ..link import Heard, Link
+from .outlet import Outlet
+from .readers import LinkReaders
+
+__all__ = ["DEFAULT_BUDGET", "DEFAULT_PERIOD", "Mode", "Node", "favour_latency"]
+
+DEFAULT_PERIOD = 0.1  # the paper's control step
+DEFAULT_BUDGET = 64  # messages per link per tick: ~8 kB/s of cobs8, within a 115200-baud radio
+
+
+SWITCH_INTERVAL = 0.0005  # seconds: how soon a reader thread with a frame gets the GIL from the loop
+
+
+def favour_latency() -> None:
+    """Make this process hand the GIL between threads every 0.5 ms instead of CPython's 5 ms.
+
+    A frame a reader thread has just read otherwise waits up to 5 ms while the
+    loop runs Python; `vstig bridge` calls this (it is process-wide, so the
+    library never does it by itself).
+    """
+    sys.setswitchinterval(SWITCH_INTERVAL)
+
+
+class Mode(enum.Enum):
+    ENGINE = "engine"
+    RAW = "raw"
+    LISTEN = "listen"
+
+
+UnitListener = Callable[[Link[Any], float, Any], None]
+HeardListener = Callable[[Heard], None]
+TickListener = Callable[["Node"], None]
+
+
+class Node:
+    def __init__(
+        self,
+        links: Iterable[Link[Any]],
+        robot_id: int = 0,
+        *,
+        mode: Mode = Mode.ENGINE,
+        period: float = DEFAULT_PERIOD,
+        budget: int | None = DEFAULT_BUDGET,
+        onconflict: ConflictResolver | None = None,
+    ) -> None:
+        self.links = list(links)
+        if not self.links:
+            raise ValueError("a node needs at least one link")
+        names = [link.name for link in self.links]
+        if len(set(names)) != len(names):
+            raise ValueError(f"link names must differ, got {', '.join(names)}")
+        if mode is Mode.RAW and len(self.links) < 2:
+            raise ValueError("a raw bridge needs at least two links")
+        self.mode = mode
+        self.period = period
+        self.engine = Stigmergy(robot_id, onconflict=onconflict) if mode is Mode.ENGINE else None
+        self.outlets = [] if mode is Mode.LISTEN else [
+            Outlet(link, budget, period, keep_all=mode is Mode.RAW) for link in self.links
+        ]
+        self.on_unit: list[UnitListener] = []
+        self.on_heard: list[HeardListener] = []
+        self.on_tick: list[TickListener] = []
+        self.ticks = 0
+        self._readers = LinkReaders(self.links)
+        self._next_tick = 0.0
+        self._retry_at: float | None = None
+        self._opened: list[Link[Any]] = []
+
+    # -- lifetime --------------------------------------------------------------
+    def open(self) -> None:
+        """Open every link and start reading; on failure, close what was opened and re-raise."""
+        try:
+            for link in self.links:
+                link.open()
+                self._opened.append(link)
+        except BaseException:
+            self.close()
+            raise
+        self._readers.start()
+        self._next_tick = time.monotonic() + self.period
+
+    def close(self) -> None:
+        """Stop reading, hand every unit already read to the listeners (no frame lost), close the links."""
+        self._readers.stop()
+        arrivals = self._readers.arrivals
+        while not arrivals.empty():
+            item = arrivals.get_nowait()
+            if item is not None:
+                self._arrive(*item)
+        while self._opened:
+            link = self._opened.pop()
+            try:
+                link.close()
+            except Exception:  # closing must reach every link even if one device is already gone
+                link.counters["close_error"] += 1
+
+    def __enter__(self) -> Node:
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- the robot's program (ENGINE mode) --------------------------------------
+    def put(self, key: int, value: int) -> None:
+        self._engine().put(key, value)
+        self._spread(time.monotonic())
+
+    def get(self, key: int) -> int | None:
+        value = self._engine().get(key)
+        self._spread(time.monotonic())
+        return value
+
+    def _engine(self) -> Stigmergy:
+        if self.engine is None:
+            raise RuntimeError(f"a {self.mode.value} node has no engine")
+        return self.engine
+
+    # -- the loop ----------------------------------------------------------------
+    def run(self, stop: threading.Event | None = None, until: Callable[[], bool] | None = None,
+            duration: float | None = None) -> None:
+        """Loop until `stop` is set, `until()` is true, or `duration` seconds pass."""
+        deadline = None if duration is None else time.monotonic() + duration
+        while not (stop is not None and stop.is_set()) and not (until is not None and until()):
+            now = time.monotonic()
+            if deadline is not None and now >= deadline:
+                return
+            wait = self._next_tick - now
+            if self._retry_at is not None:
+                wait = min(wait, self._retry_at - now)
+            if deadline is not None:
+                wait = min(wait, deadline - now)
+            self.poll(max(0.0, min(wait, 0.25)))
+
+    def poll(self, timeout: float) -> None:
+        """Handle what arrives within `timeout` seconds, then tick if a tick is due."""
+        arrivals = self._readers.arrivals
+        try:
+            item = arrivals.get(timeout=timeout) if timeout > 0 else arrivals.get_nowait()
+        except queue.Empty:
+            item = None
+        while item is not None:
+            self._arrive(*item)
+            try:
+                item = arrivals.get_nowait()
+            except queue.Empty:
+                item = None
+        now = time.monotonic()
+        if now >= self._next_tick:
+            self._tick(now)
+        self._spread(now)
+
+    def _arrive(self, index: int, t: float, units: list[Any]) -> None:
+        link = self.links[index]
+        feed = link.framing.feed
+        sender_of = link.sender_of
+        engine = self.engine
+        outlets = self.outlets
+        heard_count = 0
+        for unit in units:
+            for listener in self.on_unit:
+                listener(link, t, unit)
+            try:
+                messages = feed(unit)
+            except Exception:  # a transmit-only framing (kilobot-ohc) or a framing bug: count, keep looping
+                link.counters["drop_undecodable"] += 1
+                continue
+            if not messages:
+                continue
+            heard_count += len(messages)
+            if self.on_heard:
+                sender = sender_of(unit)
+                for msg in messages:
+                    heard = Heard(msg, link.name, t, sender)
+                    for h_listener in self.on_heard:
+                        h_listener(heard)
+            if engine is not None:
+                for msg in messages:
+                    engine.receive(msg)
+            elif self.mode is Mode.RAW:
+                for outlet in outlets:
+                    if outlet.link is not link:
+                        for msg in messages:
+                            outlet.push(msg)
+        link.counters["in"] += heard_count
+
+    def _tick(self, now: float) -> None:
+        self.ticks += 1
+        self._next_tick = max(self._next_tick + self.period, now)  # no catch-up burst after a stall
+        for link in self.links:
+            link.tick()
+        for listener in self.on_tick:
+            listener(self)
+
+    def _spread(self, now: float) -> None:
+        """Copy the engine's outbox into every link's queue, then send what budgets allow."""
+        if self.engine is not None and self.engine.pending():
+            outgoing = self.engine.drain()
+            for outlet in self.outlets:
+                for msg in outgoing:
+                    outlet.push(msg)
+        retry = None
+        for outlet in self.outlets:
+            again = outlet.flush(now)
+            if again is not None and (retry is None or again < retry):
+                retry = again
+        self._retry_at = retry
+
+    # -- what happened ------------------------------------------------------------
+    def stats(self) -> dict[str, Counters]:
+        """Per link: in/out, queued, and every drop by reason."""
+        out = {link.name: link.stats() for link in self.links}
+        for outlet in self.outlets:
+            if len(outlet):
+                out[outlet.link.name]["queued"] = len(outlet)
+        return out
+
+    def summary(self) -> str:
+        return "  ".join(f"{name}: {counters.summary()}" for name, counters in self.stats().items())

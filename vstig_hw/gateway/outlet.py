@@ -1,0 +1,109 @@
+"""One link's way out: a send queue drained under a per-tick budget.
+
+The engine has one outbox; links differ in bandwidth (a CAN bus moves thousands
+of frames a second, an e-puck radio a few dozen). So every engine message is
+copied into each link's own queue, and each queue keeps the engine's rule: one
+pending message per key, newest wins, PUTs first (`OutQueue`). A slow link
+therefore never builds a backlog of outdated values, and a fast one never waits
+for a slow one.
+
+The budget is a sliding window, not a tick-aligned burst: at most `budget`
+messages leave in any `period`-long window. A message goes out the moment the
+window allows, so a quiet gateway relays across media within the time it takes
+to wake a thread, instead of waiting up to a whole tick; a busy one is held to
+the same bandwidth the tick-aligned drain would allow.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Any
+
+from ..counters import Counters
+from ..link import Link
+from ..outqueue import OutQueue
+from ..wire import Message
+
+__all__ = ["Outlet", "SendWindow"]
+
+RAW_QUEUE_LIMIT = 10_000  # raw mode keeps every frame; beyond this the oldest are dropped and counted
+
+
+class SendWindow:
+    """At most `budget` sends in any `period` seconds (None: unlimited)."""
+
+    def __init__(self, budget: int | None, period: float) -> None:
+        if budget is not None and budget < 1:
+            raise ValueError(f"budget must be at least 1 message per tick, got {budget}")
+        if period <= 0:
+            raise ValueError(f"the tick period must be positive, got {period}")
+        self.budget = budget
+        self.period = period
+        self._sent: deque[float] = deque(maxlen=budget or 1)
+
+    def allowance(self, now: float) -> int:
+        if self.budget is None:
+            return 1 << 30
+        sent = self._sent
+        while sent and sent[0] <= now - self.period:
+            sent.popleft()
+        return self.budget - len(sent)
+
+    def record(self, now: float, count: int) -> None:
+        if self.budget is not None:
+            self._sent.extend([now] * min(count, self.budget))
+
+    def next_free(self) -> float | None:
+        """When the window next opens, if it is full now."""
+        if self.budget is None or len(self._sent) < self.budget:
+            return None
+        return self._sent[0] + self.period
+
+
+class Outlet:
+    """A link, its send queue and its budget window."""
+
+    def __init__(self, link: Link[Any], budget: int | None, period: float, *, keep_all: bool = False) -> None:
+        self.link = link
+        self.window = SendWindow(budget, period)
+        self.keep_all = keep_all  # raw mode: a FIFO of every frame, not newest-per-key
+        self._newest = OutQueue()
+        self._fifo: deque[Message] = deque()
+
+    @property
+    def counters(self) -> Counters:
+        return self.link.counters
+
+    def __len__(self) -> int:
+        return len(self._fifo) if self.keep_all else len(self._newest)
+
+    def push(self, msg: Message) -> None:
+        if not self.keep_all:
+            if not self._newest.push(msg):
+                self.counters["superseded"] += 1
+            return
+        if len(self._fifo) >= RAW_QUEUE_LIMIT:
+            self._fifo.popleft()
+            self.counters["drop_overflow"] += 1
+        self._fifo.append(msg)
+
+    def flush(self, now: float) -> float | None:
+        """Send what the window allows; returns when to try again if messages wait."""
+        if not len(self):
+            return None
+        allowed = self.window.allowance(now)
+        if allowed <= 0:
+            return self.window.next_free()
+        if self.keep_all:
+            fifo = self._fifo
+            batch = [fifo.popleft() for _ in range(min(allowed, len(fifo)))]
+        else:
+            batch = self._newest.drain(allowed)
+        self.window.record(now, len(batch))
+        send = self.link.send
+        for msg in batch:
+            try:
+                send(msg)
+            except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
+                self.counters["drop_write_error"] += 1
+        return self.window.next_free() if len(self) else None

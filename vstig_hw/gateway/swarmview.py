@@ -1,0 +1,58 @@
+"""What a sniffer learns from traffic: per key, the newest entry and who still lags behind.
+
+Pure bookkeeping fed `Heard` messages; the `sniff` command draws it. A sender
+holds a stale view of a key when the last message it sent for that key carried
+an older timestamp than the newest one seen (only where the link names senders,
+as CAN IDs do).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..link import Heard
+from ..timestamps import is_newer
+from ..wire import Op
+
+__all__ = ["KeyView", "SwarmView"]
+
+
+@dataclass
+class KeyView:
+    value: int = 0
+    timestamp: int = 0
+    robot: int = 0
+    last_seen: float = 0.0
+    puts: int = 0
+    gets: int = 0
+    conflicts: int = 0
+    sender_ts: dict[int, int] = field(default_factory=dict)  # sender -> timestamp of its last message
+
+    def stale_senders(self) -> list[int]:
+        return sorted(s for s, ts in self.sender_ts.items() if is_newer(self.timestamp, ts))
+
+
+class SwarmView:
+    def __init__(self) -> None:
+        self.keys: dict[int, KeyView] = {}
+        self.messages = 0
+
+    def add(self, heard: Heard) -> None:
+        msg = heard.message
+        view = self.keys.get(msg.key)
+        if view is None:
+            view = self.keys[msg.key] = KeyView()
+        self.messages += 1
+        view.last_seen = heard.t
+        if msg.op is Op.PUT:
+            view.puts += 1
+        else:
+            view.gets += 1
+        if heard.sender is not None:
+            view.sender_ts[heard.sender] = msg.timestamp
+        if msg.timestamp == 0:
+            return  # an empty GET: says nothing about the entry
+        if is_newer(msg.timestamp, view.timestamp):
+            view.value, view.timestamp, view.robot = msg.value, msg.timestamp, msg.robot
+        elif msg.timestamp == view.timestamp and msg.robot != view.robot:
+            view.conflicts += 1

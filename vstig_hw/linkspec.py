@@ -1,0 +1,206 @@
+"""Link specs: one string names a link, as pyserial's URLs name a port.
+
+Grammar (one parser for every command)::
+
+    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1]
+    serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot]
+    kilobot-ohc:<port or pyserial URL>
+
+The query after the last `?` is ours. A pyserial URL (`socket://h:7000`,
+`rfc2217://...`) may carry its own options in the same query: keys we do not
+know stay with the URL. A plain device path has no options of its own, so an
+unknown key there is a typo and an error.
+
+A bad spec raises ValueError with one line naming the bad part and a valid example.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .link import Link
+
+__all__ = ["EXAMPLES", "GRAMMAR", "CanSpec", "LinkSpec", "SerialSpec", "parse"]
+
+SERIAL_FRAMINGS = ("cobs8", "epuck4", "kilobot")
+DEFAULT_BAUD = 115200
+OHC_BAUD = 38400  # the Kilobot overhead controller's fixed rate
+
+GRAMMAR = (
+    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1]",
+    "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot]",
+    "kilobot-ohc:<port or pyserial URL>",
+)
+EXAMPLES = {
+    "can": ("can:socketcan:vcan0", "can:virtual:lab", "can:slcan:/dev/ttyACM0?bitrate=500000",
+            "can:socketcan:can0?fd=1&id_base=0x18000000&extended=1"),
+    "serial": ("serial:/dev/ttyUSB0?baud=115200", "serial:socket://localhost:7000?framing=epuck4",
+               "serial:/dev/rfcomm0?framing=kilobot"),
+    "kilobot-ohc": ("kilobot-ohc:/dev/ttyUSB0",),
+}
+_IFACE = re.compile(r"[A-Za-z0-9_]+\Z")
+_NAME_UNSAFE = re.compile(r"[^A-Za-z0-9._:-]+")
+
+
+@dataclass(frozen=True, slots=True)
+class CanSpec:
+    interface: str
+    channel: str
+    bitrate: int | None = None
+    fd: bool = False
+    id_base: int | None = None
+    extended: bool = False
+
+    @property
+    def kind(self) -> str:
+        return "can"
+
+    @property
+    def name(self) -> str:
+        """A short, space-free name for status lines and captures."""
+        return _safe_name(self.channel)
+
+    def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
+        """The Link (not yet open); `robot_id` is the sender field a CAN link transmits under."""
+        from .links import can_link_from_spec
+
+        return can_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
+
+
+@dataclass(frozen=True, slots=True)
+class SerialSpec:
+    port: str
+    baud: int = DEFAULT_BAUD
+    framing: str = "cobs8"  # cobs8 | epuck4 | kilobot | kilobot-ohc
+
+    @property
+    def kind(self) -> str:
+        return "kilobot-ohc" if self.framing == "kilobot-ohc" else "serial"
+
+    @property
+    def name(self) -> str:
+        tail = self.port.split("://", 1)[-1].split("?", 1)[0].rstrip("/")
+        return _safe_name(tail.rsplit("/", 1)[-1] or tail)
+
+    def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
+        """The Link (not yet open); `robot_id` is the sender field a CAN link transmits under."""
+        from .links import serial_link_from_spec
+
+        return serial_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
+
+
+LinkSpec = CanSpec | SerialSpec
+
+
+def _safe_name(text: str) -> str:
+    return _NAME_UNSAFE.sub("_", text).strip("_") or "link"
+
+
+def _bad(spec: str, problem: str, scheme: str = "") -> ValueError:
+    example = EXAMPLES.get(scheme, EXAMPLES["serial"])[0] if scheme else "serial:/dev/ttyUSB0?baud=115200"
+    return ValueError(f"bad link spec {spec!r}: {problem} (e.g. {example})")
+
+
+def _query(spec: str, body: str, scheme: str, ours: tuple[str, ...], is_url: bool) -> tuple[str, dict[str, str]]:
+    """Split `body` at its last '?' into (rest, our params); foreign keys stay on a URL."""
+    if "?" not in body:
+        return body, {}
+    rest, query = body.rsplit("?", 1)
+    params: dict[str, str] = {}
+    foreign: list[str] = []
+    for item in query.split("&"):
+        key, sep, value = item.partition("=")
+        if key in ours:
+            if not sep or not value:
+                raise _bad(spec, f"parameter {key!r} needs a value ({key}=...)", scheme)
+            if key in params:
+                raise _bad(spec, f"parameter {key!r} given twice", scheme)
+            params[key] = value
+        elif is_url and item:
+            foreign.append(item)
+        else:
+            raise _bad(spec, f"unknown parameter {item!r} (known: {', '.join(ours) or 'none'})", scheme)
+    if foreign:
+        rest = f"{rest}?{'&'.join(foreign)}"
+    return rest, params
+
+
+def _int(spec: str, scheme: str, key: str, text: str, low: int, high: int) -> int:
+    try:
+        number = int(text, 0)
+    except ValueError:
+        raise _bad(spec, f"{key}={text!r} is not an integer", scheme) from None
+    if not low <= number <= high:
+        raise _bad(spec, f"{key}={text} is outside {low}..{high:#x}" if key == "id_base"
+                   else f"{key}={text} is outside {low}..{high}", scheme)
+    return number
+
+
+def _flag(spec: str, scheme: str, key: str, text: str) -> bool:
+    if text not in ("0", "1"):
+        raise _bad(spec, f"{key}={text!r} must be 0 or 1", scheme)
+    return text == "1"
+
+
+def _port(spec: str, scheme: str, port: str) -> str:
+    if not port or port.isspace():
+        raise _bad(spec, "the port is missing", scheme)
+    if any(ch in port for ch in "\0\n\r"):
+        raise _bad(spec, "the port contains a control character", scheme)
+    return port
+
+
+def _parse_can(spec: str, body: str) -> CanSpec:
+    interface, sep, rest = body.partition(":")
+    if not sep:
+        raise _bad(spec, "expected can:<interface>:<channel>", "can")
+    if not _IFACE.match(interface):
+        raise _bad(spec, f"interface {interface!r} is not a python-can interface name", "can")
+    channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended"), False)
+    if not channel or any(ch in channel for ch in "\0\n\r "):
+        raise _bad(spec, f"channel {channel!r} is missing or has spaces", "can")
+    extended = _flag(spec, "can", "extended", params["extended"]) if "extended" in params else False
+    id_base = None
+    if "id_base" in params:
+        id_base = _int(spec, "can", "id_base", params["id_base"], 0, 0x1FFFFFFF if extended else 0x7FF)
+    return CanSpec(
+        interface=interface,
+        channel=channel,
+        bitrate=_int(spec, "can", "bitrate", params["bitrate"], 1, 10_000_000) if "bitrate" in params else None,
+        fd=_flag(spec, "can", "fd", params["fd"]) if "fd" in params else False,
+        id_base=id_base,
+        extended=extended,
+    )
+
+
+def _parse_serial(spec: str, body: str) -> SerialSpec:
+    port, params = _query(spec, body, "serial", ("baud", "framing"), "://" in body)
+    framing = params.get("framing", "cobs8")
+    if framing not in SERIAL_FRAMINGS:
+        raise _bad(spec, f"framing={framing!r} is not one of {'|'.join(SERIAL_FRAMINGS)}", "serial")
+    baud = _int(spec, "serial", "baud", params["baud"], 1, 100_000_000) if "baud" in params else DEFAULT_BAUD
+    return SerialSpec(port=_port(spec, "serial", port), baud=baud, framing=framing)
+
+
+def _parse_ohc(spec: str, body: str) -> SerialSpec:
+    port, _ = _query(spec, body, "kilobot-ohc", (), "://" in body)
+    return SerialSpec(port=_port(spec, "kilobot-ohc", port), baud=OHC_BAUD, framing="kilobot-ohc")
+
+
+_SCHEMES: dict[str, Callable[[str, str], LinkSpec]] = {
+    "can": _parse_can, "serial": _parse_serial, "kilobot-ohc": _parse_ohc,
+}
+
+
+def parse(spec: str) -> LinkSpec:
+    """Parse one link spec; ValueError (one line, with an example) when it is bad."""
+    if not isinstance(spec, str):
+        raise ValueError(f"a link spec is a string, got {type(spec).__name__}")
+    scheme, sep, body = spec.partition(":")
+    if not sep or scheme not in _SCHEMES:
+        raise _bad(spec, f"unknown kind {scheme!r}; a spec starts with can:, serial: or kilobot-ohc:")
+    return _SCHEMES[scheme](spec, body)
