@@ -79,7 +79,10 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
     if ctx.invoked_subcommand is not None:
         return
     config = _config(topology, robots, drop, **model)
-    summary = summarize(run_many(config, runs, seed, workers))
+    try:
+        summary = summarize(run_many(config, runs, seed, workers))
+    except ValueError as error:  # a layout that cannot be built (e.g. a density too high to place bodies)
+        raise click.ClickException(str(error)) from None
     if as_json:
         click.echo(json.dumps({**summary.as_json(), "config": {**vars(config), "seed": seed}}))
         return
@@ -140,7 +143,10 @@ def paper(runs: int, output: Path, sizes: tuple[int, ...], seed: int, workers: i
             progress.advance(bar)
             progress.update(bar, description=f"last: {config.topology} N={config.robots} P={config.drop}")
 
-        cells = run_grid(configs, runs, seed, workers, done)
+        try:
+            cells = run_grid(configs, runs, seed, workers, done)
+        except ValueError as error:
+            raise click.ClickException(str(error)) from None
     wall = time.monotonic() - started
     write_csv(cells, output / "summary.csv", output / "runs.csv")
     plot_figure3(cells, output / "figure3.png")

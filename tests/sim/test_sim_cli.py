@@ -35,6 +35,12 @@ def test_bad_drop_is_named() -> None:
     assert result.exit_code == 2 and "--drop" in result.output
 
 
+def test_an_arena_too_dense_for_the_bodies_is_a_clear_error() -> None:
+    result = CliRunner().invoke(cli, ["sim", "--robots", "10", "--density", "1000", "--runs", "1", "--workers", "1"])
+    assert result.exit_code == 1 and "Error: cannot place robot" in result.output
+    assert "Traceback" not in result.output
+
+
 def test_paper_grid_for_ten_robots_writes_csv_png_and_comparison(tmp_path: Path) -> None:
     out = tmp_path / "paper"
     args = ["sim", "paper", "--runs", "3", "--robots", "10", "--workers", "1", "-o", str(out)]

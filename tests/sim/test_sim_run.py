@@ -80,8 +80,9 @@ def test_split_swarm_agrees_per_component_and_bandwidth_is_one_message_per_step(
 
 
 def test_bad_conditions_are_refused_with_their_name() -> None:
-    for kwargs, word in (({"topology": "ring"}, "topology"), ({"robots": 0}, "robots"), ({"drop": 1.0}, "drop"),
-                         ({"budget": 0}, "budget"), ({"max_steps": 0}, "max_steps")):
+    bad = (({"topology": "ring"}, "topology"), ({"robots": 0}, "robots"), ({"robots": 65537}, "robots"),
+           ({"drop": 1.0}, "drop"), ({"budget": 0}, "budget"), ({"max_steps": 0}, "max_steps"))
+    for kwargs, word in bad:
         fields = {"topology": "cluster", "robots": 10, "drop": 0.0, **kwargs}
         with pytest.raises(ValueError, match=word):
             Config(**fields)  # type: ignore[arg-type]

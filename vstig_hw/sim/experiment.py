@@ -31,7 +31,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..engine import Stigmergy, larger_value_wins
-from ..wire import MESSAGE_SIZE, Message
+from ..wire import MESSAGE_SIZE, U16_MAX, Message
 from .graph import component_maxima, is_connected
 from .radio import Links, Radio, links
 from .topology import BODY_RADIUS, DENSITY, RANGE, TOPOLOGIES
@@ -63,8 +63,8 @@ class Config:
     def __post_init__(self) -> None:
         if self.topology not in TOPOLOGIES:
             raise ValueError(f"unknown topology {self.topology!r}; choose from {', '.join(TOPOLOGIES)}")
-        if self.robots < 1:
-            raise ValueError(f"robots must be at least 1, got {self.robots}")
+        if not 1 <= self.robots <= U16_MAX + 1:
+            raise ValueError(f"robots must be in 1..{U16_MAX + 1} (robot ids are 16-bit), got {self.robots}")
         if not 0.0 <= self.drop < 1.0:
             raise ValueError(f"drop probability must be in [0, 1), got {self.drop}")
         if self.budget < 1:
