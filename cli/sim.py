@@ -56,11 +56,13 @@ def _config(topology: str, robots: int, drop: float, **model: Any) -> Config:
         raise click.UsageError(str(error)) from None
 
 
-def _progress() -> Any:
+def _progress(transient: bool = False) -> Any:
+    """A bar on stderr, so stdout stays clean for pipes (rich draws nothing when stderr is not a terminal)."""
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    transient=False)
+                    console=Console(stderr=True), transient=transient)
 
 
 @click.group(invoke_without_command=True)
@@ -80,7 +82,10 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
         return
     config = _config(topology, robots, drop, **model)
     try:
-        summary = summarize(run_many(config, runs, seed, workers))
+        with _progress(transient=True) as progress:
+            bar = progress.add_task(f"{topology} N={robots} P={drop}", total=runs)
+            results = run_many(config, runs, seed, workers, lambda _task, _result: progress.advance(bar))
+        summary = summarize(results)
     except ValueError as error:  # a layout that cannot be built (e.g. a density too high to place bodies)
         raise click.ClickException(str(error)) from None
     if as_json:
