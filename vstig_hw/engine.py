@@ -102,7 +102,8 @@ class Stigmergy:
 
     def get(self, key: int) -> int | None:
         """The local value (None if unknown); queues a GET carrying our view."""
-        _check(key, 0)
+        if type(key) is not int or not 0 <= key <= KEY_MAX:  # the hot path: every robot, every step
+            _check(key, 0)
         local = self._table.get(key)
         if local is None:
             self._outbox.push(Message(Op.GET, key, 0, TS_NONE, self.robot_id))
@@ -163,14 +164,17 @@ class Stigmergy:
 
     def _resolve(self, key: int, local: Entry, remote: Entry) -> None:
         chosen = self.onconflict(key, local, remote)
-        if not isinstance(chosen, tuple) or len(chosen) != 3:
+        if chosen is local or chosen is remote:  # fields already valid: skip the checked constructor
+            winner = _as_put(key, chosen[0], local[1], chosen[2])
+        elif not isinstance(chosen, tuple) or len(chosen) != 3:
             raise TypeError(f"onconflict must return an Entry(value, timestamp, robot), got {chosen!r}")
-        # The winner keeps the local timestamp, as Buzz does.
-        winner = Message(Op.PUT, key, chosen[0], local.timestamp, chosen[2])
-        lost = local if (winner.value, winner.robot) == (remote.value, remote.robot) else remote
+        else:
+            # The winner keeps the local timestamp, as Buzz does.
+            winner = Message(Op.PUT, key, chosen[0], local[1], chosen[2])
+        lost = local if (winner[1], winner[3]) == (remote[0], remote[2]) else remote
         self._table[key] = winner
         self._outbox.push(winner, resolved=True)
-        if self.onconflictlost and lost.robot == self.robot_id and winner.robot != self.robot_id:
+        if self.onconflictlost and lost[2] == self.robot_id and winner[3] != self.robot_id:
             self.onconflictlost(key, lost)
 
     # -- what to broadcast ---------------------------------------------------

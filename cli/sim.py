@@ -1,0 +1,164 @@
+"""`vstig sim`: predict convergence and bandwidth for a swarm, or reproduce the paper's Figure 3.
+
+    vstig sim --topology cluster --robots 100 --drop 0.75 --runs 20 [--json]
+    vstig sim paper --runs 50 -o results/
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import click
+
+from vstig_hw.sim import TOPOLOGIES, Config, Summary, run_many, summarize
+from vstig_hw.sim.experiment import RunResult, Task
+from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
+from vstig_hw.wire import U16_MAX
+
+_STEP_SECONDS = 0.1  # the paper's control step
+
+
+def _model_options(fn: Any) -> Any:
+    """Radio and program options shared by a single condition and the paper grid."""
+    options = [
+        click.option("--budget", default=1, show_default=True, type=click.IntRange(1),
+                     help="messages a robot may broadcast per control step"),
+        click.option("--range", "radio_range", default=RANGE, show_default=True,
+                     type=click.FloatRange(0, min_open=True),
+                     help="communication range R in metres"),
+        click.option("--density", default=DENSITY, show_default=True, type=click.FloatRange(0, min_open=True),
+                     help="cluster density D = N*pi*R^2 / L^2"),
+        click.option("--body-radius", default=BODY_RADIUS, show_default=True, type=click.FloatRange(0),
+                     help="robot body radius in metres (overlap and line of sight)"),
+        click.option("--occlusion/--no-occlusion", default=True, show_default=True,
+                     help="bodies block line of sight, as in ARGoS"),
+        click.option("--redraw-disconnected", is_flag=True,
+                     help="re-draw split layouts (else each robot must learn its own component's highest id)"),
+        click.option("--max-steps", default=200_000, show_default=True, type=click.IntRange(1),
+                     help="give up on a run after this many control steps"),
+        click.option("--seed", default=1, show_default=True, type=int),
+        click.option("--workers", default=None, type=click.IntRange(1), help="processes [default: all cores]"),
+    ]
+    for option in reversed(options):
+        fn = option(fn)
+    return fn
+
+
+def _config(topology: str, robots: int, drop: float, **model: Any) -> Config:
+    try:
+        return Config(topology, robots, drop, budget=model["budget"], radio_range=model["radio_range"],
+                      density=model["density"], body_radius=model["body_radius"], occlusion=model["occlusion"],
+                      redraw_disconnected=model["redraw_disconnected"], max_steps=model["max_steps"])
+    except ValueError as error:
+        raise click.UsageError(str(error)) from None
+
+
+def _progress(transient: bool = False) -> Any:
+    """A bar on stderr, so stdout stays clean for pipes (rich draws nothing when stderr is not a terminal)."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                    console=Console(stderr=True), transient=transient)
+
+
+@click.group(invoke_without_command=True)
+@click.option("--topology", type=click.Choice(list(TOPOLOGIES)), default="cluster", show_default=True)
+@click.option("--robots", default=100, show_default=True, type=click.IntRange(1, U16_MAX + 1),
+              help="swarm size N (robot ids 0..N-1)")
+@click.option("--drop", default=0.0, show_default=True, type=click.FloatRange(0, 1, max_open=True),
+              help="packet drop probability P")
+@click.option("--runs", default=10, show_default=True, type=click.IntRange(1))
+@click.option("--json", "as_json", is_flag=True, help="print one JSON object")
+@_model_options
+@click.pass_context
+def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: int, as_json: bool,
+            seed: int, workers: int | None, **model: Any) -> None:
+    """Simulate the paper's task (agree on the highest id) on real engines over a lossy radio."""
+    if ctx.invoked_subcommand is not None:
+        return
+    config = _config(topology, robots, drop, **model)
+    try:
+        with _progress(transient=True) as progress:
+            bar = progress.add_task(f"{topology} N={robots} P={drop}", total=runs)
+            results = run_many(config, runs, seed, workers, lambda _task, _result: progress.advance(bar))
+        summary = summarize(results)
+    except ValueError as error:  # a layout that cannot be built (e.g. a density too high to place bodies)
+        raise click.ClickException(str(error)) from None
+    if as_json:
+        click.echo(json.dumps({**summary.as_json(), "config": {**vars(config), "seed": seed}}))
+        return
+    click.echo(f"{topology} N={robots} P={drop}: {runs} runs, seed {seed}")
+    click.echo(_steps_line(summary))
+    click.echo(_bandwidth_line(summary))
+    click.echo(f"graph: mean degree {summary.mean_degree:.2f}" + _split_note(summary))
+    _unconverged_note(summary, config.max_steps)
+
+
+def _steps_line(s: Summary) -> str:
+    if s.median is None:
+        return "convergence steps: no run converged"
+    return (f"convergence steps: median {s.median:g}  min {s.min}  max {s.max}  mean {s.mean:.2f}"
+            f"  ({s.converged}/{s.runs} converged)")
+
+
+def _bandwidth_line(s: Summary) -> str:
+    return (f"bandwidth: {s.msgs_per_robot_step:.3f} msg = {s.bytes_per_robot_step:.1f} B per robot per step "
+            f"({s.bytes_per_robot_step / _STEP_SECONDS:.0f} B/s at {_STEP_SECONDS} s steps); "
+            f"{s.deliveries_per_robot_step:.2f} messages received per robot per step")
+
+
+def _split_note(s: Summary) -> str:
+    if not s.split_runs:
+        return ""
+    return (f"; {s.split_runs} of {s.runs} layouts split into components "
+            "(each robot scored on its own component's highest id; --redraw-disconnected to avoid)")
+
+
+def _unconverged_note(s: Summary, max_steps: int) -> None:
+    if s.converged < s.runs:
+        click.echo(f"note: {s.runs - s.converged} of {s.runs} runs did not converge within {max_steps} steps "
+                   "(raise --max-steps)", err=True)
+
+
+@command.command()
+@click.option("--runs", default=50, show_default=True, type=click.IntRange(1), help="runs per condition")
+@click.option("-o", "--output", "output", default=Path("sim-paper"), show_default=True,
+              type=click.Path(file_okay=False, path_type=Path), help="folder for the CSV, PNG and markdown")
+@click.option("--robots", "sizes", multiple=True, type=click.IntRange(1, U16_MAX + 1),
+              help="swarm sizes to run (repeatable) [default: 10, 100, 1000]")
+@_model_options
+def paper(runs: int, output: Path, sizes: tuple[int, ...], seed: int, workers: int | None, **model: Any) -> None:
+    """Run the Figure 3 grid: {cluster, line, scale-free} x N {10, 100, 1000} x P {0 .. 0.95}."""
+    from vstig_hw.sim.grid import markdown_table, paper_configs, run_grid, write_csv
+    from vstig_hw.sim.plot import plot_figure3
+
+    template = _config("cluster", 10, 0.0, **model)
+    configs = [c for c in paper_configs(template) if not sizes or c.robots in sizes]
+    output.mkdir(parents=True, exist_ok=True)
+    started = time.monotonic()
+    with _progress() as progress:
+        bar = progress.add_task(f"Figure 3 grid, {runs} runs x {len(configs)} conditions", total=runs * len(configs))
+
+        def done(task: Task, result: RunResult) -> None:
+            config = task[0]
+            progress.advance(bar)
+            progress.update(bar, description=f"last: {config.topology} N={config.robots} P={config.drop}")
+
+        try:
+            cells = run_grid(configs, runs, seed, workers, done)
+        except ValueError as error:
+            raise click.ClickException(str(error)) from None
+    wall = time.monotonic() - started
+    write_csv(cells, output / "summary.csv", output / "runs.csv")
+    plot_figure3(cells, output / "figure3.png")
+    (output / "comparison.md").write_text(markdown_table(cells, runs, wall))
+    for cell in cells:
+        if cell.summary.converged < cell.summary.runs:
+            c = cell.config
+            click.echo(f"note: {c.topology} N={c.robots} P={c.drop}: {cell.summary.runs - cell.summary.converged} "
+                       f"runs did not converge within {c.max_steps} steps", err=True)
+    click.echo(f"wrote {output}/summary.csv, runs.csv, figure3.png, comparison.md in {wall:.0f} s")

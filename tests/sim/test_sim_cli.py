@@ -1,0 +1,57 @@
+"""`vstig sim` through click's CliRunner: the JSON summary, the notes, and a small paper grid."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from vstig_cli.main import cli
+
+
+def test_json_summary_of_a_lossless_line() -> None:
+    result = CliRunner().invoke(cli, ["sim", "--topology", "line", "--robots", "12", "--drop", "0", "--runs", "3",
+                                      "--workers", "1", "--json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.output)
+    assert {"median", "min", "max", "mean", "runs", "msgs_per_robot_step"} <= summary.keys()
+    assert (summary["median"], summary["min"], summary["max"], summary["mean"]) == (12, 12, 12, 12.0)
+    assert summary["runs"] == 3 and summary["msgs_per_robot_step"] == 1.0
+    assert summary["config"]["topology"] == "line"
+
+
+def test_text_summary_and_a_clear_note_when_the_step_cap_is_hit() -> None:
+    result = CliRunner().invoke(cli, ["sim", "--topology", "line", "--robots", "40", "--drop", "0.5", "--runs", "2",
+                                      "--workers", "1", "--max-steps", "20"])
+    assert result.exit_code == 0, result.output
+    assert "no run converged" in result.output
+    assert "2 of 2 runs did not converge within 20 steps" in result.output
+
+
+def test_bad_drop_is_named() -> None:
+    result = CliRunner().invoke(cli, ["sim", "--drop", "1"])
+    assert result.exit_code == 2 and "--drop" in result.output
+
+
+def test_an_arena_too_dense_for_the_bodies_is_a_clear_error() -> None:
+    result = CliRunner().invoke(cli, ["sim", "--robots", "10", "--density", "1000", "--runs", "1", "--workers", "1"])
+    assert result.exit_code == 1 and "Error: cannot place robot" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_paper_grid_for_ten_robots_writes_csv_png_and_comparison(tmp_path: Path) -> None:
+    out = tmp_path / "paper"
+    args = ["sim", "paper", "--runs", "3", "--robots", "10", "--workers", "1", "-o", str(out)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert len(rows) == 15  # 3 topologies x 5 drop probabilities
+    assert {(r["topology"], r["drop"]) for r in rows} >= {("cluster", "0.75"), ("line", "0.95"), ("scale-free", "0.0")}
+    line_lossless = next(r for r in rows if (r["topology"], r["drop"]) == ("line", "0.0"))
+    assert (line_lossless["median"], line_lossless["runs"]) == ("10", "3")
+    assert len(list(csv.DictReader((out / "runs.csv").open()))) == 45
+    assert (out / "figure3.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    table = (out / "comparison.md").read_text()
+    assert "| cluster N=10 P=0.75 | mean" in table and "| 6 |" in table

@@ -1,0 +1,232 @@
+"""One run of the paper's task on N real `Stigmergy` engines, and many runs over the cores.
+
+The task is the paper's Figure 1: at init every robot puts its own id under one
+key, conflicts keep the larger value (`larger_value_wins`), and every control
+step the robot gets the key. A run has converged at the first step whose get
+returns the highest id on every robot.
+
+Timing within a control step k (k = 1, 2, ...) follows ARGoS driving a Buzz
+controller: the radio medium moves messages between steps, so
+  1. every robot receives what its neighbours broadcast at the end of step k-1
+     (each copy through `Stigmergy.receive`, in sender order);
+  2. every robot runs its step: `get(key)`; convergence is checked here;
+  3. every robot drains at most `budget` messages from its queue and broadcasts them.
+So a message needs one step per hop, and init's PUT leaves at the end of step 1:
+on a lossless radio the swarm converges at step 1 + (hops from the highest id
+to the farthest robot).
+
+Each run's randomness (layout and drops) comes from its own seed, derived from
+the base seed and the run's identity (topology, N, P, run index), so results do
+not depend on how many worker processes share the work or in which order.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import statistics
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..engine import Stigmergy, larger_value_wins
+from ..wire import MESSAGE_SIZE, U16_MAX, Message
+from .graph import component_maxima, is_connected
+from .radio import Links, Radio, links
+from .topology import BODY_RADIUS, DENSITY, RANGE, TOPOLOGIES
+
+__all__ = ["Config", "RunResult", "Summary", "layout", "run_many", "run_once", "run_tasks", "seed_for", "summarize"]
+
+KEY = 1  # the paper's VSKEY
+_MAX_LAYOUTS = 1_000
+
+
+@dataclass(frozen=True)
+class Config:
+    """One experimental condition <topology, N, P> and the radio and program around it."""
+
+    topology: str
+    robots: int
+    drop: float
+    budget: int = 1  # messages a robot may broadcast per control step (the paper: one 8-byte message)
+    radio_range: float = RANGE
+    density: float = DENSITY  # the cluster's D: sets its arena side
+    body_radius: float = BODY_RADIUS
+    occlusion: bool = True
+    max_steps: int = 100_000
+    # A split hearing graph can never agree on one id. By default each robot must
+    # then hold the highest id of its own component (the best the radio allows);
+    # with `redraw_disconnected`, layouts are re-drawn until the swarm is connected.
+    redraw_disconnected: bool = False
+
+    def __post_init__(self) -> None:
+        if self.topology not in TOPOLOGIES:
+            raise ValueError(f"unknown topology {self.topology!r}; choose from {', '.join(TOPOLOGIES)}")
+        if not 1 <= self.robots <= U16_MAX + 1:
+            raise ValueError(f"robots must be in 1..{U16_MAX + 1} (robot ids are 16-bit), got {self.robots}")
+        if not 0.0 <= self.drop < 1.0:
+            raise ValueError(f"drop probability must be in [0, 1), got {self.drop}")
+        if self.budget < 1:
+            raise ValueError(f"budget must be at least 1 message per step, got {self.budget}")
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be at least 1, got {self.max_steps}")
+
+
+@dataclass(frozen=True)
+class RunResult:
+    run: int
+    robots: int
+    steps: int | None  # the convergence step; None when max_steps passed first
+    steps_run: int
+    messages: int  # broadcasts, all robots, all steps run
+    deliveries: int  # copies that reached a receiver
+    layouts: int  # layouts drawn (more than 1 only with redraw_disconnected)
+    mean_degree: float
+    components: int  # connected components of the hearing graph (1: everyone can agree)
+
+    @property
+    def msgs_per_robot_step(self) -> float:
+        return self.messages / (self.robots * self.steps_run)
+
+    @property
+    def deliveries_per_robot_step(self) -> float:
+        return self.deliveries / (self.robots * self.steps_run)
+
+
+def seed_for(config: Config, base_seed: int, run: int) -> np.random.SeedSequence:
+    topology = list(TOPOLOGIES).index(config.topology)
+    return np.random.SeedSequence(base_seed, spawn_key=(topology, config.robots, round(config.drop * 1e6), run))
+
+
+def layout(config: Config, rng: np.random.Generator) -> tuple[Links, int]:
+    """The hearing graph of one layout, and how many layouts were drawn to get it."""
+    generate = TOPOLOGIES[config.topology]
+    for attempt in range(1, _MAX_LAYOUTS + 1):
+        positions = generate(config.robots, rng, config.radio_range, config.body_radius, config.density)
+        hearing = links(positions, config.radio_range, config.body_radius, config.occlusion)
+        if not config.redraw_disconnected or is_connected(hearing):
+            return hearing, attempt
+    raise ValueError(f"no connected {config.topology} layout of {config.robots} robots in {_MAX_LAYOUTS} draws")
+
+
+StepHook = Callable[[int, list[int | None]], None]
+
+
+def run_once(config: Config, seed: np.random.SeedSequence, run: int = 0, on_step: StepHook | None = None) -> RunResult:
+    """One run; `on_step(step, values)` sees what every robot's get returned at each step."""
+    rng = np.random.default_rng(seed)
+    hearing, layouts = layout(config, rng)
+    radio = Radio(hearing, config.drop, rng)
+    engines = [Stigmergy(robot_id, onconflict=larger_value_wins) for robot_id in range(config.robots)]
+    for engine in engines:
+        engine.put(KEY, engine.robot_id)
+    targets = component_maxima(hearing)  # the highest id each robot can learn: all robots - 1 when connected
+    budget = config.budget
+    gets = [engine.get for engine in engines]
+    drains = [engine.drain for engine in engines]
+    receives = [engine.receive for engine in engines]
+    outgoing: list[list[Message]] = [[] for _ in engines]
+    messages = deliveries = 0
+    converged: int | None = None
+    step = 0
+    while step < config.max_steps:
+        step += 1
+        deliveries += radio.deliver(outgoing, receives)
+        values = [get(KEY) for get in gets]
+        agreed = values == targets
+        if on_step:
+            on_step(step, values)
+        outgoing = [drain(budget) for drain in drains]
+        messages += sum(map(len, outgoing))
+        if agreed:
+            converged = step
+            break
+    return RunResult(run, config.robots, converged, step, messages, deliveries, layouts,
+                     float(hearing.degrees().mean()), len(set(targets)))
+
+
+Task = tuple[Config, int, int]  # (config, base seed, run index)
+
+
+def _run_task(task: Task) -> tuple[Task, RunResult]:
+    config, base_seed, run = task
+    return task, run_once(config, seed_for(config, base_seed, run), run)
+
+
+def estimated_cost(config: Config) -> float:
+    """Rough robot-steps a run takes: used to start the longest runs first."""
+    hops = config.robots if config.topology == "line" else 4 * config.robots**0.5
+    return config.robots * hops / (1.0 - config.drop)
+
+
+def run_tasks(
+    tasks: Iterable[Task], workers: int | None = None, on_done: Callable[[Task, RunResult], None] | None = None
+) -> dict[Task, RunResult]:
+    """Run every task over `workers` processes (default: all cores), longest first."""
+    ordered = sorted(tasks, key=lambda task: -estimated_cost(task[0]))
+    workers = max(1, min(workers or os.cpu_count() or 1, len(ordered)))
+    results: dict[Task, RunResult] = {}
+    if workers == 1:
+        done: Iterable[tuple[Task, RunResult]] = map(_run_task, ordered)
+        for task, result in done:
+            results[task] = result
+            if on_done:
+                on_done(task, result)
+        return results
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        for task, result in pool.imap_unordered(_run_task, ordered, chunksize=1):
+            results[task] = result
+            if on_done:
+                on_done(task, result)
+    return results
+
+
+def run_many(
+    config: Config, runs: int, seed: int = 1, workers: int | None = None,
+    on_done: Callable[[Task, RunResult], None] | None = None,
+) -> list[RunResult]:
+    results = run_tasks([(config, seed, run) for run in range(runs)], workers, on_done)
+    return sorted(results.values(), key=lambda r: r.run)
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Convergence statistics over runs (None when no run converged) and the bandwidth used."""
+
+    runs: int
+    converged: int
+    median: float | None
+    min: int | None
+    max: int | None
+    mean: float | None
+    msgs_per_robot_step: float
+    bytes_per_robot_step: float
+    deliveries_per_robot_step: float
+    mean_degree: float
+    split_runs: int  # runs whose hearing graph had more than one component
+    steps: list[int] = field(default_factory=list)
+
+    def as_json(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def summarize(results: Sequence[RunResult]) -> Summary:
+    if not results:
+        raise ValueError("no runs to summarize")
+    steps = sorted(r.steps for r in results if r.steps is not None)
+    msgs = statistics.fmean(r.msgs_per_robot_step for r in results)
+    return Summary(
+        runs=len(results),
+        converged=len(steps),
+        median=statistics.median(steps) if steps else None,
+        min=steps[0] if steps else None,
+        max=steps[-1] if steps else None,
+        mean=statistics.fmean(steps) if steps else None,
+        msgs_per_robot_step=msgs,
+        bytes_per_robot_step=msgs * MESSAGE_SIZE,
+        deliveries_per_robot_step=statistics.fmean(r.deliveries_per_robot_step for r in results),
+        mean_degree=statistics.fmean(r.mean_degree for r in results),
+        split_runs=sum(r.components > 1 for r in results),
+        steps=steps,
+    )
