@@ -1,4 +1,4 @@
-"""Our serial capture format (firmware_spec/DECISIONS.md, "Serial capture format").
+"""Our serial capture format (firmware_spec/SPEC.md section 7).
 
     # vstig serial capture v1
     (1700000000.250000) radio0 cobs8 rx 0b0102...00
