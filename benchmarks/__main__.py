@@ -42,7 +42,8 @@ def main(argv: list[str] | None = None) -> int:
         table.add_column(column, justify="right" if column in ("value", "anchor value", "ratio") else "left")
     for r in results:
         table.add_row(r.name, f"{r.value:,.4g}", r.unit, r.anchor, f"{r.anchor_value:,.4g}", f"{r.ratio:.3f}")
-    Console().print(table)
+    # Piped output would be cut to 80 columns; the names are long, so give it room.
+    Console(width=None if sys.stdout.isatty() else 200).print(table)
     return 0
 
 
