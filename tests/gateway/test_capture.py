@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import gzip
 import json
 from pathlib import Path
 
@@ -117,6 +118,15 @@ def test_unknown_capture_type_is_named(tmp_path: Path) -> None:
     path = tmp_path / "x.bin"
     path.write_bytes(b"\x01\x02")
     with pytest.raises(CaptureError, match=r"unknown capture type '\.bin'"):
+        list(read_capture(str(path)))
+
+
+@pytest.mark.parametrize("content", [b"not gzip at all", gzip.compress(b"(1.000000) can0 600#00\n" * 50)[:30]],
+                         ids=["garbage", "cut-short"])
+def test_unreadable_gzip_capture_is_a_capture_error_naming_the_file(tmp_path: Path, content: bytes) -> None:
+    path = tmp_path / "bad.log.gz"
+    path.write_bytes(content)
+    with pytest.raises(CaptureError, match=r"bad\.log\.gz: cannot read"):
         list(read_capture(str(path)))
 
 

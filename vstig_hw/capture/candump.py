@@ -9,6 +9,7 @@ This per-line parser is the reference and the one that reports file:line errors;
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Iterator
 from typing import IO
 
@@ -71,8 +72,11 @@ def parse_line(path: str, number: int, line: str) -> can.Message | None:
 def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
     """Records in file order (.log or .log.gz); bad lines raise CaptureError, or with `skip_bad` go to `bad`."""
     with _open_text(path) as file:
-        for frame in parse_lines(path, file, parse_line, skip_bad, bad):
-            yield Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)
+        try:
+            for frame in parse_lines(path, file, parse_line, skip_bad, bad):
+                yield Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)
+        except (OSError, EOFError, zlib.error) as error:  # gzip reports a corrupt or cut-short .gz this way
+            raise CaptureError(path, None, f"cannot read: {error}") from None
 
 
 def _open_text(path: str) -> IO[str]:
