@@ -25,12 +25,14 @@ from operator import itemgetter
 from typing import Any
 
 __all__ = [
+    "GET_BIT",
     "KEY_MAX",
     "MESSAGE_SIZE",
     "U16_MAX",
     "DecodeError",
     "Message",
     "Op",
+    "check_field",
     "decode",
     "decode_many",
     "encode",
@@ -40,6 +42,7 @@ __all__ = [
 MESSAGE_SIZE = 8
 KEY_MAX = 0x7FFF
 U16_MAX = 0xFFFF
+GET_BIT = 0x8000  # the op bit in a message's first wire word (`msg[0]`), for hot loops that read words
 
 
 class Op(enum.IntEnum):
@@ -69,7 +72,8 @@ _OPS = (Op.PUT, Op.GET)
 _LIMITS = (("key", KEY_MAX), ("value", U16_MAX), ("timestamp", U16_MAX), ("robot", U16_MAX))
 
 
-def _check_field(name: str, limit: int, field: object) -> None:
+def check_field(name: str, limit: int, field: object) -> None:
+    """ValueError naming `name` unless `field` is an int (not a bool) in 0..limit."""
     if isinstance(field, bool) or not isinstance(field, int) or not 0 <= field <= limit:
         raise ValueError(f"{name} must be an integer in 0..{limit}, got {field!r}")
 
@@ -88,7 +92,7 @@ class Message(tuple[int, int, int, int]):
         if op not in (0, 1) or isinstance(op, bool):
             raise ValueError(f"op must be Op.PUT or Op.GET, got {op!r}")
         for (name, limit), field in zip(_LIMITS, (key, value, timestamp, robot), strict=True):
-            _check_field(name, limit, field)
+            check_field(name, limit, field)
         return tuple.__new__(cls, ((int(op) << 15) | key, value, timestamp, robot))
 
     @property
