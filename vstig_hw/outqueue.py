@@ -24,9 +24,6 @@ class OutQueue:
     def __len__(self) -> int:
         return len(self._puts) + len(self._gets)
 
-    def pending(self, key: int) -> Message | None:
-        return self._puts.get(key) or self._gets.get(key)
-
     def push(self, msg: Message, resolved: bool = False) -> bool:
         """Queue `msg` unless a newer one for its key is pending; True if queued.
 
