@@ -96,7 +96,9 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
 def _slow(path: str, chunk: bytes, first_line: int, out: IO[str], decoder: Decoder, value_type: ValueType,
           skip_bad: bool, bad: list[CaptureError]) -> int:
     count = 0
-    lines = chunk.decode("utf-8", "replace").splitlines()
+    # Split on "\n" only, as the line counter does: splitlines() also cuts at \r, \f, \x1c... and
+    # would misnumber every later line in the file:line of an error.
+    lines = chunk.decode("utf-8", "replace").split("\n")
     for decoded in decoder.decode_all(candump.candump_records(path, lines, skip_bad, bad, first_line)):
         out.write(as_json(decoded, value_type) + "\n")
         count += 1
