@@ -13,6 +13,12 @@ from vstig_hw.gateway import stop_on_signals
 from .errors import reports_errors
 
 
+def _drops(medium: Medium) -> str:
+    """The medium's drops by reason, without their `drop_` prefix."""
+    prefix = "drop_"
+    return " ".join(f"{k[len(prefix):]}={v}" for k, v in sorted(medium.counters.items()) if k.startswith(prefix)) or "-"
+
+
 def _live_table(step: int, media: list[Medium], agreed: int, total: int) -> Any:
     from rich.table import Table
 
@@ -23,9 +29,8 @@ def _live_table(step: int, media: list[Medium], agreed: int, total: int) -> Any:
     for medium in media:
         agree = sum(robot.entry(1) is not None and robot.entry(1).value == highest  # type: ignore[union-attr]
                     for robot in medium.robots)
-        drops = " ".join(f"{k[5:]}={v}" for k, v in sorted(medium.counters.items()) if k.startswith("drop_"))
         table.add_row(medium.name, str(len(medium.robots)), str(agree), str(medium.counters["messages"]),
-                      str(medium.counters["bytes"]), drops or "-")
+                      str(medium.counters["bytes"]), _drops(medium))
     return table
 
 
@@ -37,9 +42,8 @@ def _report(report: DemoReport) -> None:
         click.echo(f"not converged after {report.steps} steps ({report.seconds:.1f} s)")
     click.echo(f"{'medium':<8} {'robots':>6} {'messages':>9} {'bytes':>8}  drops by reason")
     for medium in report.media:
-        drops = " ".join(f"{k[5:]}={v}" for k, v in sorted(medium.counters.items()) if k.startswith("drop_"))
         click.echo(f"{medium.name:<8} {len(medium.robots):>6} {medium.counters['messages']:>9} "
-                   f"{medium.counters['bytes']:>8}  {drops or '-'}")
+                   f"{medium.counters['bytes']:>8}  {_drops(medium)}")
     for name, counters in report.gateway.items():
         click.echo(f"gateway {name}: {counters.summary()}")
 

@@ -17,7 +17,7 @@ import click
 
 from vstig_hw import linkspec
 from vstig_hw.capture.records import CaptureError
-from vstig_hw.transports.base import TransportError
+from vstig_hw.transports.base import TransportError, one_line
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -28,11 +28,6 @@ def debugging() -> bool:
     ctx = click.get_current_context(silent=True)
     root = ctx.find_root() if ctx else None
     return bool(os.environ.get("VSTIG_DEBUG")) or bool(root and (root.obj or {}).get("debug"))
-
-
-def one_line(error: BaseException) -> str:
-    text = " ".join(str(error).split()) or type(error).__name__
-    return text
 
 
 def reports_errors(fn: F) -> F:

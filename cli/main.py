@@ -2,11 +2,14 @@
 
 Each command lives in its own module of this package, named after the command,
 and exposes it as `command`. The group finds them by module name and imports one
-only when it runs, so `vstig put` does not pay for numpy or matplotlib.
+only when it runs, so `vstig put` does not pay for numpy or matplotlib. The
+command list in `vstig --help` reads each command's docstring from its source
+for the same reason: importing them all would load numpy and python-can.
 """
 
 from __future__ import annotations
 
+import ast
 import importlib
 import pkgutil
 from pathlib import Path
@@ -16,19 +19,43 @@ import click
 from vstig_hw import __version__
 
 _NOT_COMMANDS = {"main", "errors"}
+_HERE = Path(__file__).parent
+
+
+def _module(cmd_name: str) -> str:
+    return cmd_name.replace("-", "_")
+
+
+def _docstring(cmd_name: str) -> str:
+    """The docstring of the module's `command` function, read without importing the module."""
+    tree = ast.parse((_HERE / f"{_module(cmd_name)}.py").read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef) and node.name == "command":
+            return ast.get_docstring(node) or ""
+    return ""
 
 
 class CommandFolder(click.Group):
     def list_commands(self, ctx: click.Context) -> list[str]:
-        names = (m.name for m in pkgutil.iter_modules([str(Path(__file__).parent)]))
+        names = (m.name for m in pkgutil.iter_modules([str(_HERE)]))
         return sorted(n.replace("_", "-") for n in names if not n.startswith("_") and n not in _NOT_COMMANDS)
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         if cmd_name not in self.list_commands(ctx):
             return None
-        module = importlib.import_module(f"{__package__}.{cmd_name.replace('-', '_')}")
+        module = importlib.import_module(f"{__package__}.{_module(cmd_name)}")
         command: click.Command = module.command
         return command
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        names = self.list_commands(ctx)
+        if not names:
+            return
+        limit = formatter.width - 6 - max(map(len, names))
+        with formatter.section("Commands"):
+            # A bare Command with the same help shortens it exactly as the real one would.
+            formatter.write_dl([(name, click.Command(name, help=_docstring(name)).get_short_help_str(limit))
+                                for name in names])
 
 
 @click.group(cls=CommandFolder, context_settings={"help_option_names": ["-h", "--help"]})

@@ -27,6 +27,7 @@ from typing import Any
 
 from .counters import Counters
 from .engine import Stigmergy, larger_value_wins
+from .framing import make_serial_framing
 from .gateway import Node
 from .link import Link
 from .linkspec import CanSpec, SerialSpec
@@ -177,16 +178,14 @@ def _split(config: DemoConfig) -> tuple[list[int], list[int], list[int]]:
 
 def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] | None = None,
              stop: threading.Event | None = None) -> DemoReport:
-    from .links import serial_framing
-
     rng = random.Random(config.seed)
     can_ids, cobs_ids, epuck_ids = _split(config)
     media = [Medium(name, [Stigmergy(i, onconflict=larger_value_wins) for i in ids])
              for name, ids in (("can", can_ids), ("cobs8", cobs_ids), ("epuck4", epuck_ids))]
     channel = f"{config.channel}-{os.getpid()}-{rng.getrandbits(24)}"
     can_side = CanRobots(media[0], channel, config.drop, rng)
-    radios = [PtyRadio(media[1], "cobs8", lambda: serial_framing("cobs8"), config.drop, rng),
-              PtyRadio(media[2], "epuck4", lambda: serial_framing("epuck4"), config.drop, rng)]
+    radios = [PtyRadio(media[1], "cobs8", lambda: make_serial_framing("cobs8"), config.drop, rng),
+              PtyRadio(media[2], "epuck4", lambda: make_serial_framing("epuck4"), config.drop, rng)]
     links: list[Link[Any]] = [CanSpec("virtual", channel).build("can", robot_id=GATEWAY_ID)]
     links += [SerialSpec(radio.path, framing=radio.framing).build(radio.framing) for radio in radios]
     node = Node(links, GATEWAY_ID, period=config.step, onconflict=larger_value_wins)

@@ -27,7 +27,7 @@ from typing import NamedTuple
 
 from .outqueue import OutQueue
 from .timestamps import TS_NONE, is_newer, next_timestamp
-from .wire import KEY_MAX, U16_MAX, Message, Op
+from .wire import GET_BIT, KEY_MAX, U16_MAX, Message, Op, check_field
 
 __all__ = ["Entry", "Outcome", "Stigmergy", "higher_robot_wins", "larger_value_wins"]
 
@@ -65,7 +65,6 @@ def larger_value_wins(key: int, local: Entry, remote: Entry) -> Entry:
 
 
 _new = tuple.__new__
-_GET_BIT = 0x8000
 _STORED, _ANSWERED, _STALE, _SAME, _CONFLICT, _UNKNOWN, _INVALID = Outcome
 
 
@@ -82,8 +81,7 @@ class Stigmergy:
         onconflict: ConflictResolver | None = None,
         onconflictlost: ConflictLost | None = None,
     ) -> None:
-        if isinstance(robot_id, bool) or not isinstance(robot_id, int) or not 0 <= robot_id <= U16_MAX:
-            raise ValueError(f"robot_id must be an integer in 0..{U16_MAX}, got {robot_id!r}")
+        check_field("robot_id", U16_MAX, robot_id)
         self.robot_id = robot_id
         self.onconflict: ConflictResolver = onconflict or higher_robot_wins
         self.onconflictlost = onconflictlost
@@ -108,7 +106,7 @@ class Stigmergy:
         if local is None:
             self._outbox.push(Message(Op.GET, key, 0, TS_NONE, self.robot_id))
             return None
-        self._outbox.push(_new(Message, (local[0] | _GET_BIT, local[1], local[2], local[3])))
+        self._outbox.push(_new(Message, (local[0] | GET_BIT, local[1], local[2], local[3])))
         return local[1]
 
     def has(self, key: int) -> bool:
@@ -140,7 +138,7 @@ class Stigmergy:
     def _receive(self, msg: Message) -> Outcome:
         head, value, ts, robot = msg
         key = head & KEY_MAX
-        is_get = head & _GET_BIT
+        is_get = head & GET_BIT
         local = self._table.get(key)
         if ts == TS_NONE:
             if not is_get:
@@ -188,7 +186,5 @@ class Stigmergy:
 
 
 def _check(key: int, value: int) -> None:
-    if isinstance(key, bool) or not isinstance(key, int) or not 0 <= key <= KEY_MAX:
-        raise ValueError(f"key must be an integer in 0..{KEY_MAX}, got {key!r}")
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= U16_MAX:
-        raise ValueError(f"value must be an integer in 0..{U16_MAX}, got {value!r}")
+    check_field("key", KEY_MAX, key)
+    check_field("value", U16_MAX, value)

@@ -7,11 +7,10 @@ from typing import TYPE_CHECKING, Any
 from .link import Link
 
 if TYPE_CHECKING:
-    from .framing import SerialFraming
     from .framing.can import CanFraming
     from .linkspec import CanSpec, SerialSpec
 
-__all__ = ["can_framing", "can_framing_for", "can_link_from_spec", "serial_framing", "serial_link_from_spec"]
+__all__ = ["can_framing", "can_framing_for", "can_link_from_spec", "serial_link_from_spec"]
 
 LISTENER_ID = 0  # the CAN sender field of a link that never transmits (sniff, record)
 
@@ -24,8 +23,8 @@ def can_link_from_spec(spec: CanSpec, name: str, *, robot_id: int = LISTENER_ID,
                     bitrate=spec.bitrate, fd=spec.fd, id_base=spec.id_base, extended=spec.extended, name=name)
 
 
-def serial_link_from_spec(spec: SerialSpec, name: str, *, robot_id: int = LISTENER_ID,
-                          listen_only: bool = False) -> Link[Any]:
+def serial_link_from_spec(spec: SerialSpec, name: str) -> Link[Any]:
+    """A serial link never names its sender, so unlike CAN it needs no robot id."""
     from .serial_link import serial_link
 
     return serial_link(spec.port, spec.framing, spec.baud, name=name, connect=False)
@@ -41,9 +40,3 @@ def can_framing_for(robot_id: int, id_base: int | None = None, extended: bool = 
 def can_framing(id_base: int | None = None, extended: bool = False) -> CanFraming:
     """A CAN framing that decodes what any sender put on a bus with this ID scheme."""
     return can_framing_for(LISTENER_ID, id_base, extended)
-
-
-def serial_framing(name: str) -> SerialFraming:
-    from .framing import make_serial_framing
-
-    return make_serial_framing(name)

@@ -87,10 +87,10 @@ class SerialSpec:
         return _safe_name(tail.rsplit("/", 1)[-1] or tail)
 
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
-        """The Link (not yet open); `robot_id` is the sender field a CAN link transmits under."""
+        """The Link (not yet open); `robot_id` and `listen_only` matter only to CAN (same signature as CanSpec)."""
         from .links import serial_link_from_spec
 
-        return serial_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
+        return serial_link_from_spec(self, name or self.name)
 
 
 LinkSpec = CanSpec | SerialSpec

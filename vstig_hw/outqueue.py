@@ -13,9 +13,7 @@ from __future__ import annotations
 from collections import OrderedDict
 
 from .timestamps import is_newer
-from .wire import KEY_MAX, Message
-
-_GET_BIT = 0x8000
+from .wire import GET_BIT, KEY_MAX, Message
 
 
 class OutQueue:
@@ -26,9 +24,6 @@ class OutQueue:
     def __len__(self) -> int:
         return len(self._puts) + len(self._gets)
 
-    def pending(self, key: int) -> Message | None:
-        return self._puts.get(key) or self._gets.get(key)
-
     def push(self, msg: Message, resolved: bool = False) -> bool:
         """Queue `msg` unless a newer one for its key is pending; True if queued.
 
@@ -38,19 +33,19 @@ class OutQueue:
         """
         head = msg[0]
         key = head & KEY_MAX
-        is_get = head & _GET_BIT
+        is_get = head & GET_BIT
         puts = self._puts
         pending = puts.get(key)
         if pending is None:
             pending = self._gets.get(key)
         if pending is not None:
             if msg[2] == pending[2]:
-                pending_is_get = pending[0] & _GET_BIT
+                pending_is_get = pending[0] & GET_BIT
                 if not (resolved or (pending_is_get and not is_get)):
                     return False
             elif not is_newer(msg[2], pending[2]):
                 return False
-            if pending[0] & _GET_BIT != is_get:
+            if pending[0] & GET_BIT != is_get:
                 (self._gets if is_get == 0 else puts).pop(key)
         (self._gets if is_get else puts)[key] = msg
         return True

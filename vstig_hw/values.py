@@ -38,7 +38,10 @@ def to_raw(value: int | float | str, value_type: ValueType = "uint16") -> int:
         if math.isfinite(number) and not math.isfinite(struct.unpack(">e", packed)[0]):
             raise ValueError(f"{value} does not fit a float16 (|x| <= 65504)")
         return int.from_bytes(packed, "big")
-    number_i = int(value, 0) if isinstance(value, str) else value
+    try:
+        number_i = int(value, 0) if isinstance(value, str) else value
+    except ValueError:  # int()'s own message ("invalid literal ... base 0") says nothing to a user
+        raise ValueError(f"{value!r} is not an integer, as {value_type} needs (e.g. 1500 or 0x5dc)") from None
     if isinstance(number_i, float):
         if not number_i.is_integer():
             raise ValueError(f"{value} is not an integer, as {value_type} needs")

@@ -8,9 +8,10 @@ Layout (big-endian, network order as Buzz uses)::
          +-+---------------+ +---------+ +---------+ +---------+
     o = op bit (0 PUT, 1 GET); key = the low 15 bits of bytes 0-1.
 
-`MESSAGE_SCHEMA` (construct) is the declarative definition that firmware_spec
-builds on; `encode`/`decode` are the struct fast path for hot loops, tested equal
-to the schema. A `Message` is stored as its four wire words, so decoding is one
+`message_schema()` (construct) is the declarative definition; `encode`/`decode` are
+the struct fast path for hot loops, tested equal to the schema. The schema is
+built on first use: construct takes ~20 ms to import, which every `vstig`
+command and simulator worker would otherwise pay. A `Message` is stored as its four wire words, so decoding is one
 `struct.unpack` and no field shuffling: that is what keeps decode near the bare
 struct rate.
 """
@@ -18,28 +19,30 @@ struct rate.
 from __future__ import annotations
 
 import enum
+import functools
 import struct
 from operator import itemgetter
 from typing import Any
 
-from construct import BitsInteger, BitStruct, Enum
-
 __all__ = [
+    "GET_BIT",
     "KEY_MAX",
-    "MESSAGE_SCHEMA",
     "MESSAGE_SIZE",
     "U16_MAX",
     "DecodeError",
     "Message",
     "Op",
+    "check_field",
     "decode",
     "decode_many",
     "encode",
+    "message_schema",
 ]
 
 MESSAGE_SIZE = 8
 KEY_MAX = 0x7FFF
 U16_MAX = 0xFFFF
+GET_BIT = 0x8000  # the op bit in a message's first wire word (`msg[0]`), for hot loops that read words
 
 
 class Op(enum.IntEnum):
@@ -51,19 +54,26 @@ class DecodeError(ValueError):
     """A buffer that cannot hold messages (its length is wrong)."""
 
 
-MESSAGE_SCHEMA = BitStruct(
-    "op" / Enum(BitsInteger(1), PUT=0, GET=1),
-    "key" / BitsInteger(15),
-    "value" / BitsInteger(16),
-    "timestamp" / BitsInteger(16),
-    "robot" / BitsInteger(16),
-)
+@functools.cache
+def message_schema() -> Any:
+    """The construct BitStruct of the 8 bytes (built once, on first use)."""
+    from construct import BitsInteger, BitStruct, Enum
+
+    return BitStruct(
+        "op" / Enum(BitsInteger(1), PUT=0, GET=1),
+        "key" / BitsInteger(15),
+        "value" / BitsInteger(16),
+        "timestamp" / BitsInteger(16),
+        "robot" / BitsInteger(16),
+    )
+
 
 _OPS = (Op.PUT, Op.GET)
 _LIMITS = (("key", KEY_MAX), ("value", U16_MAX), ("timestamp", U16_MAX), ("robot", U16_MAX))
 
 
-def _check_field(name: str, limit: int, field: object) -> None:
+def check_field(name: str, limit: int, field: object) -> None:
+    """ValueError naming `name` unless `field` is an int (not a bool) in 0..limit."""
     if isinstance(field, bool) or not isinstance(field, int) or not 0 <= field <= limit:
         raise ValueError(f"{name} must be an integer in 0..{limit}, got {field!r}")
 
@@ -82,7 +92,7 @@ class Message(tuple[int, int, int, int]):
         if op not in (0, 1) or isinstance(op, bool):
             raise ValueError(f"op must be Op.PUT or Op.GET, got {op!r}")
         for (name, limit), field in zip(_LIMITS, (key, value, timestamp, robot), strict=True):
-            _check_field(name, limit, field)
+            check_field(name, limit, field)
         return tuple.__new__(cls, ((int(op) << 15) | key, value, timestamp, robot))
 
     @property
@@ -143,7 +153,7 @@ def decode_schema(data: bytes) -> Message:
     """Decode through the construct schema: slow, the reference `decode` is tested against."""
     if len(data) != MESSAGE_SIZE:
         raise DecodeError(f"a message is exactly {MESSAGE_SIZE} bytes, got {len(data)}")
-    parsed = MESSAGE_SCHEMA.parse(data)
+    parsed = message_schema().parse(data)
     return Message(Op[str(parsed.op)], parsed.key, parsed.value, parsed.timestamp, parsed.robot)
 
 
@@ -151,4 +161,4 @@ def encode_schema(msg: Message) -> bytes:
     """Encode through the construct schema: slow, the reference `encode` is tested against."""
     fields = {"op": msg.op.name, "key": msg.key, "value": msg.value,
               "timestamp": msg.timestamp, "robot": msg.robot}
-    return bytes(MESSAGE_SCHEMA.build(fields))
+    return bytes(message_schema().build(fields))

@@ -32,3 +32,22 @@ def test_cli_folder_is_not_installed_as_top_level_cli() -> None:
 
     spec = importlib.util.find_spec("vstig_cli")
     assert spec is not None and spec.origin is not None and spec.origin.endswith("cli/__init__.py")
+
+
+def test_command_list_in_help_matches_what_each_command_says() -> None:
+    import click
+
+    ctx = click.Context(cli)
+    for width in (80, 200):
+        ours, clicks = click.HelpFormatter(width=width), click.HelpFormatter(width=width)
+        cli.format_commands(ctx, ours)
+        click.Group.format_commands(cli, ctx, clicks)  # imports every command to ask it
+        assert ours.getvalue() == clicks.getvalue() and "sniff" in ours.getvalue()
+
+
+def test_help_does_not_import_the_heavy_libraries() -> None:
+    probe = ("import sys\nfrom vstig_cli.main import cli\n"
+             "try:\n    cli(['--help'])\nexcept SystemExit:\n    pass\n"
+             "print(sorted({'numpy', 'can', 'matplotlib', 'rich'} & {m.split('.')[0] for m in sys.modules}))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True)
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout

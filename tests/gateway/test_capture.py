@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import gzip
+import io
 import json
 from pathlib import Path
 
@@ -12,6 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vstig_hw.capture import candump
+from vstig_hw.capture.decodefile import decode_file
 from vstig_hw.capture.fastlog import chunk_to_jsonl
 from vstig_hw.capture.files import RotatingCapture, read_capture, rotated_name
 from vstig_hw.capture.records import CaptureError, Record
@@ -120,6 +123,15 @@ def test_unknown_capture_type_is_named(tmp_path: Path) -> None:
         list(read_capture(str(path)))
 
 
+@pytest.mark.parametrize("content", [b"not gzip at all", gzip.compress(b"(1.000000) can0 600#00\n" * 50)[:30]],
+                         ids=["garbage", "cut-short"])
+def test_unreadable_gzip_capture_is_a_capture_error_naming_the_file(tmp_path: Path, content: bytes) -> None:
+    path = tmp_path / "bad.log.gz"
+    path.write_bytes(content)
+    with pytest.raises(CaptureError, match=r"bad\.log\.gz: cannot read"):
+        list(read_capture(str(path)))
+
+
 def test_replay_keeps_absolute_deadlines() -> None:
     clock = [0.0]
     sent: list[float] = []
@@ -166,3 +178,14 @@ def test_fast_path_declines_mixed_or_bad_chunks() -> None:
     assert chunk_to_jsonl((good + "(1700000000.000000) can0 600#000100020003000Z\n").encode(), _classify, {}) is None
     assert chunk_to_jsonl(good.replace("600#", "600 ").encode(), _classify, {}) is None
     assert chunk_to_jsonl(good.encode() * 3, _classify, {}) is not None
+
+
+def test_line_by_line_fallback_numbers_lines_as_the_file_does(tmp_path: Path) -> None:
+    good = "(1700000000.000000) can0 600#0001000200030004\n"
+    path = tmp_path / "mixed.log"
+    path.write_text(good + "junk\x0cwith a form feed\n" + good + "bad line\n")
+    errors: dict[str, list[int | None]] = {}
+    for fmt in ("jsonl", "text"):  # jsonl takes the chunked fast path, text the per-record reader
+        _, _, bad = decode_file(str(path), io.StringIO(), fmt, skip_bad=True)
+        errors[fmt] = [error.line for error in bad]
+    assert errors["jsonl"] == errors["text"] == [2, 4]

@@ -6,6 +6,7 @@ import csv
 import json
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from vstig_cli.main import cli
@@ -39,6 +40,16 @@ def test_an_arena_too_dense_for_the_bodies_is_a_clear_error() -> None:
     result = CliRunner().invoke(cli, ["sim", "--robots", "10", "--density", "1000", "--runs", "1", "--workers", "1"])
     assert result.exit_code == 1 and "Error: cannot place robot" in result.output
     assert "Traceback" not in result.output
+
+
+@pytest.mark.parametrize(("option", "value", "named"), [
+    ("--range", "nan", "radio_range"), ("--range", "1e300", "radio_range"), ("--range", "inf", "radio_range"),
+    ("--density", "nan", "density"), ("--body-radius", "nan", "body_radius"),
+])
+def test_silly_geometry_is_a_usage_error_not_a_traceback(option: str, value: str, named: str) -> None:
+    result = CliRunner().invoke(cli, ["sim", "--robots", "5", "--runs", "1", "--workers", "1", option, value])
+    assert result.exit_code == 2, result.output
+    assert named in result.output and "Traceback" not in result.output
 
 
 def test_paper_grid_for_ten_robots_writes_csv_png_and_comparison(tmp_path: Path) -> None:

@@ -35,7 +35,8 @@ def test_int_views_round_trip(raw: int) -> None:
 @pytest.mark.parametrize(
     ("value", "kind", "message"),
     [(70000, "uint16", "outside uint16"), (-1, "uint16", "outside uint16"), (40000, "int16", "outside int16"),
-     (1e6, "float16", "does not fit a float16"), (1.5, "uint16", "not an integer")],
+     (1e6, "float16", "does not fit a float16"), (1.5, "uint16", "not an integer"),
+     ("1.5", "uint16", "'1.5' is not an integer"), ("abc", "int16", "'abc' is not an integer")],
 )
 def test_out_of_range_values_are_named(value: float, kind: str, message: str) -> None:
     with pytest.raises(ValueError, match=message):

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pickle
+import subprocess
+import sys
 
 import pytest
 from hypothesis import given
@@ -125,3 +127,9 @@ def test_decode_many_rejects_partial_message() -> None:
 def test_accepts_bytearray_and_memoryview() -> None:
     raw = bytes.fromhex("8102abcd800000ff")
     assert decode(bytearray(raw)) == decode(memoryview(raw)) == decode(raw)
+
+
+def test_importing_the_package_does_not_load_construct() -> None:
+    probe = "import sys, vstig_hw; print('construct' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60, check=True)
+    assert done.stdout.strip() == "False"

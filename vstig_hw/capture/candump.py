@@ -9,14 +9,15 @@ This per-line parser is the reference and the one that reports file:line errors;
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import zlib
+from collections.abc import Iterable, Iterator
 from typing import IO
 
 import can
 
 from .records import CAN_FRAMING, CaptureError, Record, parse_lines
 
-__all__ = ["parse_line", "read_candump"]
+__all__ = ["candump_records", "parse_line", "read_candump"]
 
 _ERROR_FLAG = 0x20000000
 _FD_LENGTHS = frozenset((0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64))
@@ -71,8 +72,17 @@ def parse_line(path: str, number: int, line: str) -> can.Message | None:
 def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
     """Records in file order (.log or .log.gz); bad lines raise CaptureError, or with `skip_bad` go to `bad`."""
     with _open_text(path) as file:
-        for frame in parse_lines(path, file, parse_line, skip_bad, bad):
-            yield Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)
+        try:
+            yield from candump_records(path, file, skip_bad, bad)
+        except (OSError, EOFError, zlib.error) as error:  # gzip reports a corrupt or cut-short .gz this way
+            raise CaptureError(path, None, f"cannot read: {error}") from None
+
+
+def candump_records(path: str, lines: Iterable[str], skip_bad: bool, bad: list[CaptureError] | None,
+                    first_line: int = 1) -> Iterator[Record]:
+    """The records on candump lines numbered from `first_line` (a whole file, or one chunk of it)."""
+    for frame in parse_lines(path, lines, parse_line, skip_bad, bad, first_line):
+        yield Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)
 
 
 def _open_text(path: str) -> IO[str]:

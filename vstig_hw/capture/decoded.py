@@ -33,12 +33,13 @@ FramingFactory = Callable[[Record], Any]
 
 
 def default_framings(id_base: int | None = None, extended: bool = False) -> FramingFactory:
-    from ..links import can_framing, serial_framing
+    from ..framing import make_serial_framing
+    from ..links import can_framing
 
     def make(record: Record) -> Any:
         if record.framing == CAN_FRAMING:
             return can_framing(id_base, extended)
-        return serial_framing(record.framing)
+        return make_serial_framing(record.framing)
 
     return make
 

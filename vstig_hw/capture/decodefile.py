@@ -16,7 +16,7 @@ from . import candump
 from .decoded import CSV_HEADER, Decoder, as_csv, as_json, as_text, default_framings
 from .fastlog import chunk_to_jsonl
 from .files import read_capture
-from .records import CAN_FRAMING, CaptureError, Record
+from .records import CaptureError
 from .serial_log import is_serial_capture
 
 __all__ = ["FORMATS", "decode_file"]
@@ -96,17 +96,10 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
 def _slow(path: str, chunk: bytes, first_line: int, out: IO[str], decoder: Decoder, value_type: ValueType,
           skip_bad: bool, bad: list[CaptureError]) -> int:
     count = 0
-    for offset, line in enumerate(chunk.decode("utf-8", "replace").splitlines()):
-        try:
-            frame = candump.parse_line(path, first_line + offset, line)
-        except CaptureError as error:
-            if not skip_bad:
-                raise
-            bad.append(error)
-            continue
-        if frame is None:
-            continue
-        for decoded in decoder.decode(Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)):
-            out.write(as_json(decoded, value_type) + "\n")
-            count += 1
+    # Split on "\n" only, as the line counter does: splitlines() also cuts at \r, \f, \x1c... and
+    # would misnumber every later line in the file:line of an error.
+    lines = chunk.decode("utf-8", "replace").split("\n")
+    for decoded in decoder.decode_all(candump.candump_records(path, lines, skip_bad, bad, first_line)):
+        out.write(as_json(decoded, value_type) + "\n")
+        count += 1
     return count

@@ -34,9 +34,9 @@ class Record:
 
 
 def parse_lines(path: str, lines: Iterable[str], parse: Callable[[str, int, str], T | None], skip_bad: bool,
-                bad: list[CaptureError] | None) -> Iterator[T]:
-    """Parse numbered lines (1-based); a bad line raises, or with `skip_bad` is collected in `bad`."""
-    for number, line in enumerate(lines, 1):
+                bad: list[CaptureError] | None, first_line: int = 1) -> Iterator[T]:
+    """Parse numbered lines (from `first_line`); a bad line raises, or with `skip_bad` is collected in `bad`."""
+    for number, line in enumerate(lines, first_line):
         try:
             item = parse(path, number, line)
         except CaptureError as error:

@@ -29,7 +29,7 @@ import can
 from ..counters import Counters
 from ..link import Link
 from ..transports.can import CanTransport
-from ..wire import MESSAGE_SIZE, Message, Op, decode_many, encode
+from ..wire import GET_BIT, MESSAGE_SIZE, Message, Op, decode_many, encode
 
 __all__ = [
     "BASES_11BIT",
@@ -47,7 +47,6 @@ DEFAULT_BASE_29BIT = 0x18000000
 BASE_MASK_29BIT = 0x1E000000  # bits 28..25
 FD_BATCH_SIZES = (1, 2, 3, 4, 6, 8)  # messages per CAN FD frame: the FD lengths 8..64 that are multiples of 8
 _FD_LENGTHS = frozenset(n * MESSAGE_SIZE for n in FD_BATCH_SIZES)
-_GET_BIT = 0x8000  # the op bit in a message's first wire word
 
 
 @dataclass(frozen=True)
@@ -182,7 +181,7 @@ class CanFraming:
             return []
         messages = list(decode_many(data))
         want_get = parsed[0] is Op.GET
-        kept = [m for m in messages if bool(m[0] & _GET_BIT) == want_get]
+        kept = [m for m in messages if bool(m[0] & GET_BIT) == want_get]
         if len(kept) != len(messages):
             self.drops["op_mismatch"] += len(messages) - len(kept)
         return kept

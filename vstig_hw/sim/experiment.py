@@ -22,6 +22,7 @@ not depend on how many worker processes share the work or in which order.
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 import statistics
@@ -67,6 +68,17 @@ class Config:
             raise ValueError(f"robots must be in 1..{U16_MAX + 1} (robot ids are 16-bit), got {self.robots}")
         if not 0.0 <= self.drop < 1.0:
             raise ValueError(f"drop probability must be in [0, 1), got {self.drop}")
+        for name in ("radio_range", "density", "body_radius"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):  # NaN passes every comparison click makes
+                raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+        if not (self.radio_range > 0 and self.density > 0):
+            raise ValueError(f"radio_range and density must be positive, got {self.radio_range} and {self.density}")
+        reach = self.radio_range + self.body_radius
+        side = math.sqrt(self.robots * math.pi * reach * reach / self.density)  # no **: it raises on overflow
+        if not math.isfinite(side * side):
+            raise ValueError(f"radio_range {self.radio_range} and density {self.density} make an arena too large "
+                             "to compute with")
         if self.budget < 1:
             raise ValueError(f"budget must be at least 1 message per step, got {self.budget}")
         if self.max_steps < 1:

@@ -15,6 +15,23 @@ from ..counters import Counters
 Unit = TypeVar("Unit")
 
 
+def errno_of(exc: BaseException) -> int | None:
+    """The OS error number behind a pyserial/python-can exception: in `.errno`, `.error_code` or a cause."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        for attr in ("errno", "error_code"):
+            code = getattr(seen, attr, None)
+            if isinstance(code, int):
+                return code
+        seen = seen.__cause__ or seen.__context__
+    return None
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception's message on one line (its type name when it has none)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
 class TransportError(Exception):
     """A device problem the user must fix; the message is one clear line naming the device."""
 

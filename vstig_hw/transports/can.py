@@ -21,7 +21,7 @@ from typing import Any
 import can
 
 from ..counters import Counters
-from .base import TransportError
+from .base import TransportError, errno_of, one_line
 
 __all__ = ["CanTransport"]
 
@@ -34,22 +34,6 @@ _DRAIN_LIMIT = 512  # frames taken per read() after the first, so one busy bus c
 _STATE_POLL_S = 1.0  # how often to ask interfaces that report it (pcan, kvaser...) for bus-off
 # Send failures that mean "the bus is busy", not "the device is gone".
 _TRANSIENT_ERRNOS = frozenset({errno.ENOBUFS, errno.EAGAIN})
-
-
-def _errno_of(exc: BaseException) -> int | None:
-    """The OS error number behind a python-can or OS exception, following the cause chain."""
-    seen: BaseException | None = exc
-    while seen is not None:
-        for attr in ("errno", "error_code"):
-            code = getattr(seen, attr, None)
-            if isinstance(code, int):
-                return code
-        seen = seen.__cause__ or seen.__context__
-    return None
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 class CanTransport:
@@ -111,12 +95,12 @@ class CanTransport:
         try:
             return can.Bus(**self._bus_kwargs)
         except can.CanInterfaceNotImplementedError as exc:
-            raise TransportError(f"CAN interface {self.interface!r} cannot be used here: {_one_line(exc)}") from None
+            raise TransportError(f"CAN interface {self.interface!r} cannot be used here: {one_line(exc)}") from None
         except (can.CanError, OSError, ValueError, TypeError) as exc:
             raise TransportError(self._explain(exc)) from None
 
     def _explain(self, exc: BaseException) -> str:
-        code = _errno_of(exc)
+        code = errno_of(exc)
         channel = self.channel
         if code == errno.ENODEV:
             if str(channel).startswith("vcan"):
@@ -127,7 +111,7 @@ class CanTransport:
                     "(socket(AF_CAN) is not supported); load the `can` modules or use another interface")
         if code == errno.ENETDOWN:
             return f"CAN interface {channel} is down: bring it up with `ip link set up {channel}`"
-        return f"cannot open CAN {self.interface} channel {channel}: {_one_line(exc)}"
+        return f"cannot open CAN {self.interface} channel {channel}: {one_line(exc)}"
 
     # -- moving frames -------------------------------------------------------
     def read(self, timeout: float) -> list[can.Message]:
@@ -147,7 +131,7 @@ class CanTransport:
             if self._bus is not None:
                 self._poll_state(bus)
         except (can.CanError, OSError) as exc:
-            self._lost(_one_line(exc))
+            self._lost(one_line(exc))
         self.counters["rx"] += len(frames)
         return frames
 
@@ -161,8 +145,8 @@ class CanTransport:
         except (can.CanError, OSError) as exc:
             self.counters["tx_dropped"] += 1
             self.counters["bus_errors"] += 1
-            if _errno_of(exc) not in _TRANSIENT_ERRNOS and "buffer full" not in str(exc).lower():
-                self._lost(_one_line(exc))
+            if errno_of(exc) not in _TRANSIENT_ERRNOS and "buffer full" not in str(exc).lower():
+                self._lost(one_line(exc))
             return
         self.counters["tx"] += 1
 

@@ -21,7 +21,7 @@ from typing import Any
 import serial
 
 from ..counters import Counters
-from .base import TransportError
+from .base import TransportError, errno_of
 
 __all__ = ["SerialTransport", "open_error"]
 
@@ -32,20 +32,9 @@ _DENIED = {errno.EACCES, errno.EPERM}
 _BUSY = {errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK}
 
 
-def _errno_of(exc: BaseException) -> int | None:
-    """The OS error behind a pyserial exception (pyserial keeps it in .errno or in the chained cause)."""
-    seen: BaseException | None = exc
-    while seen is not None:
-        code = getattr(seen, "errno", None)
-        if isinstance(code, int):
-            return code
-        seen = seen.__cause__ or seen.__context__
-    return None
-
-
 def open_error(port: str, exc: BaseException) -> TransportError:
     """One clear line, naming the port, for why it cannot be opened."""
-    code = _errno_of(exc)
+    code = errno_of(exc)
     if code in _MISSING:
         reason = "no such device (is it plugged in? `ls /dev/serial/by-id/` lists attached adapters)"
     elif code in _DENIED:
