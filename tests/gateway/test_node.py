@@ -10,7 +10,8 @@ import can
 import pytest
 
 from vstig_hw import Message, Op, Stigmergy
-from vstig_hw.gateway import Mode, Node, SendWindow
+from vstig_hw.counters import Counters
+from vstig_hw.gateway import Mode, Node, Outlet, SendWindow
 from vstig_hw.link import Heard, Link
 from vstig_hw.links import can_framing_for
 from vstig_hw.linkspec import parse
@@ -161,6 +162,35 @@ def test_per_link_queue_keeps_the_newest_message_per_key(channels: tuple[str, st
     values = [framing.feed(f)[0].value for f in frames if f is not None]
     assert values == [10]
     observer.shutdown()
+
+
+class BrokenTransport:
+    """A transport that breaks its promise never to raise (nothing real fails on cue like this)."""
+
+    name = "broken"
+    connected = True
+
+    def __init__(self) -> None:
+        self.counters = Counters()
+
+    def open(self) -> None: ...
+
+    def close(self) -> None: ...
+
+    def read(self, timeout: float) -> list[can.Message]:
+        return []
+
+    def write(self, unit: can.Message) -> None:
+        raise OSError("device exploded")
+
+
+def test_a_raising_transport_costs_its_batch_not_the_loop() -> None:
+    link: Link[can.Message] = Link("broken", BrokenTransport(), can_framing_for(1))
+    outlet = Outlet(link, budget=10, period=1.0)
+    for key in range(4):
+        outlet.push(Message(Op.PUT, key, key, 1, 1))
+    assert outlet.flush(0.0) is None  # everything left the queue, none of it the device
+    assert link.counters["drop_write_error"] == 4 and link.counters["out"] == 0 and not len(outlet)
 
 
 def test_node_rejects_bad_wiring() -> None:
