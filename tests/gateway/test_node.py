@@ -98,6 +98,28 @@ def test_raw_mode_relays_every_frame_without_an_engine(channels: tuple[str, str]
     far.shutdown()
 
 
+def test_news_crosses_to_the_other_link_before_the_echo_goes_back(channels: tuple[str, str]) -> None:
+    a, b = channels
+    buses = {a: can.Bus(interface="virtual", channel=a), b: can.Bus(interface="virtual", channel=b)}
+    framing = can_framing_for(7)
+    with Node([bus_link(a), bus_link(b)], robot_id=100) as node:
+        for key, (source, other) in enumerate([(a, b), (b, a)]):  # from the first link, then from the second
+            buses[source].send(framing.encode(Message(Op.PUT, key, 5, 1, 7))[0])
+            heard: dict[str, can.Message] = {}
+
+            def both_heard() -> bool:
+                for name, bus in buses.items():
+                    while (frame := bus.recv(0)) is not None:
+                        heard[name] = frame
+                return len(heard) == 2
+
+            run_until(node, both_heard)
+            # the virtual bus stamps each frame when it is sent: the crossing went first
+            assert heard[other].timestamp < heard[source].timestamp, f"PUT from {source}"
+    for bus in buses.values():
+        bus.shutdown()
+
+
 def test_listen_mode_never_transmits_and_reports_what_it_heard(channels: tuple[str, str]) -> None:
     a, _ = channels
     tap = can.Bus(interface="virtual", channel=a)
