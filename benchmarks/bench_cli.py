@@ -196,7 +196,6 @@ def gateway_latency() -> Iterator[Result]:
     from vstig_hw.links import can_framing_for
     from vstig_hw.linkspec import parse
 
-    favour_latency()  # as `vstig bridge` runs
     rate_hz, count = 5000, 10_000
     fork = multiprocessing.get_context("fork")
 
@@ -218,6 +217,7 @@ def gateway_latency() -> Iterator[Result]:
     links = [parse(f"can:virtual:{channel}").build("bus", robot_id=200),
              parse(f"serial:{path}").build("radio", robot_id=200)]
     node = Node(links, 200, budget=2000)  # 20,000 messages/s per link: above the offered load
+    favour_latency()  # where `vstig bridge` calls it: after building the node, before opening it
     stop = threading.Event()
     loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
     with node:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import gc
 import itertools
+import sys
 import time
 from collections.abc import Callable
 
@@ -11,7 +13,7 @@ import pytest
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.counters import Counters
-from vstig_hw.gateway import Mode, Node, Outlet, SendWindow
+from vstig_hw.gateway import Mode, Node, Outlet, SendWindow, favour_latency
 from vstig_hw.link import Heard, Link
 from vstig_hw.links import can_framing_for
 from vstig_hw.linkspec import parse
@@ -107,7 +109,7 @@ def test_news_crosses_to_the_other_link_before_the_echo_goes_back(channels: tupl
             buses[source].send(framing.encode(Message(Op.PUT, key, 5, 1, 7))[0])
             heard: dict[str, can.Message] = {}
 
-            def both_heard() -> bool:
+            def both_heard(heard: dict[str, can.Message] = heard) -> bool:
                 for name, bus in buses.items():
                     while (frame := bus.recv(0)) is not None:
                         heard[name] = frame
@@ -213,6 +215,17 @@ def test_a_raising_transport_costs_its_batch_not_the_loop() -> None:
         outlet.push(Message(Op.PUT, key, key, 1, 1))
     assert outlet.flush(0.0) is None  # everything left the queue, none of it the device
     assert link.counters["drop_write_error"] == 4 and link.counters["out"] == 0 and not len(outlet)
+
+
+def test_favour_latency_shortens_gil_turns_and_freezes_the_startup_heap() -> None:
+    before = sys.getswitchinterval()
+    try:
+        favour_latency()
+        assert sys.getswitchinterval() == pytest.approx(0.0005)
+        assert gc.get_freeze_count() > 1000  # at least the imported modules' objects
+    finally:
+        gc.unfreeze()
+        sys.setswitchinterval(before)
 
 
 def test_node_rejects_bad_wiring() -> None:
