@@ -185,26 +185,29 @@ def _sleep_paced(count: int, rate_hz: int, send: Callable[[int], None]) -> list[
 def gateway_latency() -> Iterator[Result]:
     """Frame in on a python-can virtual bus to frame out on a cobs8 pty radio, at 5,000 frames/s.
 
-    The gateway and the bus robot share this process (the virtual bus exists only in-process); the
-    radio's far end is a child process that timestamps what arrives. Values count up so every frame
-    is a new entry the engine stores and re-broadcasts. The anchor is the bare pty hop, same method.
-    (python-can's slcan driver reads a byte per system call and cannot carry 5,000 frames/s, so a
-    subprocess bridge over slcan would measure the driver, not the gateway.)"""
+    The gateway and the bus robot share this process (the virtual bus exists only in-process), so
+    the robot takes GIL turns a robot on a real bus never would: the figure is pessimistic by that
+    much. The radio's far end is a child process that timestamps what arrives; it is forked before
+    any gateway thread exists (a fork copies only the calling thread, and a lock another thread
+    held would stay locked in the child). Values count up so every frame is a new entry the engine
+    stores and re-broadcasts. The anchor is the bare pty hop, same method. The gateway is tuned with
+    `favour_latency()` where `vstig bridge` does it. (python-can's slcan driver reads a byte per
+    system call and cannot carry 5,000 frames/s, so a subprocess bridge over slcan would measure
+    the driver, not the gateway.)"""
     import multiprocessing
 
     from vstig_hw.gateway import Node, favour_latency
     from vstig_hw.links import can_framing_for
     from vstig_hw.linkspec import parse
 
-    favour_latency()  # as `vstig bridge` runs
     rate_hz, count = 5000, 10_000
     fork = multiprocessing.get_context("fork")
 
-    def hop(send: Callable[[int], None], master: int, before: Callable[[], None] = lambda: None) -> list[float]:
+    def hop(send: Callable[[int], None], master: int, start: Callable[[], None] = lambda: None) -> list[float]:
         receive, done = fork.Pipe(duplex=False)
         listener = fork.Process(target=_radio_listener, args=(master, count, done, 3.0))
         listener.start()
-        before()
+        start()
         sent = _sleep_paced(count, rate_hz, send)
         arrived = receive.recv()
         listener.join()
@@ -218,12 +221,21 @@ def gateway_latency() -> Iterator[Result]:
     links = [parse(f"can:virtual:{channel}").build("bus", robot_id=200),
              parse(f"serial:{path}").build("radio", robot_id=200)]
     node = Node(links, 200, budget=2000)  # 20,000 messages/s per link: above the offered load
+    favour_latency()  # where `vstig bridge` calls it: after building the node, before opening it
     stop = threading.Event()
     loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
-    with node:
-        latencies = hop(lambda i: robot.send(frames[i]), master, loop.start)
+
+    def start_gateway() -> None:  # after the listener is forked
+        node.open()
+        loop.start()
+
+    try:
+        latencies = hop(lambda i: robot.send(frames[i]), master, start_gateway)
+    finally:
         stop.set()
-        loop.join(timeout=5)
+        if loop.is_alive():
+            loop.join(timeout=5)
+        node.close()
     robot.shutdown()
     cobs = make_serial_framing("cobs8")
     units = [cobs.encode(_numbered(i))[0] for i in range(count)]

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import gc
 import itertools
+import sys
 import time
 from collections.abc import Callable
 
@@ -10,7 +12,8 @@ import can
 import pytest
 
 from vstig_hw import Message, Op, Stigmergy
-from vstig_hw.gateway import Mode, Node, SendWindow
+from vstig_hw.counters import Counters
+from vstig_hw.gateway import Mode, Node, Outlet, SendWindow, favour_latency
 from vstig_hw.link import Heard, Link
 from vstig_hw.links import can_framing_for
 from vstig_hw.linkspec import parse
@@ -97,6 +100,28 @@ def test_raw_mode_relays_every_frame_without_an_engine(channels: tuple[str, str]
     far.shutdown()
 
 
+def test_news_crosses_to_the_other_link_before_the_echo_goes_back(channels: tuple[str, str]) -> None:
+    a, b = channels
+    buses = {a: can.Bus(interface="virtual", channel=a), b: can.Bus(interface="virtual", channel=b)}
+    framing = can_framing_for(7)
+    with Node([bus_link(a), bus_link(b)], robot_id=100) as node:
+        for key, (source, other) in enumerate([(a, b), (b, a)]):  # from the first link, then from the second
+            buses[source].send(framing.encode(Message(Op.PUT, key, 5, 1, 7))[0])
+            heard: dict[str, can.Message] = {}
+
+            def both_heard(heard: dict[str, can.Message] = heard) -> bool:
+                for name, bus in buses.items():
+                    while (frame := bus.recv(0)) is not None:
+                        heard[name] = frame
+                return len(heard) == 2
+
+            run_until(node, both_heard)
+            # the virtual bus stamps each frame when it is sent: the crossing went first
+            assert heard[other].timestamp < heard[source].timestamp, f"PUT from {source}"
+    for bus in buses.values():
+        bus.shutdown()
+
+
 def test_listen_mode_never_transmits_and_reports_what_it_heard(channels: tuple[str, str]) -> None:
     a, _ = channels
     tap = can.Bus(interface="virtual", channel=a)
@@ -161,6 +186,46 @@ def test_per_link_queue_keeps_the_newest_message_per_key(channels: tuple[str, st
     values = [framing.feed(f)[0].value for f in frames if f is not None]
     assert values == [10]
     observer.shutdown()
+
+
+class BrokenTransport:
+    """A transport that breaks its promise never to raise (nothing real fails on cue like this)."""
+
+    name = "broken"
+    connected = True
+
+    def __init__(self) -> None:
+        self.counters = Counters()
+
+    def open(self) -> None: ...
+
+    def close(self) -> None: ...
+
+    def read(self, timeout: float) -> list[can.Message]:
+        return []
+
+    def write(self, unit: can.Message) -> None:
+        raise OSError("device exploded")
+
+
+def test_a_raising_transport_costs_its_batch_not_the_loop() -> None:
+    link: Link[can.Message] = Link("broken", BrokenTransport(), can_framing_for(1))
+    outlet = Outlet(link, budget=10, period=1.0)
+    for key in range(4):
+        outlet.push(Message(Op.PUT, key, key, 1, 1))
+    assert outlet.flush(0.0) is None  # everything left the queue, none of it the device
+    assert link.counters["drop_write_error"] == 4 and link.counters["out"] == 0 and not len(outlet)
+
+
+def test_favour_latency_shortens_gil_turns_and_freezes_the_startup_heap() -> None:
+    before = sys.getswitchinterval()
+    try:
+        favour_latency()
+        assert sys.getswitchinterval() == pytest.approx(0.0005)
+        assert gc.get_freeze_count() > 1000  # at least the imported modules' objects
+    finally:
+        gc.unfreeze()
+        sys.setswitchinterval(before)
 
 
 def test_node_rejects_bad_wiring() -> None:

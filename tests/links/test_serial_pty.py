@@ -75,6 +75,23 @@ def test_every_framing_round_trips_through_a_pty(pty: tuple[int, str], framing: 
         robot.stop()
 
 
+@pytest.mark.parametrize("framing", ["cobs8", "epuck4", "kilobot", "kilobot-ohc"])
+def test_send_many_is_one_write_of_the_same_bytes(pty: tuple[int, str], framing: str) -> None:
+    master, path = pty
+    robot = PtyRobot(master)
+    link = serial_link(path, framing)
+    try:
+        messages = random_messages(40, seed=3)
+        expected = b"".join(unit for msg in messages for unit in link.framing.encode(msg))
+        link.send_many(messages)
+        poll(lambda: len(robot.snapshot()) >= len(expected), what="the robot's inbox")
+        assert bytes(robot.snapshot()) == expected
+        assert link.transport.counters["tx"] == 1 and link.stats()["out"] == len(messages)
+    finally:
+        link.close()
+        robot.stop()
+
+
 def test_overhead_controller_packets_through_a_pty(pty: tuple[int, str]) -> None:
     master, path = pty
     robot = PtyRobot(master)

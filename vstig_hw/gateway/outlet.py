@@ -100,10 +100,8 @@ class Outlet:
         else:
             batch = self._newest.drain(allowed)
         self.window.record(now, len(batch))
-        send = self.link.send
-        for msg in batch:
-            try:
-                send(msg)
-            except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
-                self.counters["drop_write_error"] += 1
+        try:
+            self.link.send_many(batch)  # one write for the batch on a byte stream (see Link.send_many)
+        except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
+            self.counters["drop_write_error"] += len(batch)
         return self.window.next_free() if len(self) else None
