@@ -28,6 +28,7 @@ from typing import Any
 
 from ..counters import Counters
 from ..engine import ConflictResolver, Stigmergy
+from ..framing.kilobot_ohc import TransmitOnlyError
 from ..link import Heard, Link
 from .outlet import Outlet
 from .readers import LinkReaders
@@ -203,7 +204,7 @@ class Node:
                 listener(link, t, unit)
             try:
                 messages = feed(unit)
-            except Exception:  # a transmit-only framing (kilobot-ohc) or a framing bug: count, keep looping
+            except TransmitOnlyError:  # bytes from a stock overhead controller: counted, not decoded
                 link.counters["drop_undecodable"] += 1
                 continue
             if not messages:
