@@ -7,7 +7,7 @@ from typing import Any
 
 import click
 
-from vstig_hw.gateway import Node, stop_on_signals
+from vstig_hw.gateway import ENGINE_STATS, Node, stop_on_signals
 from vstig_hw.link import Link
 from vstig_hw.linkspec import LinkSpec
 
@@ -15,7 +15,7 @@ from vstig_hw.linkspec import LinkSpec
 def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool = False) -> list[Link[Any]]:
     """One Link per spec, named after its device (made unique: radio, radio-2...)."""
     links: list[Link[Any]] = []
-    seen: dict[str, int] = {}
+    seen: dict[str, int] = {ENGINE_STATS: 1}  # that name is taken by the engine's counters
     for spec in specs:
         name = spec.name
         seen[name] = seen.get(name, 0) + 1
