@@ -36,6 +36,8 @@ from ..counters import Counters
 from ..engine import ConflictResolver, Stigmergy
 from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
+from ..timestamps import TS_NONE
+from ..wire import Message, Op
 from .outlet import Outlet
 from .readers import LinkReaders
 
@@ -159,6 +161,17 @@ class Node:
         value = self._engine().get(key)
         self._spread(time.monotonic())
         return value
+
+    def ask(self, key: int) -> None:
+        """Broadcast an empty GET for `key` (timestamp 0): every neighbour holding it answers with its entry.
+
+        `get` carries our view of the key, which only holders of a newer entry
+        answer; this asks everyone, whatever we hold (SPEC section 4, row 5).
+        """
+        ask = Message(Op.GET, key, 0, TS_NONE, self._engine().robot_id)
+        for outlet in self.outlets:
+            outlet.push(ask)  # a PUT already queued for the key says more and stays (SPEC section 5)
+        self._spread(time.monotonic())
 
     def _engine(self) -> Stigmergy:
         if self.engine is None or self.mode is not Mode.ENGINE:
