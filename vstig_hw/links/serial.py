@@ -27,7 +27,8 @@ def serial_link(port: str, framing: str = "cobs8", baud: int | None = None, *, n
     Unknown framings or options raise ValueError naming them.
     """
     codec = make_serial_framing(framing, **framing_options)
-    transport = SerialTransport(port, baud or codec.default_baud, name=name, **dict(transport_options or {}))
+    transport = SerialTransport(port, baud or codec.default_baud, name=name, preamble=codec.preamble,
+                                **dict(transport_options or {}))
     link: Link[bytes] = Link(name or port, transport, codec)
     if connect:
         link.open()
