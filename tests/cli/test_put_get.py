@@ -13,10 +13,11 @@ import time
 from collections.abc import Callable
 
 import pytest
-from peers import PtyPeer, run_vstig
+from peers import PtyPeer, SlcanAdapter, run_vstig
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.framing import make_serial_framing
+from vstig_hw.links import can_framing_for
 
 Program = Callable[["RadioRobot", Message], None]
 
@@ -103,6 +104,57 @@ def test_put_asks_every_control_step_while_learning() -> None:
                 break
             gets_before_write.append(msg)
     assert len(gets_before_write) >= 5  # one a control step (0.1 s) for 1 s, not one in all
+
+
+def test_put_whose_rebroadcast_is_lost_is_confirmed_by_the_robot_answering_an_empty_get() -> None:
+    lost: list[Message] = []
+
+    def loses_its_first_rebroadcast(robot: RadioRobot, msg: Message) -> None:
+        robot.engine.receive(msg)
+        if msg.op is Op.PUT and msg.robot == 33 and not lost:
+            lost.extend(robot.engine.drain())  # the radio lost the frame that would have confirmed it
+
+    with RadioRobot(9, program=loses_its_first_rebroadcast).holding(23, 1, timestamp=5) as robot:
+        put = run_vstig("put", "23", "9", "--on", robot.link, "--robot-id", "33", "--learn", "0.3", "--wait", "5")
+        asked = [m for m in robot.heard if m.op is Op.GET and m.timestamp == 0]
+    assert lost == [Message(Op.PUT, 23, 9, 6, 33)]
+    assert put.returncode == 0, put.stderr
+    assert put.stdout.startswith("put key=23 value=9 timestamp=6 robot=33 on ")
+    assert asked  # the empty GETs it answered
+
+
+def test_put_over_can_is_confirmed_by_a_robot_on_the_bus() -> None:
+    adapter = SlcanAdapter()  # python-can's real slcan driver on the pty: a USB-CAN adapter
+    robot = Stigmergy(9)
+    for _ in range(5):
+        robot.put(23, 1)
+    robot.drain()
+    bus_framing = can_framing_for(9)
+    running = True
+
+    def on_the_bus() -> None:
+        done = 0
+        while running:
+            for frame in adapter.sent[done:]:
+                done += 1
+                for msg in bus_framing.feed(frame):
+                    robot.receive(msg)
+            for frame in bus_framing.encode_batch(robot.drain()):
+                adapter.inject(frame)
+            time.sleep(0.005)
+
+    thread = threading.Thread(target=on_the_bus, daemon=True)
+    thread.start()
+    try:
+        put = run_vstig("put", "23", "9", "--on", f"can:slcan:{adapter.path}", "--robot-id", "33", "--wait", "10")
+    finally:
+        running = False
+        thread.join(timeout=2)
+        adapter.close()
+    assert put.returncode == 0, put.stderr
+    assert put.stdout.startswith("put key=23 value=9 timestamp=6 robot=33 on ")
+    assert robot.entry(23) == (9, 6, 33)
+    assert {frame.arbitration_id for frame in adapter.sent} <= {0x600 | 33, 0x700 | 33}  # PUTs and GETs as node 33
 
 
 def test_put_that_no_robot_stores_exits_1_saying_what_the_swarm_holds() -> None:
