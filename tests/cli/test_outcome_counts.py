@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import threading
+from pathlib import Path
 
 from peers import PtyPeer, start_vstig, stop, wait_for
 
@@ -76,3 +77,11 @@ def test_sniff_reports_what_each_message_would_do_to_a_robot() -> None:
     assert sniffer.returncode == 0, err
     probes_heard = sum(1 for r in rows if isinstance(r["key"], int) and r["key"] >= 100)
     assert _engine_line(err) == _expected(stored=probes_heard + 2)
+
+
+def test_a_device_named_engine_does_not_hide_the_engine_counters(tmp_path: Path) -> None:
+    from vstig_cli._common import build_links
+    from vstig_hw.links import parse
+
+    (link,) = build_links([parse(f"serial:{tmp_path / 'engine'}")])
+    assert link.name == "engine-2"
