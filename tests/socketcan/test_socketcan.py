@@ -15,6 +15,7 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -297,3 +298,58 @@ def test_an_interface_that_is_down_is_one_outage_logged_once_not_a_reconnect_sto
     # a loaded machine only makes fewer.
     retries = [r.getMessage() for r in caplog.records if "still lost" in r.getMessage()]
     assert len(retries) <= 8, retries
+
+
+@pytest.mark.skipif(os.geteuid() != 0 and not IN_UML, reason="taking vcan interfaces down needs root")
+def test_bridge_says_once_per_unplug_that_the_interface_is_lost_and_once_that_it_is_back() -> None:
+    # The field report: `ip link set vcan0 down` for a second, then delete and re-create it:
+    # 15 "CAN device lost" lines and reconnects=15 for two unplugs.
+    _ip("add", "dev", "vcan5", "type", "vcan")
+    _ip("set", "up", "vcan5")
+    vstig = str(Path(sys.executable).with_name("vstig"))
+    bridge = subprocess.Popen([vstig, "bridge", "can:socketcan:vcan5", "--robot-id", "5"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    said: queue.Queue[str] = queue.Queue()
+    lines: list[str] = []
+
+    def pump() -> None:
+        assert bridge.stderr is not None
+        for line in bridge.stderr:
+            said.put(line.rstrip("\n"))
+
+    def wait_for_line(text: str) -> None:
+        deadline = time.monotonic() + DEADLINE_S
+        while not any(text in line for line in lines):
+            assert time.monotonic() < deadline, f"bridge never said {text!r}: {lines}"
+            with contextlib.suppress(queue.Empty):
+                lines.append(said.get(timeout=0.2))
+
+    threading.Thread(target=pump, daemon=True).start()
+    try:
+        wait_for_line("bridging")
+        _ip("set", "down", "vcan5")
+        wait_for_line("CAN device lost")
+        time.sleep(1.5)
+        _ip("set", "up", "vcan5")
+        wait_for_line("CAN device back")
+        _ip("delete", "vcan5")
+        time.sleep(1.5)
+        _ip("add", "dev", "vcan5", "type", "vcan")
+        _ip("set", "up", "vcan5")
+        deadline = time.monotonic() + DEADLINE_S
+        while sum("CAN device back" in line for line in lines) < 2:
+            assert time.monotonic() < deadline, f"the bridge never came back twice: {lines}"
+            with contextlib.suppress(queue.Empty):
+                lines.append(said.get(timeout=0.2))
+    finally:
+        bridge.send_signal(signal.SIGINT)
+        bridge.wait(timeout=DEADLINE_S)
+        subprocess.run(["ip", "link", "delete", "vcan5"], check=False, capture_output=True)
+    time.sleep(0.2)
+    while not said.empty():
+        lines.append(said.get_nowait())
+    assert bridge.returncode == 0, lines
+    assert sum("CAN device lost" in line for line in lines) == 2, lines
+    assert sum("CAN device back" in line for line in lines) == 2, lines
+    (counters,) = [line for line in lines if line.startswith("vcan5: ")]
+    assert " lost=2 " in f" {counters} " and " reconnects=2 " in f" {counters} ", counters
