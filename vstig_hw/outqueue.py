@@ -25,11 +25,13 @@ class OutQueue:
         return len(self._puts) + len(self._gets)
 
     def push(self, msg: Message, resolved: bool = False) -> bool:
-        """Queue `msg` unless a newer one for its key is pending; True if queued.
+        """Queue `msg` unless a message at least as new for its key is pending; True if queued.
 
-        Same timestamp: a PUT replaces a GET (it says at least as much), and a
-        conflict's `resolved` winner replaces whatever is pending, so the stale
-        loser is never sent.
+        At the same timestamp the pending message stays, whatever the ops: a GET
+        of an entry repairs every neighbour a PUT of it does, and also makes newer
+        neighbours answer, while a pending PUT already leaves before every GET.
+        The one exception is a conflict's `resolved` winner, which replaces a
+        pending message carrying another entry, so the loser is never sent.
         """
         head = msg[0]
         key = head & KEY_MAX
@@ -40,8 +42,7 @@ class OutQueue:
             pending = self._gets.get(key)
         if pending is not None:
             if msg[2] == pending[2]:
-                pending_is_get = pending[0] & GET_BIT
-                if not (resolved or (pending_is_get and not is_get)):
+                if not (resolved and (msg[1], msg[3]) != (pending[1], pending[3])):
                     return False
             elif not is_newer(msg[2], pending[2]):
                 return False
