@@ -77,7 +77,7 @@ def sum_merge(key: int, local: Entry, remote: Entry) -> Entry:
     """A merging rule: the sum of the values (mod 2**16), named for the higher robot.
 
     The shape every merging rule needs: the robot it names is one of the two
-    writers, chosen the same way on every robot whichever entry is local.
+    writers, picked by an order on robot ids whichever entry is local.
     """
     return Entry((local.value + remote.value) & U16_MAX, local.timestamp, max(local.robot, remote.robot))
 

@@ -292,6 +292,25 @@ def test_conflict_winner_replaces_pending_get_of_the_loser() -> None:
     assert s.drain() == [Message(PUT, 4, 1, 3, 5)]
 
 
+def test_resolver_returning_no_entry_is_refused_by_name() -> None:
+    s = Stigmergy(1, onconflict=lambda key, local, remote: None)  # type: ignore[arg-type, return-value]
+    s.receive(Message(PUT, 4, 9, 3, 2))
+    try:
+        s.receive(Message(PUT, 4, 1, 3, 5))
+    except TypeError as error:
+        assert "onconflict" in str(error) and "None" in str(error)
+    else:
+        raise AssertionError("a resolver returning None was accepted")
+    assert s.entry(4) == Entry(9, 3, 2)
+
+
+def test_outgoing_queue_compares_timestamps_across_the_wrap() -> None:
+    s = Stigmergy(1)
+    s.receive(Message(PUT, 4, 9, 65535, 2))  # the relay is pending at ts 65535
+    s.put(4, 10)  # ts 1 is newer: it replaces the relay (a plain >= would keep the relay)
+    assert s.drain() == [Message(PUT, 4, 10, 1, 1)]
+
+
 def test_outgoing_queue_keeps_only_newest_per_key() -> None:
     s = Stigmergy(1)
     for value in range(5):
