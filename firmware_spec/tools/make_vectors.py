@@ -240,7 +240,7 @@ def timestamp_vectors() -> dict[str, object]:
 
 
 # --------------------------------------------------------------------------
-# receive.json: the receive rules, one case per row of SPEC.md's table
+# receive.json: the receive rules (one case per row of SPEC.md's table), the queue, onconflictlost
 # --------------------------------------------------------------------------
 # (name, self id, local entry (value, ts, robot) or None, incoming (op, key, value, ts, robot),
 #  outcome, entry after, queued messages). Written by hand; key 4 throughout. Conflicts use the
