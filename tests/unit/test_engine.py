@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from vstig_hw import Entry, Message, Op, Outcome, Stigmergy
 from vstig_hw.engine import larger_value_wins, sum_merge
 from vstig_hw.timestamps import is_newer, next_timestamp
@@ -232,12 +234,8 @@ def test_merged_winner_between_two_other_robots_keeps_the_named_entry() -> None:
 def test_merged_winner_naming_a_third_robot_is_refused_by_name() -> None:
     s = Stigmergy(9, onconflict=lambda key, local, remote: Entry(1, local.timestamp, 77))
     s.receive(Message(PUT, 5, 200, 1, 2))
-    try:
+    with pytest.raises(ValueError, match=r"onconflict returned .*robot=77"):
         s.receive(Message(PUT, 5, 100, 1, 1))
-    except ValueError as error:
-        assert "77" in str(error) and "onconflict" in str(error)
-    else:
-        raise AssertionError("a merge naming a robot that wrote neither entry was accepted")
 
 
 def test_pending_get_is_not_replaced_by_an_answer_of_the_same_timestamp() -> None:
@@ -295,12 +293,8 @@ def test_conflict_winner_replaces_pending_get_of_the_loser() -> None:
 def test_resolver_returning_no_entry_is_refused_by_name() -> None:
     s = Stigmergy(1, onconflict=lambda key, local, remote: None)  # type: ignore[arg-type, return-value]
     s.receive(Message(PUT, 4, 9, 3, 2))
-    try:
+    with pytest.raises(TypeError, match=r"onconflict must return .*got None"):
         s.receive(Message(PUT, 4, 1, 3, 5))
-    except TypeError as error:
-        assert "onconflict" in str(error) and "None" in str(error)
-    else:
-        raise AssertionError("a resolver returning None was accepted")
     assert s.entry(4) == Entry(9, 3, 2)
 
 
