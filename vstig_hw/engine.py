@@ -187,7 +187,7 @@ class Stigmergy:
         else:
             winner = self._merged_winner(key, local, remote, chosen[0], chosen[2])
         self._table[key] = winner
-        self._outbox.push(winner, resolved=True)
+        self._outbox.push(winner)
         # Only the entry we held can be our lost write: the echo of a write that
         # already lost comes back as the remote, and must not be reported again.
         if self.onconflictlost and local[2] == self.robot_id and winner[3] != self.robot_id:

@@ -24,14 +24,15 @@ class OutQueue:
     def __len__(self) -> int:
         return len(self._puts) + len(self._gets)
 
-    def push(self, msg: Message, resolved: bool = False) -> bool:
+    def push(self, msg: Message) -> bool:
         """Queue `msg` unless a message at least as new for its key is pending; True if queued.
 
-        At the same timestamp the pending message stays, whatever the ops: a GET
-        of an entry repairs every neighbour a PUT of it does, and also makes newer
-        neighbours answer, while a pending PUT already leaves before every GET.
-        The one exception is a conflict's `resolved` winner, which replaces a
-        pending message carrying another entry, so the loser is never sent.
+        At the same timestamp the pending message stays if it carries the same
+        entry, whatever the ops: a GET of an entry repairs every neighbour a PUT
+        of it does, and also makes newer neighbours answer, while a pending PUT
+        already leaves before every GET. If it carries another entry, that entry
+        lost a conflict since (every message queued carries the sender's entry
+        of the moment), so `msg` replaces it and the loser is never sent.
         """
         head = msg[0]
         key = head & KEY_MAX
@@ -42,7 +43,7 @@ class OutQueue:
             pending = self._gets.get(key)
         if pending is not None:
             if msg[2] == pending[2]:
-                if not (resolved and (msg[1], msg[3]) != (pending[1], pending[3])):
+                if msg[1] == pending[1] and msg[3] == pending[3]:
                     return False
             elif not is_newer(msg[2], pending[2]):
                 return False

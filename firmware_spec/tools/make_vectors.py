@@ -368,13 +368,12 @@ def _receive_model(me: int, local: tuple[int, int, int] | None, before: tuple[st
     op, value, ts, robot = incoming
     queue: list[tuple[str, int, int, int]] = []  # one pending (op, value, ts, robot) at most: a single key
 
-    def push(msg: tuple[str, int, int, int], winner: bool = False) -> None:
+    def push(msg: tuple[str, int, int, int]) -> None:
         if queue:
             pending = queue[0]
-            same_ts = msg[2] == pending[2]
-            if same_ts and not (winner and msg[1::2] != pending[1::2]):
-                return
-            if not same_ts and not is_newer(msg[2], pending[2]):
+            if msg[2] == pending[2] and msg[1::2] == pending[1::2]:
+                return  # equal ts, same entry: the pending message stays
+            if msg[2] != pending[2] and not is_newer(msg[2], pending[2]):
                 return
             queue.clear()
         queue.append(msg)
@@ -404,7 +403,7 @@ def _receive_model(me: int, local: tuple[int, int, int] | None, before: tuple[st
             local = (chosen, next_ts(ts), me)  # a merge: a new write of the robot it names
         else:
             local = held if named == held[2] else remote
-        push(("PUT", *local), winner=True)
+        push(("PUT", *local))
         if held[2] == me and local[2] != me:
             lost = held
     return outcome, local, queue, lost

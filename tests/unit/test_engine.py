@@ -6,6 +6,7 @@ import pytest
 
 from vstig_hw import Entry, Message, Op, Outcome, Stigmergy
 from vstig_hw.engine import larger_value_wins, sum_merge
+from vstig_hw.outqueue import OutQueue
 from vstig_hw.timestamps import is_newer, next_timestamp
 
 PUT, GET = Op.PUT, Op.GET
@@ -288,6 +289,20 @@ def test_conflict_winner_replaces_pending_get_of_the_loser() -> None:
     s.get(4)
     assert s.receive(Message(PUT, 4, 1, 3, 5)) is Outcome.CONFLICT
     assert s.drain() == [Message(PUT, 4, 1, 3, 5)]
+
+
+def test_a_queue_fed_from_drains_sends_the_winner_not_the_loser() -> None:
+    # A gateway copies each drain into every link's own queue; a loser that
+    # waits there for bandwidth must give way to the winner drained after it.
+    link_queue = OutQueue()
+    s = Stigmergy(1)
+    s.receive(Message(PUT, 4, 9, 3, 2))
+    for msg in s.drain():
+        link_queue.push(msg)
+    s.receive(Message(PUT, 4, 1, 3, 5))  # robot 5 wins the conflict
+    for msg in s.drain():
+        link_queue.push(msg)
+    assert link_queue.drain() == [Message(PUT, 4, 1, 3, 5)]
 
 
 def test_resolver_returning_no_entry_is_refused_by_name() -> None:
