@@ -61,10 +61,6 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
         result = put_confirmed(node, key, raw, learn=0.0 if transmit_only else learn, wait=wait, tries=tries,
                                confirm=not no_confirm)
     ours = shown(result.written, value_type)
-    if result.hears_itself:
-        raise click.ClickException(
-            f"{name} brings our own GETs back (robot id {robot_id}): the radio echoes what we send, or another "
-            "robot uses that id; no answer can be told from our echo (--no-confirm writes anyway)")
     if result.superseded:
         assert result.holds is not None
         raise click.ClickException(f"key {key}: the swarm holds {shown(result.holds, value_type)} on {name}, "

@@ -202,12 +202,15 @@ def test_get_prints_the_newest_value_heard_within_wait_not_the_first() -> None:
 def test_put_on_a_radio_that_echoes_what_we_send_does_not_take_the_echo_for_an_answer() -> None:
     radio = PtyPeer()
     stop = threading.Event()
+    sent: list[Message] = []
+    framing = make_serial_framing("cobs8")
 
     def echo() -> None:
         while not stop.is_set():
             data = radio.read(0.01)
             if data:
                 radio.write(data)
+                sent.extend(framing.feed(data))
 
     threading.Thread(target=echo, daemon=True).start()
     try:
@@ -217,6 +220,7 @@ def test_put_on_a_radio_that_echoes_what_we_send_does_not_take_the_echo_for_an_a
         radio.close()
     assert put.returncode == 1 and put.stdout == ""
     assert "brings our own GETs back (robot id 33)" in put.stderr
+    assert sent and all(m.op is Op.GET for m in sent)  # found while learning: nothing was written
 
 
 def test_put_on_a_transmit_only_link_needs_no_confirm_and_then_writes() -> None:

@@ -10,6 +10,11 @@ PUT stale stays silent), so `put_confirmed`:
    at most `tries` writes in all;
 4. reports whether a neighbour showed the write, and what the swarm said otherwise.
 
+A link that brings our own empty GET back (a radio that echoes what it is sent, or
+another robot with our id) cannot confirm anything, since a neighbour's copy of our
+PUT looks like our own echo: that raises `HearsItself`, before writing if learning
+found it.
+
 Asking alternates two GETs: one carrying our view (a holder of anything older
 stores ours and re-broadcasts it, a holder of something newer answers with it)
 and an empty one (every holder answers with its entry, which shows our write even
@@ -28,7 +33,11 @@ from ..timestamps import TS_NONE
 from ..wire import Op
 from .node import Node
 
-__all__ = ["KeyWatch", "PutResult", "get_newest", "put_confirmed"]
+__all__ = ["HearsItself", "KeyWatch", "PutResult", "get_newest", "put_confirmed"]
+
+
+class HearsItself(RuntimeError):
+    """The link brings our own GETs back, so no answer can be told from our echo."""
 
 
 @dataclass
@@ -74,7 +83,6 @@ class PutResult:
     tries: int  # writes made
     holds: Entry | None  # our engine's entry at the end: not `written` when the swarm superseded it
     heard: Entry | None  # the last entry a neighbour's message carried (None: nothing heard)
-    hears_itself: bool  # the link brought our own empty GET back: no answer can be told from our echo
 
     @property
     def superseded(self) -> bool:
@@ -98,11 +106,13 @@ def put_confirmed(node: Node, key: int, value: int, *, learn: float, wait: float
     try:
         if learn:
             asker(node)
-            node.run(until=lambda: watch.hears_itself, duration=learn)
+            node.run(until=lambda: confirm and watch.hears_itself, duration=learn)
+            _check_not_echoed(node, watch, confirm)
         written, made = _write(node, key, value), 1
         if confirm:
-            while not watch.hears_itself:
+            while True:
                 node.run(until=partial(_settled, watch, written, engine), duration=wait)
+                _check_not_echoed(node, watch, confirm)
                 if engine.entry(key) == written or made >= tries:
                     break
                 watch.seen.clear()
@@ -111,8 +121,8 @@ def put_confirmed(node: Node, key: int, value: int, *, learn: float, wait: float
     finally:
         node.on_heard.remove(watch)
         node.on_tick.remove(asker)
-    confirmed = confirm and written in watch.seen and engine.entry(key) == written and not watch.hears_itself
-    return PutResult(written, confirmed, made, engine.entry(key), watch.last, watch.hears_itself)
+    confirmed = confirm and written in watch.seen and engine.entry(key) == written
+    return PutResult(written, confirmed, made, engine.entry(key), watch.last)
 
 
 def get_newest(node: Node, key: int, wait: float) -> Entry | None:
@@ -128,6 +138,14 @@ def get_newest(node: Node, key: int, wait: float) -> Entry | None:
     finally:
         node.on_tick.remove(asker)
     return engine.entry(key)
+
+
+def _check_not_echoed(node: Node, watch: KeyWatch, confirm: bool) -> None:
+    if confirm and watch.hears_itself:
+        names = ", ".join(link.name for link in node.links)
+        raise HearsItself(f"{names} brings our own GETs back (robot id {watch.robot_id}): the radio echoes what "
+                          "we send, or another robot uses that id; no answer can be told from our echo "
+                          "(--no-confirm writes anyway)")
 
 
 def _settled(watch: KeyWatch, written: Entry, engine: Stigmergy) -> bool:
