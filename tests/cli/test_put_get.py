@@ -187,6 +187,20 @@ def test_put_against_a_robot_that_keeps_overwriting_gives_up_after_its_tries() -
     assert [m.timestamp for m in writes] == [6, 8, 10]  # each write newer than what the robot answered
 
 
+def test_put_that_loses_a_conflict_writes_again_and_then_says_who_won() -> None:
+    def answers_each_write_with_a_conflicting_one(robot: RadioRobot, msg: Message) -> None:
+        if msg.op is Op.PUT and msg.robot == 33:  # same timestamp, higher robot id: it wins by default
+            robot.say.append(Message(Op.PUT, 23, 1, msg.timestamp, 200))
+
+    with RadioRobot(200, program=answers_each_write_with_a_conflicting_one) as robot:
+        put = run_vstig("put", "23", "9", "--on", robot.link, "--robot-id", "33", "--learn", "0",
+                        "--wait", "5", "--tries", "2")
+        writes = [m.timestamp for m in robot.heard if m.op is Op.PUT and m.robot == 33]
+    assert put.returncode == 1 and put.stdout == ""
+    assert writes == [1, 2]  # the second write is newer than the entry that won
+    assert "the swarm holds value=1 timestamp=2 robot=200" in put.stderr and "after 2 writes" in put.stderr
+
+
 def test_get_prints_the_newest_value_heard_within_wait_not_the_first() -> None:
     def writes_again_later(robot: RadioRobot, msg: Message) -> None:
         robot.engine.receive(msg)
