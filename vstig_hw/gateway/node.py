@@ -175,7 +175,7 @@ class Node:
 
     def _engine(self) -> Stigmergy:
         if self.engine is None or self.mode is not Mode.ENGINE:
-            raise RuntimeError(f"a {self.mode.value} node has no engine")
+            raise RuntimeError(f"a {self.mode.value} node cannot put, get or ask: only an engine node transmits")
         return self.engine
 
     # -- the loop ----------------------------------------------------------------
