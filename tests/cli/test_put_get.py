@@ -97,13 +97,13 @@ def test_put_whose_learning_answer_arrives_after_the_write_writes_again_and_repo
 
 def test_put_asks_every_control_step_while_learning() -> None:
     with RadioRobot(9, delay=0.8).holding(23, 1, timestamp=5) as robot:
-        run_vstig("put", "23", "9", "--on", robot.link, "--learn", "1.0", "--no-confirm")
+        run_vstig("put", "23", "9", "--on", robot.link, "--learn", "2.0", "--no-confirm")
         gets_before_write = []
         for msg in robot.heard:
             if msg.op is Op.PUT:
                 break
             gets_before_write.append(msg)
-    assert len(gets_before_write) >= 5  # one a control step (0.1 s) for 1 s, not one in all
+    assert len(gets_before_write) >= 5  # one a control step (0.1 s) for 2 s, not one in all
 
 
 def test_put_whose_rebroadcast_is_lost_is_confirmed_by_the_robot_answering_an_empty_get() -> None:
@@ -178,7 +178,7 @@ def test_put_against_a_robot_that_keeps_overwriting_gives_up_after_its_tries() -
             robot.engine.put(23, 1)
 
     with RadioRobot(9, program=insists_on_its_own_value).holding(23, 1, timestamp=5) as robot:
-        put = run_vstig("put", "23", "9", "--on", robot.link, "--robot-id", "33", "--learn", "0.3",
+        put = run_vstig("put", "23", "9", "--on", robot.link, "--robot-id", "33", "--learn", "1",
                         "--wait", "5", "--tries", "3")
         writes = [m for m in robot.heard if m.op is Op.PUT and m.robot == 33]
     assert put.returncode == 1 and put.stdout == ""
