@@ -6,7 +6,7 @@ import click
 
 from vstig_hw.engine import Entry
 from vstig_hw.gateway import Node
-from vstig_hw.gateway.oneshot import put_confirmed
+from vstig_hw.gateway.oneshot import HearsItself, put_confirmed
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
@@ -58,8 +58,11 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
         raise click.BadParameter(f"{name} only transmits: no neighbour can answer, so nothing can confirm "
                                  "the write (add --no-confirm to write anyway)", param_hint="'--on'")
     with node:
-        result = put_confirmed(node, key, raw, learn=0.0 if transmit_only else learn, wait=wait, tries=tries,
-                               confirm=not no_confirm)
+        try:
+            result = put_confirmed(node, key, raw, learn=0.0 if transmit_only else learn, wait=wait, tries=tries,
+                                   confirm=not no_confirm)
+        except HearsItself as error:
+            raise click.ClickException(str(error)) from None
     ours = shown(result.written, value_type)
     if result.superseded:
         assert result.holds is not None
