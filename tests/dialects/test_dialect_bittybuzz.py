@@ -63,6 +63,7 @@ def test_bbzfloat_edges() -> None:
     assert bbzfloat_to_float(0x0001) == math.ldexp(1 + 1 / 512, -31)  # E=0 with a fraction: 1.f, not 0.f
     assert bbzfloat_to_float(0x7C00) == math.inf and bbzfloat_to_float(0xFE01) == -math.inf  # E>=62
     assert bbzfloat_from_float(1e-12) == 0  # bbzfloat.c would say infinity here
+    assert bbzfloat_from_float(-(2.0**-31) * 1.5) == 0x8100  # E=0 keeps its fraction
     for bad in (2.0**31, math.inf, math.nan, 1e40):
         with pytest.raises(ValueError):
             bbzfloat_from_float(bad)
@@ -76,8 +77,7 @@ def test_any_nine_bytes_round_trip(raw: bytes) -> None:
 @given(st.integers(0, 0xFFFF))
 def test_every_finite_bbzfloat_round_trips(raw: int) -> None:
     value = bbzfloat_to_float(raw)
-    exponent = (raw >> 9) & 0x3F
-    if exponent >= 62:
+    if (raw >> 9) & 0x3F >= 62:
         assert math.isinf(value)
-    elif exponent > 0:  # E=0 values sit below the range a correct encoder can produce
+    else:
         assert bbzfloat_from_float(value) == raw

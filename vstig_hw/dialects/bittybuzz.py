@@ -142,9 +142,10 @@ def bbzfloat_from_float(value: float) -> int:
     """The bbzfloat of `value`, its fraction truncated as `bbzfloat_fromfloat` does.
 
     Values too large (|x| >= 2^31) or not finite raise ValueError instead of becoming
-    infinity. Magnitudes below 2^-30 become a signed zero: `bbzfloat_fromfloat` turns them
-    into infinity (its `e > 0 && e < 0xFF` branch also catches small exponents), which we
-    do not copy.
+    infinity. Magnitudes in [2^-31, 2^-30) use E = 0, which `bbzfloat_tofloat` reads as
+    1.f * 2^-31; smaller ones become a signed zero. `bbzfloat_fromfloat` turns every
+    magnitude below 2^-30 into infinity (its `e > 0 && e < 0xFF` branch also catches small
+    exponents), which we do not copy.
     """
     number = float(value)
     if not math.isfinite(number):
@@ -157,6 +158,6 @@ def bbzfloat_from_float(value: float) -> int:
     exponent = (bits >> 23) & 0xFF
     if exponent >= 158:
         raise ValueError(f"{value!r} does not fit a bbzfloat (|x| < 2^31)")
-    if exponent <= 96:
+    if exponent < 96:
         return sign
-    return sign | ((exponent - 96) << 9) | ((bits & 0x7FFFFF) >> 14)
+    return sign | ((exponent - 96) << 9) | ((bits & 0x7FFFFF) >> 14)  # exponent 96: E=0, read back as 1.f * 2^-31

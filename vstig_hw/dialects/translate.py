@@ -1,0 +1,131 @@
+"""Translators between each dialect's vstig messages and our Message, for one deployment.
+
+Each translator is pure and counts what it cannot carry in `drops`:
+`drop_unmapped` (a name, stigmergy or value the deployment does not map) and the
+guards below. Timestamps, writers and the PUT/GET distinction cross unchanged
+where the widths allow.
+
+Buzz: a QUERY for a key its sender does not hold (nil, timestamp 0) is our empty
+GET (value 0, timestamp 0) and back. Other nils (Buzz's put(nil) tombstones) have
+no equivalent in our format and are unmapped.
+
+BittyBuzz guards (its firmware's known defects, DIALECTS D.5):
+- only PUTs go to the Kilobots: a Kilobot stores any vstig message for a key it
+  does not hold, so a QUERY would plant its value (or nil) there;
+- at most `capacity` keys (BBZVSTIG_CAP): an incoming message for one more key is
+  written past the end of the Kilobot's store (`guard_capacity`);
+- a Kilobot's repeat of a version we know (the echo storm of pre-2021 firmware, or
+  a query reply carrying the replier's id) is not news (`bbz_repeat`);
+- timestamps go through the per-key Lamport anchors of `lamport`.
+
+A version lost on its way to the Kilobots is repaired when a Kilobot shows it
+lacks it: a query for a key it does not hold (nil, lamport 0) gets the version we
+know, replayed as it is; an older lamport or a losing conflict gets it one step
+ahead; and our side's next write goes out one step ahead anyway.
+"""
+
+from __future__ import annotations
+
+from ..counters import Counters
+from ..wire import Message, Op
+from .bittybuzz import BbzOp, BbzType, BbzVstig
+from .buzz import BuzzOp, BuzzVstig
+from .lamport import BBZ_LAMPORT_THRESHOLD, LamportBridge, Verdict
+from .mapping import Deployment
+
+__all__ = ["BittyBuzzTranslator", "BuzzTranslator"]
+
+UNMAPPED = "drop_unmapped"
+
+
+class BuzzTranslator:
+    def __init__(self, deployment: Deployment, drops: Counters | None = None) -> None:
+        self.deployment = deployment
+        self.drops = drops if drops is not None else Counters()
+
+    def to_ours(self, msg: BuzzVstig) -> Message | None:
+        entry = self.deployment.keys.get(msg.key) if isinstance(msg.key, str) else None
+        if entry is None or msg.stigmergy != self.deployment.buzz_stigmergy:
+            self.drops[UNMAPPED] += 1
+            return None
+        op = Op.PUT if msg.op is BuzzOp.PUT else Op.GET
+        if msg.value is None and op is Op.GET and msg.timestamp == 0:
+            return Message(Op.GET, entry.key, 0, 0, msg.robot)
+        raw = self.deployment.raw_from_buzz(msg.value, entry.value_type)
+        if raw is None:
+            self.drops[UNMAPPED] += 1
+            return None
+        return Message(op, entry.key, raw, msg.timestamp, msg.robot)
+
+    def from_ours(self, msg: Message) -> BuzzVstig | None:
+        entry = self.deployment.by_key.get(msg.key)
+        if entry is None:
+            self.drops[UNMAPPED] += 1
+            return None
+        op = BuzzOp.PUT if msg.op is Op.PUT else BuzzOp.QUERY
+        stigmergy = self.deployment.buzz_stigmergy
+        if op is BuzzOp.QUERY and msg.timestamp == 0:
+            return BuzzVstig(op, stigmergy, entry.name, None, 0, msg.robot)
+        value = self.deployment.buzz_from_raw(msg.value, entry.value_type)
+        if value is None:
+            self.drops[UNMAPPED] += 1
+            return None
+        return BuzzVstig(op, stigmergy, entry.name, value, msg.timestamp, msg.robot)
+
+
+class BittyBuzzTranslator:
+    def __init__(self, deployment: Deployment, drops: Counters | None = None,
+                 threshold: int = BBZ_LAMPORT_THRESHOLD) -> None:
+        self.deployment = deployment
+        self.drops = drops if drops is not None else Counters()
+        self.clock = LamportBridge(threshold)
+        self.held: set[int] = set()  # our keys the Kilobots hold: heard from them, or sent to them
+
+    def to_ours(self, msg: BbzVstig) -> tuple[Message | None, BbzVstig | None]:
+        """(what our side gets, the repair to send back to the Kilobots); either may be None."""
+        entry = self.deployment.by_bbz_id.get(msg.key)
+        if entry is None:
+            self.drops[UNMAPPED] += 1
+            return None, None
+        if msg.value_type == BbzType.NIL and msg.op is BbzOp.QUERY and msg.lamport == 0:
+            # "Who knows this key?": that robot lacks it, so it gets the version we know as it is.
+            anchor = self.clock.anchors.get(entry.key)
+            replay = None if anchor is None else BbzVstig(BbzOp.PUT, anchor.robot, msg.key, *anchor.value,
+                                                          anchor.lamport)
+            return Message(Op.GET, entry.key, 0, 0, msg.robot), replay
+        raw = self.deployment.raw_from_bbz(msg.value_type, msg.value, entry.value_type)
+        if raw is None:
+            self.drops[UNMAPPED] += 1
+            return None, None
+        self.held.add(entry.key)
+        verdict, anchor = self.clock.from_kilobots(entry.key, msg.lamport, (msg.value_type, msg.value), msg.robot)
+        if verdict is Verdict.NEWER:
+            op = Op.PUT if msg.op is BbzOp.PUT else Op.GET
+            return Message(op, entry.key, raw, anchor.timestamp, msg.robot), None
+        self.drops[verdict.value] += 1
+        if verdict is Verdict.REPEAT:
+            return None, None
+        tag, value = anchor.value
+        return None, BbzVstig(BbzOp.PUT, anchor.robot, msg.key, tag, value, anchor.lamport)
+
+    def from_ours(self, msg: Message) -> BbzVstig | None:
+        """The PUT that gives the Kilobots our version, or None (unmapped, guarded, or already theirs)."""
+        entry = self.deployment.by_key.get(msg.key)
+        if entry is None or entry.bbz_id is None:
+            self.drops[UNMAPPED] += 1
+            return None
+        if msg.timestamp == 0:
+            self.drops["guard_query"] += 1  # an empty GET would plant nil on Kilobots that lack the key
+            return None
+        if entry.key not in self.held and len(self.held) >= self.deployment.bbz_capacity:
+            self.drops["guard_capacity"] += 1
+            return None
+        tagged = self.deployment.bbz_from_raw(msg.value, entry.value_type)
+        if tagged is None:
+            self.drops[UNMAPPED] += 1
+            return None
+        lamport = self.clock.to_kilobots(entry.key, msg.timestamp, tagged, msg.robot)
+        if lamport is None:
+            return None
+        self.held.add(entry.key)
+        return BbzVstig(BbzOp.PUT, msg.robot, entry.bbz_id, tagged[0], tagged[1], lamport)
