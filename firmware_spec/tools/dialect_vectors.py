@@ -157,7 +157,7 @@ def buzz_vectors() -> dict[str, object]:
         single = struct.unpack(">f", struct.pack(">f", value))[0]
         floats.append({"value": value, "float32": single, "mantissa": mantissa.lower(), "exponent": exponent.lower(),
                        "source": SRC_BUZZ_FLOAT})
-    invalid = [{"name": name, "hex": h(spaced).hex(), "outcome": "drop", "reason": reason,
+    invalid = [{"name": name, "hex": h(spaced).hex(), "outcome": "drop", "counted_as": reason,
                 "source": SRC_BUZZ_DESERIALIZE} for name, spaced, reason in BUZZ_INVALID]
     other = [{"name": name, "hex": h(spaced).hex(), "type": kind, "source": f"{BZ} src/buzz/buzzmsg.h:14-22"}
              for name, spaced, kind in BUZZ_OTHER]
@@ -165,7 +165,8 @@ def buzz_vectors() -> dict[str, object]:
         "description": "Buzz vstig messages (firmware_spec/dialects.md). `hex` decodes to `fields` in its "
                        "`dialect`, and `fields` encode to `hex`. Objects are {type, value}; a float's value is "
                        "what the receiver rebuilds (a float32). `other` messages are not vstig: a decoder keeps "
-                       "them whole. `invalid` ones are dropped for `reason`.",
+                       "them whole. `invalid` ones are dropped and counted as `counted_as` (a decoder "
+                       "counter, not a SPEC.md 6.6 reason).",
         "messages": messages,
         "floats": floats,
         "other": other,
