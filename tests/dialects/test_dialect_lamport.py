@@ -4,9 +4,10 @@ A Kilobot store that follows BittyBuzz's receive rules (bbzmsg.c `bbzmsg_process
 HEAD) and our real engine exchange versions through `BittyBuzzTranslator`, with writes
 and message loss on both sides. At every crossing:
 
-- toward the Kilobots, a lamport is exactly one step past the last one the bridge
-  saw or sent for that key: never a jump of 50 or more, never a used lamport with
-  another value;
+- toward the Kilobots, a lamport is one step past the last one the bridge saw or
+  sent for that key (two when a pending repair was overtaken by a newer version),
+  or that very version again: never a jump of 50 or more, never a used lamport
+  with another value;
 - toward our side, a timestamp is strictly newer than the last one the bridge saw
   or produced for that key: never an equal timestamp with another value.
 
@@ -91,9 +92,9 @@ class Crossing:
         self.last_timestamp: dict[int, int] = {}
 
     def _to_kilobots(self, msg: BbzVstig, lost: bool) -> None:
-        """One step past the last lamport seen or sent, or a replay of that very version."""
+        """1..49 steps past the last lamport seen or sent (one, unless a repair was superseded), or that version."""
         last = self.last_lamport.get(msg.key)
-        assert last is None or msg.lamport == (last[0] + 1) & 0xFF or last == (msg.lamport, msg.value), (last, msg)
+        assert last is None or 1 <= (msg.lamport - last[0]) & 0xFF <= 2 or last == (msg.lamport, msg.value), (last, msg)
         self.last_lamport[msg.key] = (msg.lamport, msg.value)
         if not lost:
             self.kilobots.receive(msg)
@@ -101,16 +102,15 @@ class Crossing:
     def kilobots_to_ours(self, lost: bool) -> None:
         outbox, self.kilobots.outbox = self.kilobots.outbox, []
         for msg in outbox if not lost else ():
-            ours, repair = self.translator.to_ours(msg)
+            ours = self.translator.to_ours(msg)
             if msg.value_type != BbzType.NIL:
                 self.last_lamport[msg.key] = (msg.lamport, msg.value)
             if ours is not None and ours.timestamp:
                 last = self.last_timestamp.get(ours.key)
                 assert last is None or is_newer(ours.timestamp, last), (last, ours)
                 self.last_timestamp[ours.key] = ours.timestamp
+            if ours is not None:
                 self.engine.receive(ours)
-            if repair is not None:
-                self._to_kilobots(repair, lost=False)
 
     def ours_to_kilobots(self, lost: bool) -> None:
         for msg in self.engine.drain():

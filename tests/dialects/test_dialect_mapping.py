@@ -135,15 +135,19 @@ def test_every_mappable_value_crosses_to_buzz_and_back_unchanged(raw: int, value
 
 def test_bittybuzz_values_and_guards() -> None:
     bbz = BittyBuzzTranslator(parse_deployment(TEXT))
-    ours, _ = bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 41, 0x39, 0xFFFE, 1))  # flags above the tag are ignored
+    ours = bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 41, 0x39, 0xFFFE, 1))  # flags above the tag are ignored
     assert ours == Message(Op.PUT, 1, 0xFFFE, 1, 7)
-    assert bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 60, BbzType.INT, 0xFFFF, 1)) == (None, None)  # -1 is no uint16
-    assert bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 99, BbzType.INT, 1, 1)) == (None, None)  # unknown string id
-    assert bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 41, BbzType.NIL, 0, 2)) == (None, None)  # put(nil): no nil here
+    assert bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 60, BbzType.INT, 0xFFFF, 1)) is None  # -1 is no uint16
+    assert bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 99, BbzType.INT, 1, 1)) is None  # unknown string id
+    assert bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 41, BbzType.NIL, 0, 2)) is None  # put(nil): no nil here
     assert bbz.drops["drop_unmapped"] == 3
-    # A Kilobot asking for a key it lacks gets the version we know, replayed with its writer.
-    assert bbz.to_ours(BbzVstig(BbzOp.QUERY, 3, 41, BbzType.NIL, 0, 0)) == (
-        Message(Op.GET, 1, 0, 0, 3), BbzVstig(BbzOp.PUT, 7, 41, BbzType.INT, 0xFFFE, 1))
+    # Repeats are not news; a Kilobot asking for a key it lacks becomes our empty GET, and the
+    # engine's answer (the version the anchor says they hold) then goes back as it is.
+    assert bbz.to_ours(BbzVstig(BbzOp.QUERY, 9, 41, BbzType.INT, 0xFFFE, 1)) is None and bbz.drops["bbz_repeat"] == 1
+    assert bbz.from_ours(Message(Op.PUT, 1, 0xFFFE, 1, 7)) is None  # they hold it
+    assert bbz.to_ours(BbzVstig(BbzOp.QUERY, 3, 41, BbzType.NIL, 0, 0)) == Message(Op.GET, 1, 0, 0, 3)
+    assert bbz.from_ours(Message(Op.PUT, 1, 0xFFFE, 1, 7)) == BbzVstig(BbzOp.PUT, 7, 41, BbzType.INT, 0xFFFE, 1)
+    assert bbz.from_ours(Message(Op.PUT, 1, 0xFFFE, 1, 7)) is None  # once
     # Only PUTs toward the Kilobots, never an empty query, never more keys than they hold.
     assert bbz.from_ours(Message(Op.GET, 1, 5, 2, 500)) == BbzVstig(BbzOp.PUT, 500, 41, BbzType.INT, 5, 2)
     assert bbz.from_ours(Message(Op.GET, 2, 0, 0, 500)) is None and bbz.drops["guard_query"] == 1

@@ -19,9 +19,10 @@ BittyBuzz guards (its firmware's known defects, DIALECTS D.5):
 - timestamps go through the per-key Lamport anchors of `lamport`.
 
 A version lost on its way to the Kilobots is repaired when a Kilobot shows it
-lacks it: a query for a key it does not hold (nil, lamport 0) gets the version we
-know, replayed as it is; an older lamport or a losing conflict gets it one step
-ahead; and our side's next write goes out one step ahead anyway.
+lacks it (a query for a key it does not hold, an older lamport, a losing
+conflict): that becomes our empty GET, our engine answers with its entry, and
+that entry goes back to the Kilobots at the anchor's lamport (one step past the
+older one). Our side's next write goes out one step ahead anyway.
 """
 
 from __future__ import annotations
@@ -80,33 +81,37 @@ class BittyBuzzTranslator:
         self.drops = drops if drops is not None else Counters()
         self.clock = LamportBridge(threshold)
         self.held: set[int] = set()  # our keys the Kilobots hold: heard from them, or sent to them
+        self._repair: set[int] = set()  # keys some Kilobot showed it lacks our version of
 
-    def to_ours(self, msg: BbzVstig) -> tuple[Message | None, BbzVstig | None]:
-        """(what our side gets, the repair to send back to the Kilobots); either may be None."""
+    def to_ours(self, msg: BbzVstig) -> Message | None:
+        """What our side gets from one Kilobot message, or None (unmapped, or nothing new).
+
+        A Kilobot that shows it lacks our version (a query for a key it does not hold,
+        an older lamport, a version that lost a conflict) becomes our empty GET for the
+        key: the engine answers it with its entry, and `from_ours` then sends that entry
+        back even though the anchor says the Kilobots have it.
+        """
         entry = self.deployment.by_bbz_id.get(msg.key)
         if entry is None:
             self.drops[UNMAPPED] += 1
-            return None, None
+            return None
         if msg.value_type == BbzType.NIL and msg.op is BbzOp.QUERY and msg.lamport == 0:
-            # "Who knows this key?": that robot lacks it, so it gets the version we know as it is.
-            anchor = self.clock.anchors.get(entry.key)
-            replay = None if anchor is None else BbzVstig(BbzOp.PUT, anchor.robot, msg.key, *anchor.value,
-                                                          anchor.lamport)
-            return Message(Op.GET, entry.key, 0, 0, msg.robot), replay
+            self._repair.add(entry.key)  # "who knows this key?": that robot lacks it
+            return Message(Op.GET, entry.key, 0, 0, msg.robot)
         raw = self.deployment.raw_from_bbz(msg.value_type, msg.value, entry.value_type)
         if raw is None:
             self.drops[UNMAPPED] += 1
-            return None, None
+            return None
         self.held.add(entry.key)
         verdict, anchor = self.clock.from_kilobots(entry.key, msg.lamport, (msg.value_type, msg.value), msg.robot)
         if verdict is Verdict.NEWER:
-            op = Op.PUT if msg.op is BbzOp.PUT else Op.GET
-            return Message(op, entry.key, raw, anchor.timestamp, msg.robot), None
+            self._repair.discard(entry.key)
+            return Message(Op.PUT if msg.op is BbzOp.PUT else Op.GET, entry.key, raw, anchor.timestamp, msg.robot)
         self.drops[verdict.value] += 1
         if verdict is Verdict.REPEAT:
-            return None, None
-        tag, value = anchor.value
-        return None, BbzVstig(BbzOp.PUT, anchor.robot, msg.key, tag, value, anchor.lamport)
+            return None
+        self._repair.add(entry.key)
+        return Message(Op.GET, entry.key, 0, 0, msg.robot)
 
     def from_ours(self, msg: Message) -> BbzVstig | None:
         """The PUT that gives the Kilobots our version, or None (unmapped, guarded, or already theirs)."""
@@ -126,6 +131,10 @@ class BittyBuzzTranslator:
             return None
         lamport = self.clock.to_kilobots(entry.key, msg.timestamp, tagged, msg.robot)
         if lamport is None:
-            return None
+            anchor = self.clock.anchors[entry.key]
+            if entry.key not in self._repair or (anchor.timestamp, anchor.value) != (msg.timestamp, tagged):
+                return None
+            lamport = anchor.lamport  # the version they lack, at the lamport the anchor keeps for it
+        self._repair.discard(entry.key)
         self.held.add(entry.key)
         return BbzVstig(BbzOp.PUT, msg.robot, entry.bbz_id, tagged[0], tagged[1], lamport)
