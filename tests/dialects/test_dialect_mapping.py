@@ -107,7 +107,7 @@ def test_buzz_values_by_key_type() -> None:
         BuzzVstig(BuzzOp.PUT, 1, "x", BuzzTable(), 4, 3),
     ]
     assert [buzz.to_ours(m) for m in unmappable] == [None] * len(unmappable)
-    assert buzz.drops["drop_unmapped"] == len(unmappable)
+    assert buzz.drops["unmapped"] == len(unmappable)
 
 
 def test_ours_to_buzz() -> None:
@@ -117,7 +117,7 @@ def test_ours_to_buzz() -> None:
     assert buzz.from_ours(Message(Op.GET, 2, 0, 0, 9)) == BuzzVstig(BuzzOp.QUERY, 1, "count", None, 0, 9)
     assert buzz.from_ours(Message(Op.PUT, 3, 0x7C00, 3, 9)) is None  # a float16 infinity: Buzz cannot send it
     assert buzz.from_ours(Message(Op.PUT, 99, 1, 1, 1)) is None
-    assert buzz.drops["drop_unmapped"] == 2
+    assert buzz.drops["unmapped"] == 2
 
 
 @given(st.integers(0, 0xFFFF), st.sampled_from(["int16", "uint16", "float16", "bbzfloat"]))
@@ -140,7 +140,7 @@ def test_bittybuzz_values_and_guards() -> None:
     assert bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 60, BbzType.INT, 0xFFFF, 1)) is None  # -1 is no uint16
     assert bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 99, BbzType.INT, 1, 1)) is None  # unknown string id
     assert bbz.to_ours(BbzVstig(BbzOp.PUT, 7, 41, BbzType.NIL, 0, 2)) is None  # put(nil): no nil here
-    assert bbz.drops["drop_unmapped"] == 3
+    assert bbz.drops["unmapped"] == 3
     # Repeats are not news; a Kilobot asking for a key it lacks becomes our empty GET, and the
     # engine's answer (the version the anchor says they hold) then goes back as it is.
     assert bbz.to_ours(BbzVstig(BbzOp.QUERY, 9, 41, BbzType.INT, 0xFFFE, 1)) is None and bbz.drops["bbz_repeat"] == 1
@@ -154,4 +154,4 @@ def test_bittybuzz_values_and_guards() -> None:
     assert bbz.from_ours(Message(Op.PUT, 2, 9, 1, 500)) is not None  # a second key: capacity 2
     assert bbz.from_ours(Message(Op.PUT, 6, 1, 1, 500)) is None and bbz.drops["guard_capacity"] == 1
     assert bbz.from_ours(Message(Op.PUT, 4, 0x3E00, 1, 500)) is None  # no string id known for "heading"
-    assert bbz.drops["drop_unmapped"] == 4
+    assert bbz.drops["unmapped"] == 4

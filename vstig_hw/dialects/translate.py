@@ -36,7 +36,7 @@ from .mapping import Deployment
 
 __all__ = ["BittyBuzzTranslator", "BuzzTranslator"]
 
-UNMAPPED = "drop_unmapped"
+UNMAPPED = "unmapped"  # shown as drop_unmapped in a link's counters
 
 
 class BuzzTranslator:

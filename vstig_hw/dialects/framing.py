@@ -1,0 +1,95 @@
+"""Framings that speak a dialect: link units <-> dialect messages <-> our Message.
+
+Each is a serial framing like those of `vstig_hw.framing` (pure, counted), with a
+translator of one deployment inside:
+
+- `BittyBuzzKilobotFraming`: Kilobot `message_t` (data[9] = the BittyBuzz message,
+  type 2) in the serial frame of a Kilobot bridge radio, as the `kilobot` framing
+  carries ours;
+- `BittyBuzzOhcFraming`: the same message injected through the stock overhead
+  controller (transmit only).
+
+Counters (a link shows them as drop_<name>): `unmapped` and the guards of
+`translate`, `bbz_other` for BittyBuzz messages that are not vstig (broadcasts),
+`foreign_type` for Kilobot messages of another type, and the frame reader's own.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from ..counters import Counters
+from ..framing.cobsframe import CobsFrameReader, encode_frame
+from ..framing.kilobot_ohc import OHC_FORWARDMSG, OHC_FORWARDMSGSINGLE, TransmitOnlyError, ohc_packet
+from ..wire import Message
+from .bittybuzz import BBZ_KILOBOT_TYPE, BBZ_MESSAGE_SIZE, BbzOther, decode_bittybuzz, encode_bittybuzz
+from .mapping import Deployment
+from .translate import BittyBuzzTranslator
+
+__all__ = ["BittyBuzzKilobotFraming", "BittyBuzzOhcFraming"]
+
+_PAYLOAD = BBZ_MESSAGE_SIZE + 1  # message_t data[9] + type: what kilolib's CRC covers
+
+
+def _message_t(translator: BittyBuzzTranslator, msg: Message) -> bytes | None:
+    out = translator.from_ours(msg)
+    return None if out is None else encode_bittybuzz(out) + bytes((BBZ_KILOBOT_TYPE,))
+
+
+class BittyBuzzKilobotFraming:
+    name = "kilobot"
+    default_baud = 115200
+    transmit_only = False
+
+    def __init__(self, deployment: Deployment) -> None:
+        self.drops = Counters()
+        self.translator = BittyBuzzTranslator(deployment, self.drops)
+        self._reader = CobsFrameReader(_PAYLOAD, self.drops)
+
+    def encode(self, msg: Message) -> list[bytes]:
+        payload = _message_t(self.translator, msg)
+        return [] if payload is None else [encode_frame(payload)]
+
+    def feed(self, unit: bytes) -> list[Message]:
+        messages = []
+        for payload in self._reader.feed(unit):
+            if payload[BBZ_MESSAGE_SIZE] != BBZ_KILOBOT_TYPE:
+                self.drops["foreign_type"] += 1
+                continue
+            decoded = decode_bittybuzz(payload[:BBZ_MESSAGE_SIZE])
+            if isinstance(decoded, BbzOther):
+                self.drops["bbz_other"] += 1
+            elif (msg := self.translator.to_ours(decoded)) is not None:
+                messages.append(msg)
+        return messages
+
+    def tick(self) -> None:
+        """Nothing ages in a Kilobot stream."""
+
+    def reset(self) -> None:
+        self._reader.reset()
+
+
+class BittyBuzzOhcFraming:
+    name = "kilobot-ohc"
+    default_baud = 38400
+    transmit_only = True
+
+    def __init__(self, deployment: Deployment, mode: Literal["single", "repeat"] = "single") -> None:
+        self.drops = Counters()
+        self.translator = BittyBuzzTranslator(deployment, self.drops)
+        self.packet_type = OHC_FORWARDMSGSINGLE if mode == "single" else OHC_FORWARDMSG
+
+    def encode(self, msg: Message) -> list[bytes]:
+        payload = _message_t(self.translator, msg)
+        return [] if payload is None else [ohc_packet(payload, self.packet_type)]
+
+    def feed(self, unit: bytes) -> list[Message]:
+        raise TransmitOnlyError("kilobot-ohc is transmit-only: the overhead controller sends nothing back; "
+                                "to hear the Kilobots, add a receiving link (a kilobot bridge radio)")
+
+    def tick(self) -> None:
+        """Nothing ages: packets are written whole."""
+
+    def reset(self) -> None:
+        """No receive state."""
