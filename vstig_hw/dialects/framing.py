@@ -7,11 +7,17 @@ translator of one deployment inside:
   type 2) in the serial frame of a Kilobot bridge radio, as the `kilobot` framing
   carries ours;
 - `BittyBuzzOhcFraming`: the same message injected through the stock overhead
-  controller (transmit only).
+  controller (transmit only);
+- `BuzzKh4Framing`: BuzzKH4's fixed-size frames (a Khepera IV swarm through the
+  `blabbermouth` transport), several Buzz messages per frame.
 
 Counters (a link shows them as drop_<name>): `unmapped` and the guards of
 `translate`, `bbz_other` for BittyBuzz messages that are not vstig (broadcasts),
-`foreign_type` for Kilobot messages of another type, and the frame reader's own.
+`foreign_type` for Kilobot messages of another type, and the frame reader's own;
+for Buzz, `buzz_other` (broadcasts and swarm messages: the robots still get them,
+the relay passes every frame on), the decoder's `buzz_*` reasons, `overrun` (a
+length past the frame's end) and `oversize` (a message no frame can hold: sent,
+it would block the queue as it blocks BuzzKH4's).
 """
 
 from __future__ import annotations
@@ -23,10 +29,12 @@ from ..framing.cobsframe import CobsFrameReader, encode_frame
 from ..framing.kilobot_ohc import OHC_FORWARDMSG, OHC_FORWARDMSGSINGLE, TransmitOnlyError, ohc_packet
 from ..wire import Message
 from .bittybuzz import BBZ_KILOBOT_TYPE, BBZ_MESSAGE_SIZE, BbzOther, decode_bittybuzz, encode_bittybuzz
+from .buzz import BuzzDecodeError, BuzzOther, decode_buzz, encode_buzz
+from .buzz_packets import pack_frame, unpack_frame
 from .mapping import Deployment
-from .translate import BittyBuzzTranslator
+from .translate import BittyBuzzTranslator, BuzzTranslator
 
-__all__ = ["BittyBuzzKilobotFraming", "BittyBuzzOhcFraming"]
+__all__ = ["BittyBuzzKilobotFraming", "BittyBuzzOhcFraming", "BuzzKh4Framing"]
 
 _PAYLOAD = BBZ_MESSAGE_SIZE + 1  # message_t data[9] + type: what kilolib's CRC covers
 
@@ -93,3 +101,65 @@ class BittyBuzzOhcFraming:
 
     def reset(self) -> None:
         """No receive state."""
+
+
+class BuzzKh4Framing:
+    """Frames of `frame_size` bytes: u16 robot id, [u16 length][Buzz message]..., zero padding; little-endian."""
+
+    name = "blabbermouth"
+    transmit_only = False
+
+    def __init__(self, deployment: Deployment, robot_id: int, frame_size: int) -> None:
+        self.drops = Counters()
+        self.translator = BuzzTranslator(deployment, self.drops)
+        self.dialect = deployment.buzz_dialect
+        self.robot_id = robot_id
+        self.frame_size = frame_size
+
+    def encode(self, msg: Message) -> list[bytes]:
+        return self.encode_batch([msg])
+
+    def encode_batch(self, messages: list[Message]) -> list[bytes]:
+        """As few frames as hold the messages, in order, each under our robot id (as BuzzKH4 fills its own)."""
+        pending = []
+        for msg in messages:
+            out = self.translator.from_ours(msg)
+            if out is None:
+                continue
+            raw = encode_buzz(out, self.dialect)
+            if len(raw) + 4 > self.frame_size:
+                self.drops["oversize"] += 1
+                continue
+            pending.append(raw)
+        frames = []
+        while pending:
+            frame, packed = pack_frame(self.robot_id, pending, self.frame_size, "little")
+            frames.append(frame)
+            pending = pending[packed:]
+        return frames
+
+    def feed(self, unit: bytes) -> list[Message]:
+        frame = unpack_frame(unit, "little")
+        self.drops["overrun"] += frame.overrun
+        messages = []
+        for raw in frame.messages:
+            try:
+                decoded = decode_buzz(raw, self.dialect)
+            except BuzzDecodeError as error:
+                self.drops[error.reason] += 1
+                continue
+            if isinstance(decoded, BuzzOther):
+                self.drops["buzz_other"] += 1
+            elif (msg := self.translator.to_ours(decoded)) is not None:
+                messages.append(msg)
+        return messages
+
+    def sender_of(self, unit: bytes) -> int | None:
+        """The robot whose frame this is (its first u16)."""
+        return int.from_bytes(unit[:2], "little") if len(unit) >= 2 else None
+
+    def tick(self) -> None:
+        """Frames arrive whole: nothing ages."""
+
+    def reset(self) -> None:
+        """No partial state."""
