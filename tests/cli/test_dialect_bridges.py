@@ -12,7 +12,7 @@ from typing import Any
 
 import can
 from bbz_swarm import KilobotSwarm
-from peers import PtyPeer, SlcanAdapter, start_vstig, stop, wait_for
+from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, stop, wait_for
 
 from vstig_hw import Message, Op, Stigmergy, decode, encode
 from vstig_hw.engine import larger_value_wins
@@ -146,3 +146,26 @@ def test_sniffing_a_khepera_swarm_relays_it_whole_and_decodes_it(tmp_path: Path)
 def _collect(stream: Any, into: list[str]) -> None:
     for line in stream:
         into.append(line.strip())
+
+
+def test_record_and_decode_a_khepera_swarm(tmp_path: Path) -> None:
+    deployment = tmp_path / "kheperas.toml"
+    deployment.write_text('[buzz]\nstigmergy = 1\n[keys]\nleader = { key = 1, type = "int16" }\n', encoding="utf-8")
+    kheperas = [_start_khepera(robot_id) for robot_id in (5, 9)]
+    capture = tmp_path / "kheperas.cap"
+    addresses = ",".join(f"127.0.0.1:{port}" for _, port in kheperas)
+    try:
+        done = run_vstig("record", f"blabbermouth:{addresses}?size={FRAME}&deployment={deployment}",
+                         "-o", str(capture), "--for", "2")
+    finally:
+        for robot, _ in kheperas:
+            robot.terminate()
+            robot.wait(timeout=10)
+    assert done.returncode == 0, done.stderr
+    decoded = run_vstig("decode", str(capture), "--format", "jsonl", "--deployment", str(deployment))
+    assert decoded.returncode == 0, decoded.stderr
+    rows = [json.loads(line) for line in decoded.stdout.splitlines()]
+    assert ("PUT", 1, 9, 1, 9) in {(r["op"], r["key"], r["value"], r["timestamp"], r["robot"]) for r in rows}
+    undeployed = run_vstig("decode", str(capture))
+    assert undeployed.returncode == 1 and "--deployment" in undeployed.stderr
+    assert len(undeployed.stderr.strip().splitlines()) == 1 and "Traceback" not in undeployed.stderr

@@ -34,7 +34,8 @@ from .buzz_packets import pack_frame, unpack_frame
 from .mapping import Deployment
 from .translate import BittyBuzzTranslator, BuzzTranslator
 
-__all__ = ["BittyBuzzKilobotFraming", "BittyBuzzOhcFraming", "BuzzKh4Framing"]
+__all__ = ["DIALECT_FRAMINGS", "BittyBuzzKilobotFraming", "BittyBuzzOhcFraming", "BuzzKh4Framing",
+           "make_dialect_framing"]
 
 _PAYLOAD = BBZ_MESSAGE_SIZE + 1  # message_t data[9] + type: what kilolib's CRC covers
 
@@ -45,7 +46,7 @@ def _message_t(translator: BittyBuzzTranslator, msg: Message) -> bytes | None:
 
 
 class BittyBuzzKilobotFraming:
-    name = "kilobot"
+    name = "bittybuzz-kilobot"
     default_baud = 115200
     transmit_only = False
 
@@ -79,7 +80,7 @@ class BittyBuzzKilobotFraming:
 
 
 class BittyBuzzOhcFraming:
-    name = "kilobot-ohc"
+    name = "bittybuzz-ohc"
     default_baud = 38400
     transmit_only = True
 
@@ -109,7 +110,7 @@ class BuzzKh4Framing:
     name = "blabbermouth"
     transmit_only = False
 
-    def __init__(self, deployment: Deployment, robot_id: int, frame_size: int) -> None:
+    def __init__(self, deployment: Deployment, robot_id: int = 0, frame_size: int = 0xFFFF) -> None:
         self.drops = Counters()
         self.translator = BuzzTranslator(deployment, self.drops)
         self.dialect = deployment.buzz_dialect
@@ -163,3 +164,18 @@ class BuzzKh4Framing:
 
     def reset(self) -> None:
         """No partial state."""
+
+
+DIALECT_FRAMINGS = ("bittybuzz-kilobot", "bittybuzz-ohc", "blabbermouth")  # the names their captures carry
+
+
+def make_dialect_framing(name: str, deployment: Deployment) -> BittyBuzzKilobotFraming | BittyBuzzOhcFraming | \
+        BuzzKh4Framing:
+    """A fresh dialect framing by the name a capture records (to decode or replay it)."""
+    if name == "bittybuzz-kilobot":
+        return BittyBuzzKilobotFraming(deployment)
+    if name == "bittybuzz-ohc":
+        return BittyBuzzOhcFraming(deployment)
+    if name == "blabbermouth":
+        return BuzzKh4Framing(deployment)
+    raise ValueError(f"unknown dialect framing {name!r}; one of {', '.join(DIALECT_FRAMINGS)}")
