@@ -13,6 +13,8 @@ from vstig_hw.dialects.buzz_packets import (
     rosbuzz_payload64,
     unpack_frame,
     unpack_rosbuzz_block,
+    xbee_packet,
+    xbee_payload64,
     xbee_word_order,
 )
 
@@ -75,3 +77,18 @@ def test_packed_messages_come_back_in_order(messages: list[bytes], robot: int) -
     block, in_block = pack_rosbuzz_block(robot, messages)
     assert len(block) % 8 == 0 and len(block) <= 192
     assert unpack_rosbuzz_block(block).messages == messages[:in_block]
+
+
+def test_an_xbee_packet_carries_the_block_byte_reversed() -> None:
+    block, _ = pack_rosbuzz_block(5, [B1])
+    words = rosbuzz_payload64(block, message_number=3)
+    packet = xbee_packet(5, 3, words)
+    assert packet[:3] == b"S\x05\x03" and packet[3 + 5 * 8:] == xbee_word_order(block)  # after 5 header words
+    sysid, msgid, back = xbee_payload64(packet)
+    assert (sysid, msgid, back) == (5, 3, words)
+    block_back = rosbuzz_block_from_payload64(back)
+    assert block_back is not None and unpack_rosbuzz_block(block_back).messages == [B1]
+    with pytest.raises(ValueError):
+        xbee_payload64(b"F\x00\x00")
+    with pytest.raises(ValueError):
+        xbee_packet(1, 1, [0] * 31)  # 250 bytes: XbeeMav fragments it

@@ -155,3 +155,12 @@ def test_bittybuzz_values_and_guards() -> None:
     assert bbz.from_ours(Message(Op.PUT, 6, 1, 1, 500)) is None and bbz.drops["guard_capacity"] == 1
     assert bbz.from_ours(Message(Op.PUT, 4, 0x3E00, 1, 500)) is None  # no string id known for "heading"
     assert bbz.drops["unmapped"] == 4
+
+
+def test_a_wrapped_timestamp_is_not_handed_to_buzz() -> None:
+    buzz = BuzzTranslator(parse_deployment(TEXT))
+    buzz.to_ours(BuzzVstig(BuzzOp.PUT, 1, "x", 5, 65530, 9))  # Buzz robots hold ts 65530
+    assert buzz.from_ours(Message(Op.PUT, 1, 6, 3, 200)) is None  # newer to us (wrapped), older to Buzz's `<`
+    assert buzz.drops["buzz_wrap"] == 1
+    assert buzz.from_ours(Message(Op.PUT, 1, 6, 65531, 200)) is not None
+    assert buzz.from_ours(Message(Op.GET, 1, 5, 40000, 200)) is not None  # old, not wrapped: Buzz answers it

@@ -35,6 +35,8 @@ __all__ = [
     "rosbuzz_payload64",
     "unpack_frame",
     "unpack_rosbuzz_block",
+    "xbee_packet",
+    "xbee_payload64",
     "xbee_word_order",
 ]
 
@@ -141,3 +143,23 @@ def xbee_word_order(data: bytes) -> bytes:
     if len(data) % 8:
         raise ValueError(f"XbeeMav sends whole 64-bit words, got {len(data)} bytes")
     return b"".join(data[i:i + 8][::-1] for i in range(0, len(data), 8))
+
+
+def xbee_packet(sysid: int, msgid: int, words: Sequence[int]) -> bytes:
+    """XbeeMav's unfragmented packet for a Mavlink message: 'S', u8 sysid, u8 msgid, each word big-endian.
+
+    (PacketsHandler.cpp: a serialized message under 250 bytes gets the 'S' prefix; one of
+    exactly 250 bytes is never sent, longer ones are fragmented, which this does not do.)
+    """
+    body = bytes((sysid & 0xFF, msgid & 0xFF)) + b"".join(word.to_bytes(8, "big") for word in words)
+    if len(body) >= 250:
+        raise ValueError(f"XbeeMav fragments messages of 250 bytes or more; this one has {len(body)}")
+    return b"S" + body
+
+
+def xbee_payload64(packet: bytes) -> tuple[int, int, list[int]]:
+    """(sysid, msgid, payload64 words) of an unfragmented XbeeMav packet; ValueError for anything else."""
+    if len(packet) < 3 or packet[0] != ord("S") or (len(packet) - 3) % 8:
+        raise ValueError("an unfragmented XbeeMav packet is 'S', sysid, msgid, then whole 64-bit words")
+    words = [int.from_bytes(packet[i:i + 8], "big") for i in range(3, len(packet), 8)]
+    return packet[1], packet[2], words

@@ -7,7 +7,8 @@ where the widths allow.
 
 Buzz: a QUERY for a key its sender does not hold (nil, timestamp 0) is our empty
 GET (value 0, timestamp 0) and back. Other nils (Buzz's put(nil) tombstones) have
-no equivalent in our format and are unmapped.
+no equivalent in our format and are unmapped. A version whose timestamp wrapped
+past 65535 is not sent to Buzz robots, which would ignore it forever (`buzz_wrap`).
 
 BittyBuzz guards (its firmware's known defects, DIALECTS D.5):
 - only PUTs go to the Kilobots: a Kilobot stores any vstig message for a key it
@@ -28,6 +29,7 @@ older one). Our side's next write goes out one step ahead anyway.
 from __future__ import annotations
 
 from ..counters import Counters
+from ..timestamps import is_newer
 from ..wire import Message, Op
 from .bittybuzz import BbzOp, BbzType, BbzVstig
 from .buzz import BuzzOp, BuzzVstig
@@ -43,6 +45,13 @@ class BuzzTranslator:
     def __init__(self, deployment: Deployment, drops: Counters | None = None) -> None:
         self.deployment = deployment
         self.drops = drops if drops is not None else Counters()
+        self._highest: dict[int, int] = {}  # per our key, the highest timestamp the Buzz side has shown
+
+    def _wrapped(self, key: int, timestamp: int) -> bool:
+        """Buzz compares timestamps with a plain `<`: a version that is newer only because our counter
+        wrapped past 65535 would be ignored by every Buzz robot, forever (`buzz_wrap`)."""
+        highest = self._highest.get(key)
+        return highest is not None and timestamp < highest and is_newer(timestamp, highest)
 
     def to_ours(self, msg: BuzzVstig) -> Message | None:
         entry = self.deployment.keys.get(msg.key) if isinstance(msg.key, str) else None
@@ -50,6 +59,7 @@ class BuzzTranslator:
             self.drops[UNMAPPED] += 1
             return None
         op = Op.PUT if msg.op is BuzzOp.PUT else Op.GET
+        self._highest[entry.key] = max(self._highest.get(entry.key, 0), msg.timestamp)
         if msg.value is None and op is Op.GET and msg.timestamp == 0:
             return Message(Op.GET, entry.key, 0, 0, msg.robot)
         raw = self.deployment.raw_from_buzz(msg.value, entry.value_type)
@@ -62,6 +72,9 @@ class BuzzTranslator:
         entry = self.deployment.by_key.get(msg.key)
         if entry is None:
             self.drops[UNMAPPED] += 1
+            return None
+        if self._wrapped(entry.key, msg.timestamp):
+            self.drops["buzz_wrap"] += 1
             return None
         op = BuzzOp.PUT if msg.op is Op.PUT else BuzzOp.QUERY
         stigmergy = self.deployment.buzz_stigmergy
