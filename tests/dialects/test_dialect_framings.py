@@ -12,11 +12,12 @@ from hypothesis import strategies as st
 
 from vstig_hw.crc import crc16_mcrf4xx_le
 from vstig_hw.dialects.buzz import BuzzOp, BuzzVstig, encode_buzz
-from vstig_hw.dialects.buzz_packets import pack_frame, unpack_frame
+from vstig_hw.dialects.buzz_packets import pack_frame, rosbuzz_payload64, unpack_frame, xbee_packet
 from vstig_hw.dialects.framing import (
     BittyBuzzKilobotFraming,
     BittyBuzzOhcFraming,
     BuzzKh4Framing,
+    RosBuzzDecoder,
     make_dialect_framing,
 )
 from vstig_hw.dialects.mapping import parse_deployment
@@ -86,3 +87,13 @@ def test_any_buzz_messages_in_a_frame_never_crash(messages: list[bytes]) -> None
     framing = BuzzKh4Framing(DEPLOYMENT)
     frame, _ = pack_frame(3, messages, 128)
     assert all(isinstance(m, Message) for m in framing.feed(frame))
+
+
+def test_rosbuzz_blocks_payload64_and_xbee_packets() -> None:
+    rosbuzz = RosBuzzDecoder(DEPLOYMENT, robot_id=3)
+    sent = [Message(Op.PUT, 1, n, n, 3) for n in range(1, 14)]  # 13 x 18 bytes: more than one block
+    blocks = rosbuzz.encode_batch(sent)
+    assert len(blocks) == 2 and all(len(b) <= 192 and len(b) % 8 == 0 for b in blocks)
+    heard = [m for b in blocks for m in rosbuzz.feed_xbee(xbee_packet(3, 0, rosbuzz_payload64(b)))]
+    assert heard == sent
+    assert rosbuzz.feed_payload64([1, 0, 0, 0, 0, 0]) == []  # a code update, not a Buzz block

@@ -9,7 +9,9 @@ translator of one deployment inside:
 - `BittyBuzzOhcFraming`: the same message injected through the stock overhead
   controller (transmit only);
 - `BuzzKh4Framing`: BuzzKH4's fixed-size frames (a Khepera IV swarm through the
-  `blabbermouth` transport), several Buzz messages per frame.
+  `blabbermouth` transport), several Buzz messages per frame;
+- `RosBuzzDecoder`: ROSBuzz's Buzz blocks, from `payload64` words or XbeeMav packets
+  (for captures: there is no live ROS link).
 
 Counters (a link shows them as drop_<name>): `unmapped` and the guards of
 `translate`, `bbz_other` for BittyBuzz messages that are not vstig (broadcasts),
@@ -30,12 +32,21 @@ from ..framing.kilobot_ohc import OHC_FORWARDMSG, OHC_FORWARDMSGSINGLE, Transmit
 from ..wire import Message
 from .bittybuzz import BBZ_KILOBOT_TYPE, BBZ_MESSAGE_SIZE, BbzOther, decode_bittybuzz, encode_bittybuzz
 from .buzz import BuzzDecodeError, BuzzOther, decode_buzz, encode_buzz
-from .buzz_packets import pack_frame, unpack_frame
+from .buzz_packets import (
+    ROSBUZZ_MAX_BLOCK,
+    BuzzFrame,
+    pack_frame,
+    pack_rosbuzz_block,
+    rosbuzz_block_from_payload64,
+    unpack_frame,
+    unpack_rosbuzz_block,
+    xbee_payload64,
+)
 from .mapping import Deployment
 from .translate import BittyBuzzTranslator, BuzzTranslator
 
 __all__ = ["DIALECT_FRAMINGS", "BittyBuzzKilobotFraming", "BittyBuzzOhcFraming", "BuzzKh4Framing",
-           "make_dialect_framing"]
+           "RosBuzzDecoder", "make_dialect_framing"]
 
 _PAYLOAD = BBZ_MESSAGE_SIZE + 1  # message_t data[9] + type: what kilolib's CRC covers
 
@@ -122,16 +133,7 @@ class BuzzKh4Framing:
 
     def encode_batch(self, messages: list[Message]) -> list[bytes]:
         """As few frames as hold the messages, in order, each under our robot id (as BuzzKH4 fills its own)."""
-        pending = []
-        for msg in messages:
-            out = self.translator.from_ours(msg)
-            if out is None:
-                continue
-            raw = encode_buzz(out, self.dialect)
-            if len(raw) + 4 > self.frame_size:
-                self.drops["oversize"] += 1
-                continue
-            pending.append(raw)
+        pending = self._buzz_bytes(messages, self.frame_size)
         frames = []
         while pending:
             frame, packed = pack_frame(self.robot_id, pending, self.frame_size, "little")
@@ -139,8 +141,24 @@ class BuzzKh4Framing:
             pending = pending[packed:]
         return frames
 
+    def _buzz_bytes(self, messages: list[Message], room: int) -> list[bytes]:
+        """The Buzz messages for ours; one that cannot fit a frame of `room` bytes is counted, never queued."""
+        out = []
+        for msg in messages:
+            buzz = self.translator.from_ours(msg)
+            if buzz is None:
+                continue
+            raw = encode_buzz(buzz, self.dialect)
+            if len(raw) + 4 > room:
+                self.drops["oversize"] += 1
+                continue
+            out.append(raw)
+        return out
+
     def feed(self, unit: bytes) -> list[Message]:
-        frame = unpack_frame(unit, "little")
+        return self._messages(unpack_frame(unit, "little"))
+
+    def _messages(self, frame: BuzzFrame) -> list[Message]:
         self.drops["overrun"] += frame.overrun
         messages = []
         for raw in frame.messages:
@@ -164,6 +182,35 @@ class BuzzKh4Framing:
 
     def reset(self) -> None:
         """No partial state."""
+
+
+class RosBuzzDecoder(BuzzKh4Framing):
+    """ROSBuzz traffic (no live link): Buzz blocks, `payload64` words or XbeeMav packets to our Messages, and back."""
+
+    name = "rosbuzz"
+
+    def feed(self, unit: bytes) -> list[Message]:
+        """One Buzz block (the bytes of payload64 words 5 on, little-endian)."""
+        return self._messages(unpack_rosbuzz_block(unit))
+
+    def feed_payload64(self, words: list[int]) -> list[Message]:
+        """One `mavros_msgs/Mavlink.payload64` (a code-update message carries no Buzz block: nothing)."""
+        block = rosbuzz_block_from_payload64(words)
+        return [] if block is None else self.feed(block)
+
+    def feed_xbee(self, packet: bytes) -> list[Message]:
+        """One unfragmented XbeeMav packet ('S', sysid, msgid, big-endian words)."""
+        return self.feed_payload64(xbee_payload64(packet)[2])
+
+    def encode_batch(self, messages: list[Message]) -> list[bytes]:
+        """Buzz blocks (at most 190 bytes each) carrying our messages under our robot id."""
+        pending = self._buzz_bytes(messages, ROSBUZZ_MAX_BLOCK - 2)  # its header is 4 bytes, not 2
+        blocks = []
+        while pending:
+            block, packed = pack_rosbuzz_block(self.robot_id, pending)
+            blocks.append(block)
+            pending = pending[packed:]
+        return blocks
 
 
 DIALECT_FRAMINGS = ("bittybuzz-kilobot", "bittybuzz-ohc", "blabbermouth")  # the names their captures carry
