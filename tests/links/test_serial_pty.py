@@ -19,7 +19,7 @@ from serial_robot import OhcReceiver, PtyRobot, decode_stream, encode_for, epuck
 
 from vstig_hw import Message, Op
 from vstig_hw.framing import TransmitOnlyError
-from vstig_hw.links import Link
+from vstig_hw.links import Link, parse
 from vstig_hw.links.serial import serial_link
 from vstig_hw.transports.base import TransportError
 from vstig_hw.transports.serial import SerialTransport
@@ -268,6 +268,22 @@ def test_the_first_byte_after_every_open_is_a_delimiter(tmp_path: Path) -> None:
     robot2.stop()
     os.close(master2)
     os.close(slave2)
+
+
+def test_a_bittybuzz_kilobot_link_starts_with_a_delimiter_too(pty: tuple[int, str], tmp_path: Path) -> None:
+    master, path = pty
+    deployment = tmp_path / "kilobots.toml"
+    deployment.write_text('[keys]\nx = { key = 1, type = "int16" }\n', encoding="utf-8")
+    robot = PtyRobot(master)
+    link = parse(f"serial:{path}?framing=kilobot&dialect=bittybuzz&deployment={deployment}").build("bbz")
+    link.open()
+    try:
+        link.send(Message(Op.PUT, 1, 5, 1, 3))
+        poll(lambda: robot.snapshot().count(0) >= 2, what="the frame")
+        assert robot.snapshot()[:1] == b"\0" and robot.snapshot().count(0) == 2  # the preamble, then one frame
+    finally:
+        link.close()
+        robot.stop()
 
 
 def test_reconnects_to_a_socket_server_that_restarts() -> None:

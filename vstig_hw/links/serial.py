@@ -51,4 +51,4 @@ def _dialect_link(spec: SerialSpec, name: str) -> Link[bytes]:
     deployment = load_deployment(str(spec.deployment))
     codec: SerialFraming = (BittyBuzzOhcFraming(deployment) if spec.framing == "kilobot-ohc"
                             else BittyBuzzKilobotFraming(deployment))
-    return Link(name, SerialTransport(spec.port, spec.baud, name=name), codec)
+    return Link(name, SerialTransport(spec.port, spec.baud, name=name, preamble=codec.preamble), codec)
