@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vstig_hw.linkspec import EXAMPLES, CanSpec, SerialSpec, parse
+from vstig_hw.links.spec import EXAMPLES, CanSpec, SerialSpec, parse
 
 
 def test_can_specs() -> None:
@@ -18,6 +18,8 @@ def test_can_specs() -> None:
     assert spec.name == "dev_ttyACM0"
     spec = parse("can:socketcan:can0?fd=1&id_base=0x18000000&extended=1")
     assert spec == CanSpec("socketcan", "can0", fd=True, id_base=0x18000000, extended=True)
+    spec = parse("can:socketcan:can0?extended=1&stigmergy=0x2a")
+    assert spec == CanSpec("socketcan", "can0", extended=True, stigmergy=42)
 
 
 def test_serial_specs() -> None:
@@ -57,6 +59,8 @@ def test_every_documented_example_parses() -> None:
         ("can:virtual:lab?id_base=0x800", "id_base=0x800 is outside"),
         ("can:vir tual:lab", "interface 'vir tual'"),
         ("can:virtual:lab?bitrate", "parameter 'bitrate' needs a value"),
+        ("can:virtual:lab?stigmergy=2", "stigmergy=2 needs 29-bit IDs (extended=1)"),
+        ("can:virtual:lab?extended=1&stigmergy=256", "stigmergy=256 is outside 0..255"),
     ],
 )
 def test_bad_specs_name_the_bad_part_and_show_an_example(spec: str, names: str) -> None:

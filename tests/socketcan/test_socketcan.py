@@ -24,8 +24,9 @@ import pytest
 from can_vectors import FrameVector, load
 
 from vstig_hw import Message, Op, encode
-from vstig_hw.framing.can import CanFraming, CanIdScheme, can_link
-from vstig_hw.link import Link
+from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.links import Link
+from vstig_hw.links.can import can_link
 from vstig_hw.transports.base import TransportError
 
 IN_UML = os.environ.get("VSTIG_IN_UML") == "1"

@@ -2,7 +2,7 @@
 
 Grammar (one parser for every command)::
 
-    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1]
+    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1&stigmergy=N]
     serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot]
     kilobot-ohc:<port or pyserial URL>
 
@@ -24,23 +24,33 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .link import Link
 
-__all__ = ["EXAMPLES", "GRAMMAR", "CanSpec", "LinkSpec", "SerialSpec", "parse"]
+__all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "CanSpec", "LinkSpec", "SerialSpec", "parse"]
 
 SERIAL_FRAMINGS = ("cobs8", "epuck4", "kilobot")
 DEFAULT_BAUD = 115200
 OHC_BAUD = 38400  # the Kilobot overhead controller's fixed rate
 
 GRAMMAR = (
-    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1]",
+    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1&stigmergy=N]",
     "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot]",
     "kilobot-ohc:<port or pyserial URL>",
 )
 EXAMPLES = {
     "can": ("can:socketcan:vcan0", "can:virtual:lab", "can:slcan:/dev/ttyACM0?bitrate=500000",
-            "can:socketcan:can0?fd=1&id_base=0x18000000&extended=1"),
+            "can:socketcan:can0?fd=1&id_base=0x18000000&extended=1",
+            "can:socketcan:can0?extended=1&stigmergy=2"),
     "serial": ("serial:/dev/ttyUSB0?baud=115200", "serial:socket://localhost:7000?framing=epuck4",
                "serial:/dev/rfcomm0?framing=kilobot"),
     "kilobot-ohc": ("kilobot-ohc:/dev/ttyUSB0",),
+}
+# One line per kind for `vstig links`: what the options mean beyond the grammar.
+NOTES = {
+    "can": "can: 11-bit IDs (default base 0x600) keep stigmergies apart by id_base (0x000, 0x200, 0x400, "
+           "0x600); 29-bit IDs (extended=1) carry stigmergy=0..255 in the ID. Each link hears only its own.",
+    "serial": "serial: the query after the last '?' is ours; keys we do not know stay with a pyserial URL "
+              "(socket://, rfc2217://). Defaults: baud=115200, framing=cobs8. A serial link carries one "
+              "stigmergy: its framings have no stigmergy field.",
+    "kilobot-ohc": "kilobot-ohc: transmit only, at the overhead controller's fixed 38400 baud.",
 }
 _IFACE = re.compile(r"[A-Za-z0-9_]+\Z")
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9._:-]+")
@@ -54,6 +64,7 @@ class CanSpec:
     fd: bool = False
     id_base: int | None = None
     extended: bool = False
+    stigmergy: int = 0
 
     @property
     def kind(self) -> str:
@@ -66,7 +77,7 @@ class CanSpec:
 
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` is the sender field a CAN link transmits under."""
-        from .links import can_link_from_spec
+        from .can import can_link_from_spec
 
         return can_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
 
@@ -88,7 +99,7 @@ class SerialSpec:
 
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` and `listen_only` matter only to CAN (same signature as CanSpec)."""
-        from .links import serial_link_from_spec
+        from .serial import serial_link_from_spec
 
         return serial_link_from_spec(self, name or self.name)
 
@@ -160,13 +171,17 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         raise _bad(spec, "expected can:<interface>:<channel>", "can")
     if not _IFACE.match(interface):
         raise _bad(spec, f"interface {interface!r} is not a python-can interface name", "can")
-    channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended"), False)
+    channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended", "stigmergy"), False)
     if not channel or any(ch in channel for ch in "\0\n\r "):
         raise _bad(spec, f"channel {channel!r} is missing or has spaces", "can")
     extended = _flag(spec, "can", "extended", params["extended"]) if "extended" in params else False
     id_base = None
     if "id_base" in params:
         id_base = _int(spec, "can", "id_base", params["id_base"], 0, 0x1FFFFFFF if extended else 0x7FF)
+    stigmergy = _int(spec, "can", "stigmergy", params["stigmergy"], 0, 0xFF) if "stigmergy" in params else 0
+    if stigmergy and not extended:
+        raise _bad(spec, f"stigmergy={stigmergy} needs 29-bit IDs (extended=1); on 11-bit IDs give each "
+                         "stigmergy its own id_base (0x000, 0x200, 0x400, 0x600)", "can")
     return CanSpec(
         interface=interface,
         channel=channel,
@@ -174,6 +189,7 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         fd=_flag(spec, "can", "fd", params["fd"]) if "fd" in params else False,
         id_base=id_base,
         extended=extended,
+        stigmergy=stigmergy,
     )
 
 
