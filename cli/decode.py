@@ -10,16 +10,8 @@ import click
 from vstig_hw.capture.decodefile import FORMATS, decode_file
 from vstig_hw.values import VALUE_TYPES, ValueType
 
+from ._capture_options import parse_id_base
 from .errors import reports_errors
-
-
-def _base(text: str | None) -> int | None:
-    if text is None:
-        return None
-    try:
-        return int(text, 0)
-    except ValueError:
-        raise click.BadParameter(f"{text!r} is not an integer (e.g. 0x600)", param_hint="--id-base") from None
 
 
 @click.command()
@@ -36,7 +28,7 @@ def command(files: tuple[str, ...], fmt: str, skip_bad: bool, value_type: ValueT
 
     Example: vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
     """
-    base = _base(id_base)
+    base = parse_id_base(id_base)
     total_bad = 0
     for path in files:
         size = os.path.getsize(path)

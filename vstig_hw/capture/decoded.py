@@ -32,13 +32,14 @@ class Decoded:
 FramingFactory = Callable[[Record], Any]
 
 
-def default_framings(id_base: int | None = None, extended: bool = False) -> FramingFactory:
+def default_framings(id_base: int | None = None, extended: bool | None = False) -> FramingFactory:
+    """Framings by record; `extended=None` takes each CAN link's ID width from its first frame."""
     from ..framing import make_serial_framing
     from ..links.can import can_framing
 
     def make(record: Record) -> Any:
         if record.framing == CAN_FRAMING:
-            return can_framing(id_base, extended)
+            return can_framing(id_base, bool(record.unit.is_extended_id) if extended is None else extended)
         return make_serial_framing(record.framing)
 
     return make
@@ -55,11 +56,20 @@ class Decoder:
             total.update(framing.drops)
         return total
 
-    def decode(self, record: Record) -> list[Decoded]:
+    def _framing(self, record: Record) -> Any:
         slot = (record.link, record.framing, record.direction)
         framing = self._framings.get(slot)
         if framing is None:
             framing = self._framings[slot] = self._make(record)
+        return framing
+
+    def sender_of(self, record: Record) -> int | None:
+        """The node that sent a record, where its medium names one (a CAN frame's ID); else None."""
+        sender_of = getattr(self._framing(record), "sender_of", None)
+        return None if sender_of is None else sender_of(record.unit)
+
+    def decode(self, record: Record) -> list[Decoded]:
+        framing = self._framing(record)
         is_can = record.framing == CAN_FRAMING
         can_id = int(record.unit.arbitration_id) if is_can else None
         return [Decoded(record.t, record.link, can_id, msg) for msg in framing.feed(record.unit)]

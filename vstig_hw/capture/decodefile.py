@@ -60,46 +60,29 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
 
     fast_drops: dict[str, int] = {}
     count = 0
-    line_no = 1
-    tail = b""
     raw_out: Any = getattr(out, "buffer", None)
-    with open(path, "rb") as file:
-        while True:
-            block = file.read(CHUNK)
-            data = tail + block
-            if not block:
-                tail, chunk = b"", data
+    for line_no, chunk in candump.chunks(path, CHUNK):
+        lines = chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
+        dropped_before = sum(fast_drops.values())
+        fast = chunk_to_jsonl(chunk, classify, fast_drops)
+        if fast is not None:
+            count += lines - sum(fast_drops.values()) + dropped_before
+            if raw_out is not None:
+                out.flush()
+                raw_out.write(fast)
             else:
-                cut = data.rfind(b"\n") + 1
-                tail, chunk = data[cut:], data[:cut]
-            if chunk:
-                lines = chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
-                dropped_before = sum(fast_drops.values())
-                fast = chunk_to_jsonl(chunk, classify, fast_drops)
-                if fast is not None:
-                    count += lines - sum(fast_drops.values()) + dropped_before
-                    if raw_out is not None:
-                        out.flush()
-                        raw_out.write(fast)
-                    else:
-                        out.write(fast.decode())
-                else:
-                    count += _slow(path, chunk, line_no, out, decoder, value_type, skip_bad, bad)
-                line_no += lines
-                if progress:
-                    progress(len(chunk))
-            if not block:
-                break
+                out.write(fast.decode())
+        else:
+            count += _slow(path, chunk, line_no, out, decoder, value_type, skip_bad, bad)
+        if progress:
+            progress(len(chunk))
     return count, Counters(fast_drops)
 
 
 def _slow(path: str, chunk: bytes, first_line: int, out: IO[str], decoder: Decoder, value_type: ValueType,
           skip_bad: bool, bad: list[CaptureError]) -> int:
     count = 0
-    # Split on "\n" only, as the line counter does: splitlines() also cuts at \r, \f, \x1c... and
-    # would misnumber every later line in the file:line of an error.
-    lines = chunk.decode("utf-8", "replace").split("\n")
-    for decoded in decoder.decode_all(candump.candump_records(path, lines, skip_bad, bad, first_line)):
+    for decoded in decoder.decode_all(candump.chunk_records(path, chunk, first_line, skip_bad, bad)):
         out.write(as_json(decoded, value_type) + "\n")
         count += 1
     return count
