@@ -78,6 +78,8 @@ class Batch:
 
 def _first_last(code: I64, t: F64) -> tuple[list[int], list[int], list[int], list[int]]:
     """Distinct codes, the rows of each one's earliest and latest time, and how many rows each has."""
+    if not len(code):
+        return [], [], [], []
     order = np.lexsort((t, code))
     ordered = code[order]
     starts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])
@@ -117,6 +119,7 @@ class WriteReport:
     caught_up_after: tuple[float, ...]  # seconds after `t`, one per active sender that caught up, sorted
     behind: tuple[int, ...]  # active senders that never showed it or newer
     heard: dict[str, LinkHeard]  # per link: first and last time this write was heard
+    rank: int  # place among the key's writes from oldest (0) to newest, by timestamp and conflict rule
 
     @property
     def senders_caught_up(self) -> int:
@@ -355,4 +358,4 @@ class Analyzer:
         heard = {self.links[i]: LinkHeard(span[0], span[1], int(span[2]))
                  for i in range(len(self.links)) if (span := self._heard.get((i, code))) is not None}
         return WriteReport(key, value, (code >> 16) & 0xFFFF, code & 0xFFFF, t, self.links[link],
-                           len(caught) + len(behind), tuple(sorted(caught)), tuple(sorted(behind)), heard)
+                           len(caught) + len(behind), tuple(sorted(caught)), tuple(sorted(behind)), heard, rank)

@@ -12,7 +12,7 @@ from .analysis import Report, WriteReport
 
 __all__ = ["MAX_LINES", "plot_report", "plotted_key"]
 
-MAX_LINES = 12  # writes drawn in panel (a): the key's most recent ones; more would be a blur at column width
+MAX_LINES = 12  # writes drawn in panel (a): the key's newest ones; more would be a blur at column width
 _WIDTH_IN, _HEIGHT_IN = 3.4, 4.6
 
 
@@ -29,13 +29,14 @@ def plot_report(report: Report, path: Path, key: int | None = None) -> None:
 
     matplotlib.use("Agg")  # files only: no display on a lab server or in CI
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     key = plotted_key(report) if key is None else key
     start = report.start or 0.0
     with plt.rc_context({"font.size": 8, "axes.titlesize": 8, "legend.fontsize": 6}):
         fig, (spread, histogram) = plt.subplots(2, 1, figsize=(_WIDTH_IN, _HEIGHT_IN))
         writes = [w for w in report.writes if w.key == key and w.senders_total]
-        shown = writes[-MAX_LINES:]
+        shown = sorted(writes, key=lambda w: w.rank)[-MAX_LINES:]
         for write in shown:
             xs, ys = _spread(write, start)
             spread.step(xs, ys, where="post", linewidth=1,
@@ -47,10 +48,10 @@ def plot_report(report: Report, path: Path, key: int | None = None) -> None:
         else:
             spread.text(0.5, 0.5, "no sender named on these links" if report.writes else "no writes",
                         ha="center", va="center", transform=spread.transAxes)
-        more = f" (latest {len(shown)} of {len(writes)})" if len(writes) > len(shown) else ""
-        spread.set_title(f"(a) key {key}: senders holding each write{more}")
+        more = f", newest {len(shown)} of {len(writes)}" if len(writes) > len(shown) else ""
+        spread.set_title(f"(a) key {key}: spread of each write{more}")
         spread.set_xlabel("time in capture (s)")
-        spread.set_ylabel("fraction of active senders")
+        spread.set_ylabel("senders holding it or newer")
         spread.grid(True, alpha=0.3)
 
         times = [t for w in report.writes if (t := w.converged_after) is not None]
@@ -65,6 +66,7 @@ def plot_report(report: Report, path: Path, key: int | None = None) -> None:
         histogram.set_title(f"(b) convergence time, {len(times)} of {len(report.writes)} writes")
         histogram.set_xlabel("time to reach every active sender (s)")
         histogram.set_ylabel("writes")
+        histogram.yaxis.set_major_locator(MaxNLocator(integer=True))
         histogram.grid(True, alpha=0.3)
         fig.tight_layout()
         fig.savefig(path, dpi=300)
