@@ -12,11 +12,11 @@ import click
 
 from vstig_hw.analysis import CONFLICT_RULES, DEFAULT_WINDOW, Analyzer, Conflict, Report, Traffic, WriteReport
 from vstig_hw.capture.analyzefile import analyze_captures
+from vstig_hw.capture.filters import Filter
 from vstig_hw.counters import Counters
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
-from vstig_hw.wire import KEY_MAX
 
-from ._capture_options import parse_id_base
+from ._capture_options import filter_options, parse_id_base
 from .errors import reports_errors
 
 _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a terminal)
@@ -27,7 +27,6 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (writes, summary, bandwidth).")
 @click.option("--plot", type=click.Path(dir_okay=False, writable=True, path_type=Path),
               help="Write a PNG: (a) a key's writes spreading through the senders, (b) convergence times.")
-@click.option("--key", type=click.IntRange(0, KEY_MAX), help="Analyze only this key (and plot it).")
 @click.option("--window", default=DEFAULT_WINDOW, show_default=True, type=click.FloatRange(0, min_open=True),
               help="Seconds either side of a write in which a sender must be heard to count as active.")
 @click.option("--conflict", type=click.Choice(CONFLICT_RULES), default="robot", show_default=True,
@@ -37,9 +36,10 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @click.option("--skip-bad", is_flag=True, help="Count malformed lines and go on instead of stopping at the first.")
 @click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 for 29-bit IDs).")
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs (default: read from the frames).")
+@filter_options
 @reports_errors
-def command(files: tuple[str, ...], as_json: bool, plot: Path | None, key: int | None, window: float,
-            conflict: Conflict, value_type: ValueType, skip_bad: bool, id_base: str | None, extended: bool) -> None:
+def command(files: tuple[str, ...], as_json: bool, plot: Path | None, window: float, conflict: Conflict,
+            value_type: ValueType, skip_bad: bool, id_base: str | None, extended: bool, keep: Filter) -> None:
     """Measure how long each write took to reach every robot, and the bandwidth, from captures.
 
     A write is a new (key, timestamp, robot) entry. Every PUT or GET a robot sends
@@ -47,15 +47,17 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, key: int |
     has reached a sender when that sender first shows it or a newer entry. A write
     has converged when every sender heard within --window seconds of it has.
     Serial links name no sender: for them, the first and last time each write was
-    heard per link is reported instead. Several FILES are merged by time.
+    heard per link is reported instead. Several FILES are merged by time. The
+    filters (--key, --robot, --sender, --op, --link, --since, --until) choose
+    which messages count; --plot draws the first --key given.
 
-    Example: vstig analyze swarm.log --plot swarm.png
+    Example: vstig analyze swarm.log --key 3 --plot key3.png
     """
     base = parse_id_base(id_base)
     analyzer = Analyzer(window, conflict)
     # 11-bit unless told (--extended) or implied (--id-base names one width's base); else read from frames.
     width = True if extended else (False if base is not None else None)
-    drops, bad = _read(files, analyzer, skip_bad, base, width, key)
+    drops, bad = _read(files, analyzer, skip_bad, base, width, keep)
     for error in bad[:5]:
         click.echo(f"skipped {error}", err=True)
     report = analyzer.report()
@@ -65,9 +67,9 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, key: int |
     if plot is not None:
         from vstig_hw.analysis_plot import plot_report
 
-        plot_report(report, plot, key)
+        plot_report(report, plot, min(keep.keys) if keep.keys else None)
     if as_json:
-        click.echo(json.dumps(_as_json(report, files, drops, len(bad), key, value_type)))
+        click.echo(json.dumps(_as_json(report, files, drops, len(bad), value_type)))
     else:
         _print_text(report, value_type)
     summary = f"{report.messages} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
@@ -77,16 +79,16 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, key: int |
 
 
 def _read(files: tuple[str, ...], analyzer: Analyzer, skip_bad: bool, base: int | None, width: bool | None,
-          key: int | None) -> tuple[Counters, list[Any]]:
+          keep: Filter) -> tuple[Counters, list[Any]]:
     size = sum(os.path.getsize(path) for path in files)
     if not (sys.stderr.isatty() and size > _PROGRESS_BYTES):
-        return analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, key=key)
+        return analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep)
     from rich.console import Console
     from rich.progress import Progress
 
     with Progress(console=Console(stderr=True), transient=True) as bar:
         task = bar.add_task(f"analyzing {os.path.basename(files[0])}", total=size)
-        result = analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, key=key,
+        result = analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep,
                                   progress=lambda n: bar.advance(task, n))
     return result
 
@@ -111,7 +113,7 @@ def _traffic_json(traffic: Traffic, seconds: float) -> dict[str, Any]:
             "messages_per_s": rate(traffic.messages), "bytes_per_s": rate(traffic.bytes)}
 
 
-def _as_json(report: Report, files: tuple[str, ...], drops: Counters, bad: int, key: int | None,
+def _as_json(report: Report, files: tuple[str, ...], drops: Counters, bad: int,
              value_type: ValueType) -> dict[str, Any]:
     seconds = report.duration
     return {
@@ -119,7 +121,7 @@ def _as_json(report: Report, files: tuple[str, ...], drops: Counters, bad: int, 
                     "duration_s": _rounded(seconds), "messages": report.messages,
                     "links": list(report.links), "links_without_sender": report.links_without_sender,
                     "dropped": dict(drops), "bad_lines_skipped": bad},
-        "window_s": report.window, "conflict": report.conflict, "key": key,
+        "window_s": report.window, "conflict": report.conflict,
         "writes": [_write_json(w, value_type) for w in report.writes],
         "summary": {name: (_rounded(v) if isinstance(v, float) else v) for name, v in report.convergence().items()},
         "bandwidth": {"links": {name: _traffic_json(t, seconds) for name, t in report.links.items()},

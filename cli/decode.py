@@ -8,9 +8,10 @@ import sys
 import click
 
 from vstig_hw.capture.decodefile import FORMATS, decode_file
+from vstig_hw.capture.filters import Filter
 from vstig_hw.values import VALUE_TYPES, ValueType
 
-from ._capture_options import parse_id_base
+from ._capture_options import filter_options, parse_id_base
 from .errors import reports_errors
 
 
@@ -21,9 +22,10 @@ from .errors import reports_errors
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
 @click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 with --extended).")
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs.")
+@filter_options
 @reports_errors
 def command(files: tuple[str, ...], fmt: str, skip_bad: bool, value_type: ValueType, id_base: str | None,
-            extended: bool) -> None:
+            extended: bool, keep: Filter) -> None:
     """Print every message in FILES.
 
     Example: vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
@@ -38,11 +40,11 @@ def command(files: tuple[str, ...], fmt: str, skip_bad: bool, value_type: ValueT
             with Progress(transient=True) as bar:
                 task = bar.add_task(f"decoding {os.path.basename(path)}", total=size)
                 count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                                id_base=base, extended=extended,
+                                                id_base=base, extended=extended, keep=keep,
                                                 progress=lambda n, t=task: bar.advance(t, n))  # type: ignore[misc]
         else:
             count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                            id_base=base, extended=extended)
+                                            id_base=base, extended=extended, keep=keep)
         sys.stdout.flush()
         total_bad += len(bad)
         for error in bad[:5]:

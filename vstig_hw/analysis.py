@@ -327,10 +327,12 @@ class Analyzer:
             same_slot[code >> 16] += 1
         return Report(
             start=self._start, end=self._end, messages=self._messages, window=self.window,
-            conflict=self.conflict, writes=writes, links=links, senders=dict(sorted(senders.items())),
+            conflict=self.conflict, writes=writes, links={name: t for name, t in links.items() if t.messages},
+            senders=dict(sorted(senders.items())),
             first_copies=len(self._put_entries), rebroadcasts=self._puts - len(self._put_entries),
             conflicts=sum(n for n in same_slot.values() if n > 1),
-            links_without_sender=[name for i, name in enumerate(self.links) if i not in self._sender_links])
+            links_without_sender=[name for i, name in enumerate(self.links)
+                                  if i not in self._sender_links and links[name].messages])
 
     def _entry(self, code: int) -> tuple[int, int, int]:
         """(timestamp, robot, value) of a write code (the value it first appeared with)."""

@@ -9,6 +9,7 @@ import pytest
 from vstig_hw.analysis import NO_SENDER, Analyzer, Report
 from vstig_hw.capture.analyzefile import analyze_captures
 from vstig_hw.capture.fastlog import parse_chunk
+from vstig_hw.capture.filters import Filter
 from vstig_hw.wire import Message, Op, encode
 
 T0 = 1_700_000_000.0
@@ -143,6 +144,6 @@ def test_key_filter_keeps_one_key(tmp_path: Path) -> None:
     log = tmp_path / "two_keys.log"
     _candump(log, [(0.0, 1, put(3, 7, 1, 1)), (0.1, 1, put(4, 8, 1, 1)), (0.2, 2, get(4, 8, 1, 1))])
     analyzer = Analyzer()
-    analyze_captures([str(log)], analyzer, key=4)
+    analyze_captures([str(log)], analyzer, keep=Filter(keys=frozenset({4})))
     report = analyzer.report()
     assert [w.key for w in report.writes] == [4] and report.messages == 2

@@ -16,6 +16,7 @@ from . import candump
 from .decoded import CSV_HEADER, Decoder, as_csv, as_json, as_text, default_framings
 from .fastlog import chunk_to_jsonl
 from .files import read_capture
+from .filters import Filter, RecordFilter
 from .records import CaptureError
 from .serial_log import is_serial_capture
 
@@ -27,21 +28,23 @@ CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small 
 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
                 skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
-                progress: Callable[[int], None] | None = None) -> tuple[int, Counters, list[CaptureError]]:
-    """Write every message in `path` to `out`; returns (messages, drops by reason, bad lines skipped)."""
+                progress: Callable[[int], None] | None = None,
+                keep: Filter | None = None) -> tuple[int, Counters, list[CaptureError]]:
+    """Write every message in `path` that `keep` passes to `out`; returns (messages, drops, bad lines skipped)."""
     formatter = FORMATS[fmt]
     decoder = Decoder(default_framings(id_base, extended))
     bad: list[CaptureError] = []
     if fmt == "csv":
         out.write(CSV_HEADER)
-    if (path.endswith(".log") and fmt == "jsonl" and value_type == "uint16" and not extended
+    if (path.endswith(".log") and fmt == "jsonl" and value_type == "uint16" and not extended and not keep
             and not is_serial_capture(path)):
         count, drops = _candump_chunks(path, out, decoder, value_type, skip_bad, bad, id_base, progress)
         drops.update(decoder.drops())
         return count, drops, bad
     count = 0
+    passing = RecordFilter(keep or Filter(), decoder)
     for record in read_capture(path, skip_bad, bad):
-        for decoded in decoder.decode(record):
+        for decoded in passing.messages(record)[1]:
             out.write(formatter(decoded, value_type) + "\n")
             count += 1
     return count, decoder.drops(), bad
