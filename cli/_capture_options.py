@@ -26,31 +26,31 @@ def filter_options(fn: F) -> F:
     from vstig_hw.wire import KEY_MAX, U16_MAX
 
     options = [
-        click.option("--key", "keys", multiple=True, type=click.IntRange(0, KEY_MAX),
+        click.option("--key", "only_keys", multiple=True, type=click.IntRange(0, KEY_MAX),
                      help="Only this key (repeatable)."),
-        click.option("--robot", "robots", multiple=True, type=click.IntRange(0, U16_MAX),
+        click.option("--robot", "only_robots", multiple=True, type=click.IntRange(0, U16_MAX),
                      help="Only entries written by this robot (repeatable)."),
-        click.option("--sender", "senders", multiple=True, type=click.IntRange(0, U16_MAX),
+        click.option("--sender", "only_senders", multiple=True, type=click.IntRange(0, U16_MAX),
                      help="Only messages sent by this node: a CAN frame's sender field (repeatable)."),
-        click.option("--op", "ops", multiple=True, type=click.Choice(["PUT", "GET"], case_sensitive=False),
+        click.option("--op", "only_ops", multiple=True, type=click.Choice(["PUT", "GET"], case_sensitive=False),
                      help="Only PUTs or only GETs."),
-        click.option("--link", "links", multiple=True, help="Only this link, by name (repeatable)."),
+        click.option("--link", "only_links", multiple=True, help="Only this link, by name (repeatable)."),
         click.option("--since", type=click.FloatRange(0), help="Only from this many seconds after the first record."),
         click.option("--until", type=click.FloatRange(0), help="Only before this many seconds after the first record."),
     ]
 
     @functools.wraps(fn)
-    def with_filter(*args: Any, keys: tuple[int, ...], robots: tuple[int, ...], senders: tuple[int, ...],
-                    ops: tuple[str, ...], links: tuple[str, ...], since: float | None, until: float | None,
-                    **kwargs: Any) -> Any:
+    def with_filter(*args: Any, only_keys: tuple[int, ...], only_robots: tuple[int, ...],
+                    only_senders: tuple[int, ...], only_ops: tuple[str, ...], only_links: tuple[str, ...],
+                    since: float | None, until: float | None, **kwargs: Any) -> Any:
         from vstig_hw.capture.filters import Filter
         from vstig_hw.wire import Op
 
         if since is not None and until is not None and until <= since:
             raise click.BadParameter(f"{until:g} is not after --since {since:g}", param_hint="--until")
-        keep = Filter(keys=frozenset(keys) or None, robots=frozenset(robots) or None,
-                      senders=frozenset(senders) or None, ops=frozenset(Op[o.upper()] for o in ops) or None,
-                      links=frozenset(links) or None, since=since, until=until)
+        keep = Filter(keys=frozenset(only_keys) or None, robots=frozenset(only_robots) or None,
+                      senders=frozenset(only_senders) or None, ops=frozenset(Op[o.upper()] for o in only_ops) or None,
+                      links=frozenset(only_links) or None, since=since, until=until)
         return fn(*args, keep=keep, **kwargs)
 
     for option in reversed(options):
