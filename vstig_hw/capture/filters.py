@@ -113,8 +113,9 @@ class RecordFilter:
         _, passed = self.messages(record)
         if record.framing == CAN_FRAMING:
             return [record] if passed else []
-        return [Record(record.t, record.link, record.framing, unit, record.direction)
-                for d in passed for unit in self._encoder(record.framing).encode(d.message)]
+        encoder = self._encoder(record.framing)
+        chunk = b"".join(unit for d in passed for unit in encoder.encode(d.message))
+        return [Record(record.t, record.link, record.framing, chunk, record.direction)] if chunk else []
 
     def _encoder(self, framing: str) -> Framing[bytes]:
         from ..framing import make_serial_framing

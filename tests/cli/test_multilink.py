@@ -1,0 +1,106 @@
+"""Several links in one capture: record keeps each link's name, filters cut, replay maps links to targets."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+from click.testing import CliRunner
+from peers import PtyPeer, run_vstig, start_vstig, stop, wait_for
+
+from vstig_cli.main import cli
+from vstig_hw import Message, Op, encode
+from vstig_hw.framing import make_serial_framing
+
+T0 = 1_700_000_000.0
+
+
+def test_record_two_radios_into_one_filtered_capture_then_replay_one_link(tmp_path: Path) -> None:
+    capture = tmp_path / "both.cap"
+    radios = [PtyPeer(), PtyPeer()]
+    names = [os.path.basename(radio.path) for radio in radios]  # a serial link is named after its device
+    cobs8 = make_serial_framing("cobs8")
+    wanted = [Message(Op.PUT, 3, 100 + i, i + 1, 5 + i) for i in range(2)]
+    other = Message(Op.PUT, 4, 9, 1, 1)
+    recorder = start_vstig("record", *(f"serial:{radio.path}?framing=cobs8" for radio in radios),
+                           "-o", str(capture), "--key", "3")
+    try:
+        def both_recorded() -> bool:
+            for radio, msg in zip(radios, wanted, strict=True):
+                for m in (other, msg):
+                    radio.write(b"".join(cobs8.encode(m)))
+            text = capture.read_text() if capture.exists() else ""
+            return all(f") {name} cobs8 rx " in text for name in names)
+
+        wait_for(both_recorded, 30, step=lambda: time.sleep(0.2))
+    finally:
+        _out, err = stop(recorder)
+        for radio in radios:
+            radio.close()
+    assert recorder.returncode == 0, err
+
+    decoded = CliRunner().invoke(cli, ["decode", str(capture), "--format", "jsonl"])
+    assert decoded.exit_code == 0, decoded.output
+    rows = [json.loads(line) for line in decoded.stdout.splitlines()]
+    assert rows and {r["key"] for r in rows} == {3}  # the other key was filtered out when recording
+    by_link = {name: {(r["value"], r["robot"]) for r in rows if r["link"] == name} for name in names}
+    assert by_link == {name: {(msg.value, msg.robot)} for name, msg in zip(names, wanted, strict=True)}
+
+    analyzed = CliRunner().invoke(cli, ["analyze", str(capture), "--json"])
+    assert analyzed.exit_code == 0, analyzed.output
+    report = json.loads(analyzed.stdout)
+    assert sorted(report["capture"]["links_without_sender"]) == sorted(names)
+    assert {w["link"] for w in report["writes"]} == set(names)  # each write first heard on its own link
+
+    target = PtyPeer()
+    try:
+        done = run_vstig("replay", str(capture), "--onto", f"{names[0]}=serial:{target.path}?framing=cobs8",
+                         "--speed", "50")
+        assert done.returncode == 0, done.stderr
+        assert f"skipped links with no --onto: {names[1]}" in done.stderr
+        heard: list[Message] = []
+        receiver = make_serial_framing("cobs8")
+        while chunk := target.read(0.5):
+            heard += receiver.feed(chunk)
+    finally:
+        target.close()
+    assert heard and set(heard) == {wanted[0]}  # only the first radio's link went onto the target
+
+
+def _candump(path: Path, lines: list[tuple[float, str, int, Message]]) -> Path:
+    path.write_text("".join(f"({T0 + t:.6f}) {link} {0x600 | msg.op << 8 | sender:03X}#{encode(msg).hex()}\n"
+                            for t, link, sender, msg in lines))
+    return path
+
+
+def test_decode_and_analyze_filters_and_links_kept_apart(tmp_path: Path) -> None:
+    log = _candump(tmp_path / "two_buses.log", [
+        (0.0, "can0", 1, Message(Op.PUT, 3, 7, 1, 1)), (0.1, "can1", 2, Message(Op.PUT, 3, 7, 1, 1)),
+        (0.2, "can0", 2, Message(Op.GET, 3, 7, 1, 1)), (0.3, "can1", 3, Message(Op.GET, 4, 1, 1, 3)),
+        (2.0, "can0", 1, Message(Op.PUT, 3, 8, 2, 1)),
+    ])
+    runner = CliRunner()
+
+    def decoded(*args: str) -> list[tuple[str, int, str]]:
+        result = runner.invoke(cli, ["decode", str(log), "--format", "jsonl", *args])
+        assert result.exit_code == 0, result.output
+        return [(r["link"], r["can_id"] & 0xFF, r["op"]) for r in map(json.loads, result.stdout.splitlines())]
+
+    assert decoded("--link", "can1") == [("can1", 2, "PUT"), ("can1", 3, "GET")]
+    assert decoded("--sender", "2", "--op", "get") == [("can0", 2, "GET")]
+    assert decoded("--robot", "3") == [("can1", 3, "GET")]
+    assert decoded("--since", "0.15", "--until", "1") == [("can0", 2, "GET"), ("can1", 3, "GET")]
+    assert decoded("--key", "4", "--key", "3", "--until", "0.05") == [("can0", 1, "PUT")]
+
+    result = runner.invoke(cli, ["analyze", str(log), "--json", "--key", "3"])
+    report = json.loads(result.stdout)
+    assert set(report["bandwidth"]["links"]) == {"can0", "can1"}
+    first = report["writes"][0]
+    assert first["heard"]["can0"]["copies"] == 2 and first["heard"]["can1"]["copies"] == 1
+    assert report["capture"]["messages"] == 4
+    result = runner.invoke(cli, ["analyze", str(log), "--json", "--link", "can1"])
+    assert set(json.loads(result.stdout)["bandwidth"]["links"]) == {"can1"}
+    result = runner.invoke(cli, ["decode", str(log), "--since", "2", "--until", "1"])
+    assert result.exit_code == 2 and "is not after --since" in result.output
