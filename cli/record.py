@@ -6,9 +6,10 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.files import CAN_EXTENSIONS, RotatingCapture
+from vstig_hw.capture.files import CAN_EXTENSIONS, MCAP_EXTENSION, RotatingCapture
 from vstig_hw.capture.filters import Filter, RecordFilter
 from vstig_hw.capture.records import CAN_FRAMING, Record
+from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
@@ -30,7 +31,8 @@ def _size(text: str) -> int:
 @click.command()
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, writable=True),
-              help="CAN: .log (candump) .asc .blf .csv; serial: any name (our line format).")
+              help="CAN: .log (candump) .asc .blf .csv; serial: any name (our line format); any links: .mcap "
+                   "(rosbag2, decoded messages, one topic per link).")
 @click.option("--max-bytes", help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M).")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
 @filter_options
@@ -46,18 +48,20 @@ def command(links: tuple[LinkSpec, ...], output: str, max_bytes: str | None, dur
     Example: vstig record can:socketcan:can0 can:socketcan:can1 -o swarm.log --max-bytes 50M
     """
     is_can = isinstance(links[0], CanSpec)
-    if any(isinstance(link, CanSpec) != is_can for link in links):
-        raise click.UsageError("CAN and serial links go into separate captures (a CAN log holds CAN frames, "
-                               "a serial capture UART bytes)")
-    if is_can and not output.lower().endswith(CAN_EXTENSIONS):
-        raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} (got {output})")
+    medium = "mcap" if output.lower().endswith(MCAP_EXTENSION) else "can" if is_can else "serial"
+    if medium != "mcap" and any(isinstance(link, CanSpec) != is_can for link in links):
+        raise click.UsageError(f"CAN and serial links together go into a {MCAP_EXTENSION} capture (a CAN log "
+                               "holds CAN frames, a serial capture UART bytes)")
+    if medium == "can" and not output.lower().endswith(CAN_EXTENSIONS):
+        raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} or "
+                               f"{MCAP_EXTENSION} (got {output})")
     limit = _size(max_bytes) if max_bytes else None
     node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
-    capture = RotatingCapture(output, "can" if is_can else "serial", limit)
+    capture = RotatingCapture(output, medium, limit)
     passing = RecordFilter(keep)
 
     def write(source: Link[Any], t: float, unit: Any) -> None:
-        framing = CAN_FRAMING if is_can else source.framing.name
+        framing = CAN_FRAMING if isinstance(source.framing, CanFraming) else source.framing.name
         record = Record(t, source.name, framing, unit)
         for kept in passing.units(record) if keep else (record,):
             capture.write(kept)

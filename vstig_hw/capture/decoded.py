@@ -14,7 +14,7 @@ from typing import Any
 from ..counters import Counters
 from ..values import ValueType, from_raw
 from ..wire import Message
-from .records import CAN_FRAMING, Record
+from .records import CAN_FRAMING, MESSAGE_FRAMING, Record
 
 __all__ = ["CSV_HEADER", "Decoded", "Decoder", "as_csv", "as_json", "as_text"]
 
@@ -40,6 +40,10 @@ def default_framings(id_base: int | None = None, extended: bool | None = False) 
     def make(record: Record) -> Any:
         if record.framing == CAN_FRAMING:
             return can_framing(id_base, bool(record.unit.is_extended_id) if extended is None else extended)
+        if record.framing == MESSAGE_FRAMING:
+            from .rosbag import CarriedMessages
+
+            return CarriedMessages()
         return make_serial_framing(record.framing)
 
     return make

@@ -7,7 +7,8 @@ Every other capture type goes record by record through the framings.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import heapq
+from collections.abc import Callable, Sequence
 from typing import IO, Any
 
 from ..counters import Counters
@@ -20,7 +21,7 @@ from .filters import Filter, RecordFilter
 from .records import CaptureError
 from .serial_log import is_serial_capture
 
-__all__ = ["FORMATS", "decode_file"]
+__all__ = ["FORMATS", "decode_file", "decode_to_mcap"]
 
 FORMATS = {"text": as_text, "jsonl": as_json, "csv": as_csv}
 CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small enough for a smooth progress bar
@@ -48,6 +49,25 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
             out.write(formatter(decoded, value_type) + "\n")
             count += 1
     return count, decoder.drops(), bad
+
+
+def decode_to_mcap(paths: Sequence[str], output: str, *, skip_bad: bool = False, id_base: int | None = None,
+                   extended: bool = False, keep: Filter | None = None) -> tuple[int, Counters, list[CaptureError]]:
+    """Write the messages of `paths` (merged by time) that `keep` passes as a rosbag2 MCAP file."""
+    from .rosbag import McapCaptureWriter
+
+    decoder = Decoder(default_framings(id_base, extended))
+    passing = RecordFilter(keep or Filter(), decoder)
+    bad: list[CaptureError] = []
+    writer = McapCaptureWriter(output)
+    try:
+        for record in heapq.merge(*(read_capture(path, skip_bad, bad) for path in paths), key=lambda r: r.t):
+            sender, decoded = passing.messages(record)
+            for d in decoded:
+                writer.write_message(d.t, d.link, sender, d.message)
+    finally:
+        writer.close()
+    return writer.messages, decoder.drops(), bad
 
 
 def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: ValueType, skip_bad: bool,

@@ -23,7 +23,7 @@ import numpy.typing as npt
 from ..framing.base import Framing
 from ..wire import KEY_MAX, Message, Op
 from .decoded import Decoded, Decoder
-from .records import CAN_FRAMING, Record
+from .records import CAN_FRAMING, MESSAGE_FRAMING, Record
 
 __all__ = ["Filter", "RecordFilter", "filter_records"]
 
@@ -111,7 +111,7 @@ class RecordFilter:
         if not self.keep.by_message:
             return [record]
         _, passed = self.messages(record)
-        if record.framing == CAN_FRAMING:
+        if record.framing in (CAN_FRAMING, MESSAGE_FRAMING):  # one message per unit (classic CAN, MCAP)
             return [record] if passed else []
         encoder = self._encoder(record.framing)
         chunk = b"".join(unit for d in passed for unit in encoder.encode(d.message))
