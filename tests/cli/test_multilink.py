@@ -7,12 +7,16 @@ import os
 import time
 from pathlib import Path
 
+import can
+import pytest
 from click.testing import CliRunner
-from peers import PtyPeer, run_vstig, start_vstig, stop, wait_for
+from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, stop, wait_for
 
 from vstig_cli.main import cli
 from vstig_hw import Message, Op, encode
+from vstig_hw.capture.files import read_capture
 from vstig_hw.framing import make_serial_framing
+from vstig_hw.links import parse
 
 T0 = 1_700_000_000.0
 
@@ -104,3 +108,33 @@ def test_decode_and_analyze_filters_and_links_kept_apart(tmp_path: Path) -> None
     assert set(json.loads(result.stdout)["bandwidth"]["links"]) == {"can1"}
     result = runner.invoke(cli, ["decode", str(log), "--since", "2", "--until", "1"])
     assert result.exit_code == 2 and "is not after --since" in result.output
+
+
+@pytest.mark.slow  # python-can's slcan driver sleeps 2 s after opening its port
+def test_record_can_and_a_radio_into_one_mcap(tmp_path: Path) -> None:
+    capture = tmp_path / "bridged.mcap"
+    bus, radio = SlcanAdapter(), PtyPeer()
+    cobs8 = make_serial_framing("cobs8")
+    on_bus, on_radio = Message(Op.PUT, 3, 1500, 1, 7), Message(Op.GET, 3, 1500, 1, 7)
+    recorder = start_vstig("record", f"can:slcan:{bus.path}", f"serial:{radio.path}?framing=cobs8",
+                           "-o", str(capture))
+    try:
+        wait_for(lambda: "O" in bus.commands, 30)
+        time.sleep(0.5)
+        bus.inject(can.Message(arbitration_id=0x600 | 7, data=encode(on_bus), is_extended_id=False))
+        time.sleep(0.1)
+        radio.write(b"".join(cobs8.encode(on_radio)))
+        time.sleep(1.0)
+    finally:
+        _out, err = stop(recorder)
+        bus.close()
+        radio.close()
+    assert recorder.returncode == 0, err
+    records = list(read_capture(str(capture)))
+    names = [parse(f"can:slcan:{bus.path}").name, parse(f"serial:{radio.path}").name]  # as record names them
+    assert [(r.link, r.unit) for r in records] == [(names[0], (on_bus, 7)), (names[1], (on_radio, None))]
+
+
+def test_can_and_serial_links_need_an_mcap_capture(tmp_path: Path) -> None:
+    result = CliRunner().invoke(cli, ["record", "can:virtual:x", "serial:/dev/null", "-o", str(tmp_path / "x.log")])
+    assert result.exit_code == 2 and "go into a .mcap capture" in result.output
