@@ -40,7 +40,9 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @reports_errors
 def command(files: tuple[str, ...], as_json: bool, plot: Path | None, window: float, conflict: Conflict,
             value_type: ValueType, skip_bad: bool, id_base: str | None, extended: bool, keep: Filter) -> None:
-    """Measure how long each write took to reach every robot, and the bandwidth, from captures.
+    """Measure convergence per write and bandwidth from captures.
+
+    Convergence is how long each write took to reach every robot, the paper's measure.
 
     A write is a new (key, timestamp, robot) entry. Every PUT or GET a robot sends
     shows the entry it holds, and a CAN frame's ID names its sender, so a write
