@@ -36,10 +36,13 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @click.option("--skip-bad", is_flag=True, help="Count malformed lines and go on instead of stopping at the first.")
 @click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 for 29-bit IDs).")
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs (default: read from the frames).")
+@click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
+              help="For Buzz/BittyBuzz captures: the TOML file mapping their keys.")
 @filter_options
 @reports_errors
 def command(files: tuple[str, ...], as_json: bool, plot: Path | None, window: float, conflict: Conflict,
-            value_type: ValueType, skip_bad: bool, id_base: str | None, extended: bool, keep: Filter) -> None:
+            value_type: ValueType, skip_bad: bool, id_base: str | None, extended: bool, deployment: str | None,
+            keep: Filter) -> None:
     """Measure convergence per write and bandwidth from captures.
 
     Convergence is how long each write took to reach every robot, the paper's measure.
@@ -59,7 +62,7 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, window: fl
     analyzer = Analyzer(window, conflict)
     # 11-bit unless told (--extended) or implied (--id-base names one width's base); else read from frames.
     width = True if extended else (False if base is not None else None)
-    drops, bad = _read(files, analyzer, skip_bad, base, width, keep)
+    drops, bad = _read(files, analyzer, skip_bad, base, width, keep, deployment)
     for error in bad[:5]:
         click.echo(f"skipped {error}", err=True)
     report = analyzer.report()
@@ -81,17 +84,18 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, window: fl
 
 
 def _read(files: tuple[str, ...], analyzer: Analyzer, skip_bad: bool, base: int | None, width: bool | None,
-          keep: Filter) -> tuple[Counters, list[Any]]:
+          keep: Filter, deployment: str | None) -> tuple[Counters, list[Any]]:
     size = sum(os.path.getsize(path) for path in files)
     if not (sys.stderr.isatty() and size > _PROGRESS_BYTES):
-        return analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep)
+        return analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep,
+                                deployment=deployment)
     from rich.console import Console
     from rich.progress import Progress
 
     with Progress(console=Console(stderr=True), transient=True) as bar:
         task = bar.add_task(f"analyzing {os.path.basename(files[0])}", total=size)
         result = analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep,
-                                  progress=lambda n: bar.advance(task, n))
+                                  deployment=deployment, progress=lambda n: bar.advance(task, n))
     return result
 
 

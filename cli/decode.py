@@ -17,10 +17,11 @@ from .errors import reports_errors
 
 
 def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | None, extended: bool,
-             keep: Filter) -> None:
+             deployment: str | None, keep: Filter) -> None:
     if not output.lower().endswith(MCAP_EXTENSION):
         raise click.UsageError(f"an MCAP capture is named *{MCAP_EXTENSION} (got {output})")
-    count, drops, bad = decode_to_mcap(files, output, skip_bad=skip_bad, id_base=base, extended=extended, keep=keep)
+    count, drops, bad = decode_to_mcap(files, output, skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
+                                       deployment=deployment)
     for error in bad[:5]:
         click.echo(f"skipped {error}", err=True)
     summary = f"{output}: {count} messages from {len(files)} files" + (f", {len(bad)} bad lines skipped" if bad else "")
@@ -36,10 +37,12 @@ def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | No
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
 @click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 with --extended).")
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs.")
+@click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
+              help="For Buzz/BittyBuzz captures (blabbermouth, bittybuzz-kilobot): the TOML file mapping their keys.")
 @filter_options
 @reports_errors
 def command(files: tuple[str, ...], fmt: str, output: str | None, skip_bad: bool, value_type: ValueType,
-            id_base: str | None, extended: bool, keep: Filter) -> None:
+            id_base: str | None, extended: bool, deployment: str | None, keep: Filter) -> None:
     """Print every message in FILES (or write them as rosbag2 MCAP).
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
@@ -51,7 +54,7 @@ def command(files: tuple[str, ...], fmt: str, output: str | None, skip_bad: bool
     if (fmt == "mcap") != (output is not None):
         raise click.UsageError("--format mcap writes to -o FILE.mcap; the other formats print to stdout")
     if output is not None:
-        _to_mcap(files, output, skip_bad, base, extended, keep)
+        _to_mcap(files, output, skip_bad, base, extended, deployment, keep)
         return
     total_bad = 0
     for path in files:
@@ -63,10 +66,12 @@ def command(files: tuple[str, ...], fmt: str, output: str | None, skip_bad: bool
                 task = bar.add_task(f"decoding {os.path.basename(path)}", total=size)
                 count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
                                                 id_base=base, extended=extended, keep=keep,
+                                                deployment=deployment,
                                                 progress=lambda n, t=task: bar.advance(t, n))  # type: ignore[misc]
         else:
             count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                            id_base=base, extended=extended, keep=keep)
+                                            id_base=base, extended=extended, keep=keep,
+                                            deployment=deployment)
         sys.stdout.flush()
         total_bad += len(bad)
         for error in bad[:5]:

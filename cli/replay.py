@@ -9,7 +9,7 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.decoded import Decoder
+from vstig_hw.capture.decoded import Decoder, default_framings
 from vstig_hw.capture.files import read_capture
 from vstig_hw.capture.filters import Filter, filter_records
 from vstig_hw.capture.records import CAN_FRAMING, Record
@@ -27,9 +27,9 @@ from .errors import LINK, reports_errors
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 
 
-def _sender(link: Link[Any], is_can: bool) -> Any:
+def _sender(link: Link[Any], is_can: bool, deployment: str | None) -> Any:
     """Write a record as is when the medium and framing match; otherwise re-encode its messages."""
-    decoder = Decoder()
+    decoder = Decoder(default_framings(deployment=deployment))
 
     def send(record: Record) -> None:
         same = (record.framing == CAN_FRAMING) if is_can else (record.framing == link.framing.name)
@@ -82,11 +82,11 @@ def _targets(onto: tuple[tuple[str | None, LinkSpec], ...], robot_id: int) -> di
     return dict(zip(names, links, strict=True))
 
 
-def _table(path: str, at: float | None, value_type: ValueType, keep: Filter) -> None:
+def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, deployment: str | None) -> None:
     engine = Stigmergy(_OBSERVER_ID)
-    decoder = Decoder()
+    decoder, reader = (Decoder(default_framings(deployment=deployment)) for _ in range(2))  # framings keep state
     t0 = None
-    for decoded in decoder.decode_all(filter_records(read_capture(path), keep)):
+    for decoded in decoder.decode_all(filter_records(read_capture(path), keep, reader)):
         t0 = decoded.t if t0 is None else t0
         if at is not None and decoded.t - t0 > at:
             break
@@ -110,10 +110,12 @@ def _table(path: str, at: float | None, value_type: ValueType, keep: Filter) -> 
 @click.option("--table", is_flag=True, help="Feed an offline engine instead and print its table.")
 @click.option("--at", type=click.FloatRange(0.0), help="With --table: stop at T seconds after the first record.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
+              help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
 @filter_options
 @reports_errors
 def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: float, loop: bool, robot_id: int,
-            table: bool, at: float | None, value_type: ValueType, keep: Filter) -> None:
+            table: bool, at: float | None, value_type: ValueType, deployment: str | None, keep: Filter) -> None:
     """Replay FILE onto live links, or show what the swarm believed (--table).
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
@@ -126,14 +128,15 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     if table == bool(onto):
         raise click.UsageError("give exactly one of --onto LINK or --table")
     if table:
-        _table(file, at, value_type, keep)
+        _table(file, at, value_type, keep, deployment)
         return
     if at is not None:
         raise click.UsageError("--at goes with --table")
     targets = _targets(onto, robot_id)
-    senders = {name: _sender(link, isinstance(spec, CanSpec))
+    senders = {name: _sender(link, isinstance(spec, CanSpec), deployment)
                for (name, link), (_, spec) in zip(targets.items(), onto, strict=True)}
     every_link = senders.get(None)
+    reader = Decoder(default_framings(deployment=deployment))  # for filters that look into the messages
     unmapped: Counter[str] = Counter()
 
     def send(record: Record) -> None:
@@ -151,7 +154,7 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
         with stop_on_signals() as stop:
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
-                done = replay(filter_records(read_capture(file), keep), send, speed=speed, stop=stop)
+                done = replay(filter_records(read_capture(file), keep, reader), send, speed=speed, stop=stop)
                 click.echo(f"replayed {done.frames} units in {done.took:.3f} s (logged {done.logged:.3f} s)",
                            err=True)
                 if stop.is_set() or done.frames == 0:

@@ -31,13 +31,14 @@ CHUNK = 1 << 22  # bytes per candump chunk, as decode reads them
 
 def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, skip_bad: bool = False,
                      id_base: int | None = None, extended: bool | None = None, keep: Filter | None = None,
-                     progress: Callable[[int], None] | None = None) -> tuple[Counters, list[CaptureError]]:
+                     progress: Callable[[int], None] | None = None,
+                     deployment: str | None = None) -> tuple[Counters, list[CaptureError]]:
     """Feed every message of `paths` that `keep` passes; returns (drops by reason, bad lines skipped).
 
     `extended=None` reads each CAN link's ID width from its frames. `progress(n)`
     hears of each n bytes read, on the bulk path.
     """
-    decoder = Decoder(default_framings(id_base, extended))
+    decoder = Decoder(default_framings(id_base, extended, deployment))
     sink = _Sink(analyzer, decoder, keep or Filter())
     bad: list[CaptureError] = []
     if len(paths) == 1 and _bulk_readable(paths[0]) and not extended:

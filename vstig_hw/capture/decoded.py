@@ -32,8 +32,10 @@ class Decoded:
 FramingFactory = Callable[[Record], Any]
 
 
-def default_framings(id_base: int | None = None, extended: bool | None = False) -> FramingFactory:
-    """Framings by record; `extended=None` takes each CAN link's ID width from its first frame."""
+def default_framings(id_base: int | None = None, extended: bool | None = False,
+                     deployment: str | None = None) -> FramingFactory:
+    """Framings by the name a record carries: `extended=None` takes each CAN link's ID width from its first
+    frame; robot dialects (Buzz, BittyBuzz) need their `deployment` file."""
     from ..framing import make_serial_framing
     from ..links.can import can_framing
 
@@ -44,6 +46,15 @@ def default_framings(id_base: int | None = None, extended: bool | None = False) 
             from .rosbag import CarriedMessages
 
             return CarriedMessages()
+        from ..dialects.framing import DIALECT_FRAMINGS, make_dialect_framing
+
+        if record.framing in DIALECT_FRAMINGS:
+            if deployment is None:
+                raise ValueError(f"{record.framing} records are in a robot dialect: give the deployment file that "
+                                 "maps its keys (--deployment FILE.toml)")
+            from ..dialects.mapping import load_deployment
+
+            return make_dialect_framing(record.framing, load_deployment(deployment))
         return make_serial_framing(record.framing)
 
     return make

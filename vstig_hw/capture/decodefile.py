@@ -30,10 +30,11 @@ CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
                 skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
                 progress: Callable[[int], None] | None = None,
-                keep: Filter | None = None) -> tuple[int, Counters, list[CaptureError]]:
+                keep: Filter | None = None,
+                deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
     """Write every message in `path` that `keep` passes to `out`; returns (messages, drops, bad lines skipped)."""
     formatter = FORMATS[fmt]
-    decoder = Decoder(default_framings(id_base, extended))
+    decoder = Decoder(default_framings(id_base, extended, deployment))
     bad: list[CaptureError] = []
     if fmt == "csv":
         out.write(CSV_HEADER)
@@ -52,11 +53,12 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
 
 
 def decode_to_mcap(paths: Sequence[str], output: str, *, skip_bad: bool = False, id_base: int | None = None,
-                   extended: bool = False, keep: Filter | None = None) -> tuple[int, Counters, list[CaptureError]]:
+                   extended: bool = False, keep: Filter | None = None,
+                   deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
     """Write the messages of `paths` (merged by time) that `keep` passes as a rosbag2 MCAP file."""
     from .rosbag import McapCaptureWriter
 
-    decoder = Decoder(default_framings(id_base, extended))
+    decoder = Decoder(default_framings(id_base, extended, deployment))
     passing = RecordFilter(keep or Filter(), decoder)
     bad: list[CaptureError] = []
     writer = McapCaptureWriter(output)

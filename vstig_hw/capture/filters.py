@@ -126,11 +126,11 @@ class RecordFilter:
         return encoder
 
 
-def filter_records(records: Iterable[Record], keep: Filter) -> Iterator[Record]:
+def filter_records(records: Iterable[Record], keep: Filter, decoder: Decoder | None = None) -> Iterator[Record]:
     """The records of a capture that pass `keep` (all of them, unchanged, for an empty filter)."""
     if not keep:
         yield from records
         return
-    passing = RecordFilter(keep)
+    passing = RecordFilter(keep, decoder)
     for record in records:
         yield from passing.units(record)
