@@ -138,3 +138,51 @@ def test_record_can_and_a_radio_into_one_mcap(tmp_path: Path) -> None:
 def test_can_and_serial_links_need_an_mcap_capture(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["record", "can:virtual:x", "serial:/dev/null", "-o", str(tmp_path / "x.log")])
     assert result.exit_code == 2 and "go into a .mcap capture" in result.output
+
+
+@pytest.mark.slow  # python-can's slcan driver sleeps 2 s after opening its port
+def test_two_can_buses_in_one_candump_log_keep_their_names(tmp_path: Path) -> None:
+    capture = tmp_path / "two_buses.log"
+    buses = [SlcanAdapter(), SlcanAdapter()]
+    specs = [f"can:slcan:{bus.path}" for bus in buses]
+    recorder = start_vstig("record", *specs, "-o", str(capture))
+    try:
+        wait_for(lambda: all("O" in bus.commands for bus in buses), 30)
+        time.sleep(0.5)
+        for i, bus in enumerate(buses):
+            msg = Message(Op.PUT, 3, 100 + i, 1, 5 + i)
+            bus.inject(can.Message(arbitration_id=0x600 | 5 + i, data=encode(msg), is_extended_id=False))
+        wait_for(lambda: capture.exists() and capture.read_text().count("\n") >= 2, 20)
+    finally:
+        _out, err = stop(recorder)
+        for bus in buses:
+            bus.close()
+    assert recorder.returncode == 0, err
+    names = [parse(spec).name for spec in specs]
+    assert sorted((r.link, r.unit.arbitration_id) for r in read_capture(str(capture))) == \
+        sorted([(names[0], 0x605), (names[1], 0x606)])
+    report = json.loads(run_vstig("analyze", str(capture), "--json").stdout)
+    assert set(report["bandwidth"]["links"]) == set(names)
+    assert set(report["bandwidth"]["senders"]) == {"5", "6"}
+
+
+def test_an_mcap_capture_replays_onto_a_radio_re_encoded(tmp_path: Path) -> None:
+    from vstig_hw.capture.rosbag import McapCaptureWriter
+
+    bag = tmp_path / "run.mcap"
+    writer = McapCaptureWriter(str(bag))
+    sent = [Message(Op.PUT, 3, 100 + i, i + 1, 7) for i in range(3)]
+    for i, msg in enumerate(sent):
+        writer.write_message(T0 + i * 0.01, "can0", 7, msg)
+    writer.close()
+    radio = PtyPeer()
+    try:
+        done = run_vstig("replay", str(bag), "--onto", f"serial:{radio.path}?framing=epuck4", "--speed", "10")
+        assert done.returncode == 0, done.stderr
+        heard: list[Message] = []
+        receiver = make_serial_framing("epuck4")
+        while chunk := radio.read(0.5):
+            heard += receiver.feed(chunk)
+    finally:
+        radio.close()
+    assert heard == sent
