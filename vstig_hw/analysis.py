@@ -24,12 +24,11 @@ Definitions (the README's analyze section states them for users):
 
 from __future__ import annotations
 
-import bisect
 import functools
 import math
 import statistics
 from collections import defaultdict
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -52,7 +51,8 @@ _ENTRY_BITS = 47  # key (15) | timestamp (16) | robot (16)
 _ENTRY_MASK = (1 << _ENTRY_BITS) - 1
 _SLOT_ZERO = 1 << 39  # activity slots are stored offset by this, so slots before the origin stay positive
 _BATCH = 1 << 16  # messages buffered by add_messages before they are aggregated as one batch
-_NEVER: tuple[list[float], list[int]] = ([], [])  # the frontier of a sender that never showed the key
+_NEVER = (np.empty(0), np.empty(0, dtype=np.int64))  # the frontier of a sender that never showed the key
+_BLOCK = 4096  # writes per block of writes x senders in report()
 
 
 @dataclass(frozen=True)
@@ -295,7 +295,7 @@ class Analyzer:
         shows: dict[tuple[int, int], list[tuple[float, int]]] = defaultdict(list)
         for (sender, code), when in self._shown.items():
             shows[(sender, code >> 32)].append((when, rank[code]))
-        frontier: dict[tuple[int, int], tuple[list[float], list[int]]] = {}
+        frontier: dict[tuple[int, int], tuple[F64, I64]] = {}
         for slot, events in shows.items():
             times: list[float] = []
             ranks: list[int] = []
@@ -303,15 +303,21 @@ class Analyzer:
                 if not ranks or r > ranks[-1]:
                     times.append(when)
                     ranks.append(r)
-            frontier[slot] = (times, ranks)
-        activity: dict[int, list[int]] = defaultdict(list)
-        for code in self._active:
-            activity[code >> 40].append((code & ((1 << 40) - 1)) - _SLOT_ZERO)
-        for slots in activity.values():
-            slots.sort()
+            frontier[slot] = (np.array(times, dtype=np.float64), np.array(ranks, dtype=np.int64))
+        # Per sender: the sorted slots it was heard in.
+        active = np.array(sorted(self._active), dtype=np.int64)
+        owner = active >> 40
+        activity: dict[int, I64] = {}
+        for group in np.split(active, np.flatnonzero(owner[1:] != owner[:-1]) + 1) if len(active) else []:
+            activity[int(group[0] >> 40)] = (group & ((1 << 40) - 1)) - _SLOT_ZERO
+        heard: dict[int, dict[str, LinkHeard]] = defaultdict(dict)
+        for (link, code), span in sorted(self._heard.items()):
+            heard[code][self.links[link]] = LinkHeard(span[0], span[1], int(span[2]))
 
-        writes = [self._write_report(code, rank[code], frontier, activity)
-                  for code in sorted(self._writes, key=lambda c: (self._writes[c][0], c))]
+        reports: dict[int, WriteReport] = {}
+        for key, codes in by_key.items():
+            reports.update(self._key_reports(key, codes, rank, frontier, activity, heard))
+        writes = [reports[code] for code in sorted(self._writes, key=lambda c: (self._writes[c][0], c))]
         links: dict[str, Traffic] = {name: Traffic() for name in self.links}
         senders: dict[int, Traffic] = defaultdict(Traffic)
         for (link, sender, op), count in sorted(self._traffic.items()):
@@ -338,26 +344,34 @@ class Analyzer:
         """(timestamp, robot, value) of a write code (the value it first appeared with)."""
         return (code >> 16) & 0xFFFF, code & 0xFFFF, self._writes[code][2]
 
-    def _write_report(self, code: int, rank: int, frontier: dict[tuple[int, int], tuple[list[float], list[int]]],
-                      activity: dict[int, list[int]]) -> WriteReport:
-        t, link, value = self._writes[code]
-        key = code >> 32
+    def _key_reports(self, key: int, codes: list[int], rank: dict[int, int],
+                     frontier: dict[tuple[int, int], tuple[F64, I64]], activity: dict[int, I64],
+                     heard: dict[int, dict[str, LinkHeard]]) -> Iterator[tuple[int, WriteReport]]:
+        """One key's writes, a block of writes x every sender at a time."""
+        senders = sorted(activity)
         origin = self._origin or 0.0
-        low = math.floor((t - self.window - origin) / self._slot)
-        high = math.floor((t + self.window - origin) / self._slot)
-        caught: list[float] = []
-        behind: list[int] = []
-        for sender, slots in activity.items():
-            at = bisect.bisect_left(slots, low)
-            if at == len(slots) or slots[at] > high:
-                continue  # not active around this write
-            times, ranks = frontier.get((sender, key), _NEVER)
-            reached = bisect.bisect_left(ranks, rank)
-            if reached == len(ranks):
-                behind.append(sender)
-            else:
-                caught.append(max(0.0, times[reached] - t))
-        heard = {self.links[i]: LinkHeard(span[0], span[1], int(span[2]))
-                 for i in range(len(self.links)) if (span := self._heard.get((i, code))) is not None}
-        return WriteReport(key, value, (code >> 16) & 0xFFFF, code & 0xFFFF, t, self.links[link],
-                           len(caught) + len(behind), tuple(sorted(caught)), tuple(sorted(behind)), heard, rank)
+        for start in range(0, len(codes), _BLOCK):
+            block = codes[start:start + _BLOCK]
+            t = np.array([self._writes[code][0] for code in block])
+            ranks = np.array([rank[code] for code in block])
+            low = np.floor((t - self.window - origin) / self._slot)
+            high = np.floor((t + self.window - origin) / self._slot)
+            is_active = np.zeros((len(block), len(senders)), dtype=bool)
+            after = np.full((len(block), len(senders)), np.nan)  # NaN: never showed it or newer
+            for column, sender in enumerate(senders):
+                slots = activity[sender]
+                at = np.minimum(np.searchsorted(slots, low), len(slots) - 1)
+                is_active[:, column] = (slots[at] >= low) & (slots[at] <= high)
+                times, reached_ranks = frontier.get((sender, key), _NEVER)
+                if len(times):
+                    reached = np.searchsorted(reached_ranks, ranks)
+                    when = times[np.minimum(reached, len(times) - 1)]
+                    after[:, column] = np.where(reached < len(times), np.maximum(0.0, when - t), np.nan)
+            behind_mask = is_active & np.isnan(after)
+            for row, code in enumerate(block):
+                caught = np.sort(after[row][is_active[row] & ~behind_mask[row]]).tolist()
+                behind = [senders[column] for column in np.flatnonzero(behind_mask[row]).tolist()]
+                first, link, value = self._writes[code]
+                yield code, WriteReport(key, value, (code >> 16) & 0xFFFF, code & 0xFFFF, first, self.links[link],
+                                        len(caught) + len(behind), tuple(caught), tuple(behind),
+                                        heard.get(code, {}), rank[code])
