@@ -6,6 +6,7 @@ from typing import Any
 
 import click
 
+from vstig_hw.capture.decoded import Decoder, default_framings
 from vstig_hw.capture.files import CAN_EXTENSIONS, MCAP_EXTENSION, RotatingCapture
 from vstig_hw.capture.filters import Filter, RecordFilter
 from vstig_hw.capture.records import CAN_FRAMING, Record
@@ -57,8 +58,11 @@ def command(links: tuple[LinkSpec, ...], output: str, max_bytes: str | None, dur
                                f"{MCAP_EXTENSION} (got {output})")
     limit = _size(max_bytes) if max_bytes else None
     node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
-    capture = RotatingCapture(output, medium, limit)
-    passing = RecordFilter(keep)
+    # Units become messages again for an .mcap file and for filters that look into messages: robot dialects'
+    # links name the deployment file that maps their keys.
+    deployment = next((d for spec in links if (d := getattr(spec, "deployment", None))), None)
+    capture = RotatingCapture(output, medium, limit, Decoder(default_framings(deployment=deployment)))
+    passing = RecordFilter(keep, Decoder(default_framings(deployment=deployment)))
 
     def write(source: Link[Any], t: float, unit: Any) -> None:
         framing = CAN_FRAMING if isinstance(source.framing, CanFraming) else source.framing.name

@@ -81,10 +81,11 @@ def rotated_name(path: str, index: int) -> str:
 class RotatingCapture:
     """Writes records to `path`, starting a new numbered file whenever one exceeds `max_bytes`."""
 
-    def __init__(self, path: str, medium: str, max_bytes: int | None = None) -> None:
+    def __init__(self, path: str, medium: str, max_bytes: int | None = None, decoder: Any = None) -> None:
+        """`decoder` (a capture.decoded.Decoder) turns units into messages for an mcap capture."""
         if medium not in ("can", "serial", "mcap"):
             raise ValueError(f"medium must be can, serial or mcap, got {medium!r}")
-        self.base, self.medium, self.max_bytes = path, medium, max_bytes
+        self.base, self.medium, self.max_bytes, self.decoder = path, medium, max_bytes, decoder
         self.index = 0
         self.files = [path]
         self.records = 0
@@ -94,7 +95,7 @@ class RotatingCapture:
         if self.medium == "mcap":
             from .rosbag import McapCaptureWriter
 
-            return McapCaptureWriter(path)
+            return McapCaptureWriter(path, self.decoder)
         return CanCaptureWriter(path) if self.medium == "can" else SerialCaptureWriter(path)
 
     def write(self, record: Record) -> None:
