@@ -32,13 +32,12 @@ def plot_report(report: Report, path: Path, key: int | None = None) -> None:
     from matplotlib.ticker import MaxNLocator
 
     key = plotted_key(report) if key is None else key
-    start = report.start or 0.0
     with plt.rc_context({"font.size": 8, "axes.titlesize": 8, "legend.fontsize": 6}):
         fig, (spread, histogram) = plt.subplots(2, 1, figsize=(_WIDTH_IN, _HEIGHT_IN))
         writes = [w for w in report.writes if w.key == key and w.senders_total]
         shown = sorted(writes, key=lambda w: w.rank)[-MAX_LINES:]
         for write in shown:
-            xs, ys = _spread(write, start)
+            xs, ys = _spread(write)
             spread.step(xs, ys, where="post", linewidth=1,
                         label=f"ts {write.timestamp} robot {write.robot}")
         if shown:
@@ -50,7 +49,7 @@ def plot_report(report: Report, path: Path, key: int | None = None) -> None:
                         ha="center", va="center", transform=spread.transAxes)
         more = f", newest {len(shown)} of {len(writes)}" if len(writes) > len(shown) else ""
         spread.set_title(f"(a) key {key}: spread of each write{more}")
-        spread.set_xlabel("time in capture (s)")
+        spread.set_xlabel("time since the write first appeared (s)")
         spread.set_ylabel("senders holding it or newer")
         spread.grid(True, alpha=0.3)
 
@@ -58,8 +57,10 @@ def plot_report(report: Report, path: Path, key: int | None = None) -> None:
         if times:
             histogram.hist(times, bins=min(30, max(5, len(set(times)))), color="tab:blue", alpha=0.8)
             median = statistics.median(times)
-            histogram.axvline(median, color="black", linestyle="--", linewidth=1, label=f"median {median:.3g} s")
-            histogram.legend(loc="upper right")
+            histogram.set_ylim(top=histogram.get_ylim()[1] * 1.15)  # headroom for the median's label
+            histogram.axvline(median, color="black", linestyle="--", linewidth=1)
+            histogram.annotate(f" median {median:.3g} s", xy=(median, 0.98), xycoords=("data", "axes fraction"),
+                               va="top", ha="left", fontsize=6)
         else:
             histogram.text(0.5, 0.5, "no write reached every active sender", ha="center", va="center",
                              transform=histogram.transAxes)
@@ -73,11 +74,10 @@ def plot_report(report: Report, path: Path, key: int | None = None) -> None:
         plt.close(fig)
 
 
-def _spread(write: WriteReport, start: float) -> tuple[list[float], list[float]]:
-    """Step points: the fraction of the write's active senders that had caught up, over capture time."""
-    t0 = write.t - start
-    xs, ys = [t0], [0.0]
+def _spread(write: WriteReport) -> tuple[list[float], list[float]]:
+    """Step points: the fraction of the write's active senders that had caught up, over time since the write."""
+    xs, ys = [0.0], [0.0]
     for done, after in enumerate(write.caught_up_after, 1):
-        xs.append(t0 + after)
+        xs.append(after)
         ys.append(done / write.senders_total)
     return xs, ys
