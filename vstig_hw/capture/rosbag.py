@@ -41,15 +41,15 @@ NO_SENDER = -1
 _TOPIC_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
 
 
-def _needs(extra: str) -> Any:
-    return CaptureError(extra, None, "reading or writing .mcap needs the mcap extra: pip install 'vstig-hw[mcap]'")
+def _needs_extra(path: str) -> CaptureError:
+    return CaptureError(path, None, "reading or writing .mcap needs the mcap extra: pip install 'vstig-hw[mcap]'")
 
 
-def _typestore() -> Any:
+def _typestore(path: str) -> Any:
     try:
         from rosbags.typesys import Stores, get_types_from_msg, get_typestore
     except ImportError:
-        raise _needs("rosbags") from None
+        raise _needs_extra(path) from None
     store = get_typestore(Stores.EMPTY)
     store.register(get_types_from_msg(MSGDEF, TYPE_NAME))
     return store
@@ -68,9 +68,9 @@ class McapCaptureWriter:
         try:
             from mcap.writer import Writer
         except ImportError:
-            raise _needs("mcap") from None
+            raise _needs_extra(path) from None
         self.path = path
-        self._store = _typestore()
+        self._store = _typestore(path)
         self._type = self._store.types[TYPE_NAME]
         self._file: IO[bytes] = open(path, "wb")  # noqa: SIM115 - closed in close()
         self._writer = Writer(self._file)
@@ -145,8 +145,8 @@ def read_mcap(path: str) -> Iterator[Record]:
         from mcap.exceptions import McapError
         from mcap.reader import make_reader
     except ImportError:
-        raise _needs("mcap") from None
-    store = _typestore()
+        raise _needs_extra(path) from None
+    store = _typestore(path)
     try:
         with open(path, "rb") as file:
             for schema, channel, raw in make_reader(file).iter_messages(log_time_order=True):
