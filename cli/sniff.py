@@ -9,19 +9,21 @@ from typing import Any
 import click
 
 from vstig_hw.gateway import Mode, Node
+from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ._common import build_links, print_counters, run_until_stopped
+from ._guard import GuardChoice, guard_options, take_warnings
 from .errors import LINK, reports_errors
 
 
-def _table(view: SwarmView, value_type: ValueType) -> Any:
+def _table(view: SwarmView, value_type: ValueType, node: Node) -> Any:
     from rich.table import Table
 
-    table = Table(title=f"vstig sniff: {view.messages} messages")
+    table = Table(title=f"vstig sniff: {view.messages} messages", caption=node.summary())
     for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders"):
         table.add_column(column, justify="left" if column == "stale senders" else "right")
     now = time.time()
@@ -39,13 +41,19 @@ def _table(view: SwarmView, value_type: ValueType) -> Any:
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@guard_options
 @reports_errors
-def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float | None) -> None:
+def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float | None, guard: GuardChoice) -> None:
     """Decode LINK's traffic live, per key; passive: never transmits.
 
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
+
+    The guard options are bridge's: what a bridge with them would refuse is left out of the
+    table and counted under the table (drop_jump, drop_rate...); --max-jump 0 shows everything.
     """
-    node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN)
+    built = build_links([link], listen_only=True)
+    firewall = guard.build(built)
+    node = Node(built, mode=Mode.LISTEN, guard=firewall)
     view = SwarmView()
     node.on_heard.append(view.add)
     if jsonl:
@@ -62,12 +70,25 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
             out.flush()
 
         node.on_heard.append(emit)
+        node.on_tick.append(lambda _node: _warn(firewall))
         with node:
             run_until_stopped(node, duration=duration)
+        _warn(firewall)
         print_counters(node)
         return
     from rich.live import Live
 
-    with node, Live(_table(view, value_type), refresh_per_second=4, transient=False) as live:
-        run_until_stopped(node, lambda: live.update(_table(view, value_type)), duration)
+    with node, Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
+        def refresh() -> None:
+            for warning in take_warnings(firewall):
+                live.console.print(warning, markup=False, highlight=False)
+            live.update(_table(view, value_type, node))
+
+        run_until_stopped(node, refresh, duration)
+    _warn(firewall)
     print_counters(node)
+
+
+def _warn(firewall: Guard) -> None:
+    for warning in take_warnings(firewall):
+        click.echo(warning, err=True)

@@ -30,6 +30,7 @@ from ..counters import Counters
 from ..engine import ConflictResolver, Stigmergy
 from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
+from .guard import Guard
 from .outlet import Outlet
 from .readers import LinkReaders
 
@@ -82,6 +83,7 @@ class Node:
         period: float = DEFAULT_PERIOD,
         budget: int | None = DEFAULT_BUDGET,
         onconflict: ConflictResolver | None = None,
+        guard: Guard | None = None,
     ) -> None:
         self.links = list(links)
         if not self.links:
@@ -93,6 +95,7 @@ class Node:
             raise ValueError("a raw bridge needs at least two links")
         self.mode = mode
         self.period = period
+        self.guard = guard  # what links hear passes it before the engine, a relay or a listener sees it
         self.engine = Stigmergy(robot_id, onconflict=onconflict) if mode is Mode.ENGINE else None
         self.outlets = [] if mode is Mode.LISTEN else [
             Outlet(link, budget, period, keep_all=mode is Mode.RAW) for link in self.links
@@ -198,6 +201,8 @@ class Node:
         sender_of = link.sender_of
         engine = self.engine
         outlets = self.outlets
+        guard = self.guard
+        relays = guard is None or not guard.read_only(link.name)
         heard_count = 0
         for unit in units:
             for listener in self.on_unit:
@@ -210,6 +215,8 @@ class Node:
             if not messages:
                 continue
             heard_count += len(messages)
+            if guard is not None:
+                messages = guard.filter(link.name, sender_of(unit), messages, t, link.counters)
             if self.on_heard:
                 sender = sender_of(unit)
                 for msg in messages:
@@ -219,7 +226,7 @@ class Node:
             if engine is not None:
                 for msg in messages:
                     engine.receive(msg)
-            elif self.mode is Mode.RAW:
+            elif self.mode is Mode.RAW and relays:
                 for outlet in outlets:
                     if outlet.link is not link:
                         for msg in messages:
@@ -243,9 +250,12 @@ class Node:
         """
         if self.engine is not None and self.engine.pending():
             outgoing = self.engine.drain()
+            confined_to = self.guard.confined_to if self.guard is not None and self.guard.confines else None
             for outlet in self.outlets:
+                name = outlet.link.name
                 for msg in outgoing:
-                    outlet.push(msg)
+                    if confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay there
+                        outlet.push(msg)
         outlets = self.outlets  # outlets[i] belongs to links[i]
         if heard_on:  # a stable sort: those links move to the end, the others keep their order
             outlets = [outlets[i] for i in sorted(range(len(outlets)), key=lambda i: heard_on >> i & 1)]
