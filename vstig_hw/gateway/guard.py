@@ -19,10 +19,9 @@ Checks, in this order; a refused message is counted once, under the first reason
    allowed: an empty GET, or a GET older than our entry, passes and is answered.
 4. `jump`: a PUT or GET newer than our entry for its key by more than
    `max_jump` timestamps. A key we do not hold passes at any timestamp. The jump
-   is quarantined, not stored: if its link keeps sending only jumps for that key,
-   with no message within range, for `jump_hold` seconds, the guard concludes that
-   it is the one behind (it missed more than `max_jump` updates, say while a radio
-   was unplugged) and lets the next one through.
+   is quarantined: not stored, not relayed, and our entry stays as it was, so
+   the robots that missed it see nothing, and a robot that stored it (one on the
+   attacker's own medium) is refused each time it repeats it.
 
 Two policies refuse nothing:
 
@@ -34,8 +33,8 @@ Two policies refuse nothing:
 
 Our entry for a key is the newest one the guard has let through (timestamp,
 robot, value), kept here so the same guard serves an engine, a raw bridge and a
-sniffer. Every table is bounded: at most one entry per key (32,768), per link
-and key, and `MAX_SENDERS` token buckets.
+sniffer. Every table is bounded: at most one entry per key (32,768) and
+`MAX_SENDERS` token buckets.
 """
 
 from __future__ import annotations
@@ -48,7 +47,7 @@ from ..counters import Counters
 from ..timestamps import TS_NONE, is_newer, steps_ahead
 from ..wire import GET_BIT, KEY_MAX, Message
 
-__all__ = ["DEFAULT_JUMP_HOLD", "DEFAULT_MAX_JUMP", "MAX_SENDERS", "Guard", "IdSet", "LinkPolicy"]
+__all__ = ["DEFAULT_MAX_JUMP", "MAX_SENDERS", "Guard", "IdSet", "LinkPolicy"]
 
 # 255: every error in the timestamp's high byte (a flipped bit, a byte-swapped or
 # half-written counter) moves it by 256 or more and is refused, while the gateway
@@ -56,7 +55,6 @@ __all__ = ["DEFAULT_JUMP_HOLD", "DEFAULT_MAX_JUMP", "MAX_SENDERS", "Guard", "IdS
 # 0.1 s control step) before an honest robot looked like a jump. An accepted
 # forgery can silence honest writers of a key for at most 255 of their writes.
 DEFAULT_MAX_JUMP = 255
-DEFAULT_JUMP_HOLD = 30.0  # seconds of nothing but jumps from a link before we believe we are the ones behind
 MAX_SENDERS = 4096  # token buckets kept; beyond it, full (idle) buckets are forgotten
 
 
@@ -126,7 +124,6 @@ class Guard:
         self,
         *,
         max_jump: int | None = DEFAULT_MAX_JUMP,
-        jump_hold: float = DEFAULT_JUMP_HOLD,
         rate: float | None = None,
         flap: float | None = None,
         links: Mapping[str, LinkPolicy] | None = None,
@@ -137,10 +134,7 @@ class Guard:
             raise ValueError(f"rate must be a positive number of messages per second (or None: off), got {rate!r}")
         if flap is not None and not flap > 0:
             raise ValueError(f"flap must be a positive number of conflicts per second (or None: off), got {flap!r}")
-        if not jump_hold >= 0:
-            raise ValueError(f"jump_hold must be seconds >= 0, got {jump_hold!r}")
         self.max_jump = max_jump
-        self.jump_hold = jump_hold
         self.rate = rate
         self._burst = max(rate or 0.0, 1.0)
         self.flap = flap
@@ -148,7 +142,6 @@ class Guard:
         self.warnings: list[str] = []  # for the caller to print (and clear)
         self._view: dict[int, tuple[int, int, int]] = {}  # key -> (timestamp, robot, value) let through
         self._buckets: dict[tuple[str, int | None], list[float]] = {}  # (link, sender) -> [tokens, last time]
-        self._jumping: dict[tuple[str, int], float] = {}  # (link, key) -> when its run of only-jumps began
         self._confined: dict[int, tuple[int, int, str]] = {}  # key -> (timestamp, robot, read-only link)
         self._flaps: dict[int, list[float]] = {}  # key -> [window start, conflicts in it, timestamp of the last]
         self._warned: set[int] = set()
@@ -183,9 +176,8 @@ class Guard:
         if ts == TS_NONE:
             return None  # an empty GET: says nothing about the entry
         if view is not None and self.max_jump is not None and is_newer(ts, view[0]) \
-                and steps_ahead(ts, view[0]) > self.max_jump and self._hold_jump(link, key, now):
+                and steps_ahead(ts, view[0]) > self.max_jump:
             return "drop_jump"
-        self._jumping.pop((link, key), None)
         self._let_through(link, policy, key, ts, robot, value, view, now)
         return None
 
@@ -221,11 +213,6 @@ class Guard:
         for sender, (tokens, last) in list(self._buckets.items()):
             if tokens + max(0.0, now - last) * rate >= self._burst:
                 del self._buckets[sender]
-
-    def _hold_jump(self, link: str, key: int, now: float) -> bool:
-        """True to refuse this jump; False once its link has sent nothing but jumps for `jump_hold` seconds."""
-        began = self._jumping.setdefault((link, key), now)
-        return now - began < self.jump_hold
 
     def _let_through(self, link: str, policy: LinkPolicy, key: int, ts: int, robot: int, value: int,
                      view: tuple[int, int, int] | None, now: float) -> None:
