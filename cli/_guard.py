@@ -43,7 +43,8 @@ _OPTIONS = [
     click.option("--trust", multiple=True, metavar="LINK=IDS", callback=_pairs(U16_MAX, "ids"),
                  help="Accept on LINK only these sender ids, e.g. can0=1-20,33 (drop_untrusted). Repeatable."),
     click.option("--deny", multiple=True, metavar="LINK=IDS", callback=_pairs(U16_MAX, "ids"),
-                 help="Refuse these sender ids on LINK (drop_untrusted). Repeatable."),
+                 help="Refuse on LINK what these robots send or wrote (relayed by others too): "
+                      "drop_untrusted. Repeatable."),
     click.option("--keys", multiple=True, metavar="LINK=RANGE", callback=_pairs(KEY_MAX, "keys"),
                  help="The keys LINK may write, e.g. radio=100-199 (drop_key); it may still read any. Repeatable."),
     click.option("--read-only", multiple=True, metavar="LINK",
@@ -78,9 +79,9 @@ class GuardChoice:
                 flag = f"--{option.replace('_', '-')}"
                 if name not in names:
                     raise click.UsageError(f"{flag} {name}: no such link (links here: {', '.join(names)})")
-                if option in ("trust", "deny") and name in anonymous:
+                if option == "trust" and name in anonymous:
                     raise click.UsageError(f"{flag} {name}: this medium does not name its senders "
-                                           "(only CAN does); use --keys or --read-only on it")
+                                           "(only CAN does); use --deny, --keys or --read-only on it")
                 fields = policies.setdefault(name, {})
                 if option in fields:
                     raise click.UsageError(f"{flag} {name} given twice: join them with commas")

@@ -122,6 +122,7 @@ def test_trust_and_deny_lists_per_link() -> None:
     assert guard.check("can", 4, put(1, 2), 0.0) == "drop_untrusted"
     assert guard.check("can", None, put(1, 2), 0.0) == "drop_untrusted"  # a medium naming nobody: nobody trusted
     assert guard.check("bus", 7, put(2, 1), 0.0) == "drop_untrusted"
+    assert guard.check("bus", 8, put(2, 1, robot=7), 0.0) == "drop_untrusted"  # robot 8 relaying robot 7's write
     assert guard.check("bus", 8, put(2, 1), 0.0) is None
     assert guard.check("radio", 7, put(3, 1), 0.0) is None  # the lists are per link
 

@@ -10,8 +10,10 @@ Checks, in this order; a refused message is counted once, under the first reason
 (`drop_<reason>` on the link), and never raised:
 
 1. `untrusted`: the link has an allow-list (`trust`) and the sender is not on it
-   (a medium that names nobody names no trusted sender), or the sender is on the
-   link's deny-list.
+   (a medium that names nobody names no trusted sender), or the link has a
+   deny-list that names the sender or the robot that wrote the entry: robots on
+   a broadcast medium relay what a denied robot wrote under their own ids, and a
+   medium that names nobody still carries the writer.
 2. `rate`: the sender's token bucket is empty (`rate` messages per second, a
    burst of one second's worth, at least one message). Senders are what the medium names (CAN node
    ids, zenoh gateway ids); where it names nobody the link is one sender.
@@ -163,12 +165,12 @@ class Guard:
     def check(self, link: str, sender: int | None, msg: Message, now: float) -> str | None:
         """None if `msg` (heard on `link` from `sender` at `now` seconds) passes, else its drop counter name."""
         policy = self.policies.get(link, _OPEN)
+        head, value, ts, robot = msg
         if (policy.trust is not None and sender not in policy.trust) or (
-                policy.deny is not None and sender in policy.deny):
+                policy.deny is not None and (sender in policy.deny or robot in policy.deny)):
             return "drop_untrusted"
         if self.rate is not None and not self._take_token(link, sender, now):
             return "drop_rate"
-        head, value, ts, robot = msg
         key = head & KEY_MAX
         view = self._view.get(key)
         if policy.keys is not None and key not in policy.keys and _writes(head, ts, robot, value, view):
