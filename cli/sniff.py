@@ -80,8 +80,7 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
 
     with node, Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
         def refresh() -> None:
-            for warning in take_warnings(firewall):
-                live.console.print(warning, markup=False, highlight=False)
+            _warn(firewall)  # on a terminal, Live prints stderr above the table
             live.update(_table(view, value_type, node))
 
         run_until_stopped(node, refresh, duration)
