@@ -1,0 +1,217 @@
+"""One fuzz target per parser: bytes in, and only the parser's own error may come out.
+
+Each target takes arbitrary bytes and shapes them into its parser's input (a byte
+stream cut into reads, a CAN frame, a line of text, a file, a run of messages for
+the guard). A target returns normally for accepted input and for the parser's
+defined error (`EXPECTED`); anything else, an exception or a broken invariant,
+escapes as a crash. `tests/fuzz/run.py` drives them under atheris (`make fuzz`);
+`tests/unit/test_fuzz_targets.py` runs them briefly on random bytes in `make test`.
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+from collections.abc import Callable
+
+import can
+
+from vstig_hw.capture import candump, serial_log
+from vstig_hw.capture.fastlog import chunk_to_jsonl
+from vstig_hw.capture.pcap import PcapError, PcapReader
+from vstig_hw.capture.records import CaptureError
+from vstig_hw.counters import Counters
+from vstig_hw.framing import TransmitOnlyError, make_serial_framing
+from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.gateway.guard import Guard, IdSet, LinkPolicy
+from vstig_hw.links.spec import EXAMPLES
+from vstig_hw.links.spec import parse as parse_spec
+from vstig_hw.wire import DecodeError, Message, decode, decode_many, encode
+
+Target = Callable[[bytes], None]
+
+
+def wire(data: bytes) -> None:
+    try:
+        msg = decode(data)
+    except DecodeError:
+        assert len(data) != 8
+    else:
+        assert encode(msg) == data  # every 8 bytes are a message, and it encodes back to them
+    try:
+        assert b"".join(map(encode, decode_many(data))) == data
+    except DecodeError:
+        assert len(data) % 8
+
+
+def _reads(data: bytes) -> list[bytes]:
+    """The input cut into reads at sizes taken from its first byte, as a UART delivers them."""
+    if not data:
+        return []
+    step = data[0] % 16 + 1
+    return [data[i:i + step] for i in range(1, len(data), step)]
+
+
+def _serial(name: str) -> Target:
+    def target(data: bytes) -> None:
+        framing = make_serial_framing(name)
+        for i, chunk in enumerate(_reads(data)):
+            for msg in framing.feed(chunk):
+                assert type(msg) is Message
+            if i % 7 == 6:
+                framing.tick()
+    target.__name__ = name.replace("-", "_")
+    return target
+
+
+def kilobot_ohc(data: bytes) -> None:
+    """The overhead controller transmits only: any bytes read from it are refused with TransmitOnlyError."""
+    framing = make_serial_framing("kilobot-ohc")
+    try:
+        framing.feed(data)
+    except TransmitOnlyError:
+        return
+    raise AssertionError("kilobot-ohc decoded bytes")
+
+
+_CAN_SCHEMES = (CanIdScheme(), CanIdScheme(extended=True, stigmergy=3))
+
+
+def can_framing(data: bytes) -> None:
+    """Frames built from the bytes: 4 bytes of ID, a flags byte, a length byte, then data."""
+    framings = [CanFraming(scheme, sender=1) for scheme in _CAN_SCHEMES]
+    view = memoryview(data)
+    while len(view) >= 6:
+        ident, flags, length = struct.unpack_from(">IBB", view)
+        body = bytes(view[6:6 + length % 65])
+        view = view[6 + length % 65:]
+        frame = can.Message(arbitration_id=ident & 0x1FFFFFFF, is_extended_id=bool(flags & 1), is_fd=bool(flags & 2),
+                            is_remote_frame=bool(flags & 4), is_error_frame=bool(flags & 8), dlc=length,
+                            data=body, check=False)
+        for framing in framings:
+            for msg in framing.feed(frame):
+                assert type(msg) is Message
+
+
+def link_spec(data: bytes) -> None:
+    text = data.decode("utf-8", "replace")
+    try:
+        spec = parse_spec(text)
+    except ValueError:
+        return
+    assert spec.name and " " not in spec.name
+
+
+def candump_line(data: bytes) -> None:
+    for number, line in enumerate(data.decode("utf-8", "replace").splitlines() or [""], 1):
+        try:
+            candump.parse_line("fuzz.log", number, line)
+        except CaptureError as error:
+            assert str(error).startswith("fuzz.log:")
+
+
+def serial_capture_line(data: bytes) -> None:
+    for number, line in enumerate(data.decode("utf-8", "replace").splitlines() or [""], 1):
+        try:
+            serial_log.parse_line("fuzz.cap", number, line)
+        except CaptureError as error:
+            assert str(error).startswith("fuzz.cap:")
+
+
+_PCAP_HEADER = struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 65535, 227)
+
+
+def pcap(data: bytes) -> None:
+    """A pcap file: the bytes as they are, and behind a valid header (so records get parsed)."""
+    for file in (data, _PCAP_HEADER + data):
+        try:
+            for frame in PcapReader(io.BytesIO(file)):
+                assert isinstance(frame, can.Message)
+        except PcapError:
+            pass
+
+
+def _classify(can_id: int) -> int | None:
+    return (can_id >> 8) & 1 if can_id & 0x600 == 0x600 else None
+
+
+def candump_chunk(data: bytes) -> None:
+    """The vectorised candump path: JSON lines for a uniform chunk, None for anything else."""
+    out = chunk_to_jsonl(data, _classify, {})
+    assert out is None or out.endswith(b"\n") or out == b""
+
+
+_POLICIES = {"a": LinkPolicy(trust=IdSet.parse("0-200", 0xFFFF), keys=IdSet.parse("0-40", 0x7FFF)),
+             "b": LinkPolicy(deny=IdSet.parse("3,9", 0xFFFF), read_only=True), "c": LinkPolicy()}
+_LINKS = tuple(_POLICIES)
+
+
+def guard(data: bytes) -> None:
+    """Runs of 13-byte records: link, sender, time step (ms), then an 8-byte message; every one passes or is counted."""
+    g = Guard(max_jump=20, rate=50, flap=2, links=_POLICIES)
+    counters = Counters()
+    now = 0.0
+    records = 0
+    passed = 0
+    for offset in range(0, len(data) - 12, 13):
+        head, sender, step = struct.unpack_from(">BHH", data, offset)
+        msg = decode(data[offset + 5:offset + 13])
+        now += step / 1000
+        link = _LINKS[head % 3]
+        passed += len(g.filter(link, None if head & 0x80 else sender, [msg], now, counters))
+        records += 1
+        g.confined_to(msg)
+    assert passed + sum(counters.values()) == records
+    assert set(counters) <= {"drop_untrusted", "drop_rate", "drop_key", "drop_jump"}
+
+
+def seeds() -> dict[str, list[bytes]]:
+    """Valid inputs per target, for the fuzzer to mutate from: random bytes rarely spell `can:` or a CRC."""
+    msgs = [Message(0, 5, 1234, 7, 42), Message(1, 0x7FFF, 0, 0, 9), Message(0, 1, 0xFFFF, 0xFFFF, 0xFFFF)]
+    serial = {name: [bytes([n]) + b"".join(u for m in msgs for u in make_serial_framing(name).encode(m))
+                     for n in (0, 3, 15)] for name in ("cobs8", "epuck4", "kilobot")}
+    frames = [struct.pack(">IBB", ident, flags, 8) + encode(m) for m in msgs
+              for ident, flags in ((0x605, 0), (0x705, 0), (0x18060005, 1), (0x605, 2), (0x605, 4))]
+    candump_lines = [f"(1700000000.{i:06d}) can0 {0x600 | i:03X}#{encode(m).hex().upper()}\n"
+                     for i, m in enumerate(msgs)]
+    candump_lines += ["(1700000000.5) can0 18060005##1" + encode(msgs[0]).hex() * 2 + "\n",
+                      "(1700000000.6) can0 605#R\n", "(1700000000.7) can0 605#0102_9\n"]
+    uniform = "".join(f"(1700000000.{i:06d}) can0 {0x600 | i:03X}#{encode(m).hex().upper()}\n"
+                      for i, m in enumerate(msgs * 3))
+    cobs8 = make_serial_framing("cobs8")
+    capture = "# vstig serial capture v1\n" + "".join(
+        f"(1700000000.{i:06d}) radio cobs8 {'rx' if i % 2 else 'tx'} {cobs8.encode(m)[0].hex()}\n"
+        for i, m in enumerate(msgs))
+    pcap_file = _PCAP_HEADER + b"".join(
+        struct.pack("<IIII", 1700000000, i, 16, 16) + struct.pack(">IBBxx", 0x605, 8, 0) + encode(m)
+        for i, m in enumerate(msgs))
+    records = [struct.pack(">BHH", link, sender, step) + encode(m)
+               for link, sender, step in ((0, 5, 10), (1, 3, 0), (2, 7, 1000), (0x80, 0, 5)) for m in msgs]
+    return {
+        "wire": [encode(m) for m in msgs] + [b"".join(map(encode, msgs))],
+        **serial,
+        "kilobot-ohc": [b"\x55" + bytes(131)],
+        "can": [b"".join(frames)],
+        "link-spec": [spec.encode() for group in EXAMPLES.values() for spec in group],
+        "candump": [line.encode() for line in candump_lines],
+        "candump-chunk": [uniform.encode()],
+        "serial-capture": [capture.encode()],
+        "pcap": [pcap_file, pcap_file[len(_PCAP_HEADER):]],
+        "guard": [b"".join(records)],
+    }
+
+
+TARGETS: dict[str, Target] = {
+    "wire": wire,
+    "cobs8": _serial("cobs8"),
+    "epuck4": _serial("epuck4"),
+    "kilobot": _serial("kilobot"),
+    "kilobot-ohc": kilobot_ohc,
+    "can": can_framing,
+    "link-spec": link_spec,
+    "candump": candump_line,
+    "candump-chunk": candump_chunk,
+    "serial-capture": serial_capture_line,
+    "pcap": pcap,
+    "guard": guard,
+}
