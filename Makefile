@@ -45,5 +45,8 @@ $(FUZZ_STAMP): $(STAMP)
 fuzz: $(FUZZ_STAMP)
 	$(BIN)/python tests/fuzz/run.py --runs $(FUZZ_RUNS)
 
+soak: $(STAMP)
+	$(BIN)/python tests/soak/run.py --seconds $(SOAK_SECONDS)
+
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
