@@ -189,3 +189,11 @@ def test_line_by_line_fallback_numbers_lines_as_the_file_does(tmp_path: Path) ->
         _, _, bad = decode_file(str(path), io.StringIO(), fmt, skip_bad=True)
         errors[fmt] = [error.line for error in bad]
     assert errors["jsonl"] == errors["text"] == [2, 4]
+
+
+def test_fast_path_with_every_frame_dropped_renders_nothing() -> None:
+    """Found by `make fuzz`: a chunk of foreign IDs only used to raise IndexError in _render."""
+    drops: dict[str, int] = {}
+    chunk = "".join(f"(1700000000.00000{i}) can0 {ident}#0001000200030004\n" for i, ident in enumerate(("599", "407")))
+    assert chunk_to_jsonl(chunk.encode(), _classify, drops) == b""
+    assert drops == {"unknown_id": 2}

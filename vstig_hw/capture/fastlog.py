@@ -102,6 +102,8 @@ def chunk_to_jsonl(chunk: bytes, classify: Classify, drops: dict[str, int]) -> b
             if mismatch.any():
                 drops["op_mismatch"] = drops.get("op_mismatch", 0) + int(mismatch.sum())
                 keep &= ~mismatch
+    if not keep.any():
+        return b""  # every frame dropped (a bus of other traffic): nothing to render, and _render needs a row
     if not keep.all():
         stamp = stamp[keep]
         can_id, op, w0, w1, w2, w3 = (x[keep] for x in (can_id, op, w0, w1, w2, w3))
