@@ -165,8 +165,9 @@ def main() -> int:
     child.start()  # before any thread exists here: a fork copies only the calling thread
 
     channel = f"soak-{os.getpid()}"
+    # One handle for every robot on the bus: it sends their frames and hears the gateway's (a second handle
+    # that nobody read would queue every frame the gateway sends, and look like a leak).
     robots_bus = can.Bus(interface="virtual", channel=channel)
-    far_end = can.Bus(interface="virtual", channel=channel)
     links = [parse(f"can:virtual:{channel}").build("bus", robot_id=GATEWAY)]
     links += [parse(f"serial:{path}?framing=cobs8").build(name, robot_id=GATEWAY)
               for (_, _, path), name in zip(ptys, ("radio-a", "radio-b"), strict=True)]
@@ -184,7 +185,7 @@ def main() -> int:
     def listen() -> None:  # the CAN bus's far end: what the gateway sent there
         decode = can_framing()
         while not stop_listening.is_set():
-            frame = far_end.recv(0.05)
+            frame = robots_bus.recv(0.05)
             if frame is not None and frame.arbitration_id & 0xFF == GATEWAY:
                 for msg in decode.feed(frame):
                     bus_heard.add(msg)
@@ -234,7 +235,6 @@ def main() -> int:
         radio_writers, radio_heard = conn.recv()
         child.join(timeout=10)
         robots_bus.shutdown()
-        far_end.shutdown()
         for master, slave, _ in ptys:
             os.close(master)
             os.close(slave)
