@@ -240,7 +240,7 @@ def test_a_jump_is_refused_exactly_when_it_is_more_than_max_jump_steps_ahead(hel
     guard = Guard(max_jump=max_jump)
     guard.check("can", 1, put(0, held), 0.0)
     steps, t = 0, held  # the model: walk next_timestamp until we reach ts, at most max_jump steps
-    while t != ts and steps <= max_jump:
+    while t != ts and steps < max_jump:
         t, steps = next_timestamp(t), steps + 1
     refused = is_newer(ts, held) and t != ts
     assert (guard.check("can", 1, put(0, ts), 0.0) == "drop_jump") == refused

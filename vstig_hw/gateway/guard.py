@@ -58,6 +58,7 @@ __all__ = ["DEFAULT_MAX_JUMP", "MAX_SENDERS", "Guard", "IdSet", "LinkPolicy"]
 # forgery can silence honest writers of a key for at most 255 of their writes.
 DEFAULT_MAX_JUMP = 255
 MAX_SENDERS = 4096  # token buckets kept; beyond it, full (idle) buckets are forgotten
+SMALL_SET = 4096  # an IdSet of at most this many ids is also kept as a frozenset
 
 
 class IdSet:
@@ -72,6 +73,9 @@ class IdSet:
                 merged.append((lo, hi))
         self._lows = [lo for lo, _ in merged]
         self._highs = [hi for _, hi in merged]
+        size = sum(hi - lo + 1 for lo, hi in merged)
+        # A small set is a frozenset: one hash per message instead of a bisection.
+        self._small = frozenset(n for lo, hi in merged for n in range(lo, hi + 1)) if size <= SMALL_SET else None
 
     @classmethod
     def parse(cls, text: str, limit: int, what: str = "ids") -> IdSet:
@@ -91,6 +95,8 @@ class IdSet:
         return cls(ranges)
 
     def __contains__(self, value: object) -> bool:
+        if self._small is not None:
+            return value in self._small and isinstance(value, int)
         if not isinstance(value, int):
             return False
         i = bisect.bisect_right(self._lows, value) - 1
