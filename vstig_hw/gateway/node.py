@@ -12,7 +12,8 @@ Modes:
 
 One event loop: `run` (or `poll`, one step of it) drains the reader threads'
 queue, ticks every `period`, and flushes the outlets whenever their budget
-window allows.
+window allows. An optional `guard` (see `guard`) sees what each link heard
+before the engine, a raw relay or a listener does.
 """
 
 from __future__ import annotations
