@@ -102,20 +102,20 @@ def link_spec(data: bytes) -> None:
     assert spec.name and " " not in spec.name
 
 
-def candump_line(data: bytes) -> None:
-    for number, line in enumerate(data.decode("utf-8", "replace").splitlines() or [""], 1):
-        try:
-            candump.parse_line("fuzz.log", number, line)
-        except CaptureError as error:
-            assert str(error).startswith("fuzz.log:")
+def _text_lines(parse: Callable[[str, int, str], object], path: str) -> Target:
+    """A line reader's target: every line parses, or is a CaptureError naming path:line."""
+
+    def target(data: bytes) -> None:
+        for number, line in enumerate(data.decode("utf-8", "replace").splitlines() or [""], 1):
+            try:
+                parse(path, number, line)
+            except CaptureError as error:
+                assert str(error).startswith(f"{path}:")
+    return target
 
 
-def serial_capture_line(data: bytes) -> None:
-    for number, line in enumerate(data.decode("utf-8", "replace").splitlines() or [""], 1):
-        try:
-            serial_log.parse_line("fuzz.cap", number, line)
-        except CaptureError as error:
-            assert str(error).startswith("fuzz.cap:")
+candump_line = _text_lines(candump.parse_line, "fuzz.log")
+serial_capture_line = _text_lines(serial_log.parse_line, "fuzz.cap")
 
 
 _PCAP_HEADER = struct.pack("<IHHiIII", 0xA1B2C3D4, 2, 4, 0, 0, 65535, 227)

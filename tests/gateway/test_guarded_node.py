@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
+from collections.abc import Iterator
 
 import can
 import pytest
@@ -27,14 +29,26 @@ def inject(bus: can.BusABC, msg: Message, sender: int) -> None:
     bus.send(can.Message(arbitration_id=0x600 | int(msg.op) << 8 | sender, data=encode(msg), is_extended_id=False))
 
 
-def test_a_jump_is_neither_stored_nor_relayed_and_honest_writes_still_cross(channels: tuple[str, str]) -> None:
-    a, b = channels
+@contextlib.contextmanager
+def jump_attack(a: str, b: str, guard: Guard | None) -> Iterator[tuple[Node, BusRobot, BusRobot]]:
+    """Key 3 written on bus a and learnt on bus b, then an attacker on bus a forges it 30,000 ahead."""
     left, right = BusRobot(5, a), BusRobot(9, b)
     attacker = can.Bus(interface="virtual", channel=a)
-    with Node([bus_link(a), bus_link(b)], robot_id=100, guard=Guard(max_jump=50)) as node:
-        left.engine.put(3, 1)
-        run_until(node, lambda: right.engine.entry(3) is not None, [left, right])
-        inject(attacker, Message(Op.PUT, 3, 666, 30000, 66), sender=66)
+    try:
+        with Node([bus_link(a), bus_link(b)], robot_id=100, guard=guard) as node:
+            left.engine.put(3, 1)
+            run_until(node, lambda: right.engine.entry(3) is not None, [left, right])
+            inject(attacker, Message(Op.PUT, 3, 666, 30000, 66), sender=66)
+            yield node, left, right
+    finally:
+        for robot in (left, right):
+            robot.close()
+        attacker.shutdown()
+
+
+def test_a_jump_is_neither_stored_nor_relayed_and_honest_writes_still_cross(channels: tuple[str, str]) -> None:
+    a, b = channels
+    with jump_attack(a, b, Guard(max_jump=50)) as (node, left, right):
         run_until(node, lambda: node.stats()[a]["drop_jump"] >= 1, [left, right])
         right.engine.put(3, 2)  # honest, on the other bus: timestamp 2
         run_until(node, lambda: node.engine is not None and node.engine.entry(3) == (2, 2, 9), [left, right])
@@ -43,23 +57,12 @@ def test_a_jump_is_neither_stored_nor_relayed_and_honest_writes_still_cross(chan
             node.run(duration=0.01)
         assert right.engine.entry(3) == (2, 2, 9)
         assert node.engine is not None and node.engine.entry(3) == (2, 2, 9)
-    for robot in (left, right):
-        robot.close()
-    attacker.shutdown()
 
 
 def test_without_a_guard_the_same_jump_takes_the_key_over(channels: tuple[str, str]) -> None:
     a, b = channels
-    left, right = BusRobot(5, a), BusRobot(9, b)
-    attacker = can.Bus(interface="virtual", channel=a)
-    with Node([bus_link(a), bus_link(b)], robot_id=100) as node:
-        left.engine.put(3, 1)
-        run_until(node, lambda: right.engine.entry(3) is not None, [left, right])
-        inject(attacker, Message(Op.PUT, 3, 666, 30000, 66), sender=66)
+    with jump_attack(a, b, None) as (node, left, right):
         run_until(node, lambda: right.engine.entry(3) == (666, 30000, 66), [left, right])
-    for robot in (left, right):
-        robot.close()
-    attacker.shutdown()
 
 
 def test_a_read_only_link_is_heard_but_its_entries_never_leave_it(channels: tuple[str, str]) -> None:
