@@ -11,8 +11,11 @@ escapes as a crash. `tests/fuzz/run.py` drives them under atheris (`make fuzz`);
 from __future__ import annotations
 
 import io
+import logging
 import struct
-from collections.abc import Callable
+import tempfile
+from collections.abc import Callable, Iterable
+from pathlib import Path
 
 import can
 
@@ -131,6 +134,50 @@ def pcap(data: bytes) -> None:
             pass
 
 
+def _text(data: bytes) -> io.StringIO:
+    return io.StringIO(data.decode("utf-8", "replace"))
+
+
+# python-can's readers for the formats `read_capture` hands to can.LogReader. read_capture turns any
+# Exception they raise into a CaptureError, so what must never happen is a hang, a crash or a BaseException.
+# They are called directly on in-memory files: can.LogReader looks its plugins up on every call (~5 ms).
+_PYTHON_CAN_READERS: dict[str, Callable[[bytes], Iterable[can.Message]]] = {
+    ".asc": lambda data: can.ASCReader(_text(data), relative_timestamp=False),
+    ".blf": lambda data: can.BLFReader(io.BytesIO(data)),
+    ".csv": lambda data: can.CSVReader(_text(data)),
+    ".trc": lambda data: can.TRCReader(_text(data)),
+}
+_PYTHON_CAN_FORMATS = tuple(_PYTHON_CAN_READERS)
+logging.getLogger("can.io.trc").setLevel(logging.ERROR)  # it warns about every bad line
+
+
+def capture_files(data: bytes) -> None:
+    """The first byte picks the format, the rest is the file."""
+    suffix = _PYTHON_CAN_FORMATS[data[0] % len(_PYTHON_CAN_FORMATS)] if data else ".asc"
+    try:
+        for frame in _PYTHON_CAN_READERS[suffix](data[1:]):
+            assert isinstance(frame, can.Message)
+    except AssertionError:
+        raise
+    except Exception:  # read_capture reports these as a CaptureError naming the file
+        pass
+
+
+def _python_can_seeds(msgs: list[Message]) -> list[bytes]:
+    out = []
+    folder = Path(tempfile.mkdtemp(prefix="vstig-fuzz-seeds-"))
+    for index, suffix in enumerate(_PYTHON_CAN_FORMATS):
+        path = folder / f"seed{suffix}"
+        with can.Logger(str(path)) as log:
+            for i, m in enumerate(msgs):
+                log.on_message_received(can.Message(timestamp=1700000000 + i, arbitration_id=0x605, data=encode(m),
+                                                    is_extended_id=False))
+        out.append(bytes([index]) + path.read_bytes())
+        path.unlink()
+    folder.rmdir()
+    return out
+
+
 def _classify(can_id: int) -> int | None:
     return (can_id >> 8) & 1 if can_id & 0x600 == 0x600 else None
 
@@ -197,6 +244,7 @@ def seeds() -> dict[str, list[bytes]]:
         "candump-chunk": [uniform.encode()],
         "serial-capture": [capture.encode()],
         "pcap": [pcap_file, pcap_file[len(_PCAP_HEADER):]],
+        "capture-files": _python_can_seeds(msgs),
         "guard": [b"".join(records)],
     }
 
@@ -213,5 +261,6 @@ TARGETS: dict[str, Target] = {
     "candump-chunk": candump_chunk,
     "serial-capture": serial_capture_line,
     "pcap": pcap,
+    "capture-files": capture_files,
     "guard": guard,
 }
