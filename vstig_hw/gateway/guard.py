@@ -240,7 +240,7 @@ class Guard:
         window = self._flaps.setdefault(key, [now, 0.0, TS_NONE])
         if window[2] == ts:
             return
-        if now - window[0] >= 1.0:
+        if not 0.0 <= now - window[0] < 1.0:  # a new second (or the clock stepped back)
             window[0], window[1] = now, 0.0
         window[1] += 1
         window[2] = ts
