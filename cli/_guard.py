@@ -71,7 +71,7 @@ class GuardChoice:
         """The Guard; a link name that is not one of `links`, or a sender list for a medium that names nobody,
         is a usage error."""
         names = [link.name for link in links]
-        anonymous = {link.name for link in links if getattr(link.framing, "sender_of", None) is None}
+        anonymous = {link.name for link in links if not _names_senders(link)}
         policies: dict[str, dict[str, Any]] = {}
         for option, pairs in (("trust", self.trust), ("deny", self.deny), ("keys", self.keys),
                               ("read_only", [(name, True) for name in self.read_only])):
@@ -88,6 +88,11 @@ class GuardChoice:
                 fields[option] = value
         return Guard(max_jump=self.max_jump or None, rate=self.rate, flap=self.flap,
                      links={name: LinkPolicy(**fields) for name, fields in policies.items()})
+
+
+def _names_senders(link: Link[Any]) -> bool:
+    """Whether the link can say who sent a unit: its framing reads it (CAN IDs), or the link class does."""
+    return getattr(link.framing, "sender_of", None) is not None or type(link).sender_of is not Link.sender_of
 
 
 def guard_options(fn: Callable[..., Any]) -> Callable[..., Any]:
