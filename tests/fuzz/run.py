@@ -22,6 +22,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 PER_INPUT_TIMEOUT = 10  # seconds: longer than any parser needs for max_len bytes, so more is a hang
 MAX_LEN = 512  # bytes per input
+LONGER = {"capture-files": 4096}  # a BLF file's headers alone take a kilobyte
 ARTIFACTS = Path(".fuzz")  # the corpus per target, and any input that crashed
 
 
@@ -36,9 +37,9 @@ def child(name: str, runs: int) -> None:
     corpus.mkdir(parents=True, exist_ok=True)
     for i, seed in enumerate(seeds()[name]):
         (corpus / f"seed-{i}").write_bytes(seed)
-    atheris.Setup([sys.argv[0], str(corpus), f"-runs={runs}", f"-max_len={MAX_LEN}", f"-timeout={PER_INPUT_TIMEOUT}",
-                   "-rss_limit_mb=2048", "-print_final_stats=1", f"-artifact_prefix={ARTIFACTS}/crash-{name}-"],
-                  TARGETS[name])
+    options = [f"-runs={runs}", f"-max_len={LONGER.get(name, MAX_LEN)}", f"-timeout={PER_INPUT_TIMEOUT}",
+               "-rss_limit_mb=2048", "-print_final_stats=1", f"-artifact_prefix={ARTIFACTS}/crash-{name}-"]
+    atheris.Setup([sys.argv[0], str(corpus), *options], TARGETS[name])
     atheris.Fuzz()
 
 

@@ -10,6 +10,7 @@ escapes as a crash. `tests/fuzz/run.py` drives them under atheris (`make fuzz`);
 
 from __future__ import annotations
 
+import contextlib
 import io
 import logging
 import struct
@@ -18,12 +19,18 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import can
+from cobs import cobs
 
 from vstig_hw.capture import candump, serial_log
 from vstig_hw.capture.fastlog import chunk_to_jsonl
 from vstig_hw.capture.pcap import PcapError, PcapReader
 from vstig_hw.capture.records import CaptureError
 from vstig_hw.counters import Counters
+from vstig_hw.dialects.bittybuzz import BbzDecodeError, decode_bittybuzz
+from vstig_hw.dialects.buzz import BuzzDecodeError, decode_buzz
+from vstig_hw.dialects.buzz_packets import xbee_packet
+from vstig_hw.dialects.framing import BittyBuzzKilobotFraming, BuzzKh4Framing, RosBuzzDecoder
+from vstig_hw.dialects.mapping import DeploymentError, parse_deployment
 from vstig_hw.framing import TransmitOnlyError, make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
 from vstig_hw.gateway.guard import Guard, IdSet, LinkPolicy
@@ -178,6 +185,45 @@ def _python_can_seeds(msgs: list[Message]) -> list[bytes]:
     return out
 
 
+_DEPLOYMENT_TEXT = '[buzz]\nstigmergy = 1\n[keys]\nx = { key = 1, type = "int16" }\ny = { key = 2, type = "uint16" }\n'
+_DEPLOYMENT = parse_deployment(_DEPLOYMENT_TEXT)
+
+
+def buzz_framings(data: bytes) -> None:
+    """Buzz and BittyBuzz links: a Kilobot stream cut into reads, a BuzzKH4 frame, a ROSBuzz block or XbeeMav
+    packet (the first byte picks); every one counts what it cannot use and raises nothing (XbeeMav: ValueError)."""
+    choice, body = (data[0] % 4, data[1:]) if data else (0, b"")
+    if choice == 0:
+        kilobot = BittyBuzzKilobotFraming(_DEPLOYMENT)
+        messages = [m for chunk in _reads(body) for m in kilobot.feed(chunk)]
+    elif choice == 1:
+        messages = BuzzKh4Framing(_DEPLOYMENT).feed(body)
+    elif choice == 2:
+        messages = RosBuzzDecoder(_DEPLOYMENT).feed(body)
+    else:
+        try:
+            messages = RosBuzzDecoder(_DEPLOYMENT).feed_xbee(body)
+        except ValueError:
+            return
+    assert all(type(m) is Message for m in messages)
+
+
+def buzz_messages(data: bytes) -> None:
+    """One Buzz message in either dialect, one BittyBuzz message: each decodes or raises its DecodeError."""
+    for dialect in ("current", "pre2017"):
+        with contextlib.suppress(BuzzDecodeError):
+            decode_buzz(data, dialect)  # type: ignore[arg-type]
+    try:
+        decode_bittybuzz(data)
+    except BbzDecodeError:
+        assert len(data) != 9
+
+
+def deployment(data: bytes) -> None:
+    with contextlib.suppress(DeploymentError):
+        parse_deployment(data.decode("utf-8", "replace"))
+
+
 def _classify(can_id: int) -> int | None:
     return (can_id >> 8) & 1 if can_id & 0x600 == 0x600 else None
 
@@ -210,6 +256,23 @@ def guard(data: bytes) -> None:
         g.confined_to(msg)
     assert passed + sum(counters.values()) == records
     assert set(counters) <= {"drop_untrusted", "drop_rate", "drop_key", "drop_jump"}
+
+
+def _bbz_payloads() -> list[bytes]:
+    """BittyBuzz Kilobot payloads (the 9-byte message and its type byte), unframed."""
+    framing = BittyBuzzKilobotFraming(_DEPLOYMENT)
+    return [cobs.decode(unit[:-1])[:-2] for key in (1, 2) for unit in framing.encode(Message(0, key, 9, 4, 3))]
+
+
+def _buzz_seeds(msgs: list[Message]) -> list[bytes]:
+    ours = [Message(0, 1, 5, 3, 7), Message(1, 2, 6, 4, 8)]
+    kilobot = b"".join(u for m in ours for u in BittyBuzzKilobotFraming(_DEPLOYMENT).encode(m))
+    kh4 = BuzzKh4Framing(_DEPLOYMENT, robot_id=3, frame_size=64).encode_batch(ours)
+    rosbuzz = RosBuzzDecoder(_DEPLOYMENT, robot_id=3).encode_batch(ours)
+    xbee = [xbee_packet(3, 1, [int.from_bytes(block[i:i + 8].ljust(8, b"\0"), "big") for i in range(0, len(block), 8)])
+            for block in rosbuzz]
+    return [b"\0\x03" + kilobot, *(b"\x01" + f for f in kh4), *(b"\x02" + b for b in rosbuzz),
+            *(b"\x03" + x for x in xbee)]
 
 
 def seeds() -> dict[str, list[bytes]]:
@@ -246,6 +309,11 @@ def seeds() -> dict[str, list[bytes]]:
         "pcap": [pcap_file, pcap_file[len(_PCAP_HEADER):]],
         "capture-files": _python_can_seeds(msgs),
         "guard": [b"".join(records)],
+        "buzz-framings": _buzz_seeds(msgs),
+        "buzz-messages": [frame[4:4 + int.from_bytes(frame[2:4], "little")]  # u16 robot, u16 length, message
+                          for frame in BuzzKh4Framing(_DEPLOYMENT, frame_size=64).encode(Message(0, 1, 5, 3, 7))]
+                         + [payload[:9] for payload in _bbz_payloads()],
+        "deployment": [_DEPLOYMENT_TEXT.encode()],
     }
 
 
@@ -263,4 +331,7 @@ TARGETS: dict[str, Target] = {
     "pcap": pcap,
     "capture-files": capture_files,
     "guard": guard,
+    "buzz-framings": buzz_framings,
+    "buzz-messages": buzz_messages,
+    "deployment": deployment,
 }
