@@ -128,6 +128,12 @@ _OPEN = LinkPolicy()
 
 
 class Guard:
+    """The policies for every link (`links`, by link name) and the state they need; see the module's docstring.
+
+    `max_jump` (None: off), `rate` in messages per second per sender (None: off) and `flap`
+    in conflicts per second (None: off) apply to every link.
+    """
+
     def __init__(
         self,
         *,
@@ -190,6 +196,7 @@ class Guard:
         return None
 
     def read_only(self, link: str) -> bool:
+        """Whether nothing `link` hears may be relayed to another link."""
         return self.policies.get(link, _OPEN).read_only
 
     def confined_to(self, msg: Message) -> str | None:
