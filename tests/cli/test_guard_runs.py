@@ -216,3 +216,30 @@ def test_sniff_counts_refusals_under_its_table_and_warns_once_of_a_flapping_key(
     assert "drop_jump=1" in out  # the table's caption
     warnings = [line for line in err.splitlines() if line.startswith("warning:")]
     assert len(warnings) == 1 and "key 12" in warnings[0] and "robots 4 and 6" in warnings[0], err
+
+
+def test_bridge_read_only_link_is_heard_but_never_relayed() -> None:
+    classroom, lab = PtyPeer(), PtyPeer()
+    framing = make_serial_framing("cobs8")
+    specs = [f"serial:{peer.path}?framing=cobs8" for peer in (classroom, lab)]
+    bridge = start_vstig("bridge", *specs, "--robot-id", "200", "--read-only", parse(specs[0]).name)
+    heard: dict[str, list[Message]] = {"classroom": [], "lab": []}
+    try:
+        def both_write() -> None:  # again and again until the bridge has both ports open
+            classroom.write(framing.encode(Message(Op.PUT, 3, 11, 1, 5))[0])
+            lab.write(framing.encode(Message(Op.PUT, 4, 22, 1, 9))[0])
+            for name, peer in (("classroom", classroom), ("lab", lab)):
+                heard[name] += framing.feed(peer.read(0.05))
+
+        wait_for(lambda: any(m.key == 4 for m in heard["classroom"]) and any(m.key == 3 for m in heard["classroom"]),
+                 30, step=both_write)
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            both_write()
+    finally:
+        _out, err = stop(bridge)
+        classroom.close()
+        lab.close()
+    assert bridge.returncode == 0, err
+    assert {m.key for m in heard["classroom"]} == {3, 4}  # the lab's data reaches the classroom, its own echoes back
+    assert {m.key for m in heard["lab"]} == {4}  # nothing the classroom wrote reaches the lab
