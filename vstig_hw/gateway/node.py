@@ -216,10 +216,10 @@ class Node:
             if not messages:
                 continue
             heard_count += len(messages)
+            sender = sender_of(unit) if guard is not None or self.on_heard else None
             if guard is not None:
-                messages = guard.filter(link.name, sender_of(unit), messages, t, link.counters)
+                messages = guard.filter(link.name, sender, messages, t, link.counters)
             if self.on_heard:
-                sender = sender_of(unit)
                 for msg in messages:
                     heard = Heard(msg, link.name, t, sender)
                     for h_listener in self.on_heard:
