@@ -14,15 +14,17 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 PER_INPUT_TIMEOUT = 10  # seconds: longer than any parser needs for max_len bytes, so more is a hang
 MAX_LEN = 512  # bytes per input
-LONGER = {"capture-files": 4096}  # a BLF file's headers alone take a kilobyte
+LONGER = {"capture-files": 4096, "mcap": 4096}  # a BLF file's headers alone take a kilobyte; MCAP's summary too
 ARTIFACTS = Path(".fuzz")  # the corpus per target, and any input that crashed
 
 
@@ -56,25 +58,32 @@ def main() -> int:
     parser.add_argument("--runs", type=int, default=int(os.environ.get("FUZZ_RUNS", 1_000_000)),
                         help="inputs per target (default: $FUZZ_RUNS or 1,000,000)")
     args = parser.parse_args()
-    failed = []
     print(f"{'parser':<16} {'inputs':>10} {'seconds':>8} {'inputs/s':>9}  result")
-    for name in args.targets or TARGETS:
-        start = time.monotonic()
-        done = subprocess.run([sys.executable, __file__, "--child", name, "--runs", str(args.runs)],
-                              capture_output=True, text=True, check=False)
-        elapsed = time.monotonic() - start
-        found = re.search(r"stat::number_of_executed_units:\s*(\d+)", done.stderr)
-        tried = int(found.group(1)) if found else 0
-        ok = done.returncode == 0 and tried >= args.runs
-        print(f"{name:<16} {tried:>10,} {elapsed:>8.1f} {tried / elapsed:>9,.0f}  {'ok' if ok else 'FAILED'}",
-              flush=True)
-        if not ok:
-            failed.append(name)
-            print(done.stderr[-4000:], file=sys.stderr)
+    scratch = tempfile.mkdtemp(prefix="vstig-fuzz-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)
+    env = {**os.environ, "VSTIG_FUZZ_SCRATCH": scratch}  # the targets' files; libFuzzer skips atexit
+    try:
+        failed = [name for name in args.targets or TARGETS if not fuzz_one(name, args.runs, env)]
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
     if failed:
         print(f"fuzz: {len(failed)} target(s) failed: {', '.join(failed)}", file=sys.stderr)
         return 1
     return 0
+
+
+def fuzz_one(name: str, runs: int, env: dict[str, str]) -> bool:
+    """Run one target in its own process and print its line; True if it tried every input and nothing broke."""
+    start = time.monotonic()
+    done = subprocess.run([sys.executable, __file__, "--child", name, "--runs", str(runs)],
+                          capture_output=True, text=True, check=False, env=env)
+    elapsed = time.monotonic() - start
+    found = re.search(r"stat::number_of_executed_units:\s*(\d+)", done.stderr)
+    tried = int(found.group(1)) if found else 0
+    ok = done.returncode == 0 and tried >= runs
+    print(f"{name:<16} {tried:>10,} {elapsed:>8.1f} {tried / elapsed:>9,.0f}  {'ok' if ok else 'FAILED'}", flush=True)
+    if not ok:
+        print(done.stderr[-4000:], file=sys.stderr)
+    return ok
 
 
 if __name__ == "__main__":

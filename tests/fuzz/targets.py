@@ -10,9 +10,12 @@ escapes as a crash. `tests/fuzz/run.py` drives them under atheris (`make fuzz`);
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import io
 import logging
+import os
+import shutil
 import struct
 import tempfile
 from collections.abc import Callable, Iterable
@@ -25,6 +28,7 @@ from vstig_hw.capture import candump, serial_log
 from vstig_hw.capture.fastlog import chunk_to_jsonl
 from vstig_hw.capture.pcap import PcapError, PcapReader
 from vstig_hw.capture.records import CaptureError
+from vstig_hw.capture.rosbag import McapCaptureWriter, read_mcap
 from vstig_hw.counters import Counters
 from vstig_hw.dialects.bittybuzz import BbzDecodeError, decode_bittybuzz
 from vstig_hw.dialects.buzz import BuzzDecodeError, decode_buzz
@@ -170,6 +174,35 @@ def capture_files(data: bytes) -> None:
         pass
 
 
+# read_mcap reads a path: the file goes to memory (/dev/shm) where there is one, as opening a file on disk
+# here costs more than parsing it.
+# tests/fuzz/run.py hands its children one folder (VSTIG_FUZZ_SCRATCH) and removes it: libFuzzer ends a
+# child without running atexit.
+_SCRATCH = os.environ.get("VSTIG_FUZZ_SCRATCH") or tempfile.mkdtemp(
+    prefix="vstig-fuzz-", dir="/dev/shm" if os.path.isdir("/dev/shm") else None)
+if "VSTIG_FUZZ_SCRATCH" not in os.environ:
+    atexit.register(shutil.rmtree, _SCRATCH, True)
+_MCAP = Path(_SCRATCH) / f"capture-{os.getpid()}.mcap"
+
+
+def mcap(data: bytes) -> None:
+    """A rosbag2 MCAP capture: read_mcap yields records or raises CaptureError naming the file."""
+    _MCAP.write_bytes(data)
+    try:
+        for record in read_mcap(str(_MCAP)):
+            assert type(record.unit[0]) is Message
+    except CaptureError as error:
+        assert str(error).startswith(str(_MCAP))
+
+
+def _mcap_seed(msgs: list[Message]) -> bytes:
+    writer = McapCaptureWriter(str(_MCAP))
+    for i, m in enumerate(msgs):
+        writer.write_message(1700000000 + i, "can0" if i % 2 else "radio", i or None, m)
+    writer.close()
+    return _MCAP.read_bytes()
+
+
 def _python_can_seeds(msgs: list[Message]) -> list[bytes]:
     out = []
     folder = Path(tempfile.mkdtemp(prefix="vstig-fuzz-seeds-"))
@@ -308,6 +341,7 @@ def seeds() -> dict[str, list[bytes]]:
         "serial-capture": [capture.encode()],
         "pcap": [pcap_file, pcap_file[len(_PCAP_HEADER):]],
         "capture-files": _python_can_seeds(msgs),
+        "mcap": [_mcap_seed(msgs)],
         "guard": [b"".join(records)],
         "buzz-framings": _buzz_seeds(msgs),
         "buzz-messages": [frame[4:4 + int.from_bytes(frame[2:4], "little")]  # u16 robot, u16 length, message
@@ -330,6 +364,7 @@ TARGETS: dict[str, Target] = {
     "serial-capture": serial_capture_line,
     "pcap": pcap,
     "capture-files": capture_files,
+    "mcap": mcap,
     "guard": guard,
     "buzz-framings": buzz_framings,
     "buzz-messages": buzz_messages,
