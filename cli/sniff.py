@@ -46,6 +46,10 @@ def _table(view: SwarmView, value_type: ValueType, node: Node) -> Any:
 def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float | None, guard: GuardChoice) -> None:
     """Decode LINK's traffic live, per key; passive: never transmits.
 
+    The counters (live under the table, and on exit) include the receive outcomes
+    an engine that heard every message would count: stored, answered, stale,
+    same, conflict, unknown, invalid.
+
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
 
     The guard options are bridge's: what a bridge with them would refuse is left out of the
@@ -53,7 +57,8 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
     """
     built = build_links([link], listen_only=True)
     firewall = guard.build(built)
-    node = Node(built, mode=Mode.LISTEN, guard=firewall)
+    # The engine never transmits: it counts what each message would do to a robot that heard them all.
+    node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall)
     view = SwarmView()
     node.on_heard.append(view.add)
     if jsonl:
