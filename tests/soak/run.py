@@ -243,7 +243,7 @@ def main() -> int:
 
 def report(node: Node, honest: Writers, counts: dict[str, int], radio_writers: list[Any], radio_heard: list[Any],
            bus_heard: Heard, rss_warm: float, rss_end: float, args: argparse.Namespace) -> int:
-    stats = node.stats()
+    stats = {link.name: node.stats()[link.name] for link in node.links}  # the links (stats() adds the engine's)
     engine = node.engine
     assert engine is not None
     outcomes = {o.name: n for o, n in engine.counts.items() if n}
