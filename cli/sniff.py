@@ -9,12 +9,14 @@ from typing import Any
 import click
 
 from vstig_hw.gateway import Mode, Node
+from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ._common import build_links, print_counters, run_until_stopped
+from ._guard import GuardChoice, guard_options, take_warnings
 from .errors import LINK, reports_errors
 
 
@@ -39,8 +41,9 @@ def _table(view: SwarmView, value_type: ValueType, node: Node) -> Any:
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@guard_options
 @reports_errors
-def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float | None) -> None:
+def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float | None, guard: GuardChoice) -> None:
     """Decode LINK's traffic live, per key; passive: never transmits.
 
     The counters (live under the table, and on exit) include the receive outcomes
@@ -48,9 +51,14 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
     same, conflict, unknown, invalid.
 
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
+
+    The guard options are bridge's: what a bridge with them would refuse is left out of the
+    table and counted under the table (drop_jump, drop_rate...); --max-jump 0 shows everything.
     """
+    built = build_links([link], listen_only=True)
+    firewall = guard.build(built)
     # The engine never transmits: it counts what each message would do to a robot that heard them all.
-    node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN, count_outcomes=True)
+    node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall)
     view = SwarmView()
     node.on_heard.append(view.add)
     if jsonl:
@@ -67,12 +75,24 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
             out.flush()
 
         node.on_heard.append(emit)
+        node.on_tick.append(lambda _node: _warn(firewall))
         with node:
             run_until_stopped(node, duration=duration)
+        _warn(firewall)
         print_counters(node)
         return
     from rich.live import Live
 
     with node, Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
-        run_until_stopped(node, lambda: live.update(_table(view, value_type, node)), duration)
+        def refresh() -> None:
+            _warn(firewall)  # on a terminal, Live prints stderr above the table
+            live.update(_table(view, value_type, node))
+
+        run_until_stopped(node, refresh, duration)
+    _warn(firewall)
     print_counters(node)
+
+
+def _warn(firewall: Guard) -> None:
+    for warning in take_warnings(firewall):
+        click.echo(warning, err=True)

@@ -192,6 +192,14 @@ def test_line_by_line_fallback_numbers_lines_as_the_file_does(tmp_path: Path) ->
     assert errors["jsonl"] == errors["text"] == [2, 4]
 
 
+def test_fast_path_with_every_frame_dropped_renders_nothing() -> None:
+    """Found by `make fuzz`: a chunk of foreign IDs only used to raise IndexError in _render."""
+    drops: dict[str, int] = {}
+    chunk = "".join(f"(1700000000.00000{i}) can0 {ident}#0001000200030004\n" for i, ident in enumerate(("599", "407")))
+    assert chunk_to_jsonl(chunk.encode(), _classify, drops) == b""
+    assert drops == {"unknown_id": 2}
+
+
 def test_replay_sleeps_short_by_the_overshoot_it_measures_and_spins_only_the_rest() -> None:
     now = [0.0]
     reads = [0]
