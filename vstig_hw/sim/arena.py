@@ -55,8 +55,9 @@ class Arena:
         """For each centre, True when a body there touches neither a wall nor a column."""
         inside = np.all(np.abs(positions) <= self.side / 2 - body_radius, axis=1)
         columns = self.columns
-        rel = positions[:, None, :] - columns.centres[None, :, :]
-        clear = np.all(np.einsum("nkj,nkj->nk", rel, rel) >= (columns.radius + body_radius) ** 2, axis=1)
+        dx = positions[:, 0, None] - columns.centres[None, :, 0]
+        dy = positions[:, 1, None] - columns.centres[None, :, 1]
+        clear = np.all(dx * dx + dy * dy >= (columns.radius + body_radius) ** 2, axis=1)
         fits: NDArray[np.bool_] = inside & clear
         return fits
 

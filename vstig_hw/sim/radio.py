@@ -97,12 +97,11 @@ def _clear_pairs(positions: Positions, near_a: Index, near_c: Index, radio_range
 
 def _segments_clear_of_discs(start: Positions, end: Positions, centres: Positions, radius: float) -> NDArray[np.bool_]:
     """For each segment start->end, True when it keeps at least `radius` from every centre."""
-    seg = end - start  # (P, 2)
-    rel = centres[None, :, :] - start[:, None, :]  # (P, K, 2)
-    seg_sq = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-300)[:, None]
-    t = np.clip(np.einsum("pkj,pj->pk", rel, seg) / seg_sq, 0.0, 1.0)
-    gap = rel - t[:, :, None] * seg[:, None, :]
-    clear: NDArray[np.bool_] = np.all(np.einsum("pkj,pkj->pk", gap, gap) >= radius * radius, axis=1)
+    s, e, c = (np.ascontiguousarray(xy).view(np.complex128) for xy in (start, end, centres))  # x + iy: (P, 1), (K, 1)
+    seg = e - s
+    rel = c.T - s  # (P, K): each centre seen from each segment's start
+    t = np.clip((rel * seg.conj()).real / np.maximum((seg * seg.conj()).real, 1e-300), 0.0, 1.0)
+    clear: NDArray[np.bool_] = np.all(np.abs(rel - t * seg) >= radius, axis=1)
     return clear
 
 
@@ -138,7 +137,7 @@ def links(
         sight = _segments_clear_of_discs(positions[a], positions[b], obstacles.centres, obstacles.radius)
         a, b = a[sight], b[sight]
     a, b = np.concatenate([a, b]), np.concatenate([b, a])  # hearing is symmetric
-    order = np.lexsort((b, a))
+    order = np.argsort(a * len(positions) + b)  # by sender, then receiver
     return Links(len(positions), a[order], b[order])
 
 
