@@ -62,7 +62,7 @@ def test_a_column_blocks_line_of_sight() -> None:
     assert links(across).degrees().tolist() == [1, 1]
     assert links(across, obstacles=column).degrees().tolist() == [0, 0]
     assert links(across, obstacles=column, occlusion=False).degrees().tolist() == [1, 1]
-    beside = across + [0.0, 0.6]  # the segment passes 0.6 m from the centre: clear of the 0.5 m column
+    beside = across + np.array([0.0, 0.6])  # the segment passes 0.6 m from the centre: clear of the 0.5 m column
     assert links(beside, obstacles=column).degrees().tolist() == [1, 1]
 
 
@@ -131,7 +131,7 @@ def test_sparse_robots_need_motion_to_agree() -> None:
 
 def test_at_d1_speed_is_the_limiting_factor() -> None:
     # Four times the speed: close to four times faster (the paper: speed limits convergence at D = 1).
-    config = Config("motion", 30, 0.25, density=1.0)
+    config = Config("motion", 10, 0.25, density=1.0)
     slow, fast = _medians(config, 3, speed=0.05), _medians(config, 3, speed=0.2)
     assert 2.0 <= slow / fast <= 8.0, (slow, fast)
 
