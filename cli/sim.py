@@ -18,6 +18,7 @@ import click
 
 from vstig_hw.sim import Config, Summary, run_many, summarize
 from vstig_hw.sim.experiment import MOTION, TOPOLOGY_NAMES, RunResult, Task
+from vstig_hw.sim.grid import Cell
 from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
 
@@ -174,35 +175,45 @@ def _unconverged_note(s: Summary, max_steps: int) -> None:
 @_model_options
 def paper(runs: int, output: Path, sizes: tuple[int, ...], seed: int, workers: int | None, **model: Any) -> None:
     """Run the Figure 3 grid: {cluster, line, scale-free} x N {10, 100, 1000} x P {0 .. 0.95}."""
-    from vstig_hw.sim.grid import markdown_table, paper_configs, run_grid, write_csv
+    from vstig_hw.sim.grid import markdown_table, paper_configs, write_csv
     from vstig_hw.sim.plot import plot_figure3
 
     template = _config("cluster", 10, 0.0, **model)
     configs = [c for c in paper_configs(template) if not sizes or c.robots in sizes]
     output.mkdir(parents=True, exist_ok=True)
+    cells, wall = _run_grid("Figure 3 grid", configs, runs, seed, workers)
+    write_csv(cells, output / "summary.csv", output / "runs.csv")
+    plot_figure3(cells, output / "figure3.png")
+    (output / "comparison.md").write_text(markdown_table(cells, runs, wall))
+    _unconverged_cells(cells)
+    click.echo(f"wrote {output}/summary.csv, runs.csv, figure3.png, comparison.md in {wall:.0f} s")
+
+
+def _run_grid(title: str, configs: list[Config], runs: int, seed: int, workers: int | None) -> tuple[list[Cell], float]:
+    """Every condition `runs` times, behind a progress bar; the cells and the wall time in seconds."""
+    from vstig_hw.sim.grid import run_grid
+
     started = time.monotonic()
     with _progress() as progress:
-        bar = progress.add_task(f"Figure 3 grid, {runs} runs x {len(configs)} conditions", total=runs * len(configs))
+        bar = progress.add_task(f"{title}, {runs} runs x {len(configs)} conditions", total=runs * len(configs))
 
         def done(task: Task, result: RunResult) -> None:
-            config = task[0]
             progress.advance(bar)
-            progress.update(bar, description=f"last: {config.topology} N={config.robots} P={config.drop}")
+            progress.update(bar, description=f"last: {_label(task[0])}")
 
         try:
             cells = run_grid(configs, runs, seed, workers, done)
         except ValueError as error:
             raise click.ClickException(str(error)) from None
-    wall = time.monotonic() - started
-    write_csv(cells, output / "summary.csv", output / "runs.csv")
-    plot_figure3(cells, output / "figure3.png")
-    (output / "comparison.md").write_text(markdown_table(cells, runs, wall))
+    return cells, time.monotonic() - started
+
+
+def _unconverged_cells(cells: list[Cell]) -> None:
     for cell in cells:
         if cell.summary.converged < cell.summary.runs:
             c = cell.config
-            click.echo(f"note: {c.topology} N={c.robots} P={c.drop}: {cell.summary.runs - cell.summary.converged} "
+            click.echo(f"note: {_label(c)}: {cell.summary.runs - cell.summary.converged} "
                        f"runs did not converge within {c.max_steps} steps", err=True)
-    click.echo(f"wrote {output}/summary.csv, runs.csv, figure3.png, comparison.md in {wall:.0f} s")
 
 
 def _draw_snapshot(config: Config, seed: int, step: int, path: Path) -> None:
@@ -242,7 +253,7 @@ def paper_motion(runs: int, output: Path, robots: int, densities: str, speeds: s
                  workers: int | None, **model: Any) -> None:
     """Run the Figure 5 grid: N=100 moving robots, D {1, 3, 5} x S {5, 10, 20 cm/s} x P {0 .. 0.95}."""
     from vstig_hw.sim.figure5 import MOTION_CONDITION, motion_configs, motion_markdown
-    from vstig_hw.sim.grid import run_grid, write_csv
+    from vstig_hw.sim.grid import write_csv
     from vstig_hw.sim.plot import plot_figure5
 
     model.pop("density")  # the grid's densities replace it
@@ -256,31 +267,14 @@ def paper_motion(runs: int, output: Path, robots: int, densities: str, speeds: s
         raise click.UsageError(str(error)) from None
     output.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()[0]
-    started = time.monotonic()
-    with _progress() as progress:
-        bar = progress.add_task(f"Figure 5 grid, {runs} runs x {len(configs)} conditions", total=runs * len(configs))
-
-        def done(task: Task, result: RunResult) -> None:
-            c = task[0]
-            progress.advance(bar)
-            progress.update(bar, description=f"last: D={c.density:g} S={c.speed:g} P={c.drop}")
-
-        try:
-            cells = run_grid(configs, runs, seed, workers, done)
-        except ValueError as error:
-            raise click.ClickException(str(error)) from None
-    wall = time.monotonic() - started
+    cells, wall = _run_grid("Figure 5 grid", configs, runs, seed, workers)
     circumstances = (f"{workers or os.cpu_count()} worker process(es) on {os.cpu_count()} cores at niceness "
                      f"{os.nice(0)}; 1-minute load average {load_before:.1f} at the start, "
                      f"{os.getloadavg()[0]:.1f} at the end.")
     write_csv(cells, output / "summary.csv", output / "runs.csv", MOTION_CONDITION)
     plot_figure5(cells, output / "figure5.png")
     (output / "comparison.md").write_text(motion_markdown(cells, runs, wall, circumstances))
-    for cell in cells:
-        if cell.summary.converged < cell.summary.runs:
-            c = cell.config
-            click.echo(f"note: D={c.density:g} S={c.speed:g} P={c.drop}: {cell.summary.runs - cell.summary.converged} "
-                       f"runs did not converge within {c.max_steps} steps", err=True)
+    _unconverged_cells(cells)
     click.echo(f"wrote {output}/summary.csv, runs.csv, figure5.png, comparison.md in {wall:.0f} s")
 
 

@@ -101,7 +101,8 @@ def motion_claims(cells: Sequence[Cell]) -> list[Claim]:
             if len(drops) < 2 or drops[0] != 0.0 or any(m is None for m in medians):
                 continue
             # The line's loss (every drop costs a retry) is 1/(1-P); graceful is slower than that.
-            worst = max((m or 0.0) / (medians[0] or 1.0) * (1 - p) for m, p in zip(medians, drops, strict=True))
+            worst = max((m or 0.0) / (medians[0] or 1.0) * (1 - p)
+                        for m, p in zip(medians[1:], drops[1:], strict=True))
             claims.append(Claim(f"D={density:g} S={speed:g}", "median at P over median at P=0, as a fraction "
                                 "of 1/(1-P) (graceful: at most 1 at every P)", "degrades gracefully",
                                 f"medians {', '.join(fmt_steps(m) for m in medians)}; worst {worst:.2f}",
