@@ -33,9 +33,10 @@ def _pyplot() -> Any:
 
 
 def _plot_panels(cells: Sequence[Cell], path: Path, panel_of: Callable[[Cell], Any], series_of: Callable[[Cell], Any],
-                 panels: Sequence[Any], title: Callable[[Any], str], label: Callable[[Any], str]) -> None:
+                 panels: Sequence[Any], title: Callable[[Any], str], label: Callable[[Any], str],
+                 sharey: bool = False) -> None:
     plt = _pyplot()
-    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4.2), squeeze=False)
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4.2), squeeze=False, sharey=sharey)
     for ax, panel in zip(axes[0], panels, strict=True):
         ours = [c for c in cells if panel_of(c) == panel]
         keys = sorted({series_of(c) for c in ours})
@@ -72,7 +73,8 @@ def plot_figure3(cells: Sequence[Cell], path: Path) -> None:
 def plot_figure5(cells: Sequence[Cell], path: Path) -> None:
     speeds = sorted({c.config.speed for c in cells})
     _plot_panels(cells, path, lambda c: c.config.speed, lambda c: c.config.density, speeds,
-                 lambda speed: f"Max speed = {speed * 100:g} cm/s", lambda density: f"D = {density:g}")
+                 lambda speed: f"Max speed = {speed * 100:g} cm/s", lambda density: f"D = {density:g}",
+                 sharey=True)  # one scale, so the panels show what speed buys
 
 
 def plot_snapshot(positions: Positions, hearing: Links, side: float, columns: Discs, body_radius: float,
