@@ -145,6 +145,7 @@ def layout(config: Config, rng: np.random.Generator) -> tuple[Links, int]:
 
 
 StepHook = Callable[[int, list[int | None]], None]
+BroadcastHook = Callable[[int, list[list[Message]]], None]
 
 
 def moving_swarm(config: Config, rng: np.random.Generator) -> MovingSwarm:
@@ -172,8 +173,10 @@ def motion_streams(seed: np.random.SeedSequence) -> tuple[np.random.Generator, n
     return np.random.default_rng(motion), np.random.default_rng(radio)
 
 
-def run_once(config: Config, seed: np.random.SeedSequence, run: int = 0, on_step: StepHook | None = None) -> RunResult:
-    """One run; `on_step(step, values)` sees what every robot's get returned at each step."""
+def run_once(config: Config, seed: np.random.SeedSequence, run: int = 0, on_step: StepHook | None = None,
+             on_broadcast: BroadcastHook | None = None) -> RunResult:
+    """One run; `on_step(step, values)` sees what every robot's get returned at each step,
+    `on_broadcast(step, outgoing)` what every robot broadcast at its end."""
     swarm: MovingSwarm | None = None
     if config.topology == MOTION:
         motion_rng, rng = motion_streams(seed)
@@ -207,6 +210,8 @@ def run_once(config: Config, seed: np.random.SeedSequence, run: int = 0, on_step
             on_step(step, values)
         outgoing = [drain(budget) for drain in drains]
         messages += sum(map(len, outgoing))
+        if on_broadcast:
+            on_broadcast(step, outgoing)
         if agreed:
             converged = step
             break
