@@ -1,10 +1,12 @@
-"""Simulated control steps per second at N=1000, beside what the Figure 3 grid needs (issue 7).
+"""Simulated control steps per second, beside what the Figure 3 and Figure 5 grids need.
 
-The anchor is the rate at which one core must simulate 1000-robot control steps
-for the whole grid (3 topologies x 3 sizes x 5 drop rates x 50 runs) to finish
-in 30 minutes on 2 cores. The grid's work, in robot-steps, is read from the last
-`vstig sim paper` output committed under benchmarks/results/paper/ (scaled to 50
-runs); ratio >= 1 means we make it, if the cores are ours alone.
+The anchor is the rate at which one core must simulate control steps for the
+whole grid to finish in 30 minutes on 2 cores: Figure 3 (3 topologies x 3 sizes
+x 5 drop rates x 50 runs) in 1000-robot steps, Figure 5 (3 densities x 3 speeds
+x 5 drop rates x 50 runs of 100 moving robots) in 100-robot steps. The grid's
+work is read from the last `vstig sim paper` / `paper-motion` output committed
+under benchmarks/results/ (scaled to 50 runs); ratio >= 1 means we make it, if
+the cores are ours alone.
 """
 
 from __future__ import annotations
@@ -22,14 +24,14 @@ _RUNS = 50
 _BUDGET_SECONDS = 30 * 60
 _CORES = 2
 _RESULTS = Path(__file__).parent / "results" / "paper" / "runs.csv"
+_MOTION_RESULTS = Path(__file__).parent / "results" / "paper-motion" / "runs.csv"
 
 
 def grid_robot_steps(path: Path = _RESULTS, runs: int = _RUNS) -> float:
     """Robot-steps the whole grid simulates at `runs` runs per condition, from a recorded grid."""
     with path.open(newline="") as rows:
         records = list(csv.DictReader(rows))
-    conditions = {(r["topology"], r["robots"], r["drop"]) for r in records}
-    recorded_runs = len(records) / len(conditions)
+    recorded_runs = len({r["run"] for r in records})
     work = sum(int(r["steps_run"]) * int(r["robots"]) for r in records)
     return work * runs / recorded_runs
 
@@ -40,14 +42,29 @@ def _steps_per_second(config: Config) -> float:
     return result.steps_run / (time.perf_counter() - start)
 
 
+def _needed(path: Path, robots: int, command: str) -> tuple[str, float]:
+    """The anchor: `robots`-robot steps per second per core that the recorded grid needs."""
+    if not path.exists():
+        raise SystemExit(f"{path} is missing: run `vstig sim {command} -o {path.parent}` first")
+    return (f"needed: {_RUNS}-run grid in 30 min on {_CORES} cores",
+            grid_robot_steps(path) / robots / (_BUDGET_SECONDS * _CORES))
+
+
 @benchmark("sim")
 def steps_at_n1000() -> Iterator[Result]:
-    if not _RESULTS.exists():
-        raise SystemExit(f"{_RESULTS} is missing: run `vstig sim paper -o {_RESULTS.parent}` first")
-    needed = grid_robot_steps() / 1000 / (_BUDGET_SECONDS * _CORES)
-    anchor = f"needed: {_RUNS}-run grid in 30 min on {_CORES} cores"
+    anchor, needed = _needed(_RESULTS, 1000, "paper")
     cluster = Config("cluster", 1000, 0.75)
     yield Result("sim.cluster_n1000_p0.75", _steps_per_second(cluster), "steps/s", anchor, needed)
     # Two thirds of the grid's work is this one condition: 1000 robots in a line at P=0.95.
     line = Config("line", 1000, 0.95, max_steps=2_000)
     yield Result("sim.line_n1000_p0.95", _steps_per_second(line), "steps/s", anchor, needed)
+
+
+@benchmark("sim")
+def motion_steps_at_n100() -> Iterator[Result]:
+    anchor, needed = _needed(_MOTION_RESULTS, 100, "paper-motion")
+    # D = 1 is most of the Figure 5 grid's work: islands that wait thousands of steps for motion.
+    sparse = Config("motion", 100, 0.5, density=1.0, speed=0.2, max_steps=2_000)
+    yield Result("sim.motion_d1_n100_p0.5", _steps_per_second(sparse), "steps/s", anchor, needed)
+    dense = Config("motion", 100, 0.5, density=5.0, speed=0.05, max_steps=2_000)
+    yield Result("sim.motion_d5_n100_p0.5", _steps_per_second(dense), "steps/s", anchor, needed)

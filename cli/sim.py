@@ -1,20 +1,24 @@
-"""`vstig sim`: predict convergence and bandwidth for a swarm, or reproduce the paper's Figure 3.
+"""`vstig sim`: predict convergence and bandwidth for a swarm, or reproduce the paper's Figures 3 and 5.
 
     vstig sim --topology cluster --robots 100 --drop 0.75 --runs 20 [--json]
+    vstig sim --topology motion --density 3 --speed 0.1 --drop 0.5 --runs 10 [--snapshot out.png]
     vstig sim paper --runs 50 -o results/
+    vstig sim paper-motion --runs 50 -o results/
 """
 
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 from typing import Any
 
 import click
 
-from vstig_hw.sim import TOPOLOGIES, Config, Summary, run_many, summarize
-from vstig_hw.sim.experiment import RunResult, Task
+from vstig_hw.sim import Config, Summary, run_many, summarize
+from vstig_hw.sim.experiment import MOTION, TOPOLOGY_NAMES, RunResult, Task
+from vstig_hw.sim.grid import Cell
 from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
 
@@ -30,7 +34,7 @@ def _model_options(fn: Any) -> Any:
                      type=click.FloatRange(0, min_open=True),
                      help="communication range R in metres"),
         click.option("--density", default=DENSITY, show_default=True, type=click.FloatRange(0, min_open=True),
-                     help="cluster density D = N*pi*R^2 / L^2"),
+                     help="density D = N*pi*R^2 / area (cluster: L^2; motion: L^2 minus the 4 columns)"),
         click.option("--body-radius", default=BODY_RADIUS, show_default=True, type=click.FloatRange(0),
                      help="robot body radius in metres (overlap and line of sight)"),
         click.option("--occlusion/--no-occlusion", default=True, show_default=True,
@@ -47,11 +51,30 @@ def _model_options(fn: Any) -> Any:
     return fn
 
 
+def _motion_options(fn: Any) -> Any:
+    """How robots move in the motion arena (section 4.2); the speed cap is set per command."""
+    options = [
+        click.option("--control-step", default=Config.control_step, show_default=True,
+                     type=click.FloatRange(0, min_open=True), help="seconds of motion per control step (motion)"),
+        click.option("--repulsion", default=Config.repulsion, show_default=True, type=click.FloatRange(0),
+                     help="gap in metres at which a neighbour's or obstacle's push equals the forward drive (motion)"),
+        click.option("--turn-noise", default=Config.turn_noise, show_default=True, type=click.FloatRange(0),
+                     help="standard deviation of the random turn per control step, in radians (motion)"),
+    ]
+    for option in reversed(options):
+        fn = option(fn)
+    return fn
+
+
+_MOTION_FIELDS = ("speed", "control_step", "repulsion", "turn_noise")
+
+
 def _config(topology: str, robots: int, drop: float, **model: Any) -> Config:
+    motion = {name: model[name] for name in _MOTION_FIELDS if name in model}
     try:
         return Config(topology, robots, drop, budget=model["budget"], radio_range=model["radio_range"],
                       density=model["density"], body_radius=model["body_radius"], occlusion=model["occlusion"],
-                      redraw_disconnected=model["redraw_disconnected"], max_steps=model["max_steps"])
+                      redraw_disconnected=model["redraw_disconnected"], max_steps=model["max_steps"], **motion)
     except ValueError as error:
         raise click.UsageError(str(error)) from None
 
@@ -66,7 +89,8 @@ def _progress(transient: bool = False) -> Any:
 
 
 @click.group(invoke_without_command=True)
-@click.option("--topology", type=click.Choice(list(TOPOLOGIES)), default="cluster", show_default=True)
+@click.option("--topology", type=click.Choice(TOPOLOGY_NAMES), default="cluster", show_default=True,
+              help="a static layout of section 4.1, or motion: robots diffusing through the arena of section 4.2")
 @click.option("--robots", default=100, show_default=True, type=click.IntRange(1, U16_MAX + 1),
               help="swarm size N (robot ids 0..N-1)")
 @click.option("--drop", default=0.0, show_default=True, type=click.FloatRange(0, 1, max_open=True),
@@ -77,16 +101,27 @@ def _progress(transient: bool = False) -> Any:
               help="also write run 0's radio traffic as a CAN capture (.log candump, .asc, .blf...): robot i is "
                    "CAN node i, time = step x 0.1 s; for checking `vstig analyze`")
 @_model_options
+@click.option("--speed", default=Config.speed, show_default=True, type=click.FloatRange(0),
+              help="forward speed cap S in m/s (motion)")
+@_motion_options
+@click.option("--snapshot", type=click.Path(dir_okay=False, path_type=Path),
+              help="instead of running, draw run 0 at --snapshot-step to this PNG (motion; as Figure 4)")
+@click.option("--snapshot-step", default=1, show_default=True, type=click.IntRange(1),
+              help="the control step --snapshot draws")
 @click.pass_context
 def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: int, as_json: bool,
-            capture: str | None, seed: int, workers: int | None, **model: Any) -> None:
+            capture: str | None, seed: int, workers: int | None, snapshot: Path | None, snapshot_step: int,
+            **model: Any) -> None:
     """Simulate the paper's task (agree on the highest id) on real engines over a lossy radio."""
     if ctx.invoked_subcommand is not None:
         return
     config = _config(topology, robots, drop, **model)
+    if snapshot is not None:
+        _draw_snapshot(config, seed, snapshot_step, snapshot)
+        return
     try:
         with _progress(transient=True) as progress:
-            bar = progress.add_task(f"{topology} N={robots} P={drop}", total=runs)
+            bar = progress.add_task(_label(config), total=runs)
             results = run_many(config, runs, seed, workers, lambda _task, _result: progress.advance(bar))
         summary = summarize(results)
     except ValueError as error:  # a layout that cannot be built (e.g. a density too high to place bodies)
@@ -96,11 +131,16 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
     if as_json:
         click.echo(json.dumps({**summary.as_json(), "config": {**vars(config), "seed": seed}}))
         return
-    click.echo(f"{topology} N={robots} P={drop}: {runs} runs, seed {seed}")
+    click.echo(f"{_label(config)}: {runs} runs, seed {seed}")
     click.echo(_steps_line(summary))
     click.echo(_bandwidth_line(summary))
-    click.echo(f"graph: mean degree {summary.mean_degree:.2f}" + _split_note(summary))
+    click.echo(f"graph: mean degree {summary.mean_degree:.2f}" + _split_note(summary, config.topology == MOTION))
     _unconverged_note(summary, config.max_steps)
+
+
+def _label(c: Config) -> str:
+    moving = f" D={c.density:g} S={c.speed:g}" if c.topology == MOTION else ""
+    return f"{c.topology}{moving} N={c.robots} P={c.drop}"
 
 
 def _capture(config: Config, seed: int, path: str) -> None:
@@ -129,9 +169,12 @@ def _bandwidth_line(s: Summary) -> str:
             f"{s.deliveries_per_robot_step:.2f} messages received per robot per step")
 
 
-def _split_note(s: Summary) -> str:
+def _split_note(s: Summary, moving: bool = False) -> str:
     if not s.split_runs:
         return ""
+    if moving:
+        return (f" over the steps run; {s.split_runs} of {s.runs} runs started split into components "
+                f"({s.largest_share:.0%} of robots in the largest), which motion had to join")
     return (f"; {s.split_runs} of {s.runs} layouts split into components "
             "(each robot scored on its own component's highest id; --redraw-disconnected to avoid)")
 
@@ -151,32 +194,120 @@ def _unconverged_note(s: Summary, max_steps: int) -> None:
 @_model_options
 def paper(runs: int, output: Path, sizes: tuple[int, ...], seed: int, workers: int | None, **model: Any) -> None:
     """Run the Figure 3 grid: {cluster, line, scale-free} x N {10, 100, 1000} x P {0 .. 0.95}."""
-    from vstig_hw.sim.grid import markdown_table, paper_configs, run_grid, write_csv
+    from vstig_hw.sim.grid import markdown_table, paper_configs, write_csv
     from vstig_hw.sim.plot import plot_figure3
 
     template = _config("cluster", 10, 0.0, **model)
     configs = [c for c in paper_configs(template) if not sizes or c.robots in sizes]
     output.mkdir(parents=True, exist_ok=True)
+    cells, wall = _run_grid("Figure 3 grid", configs, runs, seed, workers)
+    write_csv(cells, output / "summary.csv", output / "runs.csv")
+    plot_figure3(cells, output / "figure3.png")
+    (output / "comparison.md").write_text(markdown_table(cells, runs, wall))
+    _unconverged_cells(cells)
+    click.echo(f"wrote {output}/summary.csv, runs.csv, figure3.png, comparison.md in {wall:.0f} s")
+
+
+def _run_grid(title: str, configs: list[Config], runs: int, seed: int, workers: int | None) -> tuple[list[Cell], float]:
+    """Every condition `runs` times, behind a progress bar; the cells and the wall time in seconds."""
+    from vstig_hw.sim.grid import run_grid
+
     started = time.monotonic()
     with _progress() as progress:
-        bar = progress.add_task(f"Figure 3 grid, {runs} runs x {len(configs)} conditions", total=runs * len(configs))
+        bar = progress.add_task(f"{title}, {runs} runs x {len(configs)} conditions", total=runs * len(configs))
 
         def done(task: Task, result: RunResult) -> None:
-            config = task[0]
             progress.advance(bar)
-            progress.update(bar, description=f"last: {config.topology} N={config.robots} P={config.drop}")
+            progress.update(bar, description=f"last: {_label(task[0])}")
 
         try:
             cells = run_grid(configs, runs, seed, workers, done)
         except ValueError as error:
             raise click.ClickException(str(error)) from None
-    wall = time.monotonic() - started
-    write_csv(cells, output / "summary.csv", output / "runs.csv")
-    plot_figure3(cells, output / "figure3.png")
-    (output / "comparison.md").write_text(markdown_table(cells, runs, wall))
+    return cells, time.monotonic() - started
+
+
+def _unconverged_cells(cells: list[Cell]) -> None:
     for cell in cells:
         if cell.summary.converged < cell.summary.runs:
             c = cell.config
-            click.echo(f"note: {c.topology} N={c.robots} P={c.drop}: {cell.summary.runs - cell.summary.converged} "
+            click.echo(f"note: {_label(c)}: {cell.summary.runs - cell.summary.converged} "
                        f"runs did not converge within {c.max_steps} steps", err=True)
-    click.echo(f"wrote {output}/summary.csv, runs.csv, figure3.png, comparison.md in {wall:.0f} s")
+
+
+def _draw_snapshot(config: Config, seed: int, step: int, path: Path) -> None:
+    from vstig_hw.sim.experiment import motion_at, seed_for
+    from vstig_hw.sim.graph import component_labels
+    from vstig_hw.sim.plot import plot_snapshot
+
+    if config.topology != MOTION:
+        raise click.UsageError("--snapshot draws the motion arena: use it with --topology motion")
+    try:
+        swarm = motion_at(config, seed_for(config, seed, 0), step)
+    except ValueError as error:
+        raise click.ClickException(str(error)) from None
+    hearing, arena = swarm.hearing, swarm.arena
+    components = len(set(component_labels(hearing)))
+    title = (f"D = {config.density:g}, N = {config.robots}, L = {arena.side:.1f} m, S = {config.speed * 100:g} cm/s, "
+             f"step {step}\nmean degree {hearing.degrees().mean():.2f}, {components} component(s)")
+    try:
+        plot_snapshot(swarm.positions, hearing, arena.side, arena.columns, config.body_radius, title, path)
+    except OSError as error:
+        raise click.ClickException(f"cannot write {path}: {error.strerror or error}") from None
+    click.echo(f"wrote {path}: step {step}, {components} component(s), mean degree {hearing.degrees().mean():.2f}")
+
+
+@command.command("paper-motion")
+@click.option("--runs", default=50, show_default=True, type=click.IntRange(1), help="runs per condition")
+@click.option("-o", "--output", "output", default=Path("sim-paper-motion"), show_default=True,
+              type=click.Path(file_okay=False, path_type=Path), help="folder for the CSV, PNG and markdown")
+@click.option("--robots", default=100, show_default=True, type=click.IntRange(1, U16_MAX + 1), help="swarm size N")
+@click.option("--densities", default="1,3,5", show_default=True, help="comma-separated densities D")
+@click.option("--speeds", default="0.05,0.1,0.2", show_default=True, help="comma-separated speed caps S in m/s")
+@click.option("--drops", default="0,0.25,0.5,0.75,0.95", show_default=True,
+              help="comma-separated drop probabilities P")
+@_model_options
+@_motion_options
+def paper_motion(runs: int, output: Path, robots: int, densities: str, speeds: str, drops: str, seed: int,
+                 workers: int | None, **model: Any) -> None:
+    """Run the Figure 5 grid: N=100 moving robots, D {1, 3, 5} x S {5, 10, 20 cm/s} x P {0 .. 0.95}."""
+    from vstig_hw.sim.figure5 import MOTION_CONDITION, motion_configs, motion_markdown
+    from vstig_hw.sim.grid import write_csv
+    from vstig_hw.sim.plot import plot_figure5
+
+    model.pop("density")  # the grid's densities replace it
+    template = _config(MOTION, robots, 0.0, density=1.0, **model)
+    grid = {name: _numbers(name, text) for name, text in
+            (("--densities", densities), ("--speeds", speeds), ("--drops", drops))}
+    try:
+        configs = [_checked(c) for c in motion_configs(template, grid["--densities"], grid["--speeds"],
+                                                        grid["--drops"])]
+    except ValueError as error:
+        raise click.UsageError(str(error)) from None
+    output.mkdir(parents=True, exist_ok=True)
+    load_before = os.getloadavg()[0]
+    cells, wall = _run_grid("Figure 5 grid", configs, runs, seed, workers)
+    circumstances = (f"{workers or os.cpu_count()} worker process(es) on {os.cpu_count()} cores at niceness "
+                     f"{os.nice(0)}; 1-minute load average {load_before:.1f} at the start, "
+                     f"{os.getloadavg()[0]:.1f} at the end.")
+    write_csv(cells, output / "summary.csv", output / "runs.csv", MOTION_CONDITION)
+    plot_figure5(cells, output / "figure5.png")
+    (output / "comparison.md").write_text(motion_markdown(cells, runs, wall, circumstances))
+    _unconverged_cells(cells)
+    click.echo(f"wrote {output}/summary.csv, runs.csv, figure5.png, comparison.md in {wall:.0f} s")
+
+
+def _numbers(option: str, text: str) -> list[float]:
+    try:
+        values = [float(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise click.BadParameter(f"{text!r} is not a comma-separated list of numbers", param_hint=option) from None
+    if not values:
+        raise click.BadParameter("needs at least one number", param_hint=option)
+    return values
+
+
+def _checked(config: Config) -> Config:
+    """A grid condition built by dataclasses.replace, validated as the constructor would."""
+    config.__post_init__()
+    return config

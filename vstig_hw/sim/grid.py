@@ -9,7 +9,8 @@ from pathlib import Path
 
 from .experiment import Config, RunResult, Summary, Task, run_tasks, summarize
 
-__all__ = ["PAPER_DROPS", "PAPER_ROBOTS", "PAPER_TOPOLOGIES", "Cell", "paper_claims", "run_grid", "write_csv"]
+__all__ = ["PAPER_DROPS", "PAPER_ROBOTS", "PAPER_TOPOLOGIES", "STATIC_CONDITION", "Cell", "Claim", "claims_table",
+           "conditions_table", "fmt_steps", "paper_claims", "run_grid", "write_csv"]
 
 PAPER_TOPOLOGIES = ("cluster", "line", "scale-free")
 PAPER_ROBOTS = (10, 100, 1000)
@@ -41,31 +42,40 @@ def run_grid(
     return [Cell(config, [results[(config, seed, run)] for run in range(runs)]) for config in configs]
 
 
-_SUMMARY_FIELDS = ("topology", "robots", "drop", "runs", "converged", "median", "min", "max", "mean",
-                   "msgs_per_robot_step", "bytes_per_robot_step", "deliveries_per_robot_step", "mean_degree",
-                   "split_runs")
-_RUN_FIELDS = ("topology", "robots", "drop", "run", "steps", "steps_run", "messages", "deliveries",
-               "mean_degree", "components", "layouts")
+STATIC_CONDITION = ("topology", "robots", "drop")  # the Config fields that name a Figure 3 condition
+_SUMMARY_FIELDS = ("runs", "converged", "median", "min", "max", "mean", "msgs_per_robot_step", "bytes_per_robot_step",
+                   "deliveries_per_robot_step", "mean_degree", "split_runs", "largest_share")
+_RUN_FIELDS = ("run", "steps", "steps_run", "messages", "deliveries", "mean_degree", "components", "layouts",
+               "largest_share")
 
 
-def write_csv(cells: Sequence[Cell], summary_path: Path, runs_path: Path) -> None:
-    """One row per condition (summary) and one per run (for your own statistics)."""
+def write_csv(cells: Sequence[Cell], summary_path: Path, runs_path: Path,
+              condition: Sequence[str] = STATIC_CONDITION) -> None:
+    """One row per condition (summary) and one per run (for your own statistics).
+
+    `condition` names the Config fields that tell the conditions apart; they lead each row.
+    """
     with summary_path.open("w", newline="") as out:
         writer = csv.writer(out)
-        writer.writerow(_SUMMARY_FIELDS)
+        writer.writerow([*condition, *_SUMMARY_FIELDS])
         for cell in cells:
-            s, c = cell.summary, cell.config
-            writer.writerow([c.topology, c.robots, c.drop, s.runs, s.converged, s.median, s.min, s.max,
+            s = cell.summary
+            writer.writerow([*_condition_values(cell.config, condition), s.runs, s.converged, s.median, s.min, s.max,
                              _fmt(s.mean), _fmt(s.msgs_per_robot_step), _fmt(s.bytes_per_robot_step),
-                             _fmt(s.deliveries_per_robot_step), _fmt(s.mean_degree), s.split_runs])
+                             _fmt(s.deliveries_per_robot_step), _fmt(s.mean_degree), s.split_runs,
+                             _fmt(s.largest_share)])
     with runs_path.open("w", newline="") as out:
         writer = csv.writer(out)
-        writer.writerow(_RUN_FIELDS)
+        writer.writerow([*condition, *_RUN_FIELDS])
         for cell in cells:
-            c = cell.config
+            leading = _condition_values(cell.config, condition)
             for r in cell.results:
-                writer.writerow([c.topology, c.robots, c.drop, r.run, r.steps, r.steps_run, r.messages,
-                                 r.deliveries, _fmt(r.mean_degree), r.components, r.layouts])
+                writer.writerow([*leading, r.run, r.steps, r.steps_run, r.messages, r.deliveries,
+                                 _fmt(r.mean_degree), r.components, r.layouts, _fmt(r.largest_share)])
+
+
+def _condition_values(config: Config, condition: Sequence[str]) -> list[object]:
+    return [getattr(config, name) for name in condition]
 
 
 def _fmt(value: float | None) -> str:
@@ -100,11 +110,11 @@ def paper_claims(cells: Sequence[Cell]) -> list[Claim]:
     claims: list[Claim] = []
     s = _find(cells, "cluster", 10, 0.75)
     if s:
-        claims.append(Claim("cluster N=10 P=0.75", "mean (agrees within ±25%)", "6", _num(s.mean),
+        claims.append(Claim("cluster N=10 P=0.75", "mean (agrees within ±25%)", "6", fmt_steps(s.mean),
                             _within(s.mean, 4.5, 7.5)))
     s = _find(cells, "cluster", 1000, 0.75)
     if s:
-        claims.append(Claim("cluster N=1000 P=0.75", "mean (agrees within ±25%)", "13", _num(s.mean),
+        claims.append(Claim("cluster N=1000 P=0.75", "mean (agrees within ±25%)", "13", fmt_steps(s.mean),
                             _within(s.mean, 9.75, 16.25)))
         claims.append(Claim("cluster N=1000 P=0.75", "[min, max] (agrees if it overlaps)", "[10, 15]",
                             _range(s), _overlaps(s, 10, 15)))
@@ -119,7 +129,7 @@ def paper_claims(cells: Sequence[Cell]) -> list[Claim]:
             medians = [f.median for f in flat if f and f.median]
             ratio = max(medians) / min(medians)
             claims.append(Claim(f"cluster N={robots}, P=0..0.75", "max/min of medians (flat: at most 1.5)",
-                                "flat (no increase)", f"{ratio:.2f} ({', '.join(_num(m) for m in medians)})",
+                                "flat (no increase)", f"{ratio:.2f} ({', '.join(fmt_steps(m) for m in medians)})",
                                 ratio <= 1.5))
             jump = steep.median / medians[-1]
             claims.append(Claim(f"cluster N={robots}, P=0.95", "median / median at P=0.75 (drops: at least 1.5)",
@@ -127,7 +137,7 @@ def paper_claims(cells: Sequence[Cell]) -> list[Claim]:
     return claims
 
 
-def _num(value: float | None) -> str:
+def fmt_steps(value: float | None) -> str:
     if value is None:
         return "-"
     return f"{value:.0f}" if abs(value) >= 100 or value == int(value) else f"{value:.1f}"
@@ -150,18 +160,32 @@ def markdown_table(cells: Sequence[Cell], runs: int, wall_seconds: float | None 
                   f"{'on' if first.occlusion else 'off'} (body radius {first.body_radius} m).", ""]
     if wall_seconds is not None:
         lines += [f"Wall time for the grid: {wall_seconds:.0f} s.", ""]
-    lines += ["## Every number the paper states, beside ours", "",
-              "| condition | measure | paper | ours | agrees |", "|---|---|---|---|---|"]
-    for claim in paper_claims(cells):
+    lines += ["## Every number the paper states, beside ours", "", *claims_table(paper_claims(cells))]
+    lines += ["", "## All conditions (convergence in control steps)", "", *conditions_table(cells, STATIC_CONDITION)]
+    return "\n".join(lines) + "\n"
+
+
+def claims_table(claims: Sequence[Claim]) -> list[str]:
+    lines = ["| condition | measure | paper | ours | agrees |", "|---|---|---|---|---|"]
+    for claim in claims:
         verdict = "-" if claim.agrees is None else ("yes" if claim.agrees else "**no**")
         lines.append(f"| {claim.condition} | {claim.measure} | {claim.paper} | {claim.ours} | {verdict} |")
-    lines += ["", "## All conditions (convergence in control steps)", "",
-              "| topology | N | P | median | min | max | mean | converged | msg/robot/step | "
-              "receptions/robot/step | mean degree | split layouts |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    return lines
+
+
+_HEADINGS = {"topology": "topology", "robots": "N", "drop": "P", "density": "D", "speed": "S (m/s)"}
+
+
+def conditions_table(cells: Sequence[Cell], condition: Sequence[str]) -> list[str]:
+    """Markdown rows: each condition's convergence statistics, bandwidth and connectivity."""
+    head = [_HEADINGS.get(name, name) for name in condition]
+    lines = ["| " + " | ".join(head) + " | median | min | max | mean | converged | msg/robot/step | "
+             "receptions/robot/step | mean degree | split layouts |",
+             "|" + "---|" * (len(head) + 9)]
     for cell in cells:
-        c, s = cell.config, cell.summary
-        lines.append(f"| {c.topology} | {c.robots} | {c.drop} | {_num(s.median)} | {_num(s.min)} | {_num(s.max)} | "
-                     f"{_num(s.mean)} | {s.converged}/{s.runs} | {s.msgs_per_robot_step:.3f} | "
+        s = cell.summary
+        leading = " | ".join(str(value) for value in _condition_values(cell.config, condition))
+        lines.append(f"| {leading} | {fmt_steps(s.median)} | {fmt_steps(s.min)} | {fmt_steps(s.max)} | "
+                     f"{fmt_steps(s.mean)} | {s.converged}/{s.runs} | {s.msgs_per_robot_step:.3f} | "
                      f"{s.deliveries_per_robot_step:.3f} | {s.mean_degree:.2f} | {s.split_runs} |")
-    return "\n".join(lines) + "\n"
+    return lines

@@ -29,6 +29,7 @@ __all__ = [
     "arena_side",
     "cluster",
     "line",
+    "place_apart",
     "scale_free",
 ]
 
@@ -54,7 +55,7 @@ Draw = Callable[[int, Positions], NDArray[np.float64]]
 Placed = Callable[[int, Positions], None]
 
 
-def _place(robots: int, draw: Draw, body_radius: float, placed: Placed | None = None) -> Positions:
+def place_apart(robots: int, draw: Draw, body_radius: float, placed: Placed | None = None) -> Positions:
     """Place robots one by one: `draw(i, so_far)` proposes robot i's spot, re-drawn while it overlaps a body."""
     positions = np.empty((robots, 2))
     min_gap_sq = (2 * body_radius) ** 2
@@ -77,7 +78,7 @@ def cluster(
     density: float = DENSITY,
 ) -> Positions:
     half = arena_side(robots, radio_range, density) / 2
-    return _place(robots, lambda _i, _so_far: rng.uniform(-half, half, size=2), body_radius)
+    return place_apart(robots, lambda _i, _so_far: rng.uniform(-half, half, size=2), body_radius)
 
 
 def line(
@@ -112,7 +113,7 @@ def scale_free(
         degree[:i] += in_range
         degree[i] = in_range.sum()
 
-    return _place(robots, draw, body_radius, placed)
+    return place_apart(robots, draw, body_radius, placed)
 
 
 # Every generator takes (robots, rng, radio_range, body_radius, density); only the
