@@ -115,7 +115,13 @@ def run_swarm(guarded: bool) -> tuple[Radio, Stigmergy, str, str]:
         for robot in everyone:
             robot.put(TASK_KEY, robot.robot_id)
         radio.robots[1].put(JUMP_KEY, 1)
-        wait_for(lambda: honest.has(JUMP_KEY), 30, step=control_step)  # the bridge holds it too
+        def ask_until_bridged() -> None:
+            # The first PUT may reach the pty before the bridge has opened it (opening flushes input):
+            # robot 21 asks each step, and its GET carries the entry across as the PUT would.
+            radio.robots[1].get(JUMP_KEY)
+            control_step()
+
+        wait_for(lambda: honest.has(JUMP_KEY), 30, step=ask_until_bridged)  # the bridge holds it too
 
         forged = honest.entry(JUMP_KEY)
         assert forged is not None
