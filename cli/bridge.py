@@ -10,7 +10,7 @@ from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, favour_latency
 from vstig_hw.links.spec import LinkSpec
 
-from ._common import build_links, print_counters, run_until_stopped
+from ._common import build_links, describe_links, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
 
@@ -31,6 +31,9 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
     Example: vstig bridge can:socketcan:can0 serial:/dev/ttyUSB0?framing=epuck4 --robot-id 200
+
+    Many PCs: add a zenoh link on each (vstig links lists its options), e.g.
+    vstig bridge can:socketcan:can0 zenoh:lab?connect=tcp/10.0.0.5:7447 --robot-id 201
     """
     if robot_id is None and not raw:
         raise click.UsageError("--robot-id is required (the PC's id in the swarm), or use --raw")
@@ -50,6 +53,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     with node:
         click.echo(f"bridging {', '.join(link.name for link in node.links)} "
                    f"({'raw' if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
+        describe_links(node)
         try:
             run_until_stopped(node, status, duration)
         finally:

@@ -9,7 +9,7 @@ from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 from vstig_hw.wire import KEY_MAX
 
-from ._common import build_links
+from ._common import build_links, lossless
 from .errors import LINK, reports_errors
 
 
@@ -26,7 +26,7 @@ def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: Va
 
     Example: vstig get 3 --on serial:/dev/ttyUSB0?framing=epuck4 --wait 5
     """
-    node = Node(build_links([link], robot_id), robot_id)
+    node = Node(build_links([lossless(link)], robot_id), robot_id)
     engine = node.engine
     assert engine is not None
 

@@ -11,7 +11,7 @@ from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, to_raw
 from vstig_hw.wire import KEY_MAX
 
-from ._common import build_links
+from ._common import build_links, lossless
 from .errors import LINK, reports_errors
 
 
@@ -33,7 +33,7 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
         raw = to_raw(value, value_type)
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="VALUE") from None
-    node = Node(build_links([link], robot_id), robot_id)
+    node = Node(build_links([lossless(link)], robot_id), robot_id)
     engine = node.engine
     assert engine is not None
     with node:

@@ -12,7 +12,7 @@ from vstig_hw.gateway import Mode, Node
 from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 
-from ._common import build_links, print_counters, run_until_stopped
+from ._common import build_links, describe_links, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
 
@@ -53,6 +53,7 @@ def command(link: LinkSpec, output: str, max_bytes: str | None, duration: float 
     try:
         with node:
             click.echo(f"recording {node.links[0].name} to {output}; Ctrl-C stops", err=True)
+            describe_links(node)
             run_until_stopped(node, duration=duration)
     finally:
         capture.close()  # after the node: its close() handed over every unit already read

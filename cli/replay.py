@@ -18,7 +18,7 @@ from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._common import build_links
+from ._common import build_links, lossless
 from .errors import LINK, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
@@ -89,7 +89,7 @@ def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, robot_id
     if at is not None:
         raise click.UsageError("--at goes with --table")
     assert onto is not None
-    link = build_links([onto], robot_id)[0]
+    link = build_links([lossless(onto)], robot_id)[0]
     send = _sender(link, isinstance(onto, CanSpec))
     link.open()
     try:
