@@ -7,7 +7,7 @@ import sys
 import click
 
 from vstig_hw.engine import larger_value_wins
-from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, favour_latency
+from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency
 from vstig_hw.links.spec import LinkSpec
 
 from ._common import build_links, describe_links, print_counters, run_until_stopped
@@ -24,10 +24,13 @@ from .errors import LINK, reports_errors
 @click.option("--raw", is_flag=True, help="Relay every frame between links, translating framings, with no engine.")
 @click.option("--larger-value-wins", "larger", is_flag=True,
               help="Resolve conflicts by the larger value (the paper's Figure 1) instead of the higher robot id.")
+@click.option("--refresh/--no-refresh", default=True, show_default=True,
+              help="GET one key of the table per tick, round-robin, as a robot's program would: repairs gateways "
+                   "that were apart (network partition, restart) without waiting for the next write.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
-            larger: bool, duration: float | None) -> None:
+            larger: bool, refresh: bool, duration: float | None) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
     Example: vstig bridge can:socketcan:can0 serial:/dev/ttyUSB0?framing=epuck4 --robot-id 200
@@ -42,6 +45,8 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     node = Node(build_links(links, robot_id or 0), robot_id or 0, mode=Mode.RAW if raw else Mode.ENGINE,
                 period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
                 onconflict=larger_value_wins if larger else None)
+    if refresh and not raw:
+        node.on_tick.append(RoundRobinGet())
     live = sys.stderr.isatty()
     favour_latency()
 

@@ -2,8 +2,10 @@
 
 from .node import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, favour_latency
 from .outlet import Outlet, SendWindow
+from .refresh import RoundRobinGet
 from .shutdown import stop_on_signals
 
 __all__ = [
-    "DEFAULT_BUDGET", "DEFAULT_PERIOD", "Mode", "Node", "Outlet", "SendWindow", "favour_latency", "stop_on_signals",
+    "DEFAULT_BUDGET", "DEFAULT_PERIOD", "Mode", "Node", "Outlet", "RoundRobinGet", "SendWindow", "favour_latency",
+    "stop_on_signals",
 ]
