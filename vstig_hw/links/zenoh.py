@@ -66,13 +66,24 @@ def zenoh_config(spec: ZenohSpec) -> zenoh.Config:
     if spec.listen:
         config.insert_json5("listen/endpoints", json.dumps(list(spec.listen)))
     elif _json(config, "listen/endpoints") == _json(zenoh_default, "listen/endpoints"):
-        loopback = [] if _mode(config) == "client" else [f"tcp/127.0.0.1:{_free_loopback_port()}"]
+        protocol = _loopback_protocol(config)
+        loopback = [f"{protocol}/127.0.0.1:{_free_loopback_port()}"] if protocol else []
         config.insert_json5("listen/endpoints", json.dumps(loopback))
     if spec.scout is not None:
         config.insert_json5("scouting/multicast/enabled", json.dumps(spec.scout))
     elif _json(config, "scouting/multicast/enabled") is None:
         config.insert_json5("scouting/multicast/enabled", "false")
     return config
+
+
+def _loopback_protocol(config: zenoh.Config) -> str | None:
+    """The default loopback listener's protocol: tcp, or tls where the config allows only TLS; none for a client."""
+    if _mode(config) == "client":
+        return None
+    allowed = _json(config, "transport/link/protocols")
+    if not allowed or "tcp" in allowed:
+        return "tcp"
+    return "tls" if "tls" in allowed else None
 
 
 def _mode(config: zenoh.Config) -> str:

@@ -111,7 +111,8 @@ class ZenohTransport:
         except zenoh.ZError as exc:
             reason = one_line(exc).split(" at /", 1)[0]  # Zenoh appends its source location
             if _UNREACHABLE_MARK in reason:
-                raise _Unreachable(f"no Zenoh router reachable ({reason})") from None
+                raise _Unreachable(f"no Zenoh router reachable ({reason}): is it up, and does it accept our "
+                                   "certificates and credentials?") from None
             raise TransportError(f"{self.name}: cannot open a Zenoh session: {reason}") from None
         try:
             subscriber = session.declare_subscriber(self.subscription, self._heard,
@@ -199,7 +200,8 @@ class ZenohTransport:
                 and now - self._opened_at > _UNREACHABLE_AFTER_S:
             self._reported_alone = True
             self.counters["unreachable"] += 1
-            log.warning("%s: no Zenoh peer reachable yet; Zenoh keeps retrying with backoff", self.name)
+            log.warning("%s: no Zenoh peer reachable yet (are they up, and do they accept our certificates and "
+                        "credentials?); Zenoh keeps retrying with backoff", self.name)
 
     def _retry_later(self, reason: str) -> None:
         self.last_error = reason

@@ -1,0 +1,82 @@
+"""The locked deployment: mutual TLS through the Zenoh config file, with certificates made here.
+
+Two gateways whose certificates the lab CA signed exchange batches. An intruder
+with a certificate from another CA can neither read (its sniffer hears nothing
+while the lab talks) nor inject (its put never reaches the lab, and it is told
+so in one line).
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from certs import Authority, mtls_config
+
+from vstig_hw.links import parse
+from vstig_hw.wire import Message, Op
+
+VSTIG = str(Path(sys.executable).with_name("vstig"))
+pytestmark = pytest.mark.slow
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def test_only_gateways_with_the_labs_certificates_join(tmp_path: Path) -> None:
+    lab, other = Authority(tmp_path, "lab-ca"), Authority(tmp_path, "other-ca")
+    configs = {}
+    for name, authority in (("gw-a", lab), ("gw-b", lab), ("gw-c", lab), ("intruder", other)):
+        configs[name] = tmp_path / f"{name}.json5"
+        configs[name].write_text(mtls_config(authority, name))
+    port = _free_port()
+    listener = parse(f"zenoh:lab?listen=tls/localhost:{port}&config={configs['gw-a']}").build(robot_id=1)
+    member = parse(f"zenoh:lab?connect=tls/localhost:{port}&config={configs['gw-b']}").build(robot_id=2)
+    intruder = f"zenoh:lab?connect=tls/localhost:{port}&config={configs['intruder']}"
+    listener.open()
+    member.open()
+    sniffer = subprocess.Popen([VSTIG, "sniff", intruder, "--jsonl", "--for", "6"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    colleague = subprocess.Popen([VSTIG, "sniff", intruder.replace("intruder", "gw-c"), "--jsonl", "--for", "6"],
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        heard = []
+        end = time.monotonic() + 20
+        while not heard and time.monotonic() < end:
+            listener.send(Message(Op.PUT, 1, 42, 1, 1))
+            heard = member.receive(0.3)
+        assert heard and heard[0].message == Message(Op.PUT, 1, 42, 1, 1)  # the lab works
+
+        end = time.monotonic() + 7
+        while sniffer.poll() is None and time.monotonic() < end:
+            listener.send(Message(Op.PUT, 1, 42, 1, 1))  # the lab keeps talking while the intruder listens
+            time.sleep(0.2)
+        out, err = sniffer.communicate(timeout=20)
+        assert out == ""  # it read nothing
+        rows = [json.loads(line) for line in colleague.communicate(timeout=20)[0].splitlines()]
+        assert rows and rows[0]["value"] == 42 and rows[0]["sender"] == 1  # where a lab member reads it all
+        assert "no Zenoh peer reachable yet" in err and "Traceback" not in err
+
+        put = subprocess.run([VSTIG, "put", "9", "666", "--learn", "0", "--on",
+                              intruder.replace("zenoh:lab?", "zenoh:lab?mode=client&")],
+                             capture_output=True, text=True, timeout=60, check=False)
+        assert put.returncode == 1
+        assert put.stderr.splitlines()[-1].startswith("Error: zenoh-lab: the put was not sent (no Zenoh router "
+                                                      "reachable")
+        assert "Traceback" not in put.stderr
+        late = [h for _ in range(5) for h in member.receive(0.2)]
+        assert all(h.message.key != 9 for h in late)  # it injected nothing
+    finally:
+        for process in (sniffer, colleague):
+            if process.poll() is None:
+                process.kill()
+        listener.close()
+        member.close()
