@@ -28,7 +28,7 @@ def _size(text: str) -> int:
 @click.command()
 @click.argument("link", type=LINK)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, writable=True),
-              help="CAN: .log (candump) .asc .blf .csv; serial: any name (our line format).")
+              help="CAN: .log (candump) .asc .blf .csv; serial and zenoh: any name (our line formats).")
 @click.option("--max-bytes", help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M).")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
 @reports_errors
@@ -42,7 +42,7 @@ def command(link: LinkSpec, output: str, max_bytes: str | None, duration: float 
         raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} (got {output})")
     limit = _size(max_bytes) if max_bytes else None
     node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN)
-    capture = RotatingCapture(output, "can" if is_can else "serial", limit)
+    capture = RotatingCapture(output, link.kind if link.kind in ("can", "zenoh") else "serial", limit)
 
     def write(source: Link[Any], t: float, unit: Any) -> None:
         framing = CAN_FRAMING if is_can else source.framing.name

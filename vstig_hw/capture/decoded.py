@@ -34,11 +34,14 @@ FramingFactory = Callable[[Record], Any]
 
 def default_framings(id_base: int | None = None, extended: bool = False) -> FramingFactory:
     from ..framing import make_serial_framing
+    from ..framing.zenoh import ZenohFraming, ZenohKeySpace
     from ..links.can import can_framing
 
     def make(record: Record) -> Any:
         if record.framing == CAN_FRAMING:
             return can_framing(id_base, extended)
+        if record.framing == ZenohFraming.name:  # the key space the link subscribed to, read off its first key
+            return ZenohFraming(ZenohKeySpace.of_key(record.unit.key), sender=0)
         return make_serial_framing(record.framing)
 
     return make

@@ -28,13 +28,18 @@ def format_line(record: Record) -> str:
 
 
 class SerialCaptureWriter:
+    """A line capture: a header line, then one line per record (the zenoh capture shares it)."""
+
+    header = HEADER
+    format_line = staticmethod(format_line)
+
     def __init__(self, path: str) -> None:
         self.path = path
         self.file: IO[str] = open(path, "w", encoding="utf-8")  # noqa: SIM115 (closed by close())
-        self.file.write(HEADER + "\n")
+        self.file.write(self.header + "\n")
 
     def write(self, record: Record) -> None:
-        self.file.write(format_line(record))
+        self.file.write(self.format_line(record))
 
     def size(self) -> int:
         return self.file.tell()
@@ -65,6 +70,6 @@ def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureErro
         yield from parse_lines(path, file, parse_line, skip_bad, bad)
 
 
-def is_serial_capture(path: str) -> bool:
+def is_serial_capture(path: str, header: str = HEADER) -> bool:
     with open(path, "rb") as file:
-        return file.read(len(HEADER)).decode("utf-8", "replace") == HEADER
+        return file.read(len(header)).decode("utf-8", "replace") == header

@@ -59,6 +59,14 @@ class ZenohKeySpace:
                 or not 0 <= self.stigmergy <= MAX_STIGMERGY:
             raise ValueError(f"stigmergy must be 0..{MAX_STIGMERGY}, got {self.stigmergy!r}")
 
+    @classmethod
+    def of_key(cls, key: str) -> ZenohKeySpace:
+        """The space a key vstig/<swarm>/<stigmergy>/<gateway> belongs to; ValueError for any other key."""
+        parts = key.split("/")
+        if len(parts) != 4 or parts[0] != KEY_ROOT or not parts[2].isdigit() or not parts[2].isascii():
+            raise ValueError(f"{key!r} is not a vstig key (vstig/<swarm>/<stigmergy>/<gateway id>)")
+        return cls(parts[1], int(parts[2]))
+
     @property
     def prefix(self) -> str:
         return f"{KEY_ROOT}/{self.swarm}/{self.stigmergy}/"

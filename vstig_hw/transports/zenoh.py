@@ -40,6 +40,7 @@ log = logging.getLogger(__name__)
 _DRAIN_LIMIT = 512  # samples taken per read() after the first, so a busy swarm cannot starve the loop
 _PEER_POLL_S = 1.0  # how often to ask the session whether any peer or router is connected
 _UNREACHABLE_AFTER_S = 3.0  # a session told to connect that has found nobody by then is reported
+_FIRST_PEER_WAIT_S = 3.0  # open() waits this long for a peer it was told to connect to, so a first put is heard
 _UNREACHABLE_MARK = "Unable to connect"  # Zenoh's words when a client finds no router at all
 
 
@@ -89,6 +90,19 @@ class ZenohTransport:
             self.counters["unreachable"] += 1
             self._retry_later(str(exc))
             log.warning("%s: %s; retrying with backoff", self.name, exc)
+            return
+        if self._expects_peer:
+            self._await_peer(_FIRST_PEER_WAIT_S)
+
+    def _await_peer(self, seconds: float) -> None:
+        """Wait (briefly) for the peer or router we connect to, so what we send first is not sent to nobody."""
+        session, end = self._session, time.monotonic() + seconds
+        while session is not None and time.monotonic() < end:
+            info = session.info
+            if info.peers_zid() or info.routers_zid():
+                time.sleep(0.05)  # its subscriptions arrive right after the session opens
+                return
+            time.sleep(0.02)
 
     def close(self) -> None:
         self._opened = False
