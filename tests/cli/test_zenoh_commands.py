@@ -20,8 +20,8 @@ BATCH = [Message(Op.PUT, 9, 100 + i, i + 1, 201) for i in range(4)]
 def _listener() -> tuple[Link[object], str]:
     """A zenoh link (not yet open) publishing as gateway 201, and the spec of a link that connects to it."""
     link = parse("zenoh:lab?stigmergy=3").build(robot_id=201)
-    port = link.transport.about.rsplit(":", 1)[1]  # type: ignore[attr-defined]
-    return link, f"zenoh:lab?stigmergy=3&connect=tcp/127.0.0.1:{port}"
+    [endpoint] = link.transport.listening  # type: ignore[attr-defined]
+    return link, f"zenoh:lab?stigmergy=3&connect={endpoint}"
 
 
 @pytest.mark.slow
@@ -83,3 +83,14 @@ def test_put_and_get_through_a_zenoh_link() -> None:
         out, err = got.communicate(timeout=10)
         assert got.returncode == 0, err
         assert out.strip() == "key=5 value=1234 timestamp=1 robot=77"
+
+
+@pytest.mark.slow
+def test_demo_with_two_gateways_converges_across_zenoh() -> None:
+    done = run_vstig("demo", "--gateways", "2", "--robots", "12", "--drop", "0.5", "--max-steps", "200", timeout=90)
+    assert done.returncode == 0, done.stderr
+    assert "converged: all 12 robots hold 12" in done.stdout  # the highest id sits in the second gateway's arena
+    traffic = {line.split(":")[0]: line for line in done.stdout.splitlines() if line.startswith("gateway ")}
+    assert set(traffic) == {"gateway 250/can", "gateway 250/cobs8", "gateway 250/zenoh", "gateway 251/epuck4",
+                            "gateway 251/zenoh"}
+    assert " in=" in traffic["gateway 250/zenoh"] and " out=" in traffic["gateway 251/zenoh"]

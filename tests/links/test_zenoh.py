@@ -127,8 +127,8 @@ def test_a_bad_config_file_is_one_line_naming_it(tmp_path: Path) -> None:
 # -- real sessions on loopback --------------------------------------------------------
 def _pair() -> tuple[Link[ZenohSample], Link[ZenohSample]]:
     first = parse("zenoh:lab").build(robot_id=201)
-    port = first.transport.about.rsplit(":", 1)[1]  # type: ignore[attr-defined]
-    second = parse(f"zenoh:lab?connect=tcp/127.0.0.1:{port}").build(robot_id=202)
+    [endpoint] = first.transport.listening  # type: ignore[attr-defined]
+    second = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
     first.open()
     second.open()
     return first, second

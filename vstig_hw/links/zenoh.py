@@ -148,6 +148,7 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
                     name, open_to)
     transport = ZenohTransport(make_config, space.subscription, name=name, block=spec.block,
                                expects_peer=bool(connecting) or _mode(first) == "client")
+    transport.listening = tuple(listening)
     transport.about = "; ".join(filter(None, (
         f"listening on {', '.join(listening)}" if listening else "",
         f"connecting to {', '.join(connecting)}" if connecting else "",

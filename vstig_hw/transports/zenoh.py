@@ -59,6 +59,7 @@ class ZenohTransport:
     ) -> None:
         self.name = name
         self.about = ""  # where it listens and connects, for the start line
+        self.listening: tuple[str, ...] = ()  # the endpoints it listens on (a free loopback port by default)
         self.counters = Counters()
         self.last_error: str | None = None
         self.subscription = subscription
