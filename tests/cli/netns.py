@@ -23,7 +23,12 @@ def netns_unavailable() -> str | None:
     if os.geteuid() != 0:
         return "network namespaces need root (`ip netns add`); ran the zenoh gateways on loopback instead"
     if shutil.which("ip") is None:
-        return "iproute2 (`ip`) is not installed"
+        return "iproute2 (`ip`) is not installed (tests/sysdeps.sh installs it when run as root)"
+    probe = f"zenoh-{os.getpid() % 100000:05d}-probe"
+    made = subprocess.run(["ip", "netns", "add", probe], capture_output=True, text=True, timeout=20, check=False)
+    if made.returncode:
+        return f"`ip netns add` failed here: {made.stderr.strip() or made.returncode}"
+    subprocess.run(["ip", "netns", "del", probe], capture_output=True, timeout=20, check=False)
     return None
 
 
