@@ -188,3 +188,22 @@ def test_a_client_with_no_router_retries_with_backoff_instead_of_failing(caplog:
     assert not link.transport.connected
     assert link.transport.counters["unreachable"] == 1 and link.transport.counters["tx_dropped"] == 1
     assert len(caplog.records) == 1 and "no Zenoh router reachable" in caplog.records[0].getMessage()
+
+
+# -- the zenoh capture -----------------------------------------------------------------
+def test_a_zenoh_capture_round_trips_and_a_bad_line_is_named(tmp_path: Path) -> None:
+    from vstig_hw.capture.files import RotatingCapture, read_capture
+    from vstig_hw.capture.records import CaptureError, Record
+
+    path = str(tmp_path / "lab.zcap")
+    sample = ZenohFraming(ZenohKeySpace("lab"), sender=201).encode_batch(MESSAGES)[0]
+    capture = RotatingCapture(path, "zenoh")
+    capture.write(Record(1700000000.25, "zenoh-lab", "zenoh", sample))
+    capture.close()
+    assert Path(path).read_text().splitlines() == [
+        "# vstig zenoh capture v1", f"(1700000000.250000) zenoh-lab zenoh rx vstig/lab/0/201 {sample.payload.hex()}"]
+    assert list(read_capture(path)) == [Record(1700000000.25, "zenoh-lab", "zenoh", sample)]
+    with open(path, "a") as file:
+        file.write("(1.0) zenoh-lab zenoh rx vstig/lab/0/201\n")
+    with pytest.raises(CaptureError, match=r"lab.zcap:3: not a zenoh capture line"):
+        list(read_capture(path))

@@ -11,7 +11,7 @@ byte for byte.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import IO
 
 from .records import CaptureError, Record, parse_lines
@@ -51,23 +51,36 @@ class SerialCaptureWriter:
         self.file.close()
 
 
-def parse_line(path: str, number: int, line: str) -> Record | None:
-    """One line of a serial capture; None for comments and blank lines."""
+def match_line(path: str, number: int, line: str, pattern: re.Pattern[str], what: str,
+               expected: str) -> re.Match[str] | None:
+    """A capture line's fields; None for comments and blank lines; CaptureError naming `what` it should be."""
     text = line.rstrip("\r\n")
     if not text.strip() or text.startswith("#"):
         return None
-    match = _LINE.match(text)
+    match = pattern.match(text)
     if match is None:
-        raise CaptureError(path, number, f"not a serial capture line: {text[:60]!r} "
-                           "(expected '(<time>) <link> <framing> rx|tx <hex bytes>')")
+        raise CaptureError(path, number, f"not a {what}: {text[:60]!r} (expected {expected!r})")
+    return match
+
+
+def parse_line(path: str, number: int, line: str) -> Record | None:
+    """One line of a serial capture; None for comments and blank lines."""
+    match = match_line(path, number, line, _LINE, "serial capture line", "(<time>) <link> <framing> rx|tx <hex bytes>")
+    if match is None:
+        return None
     stamp, link, framing, direction, data = match.groups()
     return Record(float(stamp), link, framing, bytes.fromhex(data), direction)
 
 
-def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+def read_line_capture(path: str, parse: Callable[[str, int, str], Record | None], skip_bad: bool = False,
+                      bad: list[CaptureError] | None = None) -> Iterator[Record]:
     """Records in file order; a malformed line raises CaptureError, or with `skip_bad` is collected in `bad`."""
     with open(path, encoding="utf-8", errors="replace") as file:
-        yield from parse_lines(path, file, parse_line, skip_bad, bad)
+        yield from parse_lines(path, file, parse, skip_bad, bad)
+
+
+def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+    return read_line_capture(path, parse_line, skip_bad, bad)
 
 
 def is_serial_capture(path: str, header: str = HEADER) -> bool:

@@ -16,8 +16,8 @@ import re
 from collections.abc import Iterator
 
 from ..framing.zenoh import ZenohSample
-from .records import CaptureError, Record, parse_lines
-from .serial_log import SerialCaptureWriter, is_serial_capture
+from .records import CaptureError, Record
+from .serial_log import SerialCaptureWriter, is_serial_capture, match_line, read_line_capture
 
 __all__ = ["HEADER", "ZenohCaptureWriter", "is_zenoh_capture", "read_zenoh_capture"]
 
@@ -37,20 +37,16 @@ class ZenohCaptureWriter(SerialCaptureWriter):
 
 def parse_line(path: str, number: int, line: str) -> Record | None:
     """One line of a zenoh capture; None for comments and blank lines."""
-    text = line.rstrip("\r\n")
-    if not text.strip() or text.startswith("#"):
-        return None
-    match = _LINE.match(text)
+    match = match_line(path, number, line, _LINE, "zenoh capture line",
+                       "(<time>) <link> zenoh rx|tx <key expression> <hex payload>")
     if match is None:
-        raise CaptureError(path, number, f"not a zenoh capture line: {text[:60]!r} "
-                           "(expected '(<time>) <link> zenoh rx|tx <key expression> <hex payload>')")
+        return None
     stamp, link, framing, direction, key, data = match.groups()
     return Record(float(stamp), link, framing, ZenohSample(key, bytes.fromhex(data)), direction)
 
 
 def read_zenoh_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
-    with open(path, encoding="utf-8", errors="replace") as file:
-        yield from parse_lines(path, file, parse_line, skip_bad, bad)
+    return read_line_capture(path, parse_line, skip_bad, bad)
 
 
 def is_zenoh_capture(path: str) -> bool:
