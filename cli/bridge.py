@@ -35,6 +35,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
 
     Example: vstig bridge can:socketcan:can0 serial:/dev/ttyUSB0?framing=epuck4 --robot-id 200
 
+    \b
     Many PCs: add a zenoh link on each (vstig links lists its options), e.g.
     vstig bridge can:socketcan:can0 zenoh:lab?connect=tcp/10.0.0.5:7447 --robot-id 201
     """
