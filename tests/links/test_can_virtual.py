@@ -133,3 +133,23 @@ def test_two_stigmergies_share_one_bus_without_crosstalk(first: str, second: str
     finally:
         for link in links:
             link.close()
+
+
+def test_filter_off_lets_foreign_ids_in_and_counts_them() -> None:
+    """filter=0: the acceptance filter is off, so a foreign ID reaches the framing as drop_unknown_id."""
+    channel = _fresh_channel()
+    ours = parse(f"can:virtual:{channel}?filter=0").build(robot_id=1)
+    stranger = can.Bus(interface="virtual", channel=channel)
+    ours.open()
+    try:
+        stranger.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=bytes(8)))  # not our scheme
+        stranger.send(can.Message(arbitration_id=0x72A, is_extended_id=False, data=bytes.fromhex("8001000200030004")))
+        heard = []
+        deadline = time.monotonic() + 10
+        while not heard and time.monotonic() < deadline:
+            heard = ours.receive(0.05)
+        assert [h.message for h in heard] == [Message(Op.GET, 1, 2, 3, 4)]
+        assert ours.stats()["rx"] == 2 and ours.stats()["drop_unknown_id"] == 1
+    finally:
+        ours.close()
+        stranger.shutdown()

@@ -167,6 +167,15 @@ def candump_ready(tmp_path: Path) -> Iterator[Candump]:
             dump.stop()
 
 
+def test_fd_flags_digit_is_written_1_and_logged_5_as_spec_says(candump_ready: Candump) -> None:
+    """SPEC 6.5.5 'FD notation': cansend's `607##1...` is the frame candump -L prints as `607##5...`."""
+    data = "0001000A000100070002001400010007"
+    _cansend(FD, f"607##1{data}")
+    candump_ready.wait_for(FD, f"607##1{data}")
+    raw = [line.split()[2] for line in candump_ready.seen if len(line.split()) == 3 and line.split()[1] == FD]
+    assert f"607##5{data}" in raw, raw
+
+
 def test_our_frames_show_up_in_candump_with_the_spec_ids_and_bytes(candump_ready: Candump) -> None:
     expected = []
     for vector in VECTORS:

@@ -28,6 +28,7 @@ def can_link(
     id_base: int | None = None,
     extended: bool = False,
     stigmergy: int = 0,
+    kernel_filter: bool = True,
     name: str | None = None,
     **bus_options: Any,
 ) -> Link[can.Message]:
@@ -36,12 +37,14 @@ def can_link(
     `interface`/`channel`/`bitrate` go to python-can unchanged (socketcan vcan0,
     slcan /dev/ttyACM0, pcan PCAN_USBBUS1, virtual ...); `bus_options` too (e.g.
     `sleep_after_open=0` for slcan). The transport's kernel/hardware filters pass
-    only this scheme's IDs. Raises ValueError for a bad id_base/stigmergy/robot_id.
+    only this scheme's IDs; with `kernel_filter=False` every frame reaches the
+    framing, which counts foreign IDs as `unknown_id`. Raises ValueError for a bad
+    id_base/stigmergy/robot_id.
     """
     scheme = CanIdScheme(extended=extended, base=id_base, stigmergy=stigmergy)
     framing = CanFraming(scheme, sender=robot_id, fd=fd)
-    transport = CanTransport(interface, channel, bitrate=bitrate, fd=fd, can_filters=scheme.can_filters(),
-                             **bus_options)
+    filters = scheme.can_filters() if kernel_filter else None
+    transport = CanTransport(interface, channel, bitrate=bitrate, fd=fd, can_filters=filters, **bus_options)
     return Link(name or f"{interface}:{channel}", transport, framing)
 
 
@@ -49,7 +52,7 @@ def can_link_from_spec(spec: CanSpec, name: str, *, robot_id: int = LISTENER_ID,
                        listen_only: bool = False) -> Link[Any]:
     return can_link(spec.interface, spec.channel, robot_id=LISTENER_ID if listen_only else robot_id,
                     bitrate=spec.bitrate, fd=spec.fd, id_base=spec.id_base, extended=spec.extended,
-                    stigmergy=spec.stigmergy, name=name)
+                    stigmergy=spec.stigmergy, kernel_filter=spec.kernel_filter, name=name)
 
 
 def can_framing_for(robot_id: int, id_base: int | None = None, extended: bool = False,

@@ -36,4 +36,5 @@ def serial_link(port: str, framing: str = "cobs8", baud: int | None = None, *, n
 
 def serial_link_from_spec(spec: SerialSpec, name: str) -> Link[Any]:
     """A serial link never names its sender, so unlike CAN it needs no robot id."""
-    return serial_link(spec.port, spec.framing, spec.baud, name=name, connect=False)
+    options: dict[str, Any] = {} if spec.expiry_ticks is None else {"expiry_ticks": spec.expiry_ticks}
+    return serial_link(spec.port, spec.framing, spec.baud, name=name, connect=False, **options)

@@ -2,8 +2,8 @@
 
 Grammar (one parser for every command)::
 
-    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1&stigmergy=N]
-    serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot]
+    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1&stigmergy=N&filter=0]
+    serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]
     kilobot-ohc:<port or pyserial URL>
     zenoh:<swarm>[?mode=peer|client&connect=<endpoint>[,<endpoint>...]&listen=<endpoint>[,...]
                   &config=<zenoh json5 file>&stigmergy=N&scout=1]
@@ -35,8 +35,8 @@ DEFAULT_BAUD = 115200
 OHC_BAUD = 38400  # the Kilobot overhead controller's fixed rate
 
 GRAMMAR = (
-    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1&stigmergy=N]",
-    "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot]",
+    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1&stigmergy=N&filter=0]",
+    "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]",
     "kilobot-ohc:<port or pyserial URL>",
     "zenoh:<swarm>[?mode=peer|client&connect=<endpoint>[,...]&listen=<endpoint>[,...]&config=<zenoh json5 file>"
     "&stigmergy=N&scout=0|1]",
@@ -44,9 +44,10 @@ GRAMMAR = (
 EXAMPLES = {
     "can": ("can:socketcan:vcan0", "can:virtual:lab", "can:slcan:/dev/ttyACM0?bitrate=500000",
             "can:socketcan:can0?fd=1&id_base=0x18000000&extended=1",
-            "can:socketcan:can0?extended=1&stigmergy=2"),
+            "can:socketcan:can0?extended=1&stigmergy=2", "can:socketcan:can0?filter=0"),
     "serial": ("serial:/dev/ttyUSB0?baud=115200", "serial:socket://localhost:7000?framing=epuck4",
-               "serial:/dev/rfcomm0?framing=kilobot"),
+               "serial:/dev/rfcomm0?framing=kilobot",
+               "serial:/dev/ttyUSB1?framing=epuck4&expiry_ticks=5"),
     "kilobot-ohc": ("kilobot-ohc:/dev/ttyUSB0",),
     "zenoh": ("zenoh:lab", "zenoh:lab?listen=tcp/0.0.0.0:7447&config=lab.json5",
               "zenoh:lab?connect=tcp/10.0.0.5:7447",
@@ -56,10 +57,13 @@ EXAMPLES = {
 # One line per kind for `vstig links`: what the options mean beyond the grammar.
 NOTES = {
     "can": "can: 11-bit IDs (default base 0x600) keep stigmergies apart by id_base (0x000, 0x200, 0x400, "
-           "0x600); 29-bit IDs (extended=1) carry stigmergy=0..255 in the ID. Each link hears only its own.",
+           "0x600); 29-bit IDs (extended=1) carry stigmergy=0..255 in the ID. Each link hears only its own. "
+           "filter=0 turns the kernel/adapter acceptance filter off, so foreign IDs reach vstig-hw and are "
+           "counted as drop_unknown_id (a conformance check; costs CPU on a busy bus).",
     "serial": "serial: the query after the last '?' is ours; keys we do not know stay with a pyserial URL "
               "(socket://, rfc2217://). Defaults: baud=115200, framing=cobs8. A serial link carries one "
-              "stigmergy: its framings have no stigmergy field.",
+              "stigmergy: its framings have no stigmergy field. epuck4's expiry_ticks (default 3) is how many "
+              "control periods a message's three words may take to arrive (firmware_spec/SPEC.md 6.2.2).",
     "kilobot-ohc": "kilobot-ohc: transmit only, at the overhead controller's fixed 38400 baud.",
     "zenoh": "zenoh: gateways on many PCs as one swarm (key vstig/<swarm>/<stigmergy>/<gateway id>). Closed by "
              "default: listens on a free loopback port, no multicast scouting; listen=, connect= or scout=1 open "
@@ -78,6 +82,7 @@ class CanSpec:
     id_base: int | None = None
     extended: bool = False
     stigmergy: int = 0
+    kernel_filter: bool = True  # False: every frame reaches us, and foreign IDs count as drop_unknown_id
 
     @property
     def kind(self) -> str:
@@ -100,6 +105,7 @@ class SerialSpec:
     port: str
     baud: int = DEFAULT_BAUD
     framing: str = "cobs8"  # cobs8 | epuck4 | kilobot | kilobot-ohc
+    expiry_ticks: int | None = None  # epuck4 only: control periods a fragment waits for the rest
 
     @property
     def kind(self) -> str:
@@ -210,7 +216,8 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         raise _bad(spec, "expected can:<interface>:<channel>", "can")
     if not _IFACE.match(interface):
         raise _bad(spec, f"interface {interface!r} is not a python-can interface name", "can")
-    channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended", "stigmergy"), False)
+    channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended", "stigmergy", "filter"),
+                             False)
     if not channel or any(ch in channel for ch in "\0\n\r "):
         raise _bad(spec, f"channel {channel!r} is missing or has spaces", "can")
     extended = _flag(spec, "can", "extended", params["extended"]) if "extended" in params else False
@@ -229,16 +236,22 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         id_base=id_base,
         extended=extended,
         stigmergy=stigmergy,
+        kernel_filter=_flag(spec, "can", "filter", params["filter"]) if "filter" in params else True,
     )
 
 
 def _parse_serial(spec: str, body: str) -> SerialSpec:
-    port, params = _query(spec, body, "serial", ("baud", "framing"), "://" in body)
+    port, params = _query(spec, body, "serial", ("baud", "framing", "expiry_ticks"), "://" in body)
     framing = params.get("framing", "cobs8")
     if framing not in SERIAL_FRAMINGS:
         raise _bad(spec, f"framing={framing!r} is not one of {'|'.join(SERIAL_FRAMINGS)}", "serial")
     baud = _int(spec, "serial", "baud", params["baud"], 1, 100_000_000) if "baud" in params else DEFAULT_BAUD
-    return SerialSpec(port=_port(spec, "serial", port), baud=baud, framing=framing)
+    expiry_ticks = None
+    if "expiry_ticks" in params:
+        if framing != "epuck4":
+            raise _bad(spec, f"expiry_ticks is an epuck4 option, not one of framing={framing}", "serial")
+        expiry_ticks = _int(spec, "serial", "expiry_ticks", params["expiry_ticks"], 1, 254)
+    return SerialSpec(port=_port(spec, "serial", port), baud=baud, framing=framing, expiry_ticks=expiry_ticks)
 
 
 def _parse_ohc(spec: str, body: str) -> SerialSpec:
