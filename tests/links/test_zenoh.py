@@ -207,3 +207,27 @@ def test_a_zenoh_capture_round_trips_and_a_bad_line_is_named(tmp_path: Path) -> 
         file.write("(1.0) zenoh-lab zenoh rx vstig/lab/0/201\n")
     with pytest.raises(CaptureError, match=r"lab.zcap:3: not a zenoh capture line"):
         list(read_capture(path))
+
+
+def _sockets(table: str) -> list[tuple[str, int, str]]:
+    """(local address hex, port, state hex) of every socket in /proc/net/<table> (this network namespace)."""
+    rows = Path(f"/proc/net/{table}").read_text().splitlines()[1:]
+    out = []
+    for row in rows:
+        fields = row.split()
+        address, port = fields[1].split(":")
+        out.append((address, int(port, 16), fields[3]))
+    return out
+
+
+def test_an_open_link_really_listens_on_loopback_only_and_joins_no_multicast_group() -> None:
+    link = parse("zenoh:lab").build(robot_id=1)
+    [endpoint] = link.transport.listening  # type: ignore[attr-defined]
+    port = int(endpoint.rsplit(":", 1)[1])
+    link.open()
+    try:
+        listening = [(a, s) for a, p, s in _sockets("tcp") + _sockets("tcp6") if p == port and s == "0A"]
+        assert listening == [("0100007F", "0A")]  # 127.0.0.1, LISTEN: nothing on 0.0.0.0 or ::
+        assert all(p != 7446 for _, p, _ in _sockets("udp") + _sockets("udp6"))  # Zenoh's scouting port unused
+    finally:
+        link.close()
