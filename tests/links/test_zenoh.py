@@ -231,3 +231,45 @@ def test_an_open_link_really_listens_on_loopback_only_and_joins_no_multicast_gro
         assert all(p != 7446 for _, p, _ in _sockets("udp") + _sockets("udp6"))  # Zenoh's scouting port unused
     finally:
         link.close()
+
+
+def _router(port: int) -> object:
+    import json
+
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("mode", '"router"')
+    config.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
+def test_clients_survive_their_router_going_away_and_coming_back(caplog: pytest.LogCaptureFixture) -> None:
+    from vstig_hw.links.zenoh import _free_loopback_port
+
+    port = _free_loopback_port()
+    router = _router(port)
+    spec = f"zenoh:lab?mode=client&connect=tcp/127.0.0.1:{port}"
+    sender, receiver = parse(spec).build(robot_id=1), parse(spec).build(robot_id=2)
+    sender.open()
+    receiver.open()
+    try:
+        with caplog.at_level(logging.WARNING):
+            router.close()  # type: ignore[attr-defined]
+            _until(lambda: sender.receive(0.2) == [] and sender.transport.counters["lost"] == 1)
+            router = _router(port)
+            _until(lambda: sender.receive(0.2) == [] and sender.transport.counters["reconnects"] == 1)
+        heard = []
+        end = time.monotonic() + 20
+        while not heard and time.monotonic() < end:
+            sender.send(MESSAGES[0])
+            heard = receiver.receive(0.3)
+        assert [h.message for h in heard] == [MESSAGES[0]]
+        mine = [r.getMessage() for r in caplog.records if r.name.endswith("zenoh")]
+        assert mine.count("zenoh-lab: lost every Zenoh peer; Zenoh reconnects with backoff") >= 1
+        assert sender.transport.counters["lost"] == 1 and sender.transport.counters["unreachable"] == 0
+    finally:
+        sender.close()
+        receiver.close()
+        router.close()  # type: ignore[attr-defined]

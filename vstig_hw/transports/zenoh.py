@@ -101,6 +101,7 @@ class ZenohTransport:
         while session is not None and time.monotonic() < end:
             info = session.info
             if info.peers_zid() or info.routers_zid():
+                self._had_peer = True
                 time.sleep(0.05)  # its subscriptions arrive right after the session opens
                 return
             time.sleep(0.02)
