@@ -81,6 +81,7 @@ class Federation:
                 spec += f"&connect=tcp/{hosts[0]}:{ports[0]}"
             self.gateways.append(Gateway(n, own, lan.command(n) if lan else [], spec))
         self.robots = [robot for own in robots for robot in own]
+        self.on_lan = lan is not None
 
     def step(self) -> None:
         for robot in self.robots:
@@ -171,6 +172,8 @@ def test_three_gateways_converge_and_a_restarted_one_catches_up(federation: Fede
 
     for gateway in federation.gateways:
         assert gateway.stop() == 0, "".join(gateway.log)
+        # Listening on the LAN with no authentication is worth a warning; on loopback it is not.
+        assert gateway.said("WARNING: this gateway listens on tcp/10.77.0.") == federation.on_lan
         counters = next(line for line in gateway.log if line.startswith("zenoh-lab: ") and "in=" in line)
         assert "out=" in counters and "tx=" in counters and "rx=" in counters
         assert not any("Traceback" in line for line in gateway.log)
