@@ -23,8 +23,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from ..framing.zenoh import MAX_STIGMERGY, check_swarm
-
 if TYPE_CHECKING:
     from .link import Link
 
@@ -276,6 +274,8 @@ def _endpoints(spec: str, key: str, text: str) -> tuple[str, ...]:
 
 
 def _parse_zenoh(spec: str, body: str) -> ZenohSpec:
+    from ..framing.zenoh import MAX_STIGMERGY, check_swarm  # the key space's owner; loaded only for zenoh specs
+
     swarm, params = _query(spec, body, "zenoh", ("mode", "connect", "listen", "config", "stigmergy", "scout"), False)
     try:
         check_swarm(swarm)
