@@ -60,3 +60,14 @@ def mtls_config(authority: Authority, name: str) -> str:
             f"root_ca_certificate: \"{authority.cert_path}\", enable_mtls: true, "
             f"listen_private_key: \"{key}\", listen_certificate: \"{cert}\", "
             f"connect_private_key: \"{key}\", connect_certificate: \"{cert}\" }} }} }} }}\n")
+
+
+def password_config(authority: Authority, user: str, password: str, users: Path) -> str:
+    """A Zenoh config (JSON5) for TLS plus user/password: the server side's certificate, the lab CA, and
+    `users` (one `user:password` per line) that a listener checks connecting peers against."""
+    key, cert = authority.issue("lab-server")
+    return ("{ transport: { link: { protocols: [\"tls\"], tls: { "
+            f"root_ca_certificate: \"{authority.cert_path}\", "
+            f"listen_private_key: \"{key}\", listen_certificate: \"{cert}\" }} }}, "
+            f"auth: {{ usrpwd: {{ user: \"{user}\", password: \"{password}\", "
+            f"dictionary_file: \"{users}\" }} }} }} }}\n")

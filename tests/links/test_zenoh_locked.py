@@ -1,9 +1,10 @@
-"""The locked deployment: mutual TLS through the Zenoh config file, with certificates made here.
+"""The locked deployments, through the Zenoh config file, with certificates made here.
 
-Two gateways whose certificates the lab CA signed exchange batches. An intruder
-with a certificate from another CA can neither read (its sniffer hears nothing
-while the lab talks) nor inject (its put never reaches the lab, and it is told
-so in one line).
+Mutual TLS (every gateway's certificate signed by the lab CA), or TLS plus
+user/password. Two lab gateways exchange batches; an intruder (a certificate
+from another CA, or a wrong password) can neither read (its sniffer hears
+nothing while a lab member's sniffer hears the lab) nor inject (its put never
+reaches the lab, and it is told so in one line).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
-from certs import Authority, mtls_config
+from certs import Authority, mtls_config, password_config
 
 from vstig_hw.links import parse
 from vstig_hw.wire import Message, Op
@@ -31,12 +32,26 @@ def _free_port() -> int:
         return int(probe.getsockname()[1])
 
 
-def test_only_gateways_with_the_labs_certificates_join(tmp_path: Path) -> None:
-    lab, other = Authority(tmp_path, "lab-ca"), Authority(tmp_path, "other-ca")
+def _configs(folder: Path, deployment: str) -> dict[str, Path]:
+    lab = Authority(folder, "lab-ca")
+    users = folder / "users.txt"
+    users.write_text("gw-a:pw-a\ngw-b:pw-b\ngw-c:pw-c\n")
+    if deployment == "mtls":
+        texts = {name: mtls_config(lab, name) for name in ("gw-a", "gw-b", "gw-c")}
+        texts["intruder"] = mtls_config(Authority(folder, "other-ca"), "intruder")  # a certificate the lab never signed
+    else:
+        texts = {name: password_config(lab, name, f"pw-{name[-1]}", users) for name in ("gw-a", "gw-b", "gw-c")}
+        texts["intruder"] = password_config(lab, "gw-b", "a-guess", users)  # trusts the lab CA, guesses a password
     configs = {}
-    for name, authority in (("gw-a", lab), ("gw-b", lab), ("gw-c", lab), ("intruder", other)):
-        configs[name] = tmp_path / f"{name}.json5"
-        configs[name].write_text(mtls_config(authority, name))
+    for name, text in texts.items():
+        configs[name] = folder / f"{name}.json5"
+        configs[name].write_text(text)
+    return configs
+
+
+@pytest.mark.parametrize("deployment", ["mtls", "tls+password"])
+def test_only_gateways_with_the_labs_credentials_join(tmp_path: Path, deployment: str) -> None:
+    configs = _configs(tmp_path, deployment)
     port = _free_port()
     listener = parse(f"zenoh:lab?listen=tls/localhost:{port}&config={configs['gw-a']}").build(robot_id=1)
     member = parse(f"zenoh:lab?connect=tls/localhost:{port}&config={configs['gw-b']}").build(robot_id=2)
