@@ -29,9 +29,11 @@ def _base(text: str | None) -> int | None:
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
 @click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 with --extended).")
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs.")
+@click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
+              help="For Buzz/BittyBuzz captures (blabbermouth, bittybuzz-kilobot): the TOML file mapping their keys.")
 @reports_errors
 def command(files: tuple[str, ...], fmt: str, skip_bad: bool, value_type: ValueType, id_base: str | None,
-            extended: bool) -> None:
+            extended: bool, deployment: str | None) -> None:
     """Print every message in FILES.
 
     Example: vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
@@ -46,11 +48,11 @@ def command(files: tuple[str, ...], fmt: str, skip_bad: bool, value_type: ValueT
             with Progress(transient=True) as bar:
                 task = bar.add_task(f"decoding {os.path.basename(path)}", total=size)
                 count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                                id_base=base, extended=extended,
+                                                id_base=base, extended=extended, deployment=deployment,
                                                 progress=lambda n, t=task: bar.advance(t, n))  # type: ignore[misc]
         else:
             count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                            id_base=base, extended=extended)
+                                            id_base=base, extended=extended, deployment=deployment)
         sys.stdout.flush()
         total_bad += len(bad)
         for error in bad[:5]:

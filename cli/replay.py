@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.decoded import Decoder
+from vstig_hw.capture.decoded import Decoder, default_framings
 from vstig_hw.capture.files import read_capture
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.capture.replay import replay
@@ -24,9 +24,9 @@ from .errors import LINK, reports_errors
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 
 
-def _sender(link: Link[Any], is_can: bool) -> Any:
+def _sender(link: Link[Any], is_can: bool, deployment: str | None) -> Any:
     """Write a record as is when the medium and framing match; otherwise re-encode its messages."""
-    decoder = Decoder()
+    decoder = Decoder(default_framings(deployment=deployment))
 
     def send(record: Record) -> None:
         same = (record.framing == CAN_FRAMING) if is_can else (record.framing == link.framing.name)
@@ -48,9 +48,9 @@ def _fresh(frame: Any) -> Any:
                        dlc=frame.dlc, check=False)
 
 
-def _table(path: str, at: float | None, value_type: ValueType) -> None:
+def _table(path: str, at: float | None, value_type: ValueType, deployment: str | None) -> None:
     engine = Stigmergy(_OBSERVER_ID)
-    decoder = Decoder()
+    decoder = Decoder(default_framings(deployment=deployment))
     t0 = None
     for decoded in decoder.decode_all(read_capture(path)):
         t0 = decoded.t if t0 is None else t0
@@ -74,9 +74,11 @@ def _table(path: str, at: float | None, value_type: ValueType) -> None:
 @click.option("--table", is_flag=True, help="Feed an offline engine instead and print its table.")
 @click.option("--at", type=click.FloatRange(0.0), help="With --table: stop at T seconds after the first record.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
+              help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
 @reports_errors
 def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, robot_id: int, table: bool,
-            at: float | None, value_type: ValueType) -> None:
+            at: float | None, value_type: ValueType, deployment: str | None) -> None:
     """Replay FILE onto a live link, or show what the swarm believed (--table).
 
     Examples: vstig replay swarm.log --onto can:socketcan:vcan0 --speed 2;  vstig replay radio.cap --table --at 30
@@ -84,13 +86,13 @@ def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, robot_id
     if table == (onto is not None):
         raise click.UsageError("give exactly one of --onto LINK or --table")
     if table:
-        _table(file, at, value_type)
+        _table(file, at, value_type, deployment)
         return
     if at is not None:
         raise click.UsageError("--at goes with --table")
     assert onto is not None
     link = build_links([lossless(onto)], robot_id)[0]
-    send = _sender(link, isinstance(onto, CanSpec))
+    send = _sender(link, isinstance(onto, CanSpec), deployment)
     link.open()
     try:
         with stop_on_signals() as stop:

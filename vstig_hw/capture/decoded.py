@@ -32,7 +32,9 @@ class Decoded:
 FramingFactory = Callable[[Record], Any]
 
 
-def default_framings(id_base: int | None = None, extended: bool = False) -> FramingFactory:
+def default_framings(id_base: int | None = None, extended: bool = False,
+                     deployment: str | None = None) -> FramingFactory:
+    """Framings by the name a record carries; robot dialects (Buzz, BittyBuzz) need their `deployment` file."""
     from ..framing import make_serial_framing
     from ..framing.zenoh import ZenohFraming, ZenohKeySpace
     from ..links.can import can_framing
@@ -42,6 +44,15 @@ def default_framings(id_base: int | None = None, extended: bool = False) -> Fram
             return can_framing(id_base, extended)
         if record.framing == ZenohFraming.name:  # the key space the link subscribed to, read off its first key
             return ZenohFraming(ZenohKeySpace.of_key(record.unit.key), sender=0)
+        from ..dialects.framing import DIALECT_FRAMINGS, make_dialect_framing
+
+        if record.framing in DIALECT_FRAMINGS:
+            if deployment is None:
+                raise ValueError(f"{record.framing} records are in a robot dialect: give the deployment file that "
+                                 "maps its keys (--deployment FILE.toml)")
+            from ..dialects.mapping import load_deployment
+
+            return make_dialect_framing(record.framing, load_deployment(deployment))
         return make_serial_framing(record.framing)
 
     return make

@@ -28,10 +28,11 @@ CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small 
 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
                 skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
-                progress: Callable[[int], None] | None = None) -> tuple[int, Counters, list[CaptureError]]:
+                progress: Callable[[int], None] | None = None,
+                deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
     """Write every message in `path` to `out`; returns (messages, drops by reason, bad lines skipped)."""
     formatter = FORMATS[fmt]
-    decoder = Decoder(default_framings(id_base, extended))
+    decoder = Decoder(default_framings(id_base, extended, deployment))
     bad: list[CaptureError] = []
     if fmt == "csv":
         out.write(CSV_HEADER)
