@@ -43,10 +43,12 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
         node.put(key, raw)
         node.run(until=lambda: all(not len(o) for o in node.outlets), duration=5.0)
         time.sleep(0.05)  # let the device's own buffer drain before the port closes
-    dropped = node.links[0].stats()["tx_dropped"]
-    if dropped:
+    stats = node.links[0].stats()
+    if stats["tx_dropped"]:
         reason = getattr(node.links[0].transport, "last_error", None) or "the device was gone"
         raise click.ClickException(f"{node.links[0].name}: the put was not sent ({reason})")
+    if stats["tx_unheard"] and stats["tx_unheard"] >= stats["tx"]:  # a medium that knows nobody listened (zenoh)
+        raise click.ClickException(f"{node.links[0].name}: nobody heard the put (no gateway of the swarm is reachable)")
     entry = engine.entry(key)
     assert entry is not None
     click.echo(f"put key={key} value={value} timestamp={entry.timestamp} robot={robot_id} on {node.links[0].name}")

@@ -14,7 +14,7 @@ from vstig_hw.links import Heard
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._common import build_links, print_counters, run_until_stopped
+from ._common import build_links, describe_links, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
 
@@ -63,11 +63,13 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
 
         node.on_heard.append(emit)
         with node:
+            describe_links(node)
             run_until_stopped(node, duration=duration)
         print_counters(node)
         return
     from rich.live import Live
 
     with node, Live(_table(view, value_type), refresh_per_second=4, transient=False) as live:
+        describe_links(node)
         run_until_stopped(node, lambda: live.update(_table(view, value_type)), duration)
     print_counters(node)

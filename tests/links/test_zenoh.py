@@ -153,6 +153,11 @@ def test_two_links_exchange_a_batch_as_one_sample_named_by_its_sender() -> None:
         assert {h.sender for h in heard} == {201}
         assert first.stats()["out"] >= 5 and first.transport.counters["tx"] == first.stats()["out"] // 5
         assert first.receive(0.2) == []  # a session never hears itself
+        alone = parse("zenoh:lab").build(robot_id=203)
+        alone.open()
+        alone.send(MESSAGES[0])
+        alone.close()
+        assert alone.transport.counters["tx_unheard"] == 1  # published while no other session subscribed
     finally:
         first.close()
         second.close()

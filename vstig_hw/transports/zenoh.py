@@ -15,7 +15,8 @@ Congestion control is chosen by the caller: BLOCK where losing a sample loses
 data (replay, put), DROP for the gateway, whose protocol repairs losses and whose
 other links must not stall behind a slow network (README, "Many PCs").
 
-Counters: `rx`, `tx` (samples), `tx_dropped`, `lost`, `unreachable`, `reconnects`.
+Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session subscribed),
+`tx_dropped`, `lost`, `unreachable`, `reconnects`.
 """
 
 from __future__ import annotations
@@ -179,7 +180,10 @@ class ZenohTransport:
             try:
                 if publisher is None:
                     publisher = self._publishers[unit.key] = session.declare_publisher(
-                        unit.key, congestion_control=self.congestion)
+                        unit.key, congestion_control=self.congestion, allowed_destination=zenoh.Locality.REMOTE)
+                status: Any = publisher.matching_status  # a MatchingStatus (the stub says bool)
+                if not status.matching:  # no other session subscribes: the sample reaches nobody
+                    self.counters["tx_unheard"] += 1
                 publisher.put(unit.payload)
             except zenoh.ZError as exc:
                 self.counters["tx_dropped"] += 1
