@@ -116,9 +116,10 @@ def exposure(config: zenoh.Config) -> str | None:
     """Why this configuration is open to the network without authentication, or None if it is not."""
     if _authenticated(config):
         return None
-    reasons = [f"listens on {', '.join(e for e in _endpoints(config, 'listen/endpoints') if not _is_local(e))}"]
-    if reasons[0] == "listens on ":
-        reasons.clear()
+    reasons = []
+    beyond = [e for e in _endpoints(config, "listen/endpoints") if not _is_local(e)]
+    if beyond:
+        reasons.append(f"listens on {', '.join(beyond)}")
     if _json(config, "scouting/multicast/enabled") is not False:
         reasons.append("scouts the LAN by multicast")
     return " and ".join(reasons) or None
@@ -146,11 +147,11 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
         log.warning("%s: WARNING: this gateway %s with no authentication: anyone on the network can read "
                     "and write the swarm (configure TLS and user/password with config=, see README 'Many PCs')",
                     name, open_to)
-    transport = ZenohTransport(make_config, space.subscription, name=name, block=spec.block,
-                               expects_peer=bool(connecting) or _mode(first) == "client")
-    transport.listening = tuple(listening)
-    transport.about = "; ".join(filter(None, (
+    about = "; ".join(filter(None, (
         f"listening on {', '.join(listening)}" if listening else "",
         f"connecting to {', '.join(connecting)}" if connecting else "",
         "scouting by multicast" if _json(first, "scouting/multicast/enabled") is not False else "")))
+    transport = ZenohTransport(make_config, space.subscription, name=name, block=spec.block,
+                               expects_peer=bool(connecting) or _mode(first) == "client",
+                               listening=tuple(listening), about=about)
     return Link(name, transport, framing)

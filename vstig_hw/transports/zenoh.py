@@ -56,11 +56,13 @@ class ZenohTransport:
         name: str,
         block: bool = False,
         expects_peer: bool = False,
+        listening: tuple[str, ...] = (),
+        about: str = "",
         backoff: tuple[float, float] = (0.5, 10.0),
     ) -> None:
         self.name = name
-        self.about = ""  # where it listens and connects, for the start line
-        self.listening: tuple[str, ...] = ()  # the endpoints it listens on (a free loopback port by default)
+        self.listening = listening  # the endpoints it listens on (a free loopback port by default)
+        self.about = about  # where it listens and connects, for the start line
         self.counters = Counters()
         self.last_error: str | None = None
         self.subscription = subscription
