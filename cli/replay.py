@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from collections import Counter
 from collections.abc import Iterator
 from typing import Any
 
@@ -10,6 +11,7 @@ import click
 
 from vstig_hw.capture.decoded import Decoder, default_framings
 from vstig_hw.capture.files import read_capture
+from vstig_hw.capture.filters import Filter, filter_records
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.capture.replay import replay
 from vstig_hw.engine import Stigmergy
@@ -18,6 +20,7 @@ from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
+from ._capture_options import filter_options
 from ._common import build_links, lossless
 from .errors import LINK, reports_errors
 
@@ -48,11 +51,42 @@ def _fresh(frame: Any) -> Any:
                        dlc=frame.dlc, check=False)
 
 
-def _table(path: str, at: float | None, value_type: ValueType, deployment: str | None) -> None:
+class OntoType(click.ParamType):
+    """`--onto SPEC` (every link of the capture) or `--onto NAME=SPEC` (the capture's link NAME)."""
+
+    name = "[NAME=]LINK"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> tuple[str | None, Any]:
+        if isinstance(value, tuple):
+            return value
+        name, sep, spec = value.partition("=")
+        # A spec starts with its kind and a colon; link names never hold "=", so NAME=SPEC is unambiguous.
+        if not sep or ":" in name:
+            return None, LINK.convert(value, param, ctx)
+        if not name:
+            self.fail(f"{value!r}: the link name before '=' is empty", param, ctx)
+        return name, LINK.convert(spec, param, ctx)
+
+
+ONTO = OntoType()
+
+
+def _targets(onto: tuple[tuple[str | None, LinkSpec], ...], robot_id: int) -> dict[str | None, Link[Any]]:
+    """Link name (None: every link) -> the target link, built but not open."""
+    names = [name for name, _ in onto]
+    if None in names and len(onto) > 1:
+        raise click.UsageError("give one --onto LINK for every link, or --onto NAME=LINK per link, not both")
+    if len(set(names)) < len(names):
+        raise click.UsageError("each capture link goes onto one target: a NAME appears in two --onto")
+    links = build_links([lossless(spec) for _, spec in onto], robot_id)
+    return dict(zip(names, links, strict=True))
+
+
+def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, deployment: str | None) -> None:
     engine = Stigmergy(_OBSERVER_ID)
-    decoder = Decoder(default_framings(deployment=deployment))
+    decoder, reader = (Decoder(default_framings(deployment=deployment)) for _ in range(2))  # framings keep state
     t0 = None
-    for decoded in decoder.decode_all(read_capture(path)):
+    for decoded in decoder.decode_all(filter_records(read_capture(path), keep, reader)):
         t0 = decoded.t if t0 is None else t0
         if at is not None and decoded.t - t0 > at:
             break
@@ -66,7 +100,9 @@ def _table(path: str, at: float | None, value_type: ValueType, deployment: str |
 
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
-@click.option("--onto", type=LINK, help="Send the capture onto this link with its original timing.")
+@click.option("--onto", type=ONTO, multiple=True,
+              help="Send the capture onto this link with its original timing; NAME=LINK sends only the capture's "
+                   "link NAME there (repeat for each link; links not named are skipped).")
 @click.option("--speed", type=click.FloatRange(0.001, 1000), default=1.0, show_default=True)
 @click.option("--loop", is_flag=True, help="Start again at the end, until Ctrl-C.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=0, show_default=True,
@@ -76,33 +112,58 @@ def _table(path: str, at: float | None, value_type: ValueType, deployment: str |
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
               help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
+@filter_options
 @reports_errors
-def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, robot_id: int, table: bool,
-            at: float | None, value_type: ValueType, deployment: str | None) -> None:
-    """Replay FILE onto a live link, or show what the swarm believed (--table).
+def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: float, loop: bool, robot_id: int,
+            table: bool, at: float | None, value_type: ValueType, deployment: str | None, keep: Filter) -> None:
+    """Replay FILE onto live links, or show what the swarm believed (--table).
 
-    Examples: vstig replay swarm.log --onto can:socketcan:vcan0 --speed 2;  vstig replay radio.cap --table --at 30
+    The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
+    what is replayed; a serial chunk they cut is re-encoded in its framing.
+
+    Examples: vstig replay swarm.log --onto can:socketcan:vcan0 --speed 2;
+    vstig replay bridged.log --onto can0=can:socketcan:vcan0 --onto radio0=serial:/dev/ttyUSB1;
+    vstig replay radio.cap --table --at 30
     """
-    if table == (onto is not None):
+    if table == bool(onto):
         raise click.UsageError("give exactly one of --onto LINK or --table")
     if table:
-        _table(file, at, value_type, deployment)
+        _table(file, at, value_type, keep, deployment)
         return
     if at is not None:
         raise click.UsageError("--at goes with --table")
-    assert onto is not None
-    link = build_links([lossless(onto)], robot_id)[0]
-    send = _sender(link, isinstance(onto, CanSpec), deployment)
-    link.open()
+    targets = _targets(onto, robot_id)
+    senders = {name: _sender(link, isinstance(spec, CanSpec), deployment)
+               for (name, link), (_, spec) in zip(targets.items(), onto, strict=True)}
+    every_link = senders.get(None)
+    reader = Decoder(default_framings(deployment=deployment))  # for filters that look into the messages
+    unmapped: Counter[str] = Counter()
+
+    def send(record: Record) -> None:
+        target = every_link or senders.get(record.link)
+        if target is None:
+            unmapped[record.link] += 1
+        else:
+            target(record)
+
+    opened: list[Link[Any]] = []
     try:
+        for link in targets.values():
+            link.open()
+            opened.append(link)
         with stop_on_signals() as stop:
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
-                done = replay(read_capture(file), send, speed=speed, stop=stop)
+                done = replay(filter_records(read_capture(file), keep, reader), send, speed=speed, stop=stop)
                 click.echo(f"replayed {done.frames} units in {done.took:.3f} s (logged {done.logged:.3f} s)",
                            err=True)
                 if stop.is_set() or done.frames == 0:
                     break
     finally:
-        link.close()
-    click.echo(f"{link.name}: {link.stats().summary()}", err=True)
+        for link in opened:
+            link.close()
+    for link in targets.values():
+        click.echo(f"{link.name}: {link.stats().summary()}", err=True)
+    if unmapped:
+        skipped = ", ".join(f"{name} ({count} units)" for name, count in sorted(unmapped.items()))
+        click.echo(f"skipped links with no --onto: {skipped}", err=True)

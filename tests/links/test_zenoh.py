@@ -278,3 +278,15 @@ def test_clients_survive_their_router_going_away_and_coming_back(caplog: pytest.
         sender.close()
         receiver.close()
         router.close()  # type: ignore[attr-defined]
+
+
+def test_capture_filters_cut_a_zenoh_sample_by_key_and_sender() -> None:
+    from vstig_hw.capture.filters import Filter, filter_records
+    from vstig_hw.capture.records import Record
+
+    space = ZenohKeySpace("lab")
+    samples = [ZenohFraming(space, sender=gateway).encode_batch(MESSAGES)[0] for gateway in (201, 202)]
+    records = [Record(1.0 + i, "zenoh-lab", "zenoh", sample) for i, sample in enumerate(samples)]
+    kept = list(filter_records(records, Filter(keys=frozenset({1, 3}), senders=frozenset({202}))))
+    assert kept == [Record(2.0, "zenoh-lab", "zenoh", ZenohSample("vstig/lab/0/202", encode(MESSAGES[1])
+                                                                   + encode(MESSAGES[3])))]

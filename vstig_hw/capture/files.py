@@ -20,9 +20,10 @@ from .records import CAN_FRAMING, CaptureError, Record
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
 from .zenoh_log import ZenohCaptureWriter, is_zenoh_capture, read_zenoh_capture
 
-__all__ = ["CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "read_capture", "rotated_name"]
+__all__ = ["CAN_EXTENSIONS", "MCAP_EXTENSION", "CaptureWriter", "RotatingCapture", "read_capture", "rotated_name"]
 
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
+MCAP_EXTENSION = ".mcap"  # rosbag2 MCAP (capture.rosbag): decoded messages of any links
 _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
 
 
@@ -86,16 +87,21 @@ def rotated_name(path: str, index: int) -> str:
 class RotatingCapture:
     """Writes records to `path`, starting a new numbered file whenever one exceeds `max_bytes`."""
 
-    def __init__(self, path: str, medium: str, max_bytes: int | None = None) -> None:
-        if medium not in _WRITERS:
-            raise ValueError(f"medium must be {', '.join(_WRITERS)}, got {medium!r}")
-        self.base, self.medium, self.max_bytes = path, medium, max_bytes
+    def __init__(self, path: str, medium: str, max_bytes: int | None = None, decoder: Any = None) -> None:
+        """`decoder` (a capture.decoded.Decoder) turns units into messages for an mcap capture."""
+        if medium not in (*_WRITERS, "mcap"):
+            raise ValueError(f"medium must be {', '.join(_WRITERS)} or mcap, got {medium!r}")
+        self.base, self.medium, self.max_bytes, self.decoder = path, medium, max_bytes, decoder
         self.index = 0
         self.files = [path]
         self.records = 0
         self._writer = self._open(path)
 
     def _open(self, path: str) -> CaptureWriter:
+        if self.medium == "mcap":
+            from .rosbag import McapCaptureWriter
+
+            return McapCaptureWriter(path, self.decoder)
         return _WRITERS[self.medium](path)
 
     def write(self, record: Record) -> None:
@@ -127,12 +133,17 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
         yield from read_zenoh_capture(path, skip_bad, bad)
         return
     suffix = _suffix(path)
+    if suffix == MCAP_EXTENSION:
+        from .rosbag import read_mcap
+
+        yield from read_mcap(path)
+        return
     if suffix in (".log", ".log.gz"):
         yield from read_candump(path, skip_bad, bad)
         return
     if suffix not in CAN_EXTENSIONS:
         raise CaptureError(path, None, f"unknown capture type {suffix or '(no extension)'!r}: expected a "
-                           f"serial capture or one of {', '.join(CAN_EXTENSIONS)}")
+                           f"serial capture, {MCAP_EXTENSION} or one of {', '.join(CAN_EXTENSIONS)}")
     options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}
     try:
         for frame in can.LogReader(path, **options):
