@@ -56,8 +56,8 @@ def command(links: tuple[LinkSpec, ...], output: str, max_bytes: str | None, dur
     media = {_medium(link) for link in links}
     medium = "mcap" if output.lower().endswith(MCAP_EXTENSION) else media.pop()
     if medium != "mcap" and media:
-        raise click.UsageError(f"links of different media (CAN, serial, zenoh) go together into a {MCAP_EXTENSION} "
-                               "capture (a CAN log holds CAN frames, a serial capture UART bytes, a zenoh capture "
+        raise click.UsageError(f"links of different media (CAN, serial, zenoh) go into a {MCAP_EXTENSION} capture "
+                               "together (a CAN log holds CAN frames, a serial capture UART bytes, a zenoh capture "
                                "samples)")
     if medium == "can" and not output.lower().endswith(CAN_EXTENSIONS):
         raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} or "
