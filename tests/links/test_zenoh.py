@@ -290,3 +290,18 @@ def test_capture_filters_cut_a_zenoh_sample_by_key_and_sender() -> None:
     kept = list(filter_records(records, Filter(keys=frozenset({1, 3}), senders=frozenset({202}))))
     assert kept == [Record(2.0, "zenoh-lab", "zenoh", ZenohSample("vstig/lab/0/202", encode(MESSAGES[1])
                                                                    + encode(MESSAGES[3])))]
+
+
+def test_a_client_opened_before_its_router_joins_when_the_router_comes_up() -> None:
+    from vstig_hw.links.zenoh import _free_loopback_port
+
+    port = _free_loopback_port()
+    link = parse(f"zenoh:lab?mode=client&connect=tcp/127.0.0.1:{port}").build(robot_id=4)
+    link.open()
+    router = _router(port)
+    try:
+        _until(lambda: link.receive(0.2) == [] and link.transport.connected, 30)  # reopened under backoff
+        assert link.transport.counters["unreachable"] == 1 and link.transport.counters["reconnects"] == 1
+    finally:
+        link.close()
+        router.close()  # type: ignore[attr-defined]
