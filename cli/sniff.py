@@ -18,10 +18,10 @@ from ._common import build_links, describe_links, print_counters, run_until_stop
 from .errors import LINK, reports_errors
 
 
-def _table(view: SwarmView, value_type: ValueType) -> Any:
+def _table(view: SwarmView, value_type: ValueType, node: Node) -> Any:
     from rich.table import Table
 
-    table = Table(title=f"vstig sniff: {view.messages} messages")
+    table = Table(title=f"vstig sniff: {view.messages} messages", caption=node.summary())
     for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders"):
         table.add_column(column, justify="left" if column == "stale senders" else "right")
     now = time.time()
@@ -43,9 +43,14 @@ def _table(view: SwarmView, value_type: ValueType) -> Any:
 def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float | None) -> None:
     """Decode LINK's traffic live, per key; passive: never transmits.
 
+    The counters (live under the table, and on exit) include the receive outcomes
+    an engine that heard every message would count: stored, answered, stale,
+    same, conflict, unknown, invalid.
+
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
     """
-    node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN)
+    # The engine never transmits: it counts what each message would do to a robot that heard them all.
+    node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN, count_outcomes=True)
     view = SwarmView()
     node.on_heard.append(view.add)
     if jsonl:
@@ -69,7 +74,7 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
         return
     from rich.live import Live
 
-    with node, Live(_table(view, value_type), refresh_per_second=4, transient=False) as live:
+    with node, Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
         describe_links(node)
-        run_until_stopped(node, lambda: live.update(_table(view, value_type)), duration)
+        run_until_stopped(node, lambda: live.update(_table(view, value_type, node)), duration)
     print_counters(node)

@@ -24,7 +24,7 @@ def invoke(*args: str) -> tuple[int, str]:
         (["sniff", "serial:/dev/null?framing=hdlc"], "framing='hdlc'"),
         (["sniff", "serial:/dev/null", "--value-type", "int8"], "'int8' is not one of"),
         (["put", "3", "70000", "--on", "can:virtual:x"], "outside uint16"),
-        (["put", "40000", "1", "--on", "can:virtual:x"], "40000 is not in the range"),
+        (["put", "40000", "1", "--on", "can:virtual:x"], "40000 is outside 0..32767"),
         (["get", "1"], "Missing option '--on'"),
         (["record", "can:virtual:x", "-o", "out.txt"], "chosen by extension"),
         (["record", "serial:/dev/null", "-o", "o.cap", "--max-bytes", "lots"], "not a size"),
