@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import click
 
 from vstig_hw.gateway import ENGINE_STATS, Node, stop_on_signals
 from vstig_hw.links import Link
-from vstig_hw.links.spec import CanSpec, LinkSpec
+from vstig_hw.links.spec import CanSpec, LinkSpec, ZenohSpec
 
 
 def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool = False) -> list[Link[Any]]:
@@ -33,6 +34,19 @@ def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool 
             name = f"{name}-{seen[name]}"
         links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
     return links
+
+
+def describe_links(node: Node) -> None:
+    """One line per link whose transport says where it is reachable (a Zenoh link's endpoints)."""
+    for link in node.links:
+        about = getattr(link.transport, "about", "")
+        if about:
+            click.echo(f"{link.name}: {about}", err=True)
+
+
+def lossless(spec: LinkSpec) -> LinkSpec:
+    """The spec for a command that must not lose what it sends (put, get, replay): Zenoh BLOCKs, not DROPs."""
+    return replace(spec, block=True) if isinstance(spec, ZenohSpec) else spec
 
 
 def run_until_stopped(node: Node, status: Any = None, duration: float | None = None) -> None:

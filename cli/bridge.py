@@ -7,10 +7,10 @@ import sys
 import click
 
 from vstig_hw.engine import larger_value_wins
-from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, favour_latency
+from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency
 from vstig_hw.links.spec import LinkSpec
 
-from ._common import build_links, print_counters, run_until_stopped
+from ._common import build_links, describe_links, print_counters, run_until_stopped
 from ._guard import GuardChoice, guard_options, take_warnings
 from .errors import LINK, reports_errors
 
@@ -25,11 +25,14 @@ from .errors import LINK, reports_errors
 @click.option("--raw", is_flag=True, help="Relay every frame between links, translating framings, with no engine.")
 @click.option("--larger-value-wins", "larger", is_flag=True,
               help="Resolve conflicts by the larger value (the paper's Figure 1) instead of the higher robot id.")
+@click.option("--refresh/--no-refresh", default=True, show_default=True,
+              help="GET one key of the table per tick, round-robin, as a robot's program would: repairs gateways "
+                   "that were apart (network partition, restart) without waiting for the next write.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
 @guard_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
-            larger: bool, duration: float | None, guard: GuardChoice) -> None:
+            larger: bool, refresh: bool, duration: float | None, guard: GuardChoice) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
     The status line and the counters printed on exit have each link's counters
@@ -42,6 +45,10 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     default; --rate, --trust, --deny, --keys, --read-only and --flap add policies. LINK names are
     those printed at start (the device's name: can0, ttyUSB0...). Refusals are counted per link
     (drop_jump, drop_rate, drop_untrusted, drop_key).
+
+    \b
+    Many PCs: add a zenoh link on each (vstig links lists its options), e.g.
+    vstig bridge can:socketcan:can0 zenoh:lab?connect=tcp/10.0.0.5:7447 --robot-id 201
     """
     if robot_id is None and not raw:
         raise click.UsageError("--robot-id is required (the PC's id in the swarm), or use --raw")
@@ -52,6 +59,8 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     node = Node(built, robot_id or 0, mode=Mode.RAW if raw else Mode.ENGINE,
                 period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
                 onconflict=larger_value_wins if larger else None, guard=firewall)
+    if refresh and not raw:
+        node.on_tick.append(RoundRobinGet())
     live = sys.stderr.isatty()
     favour_latency()
 
@@ -65,6 +74,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     with node:
         click.echo(f"bridging {', '.join(link.name for link in node.links)} "
                    f"({'raw' if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
+        describe_links(node)
         try:
             run_until_stopped(node, status, duration)
         finally:

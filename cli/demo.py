@@ -56,14 +56,17 @@ def _report(report: DemoReport) -> None:
 @click.option("--step", default=0.1, show_default=True, type=click.FloatRange(0.01, 1.0),
               help="Seconds per control step.")
 @click.option("--max-steps", default=300, show_default=True, type=click.IntRange(1, 10_000))
+@click.option("--gateways", default=1, show_default=True, type=click.IntRange(1, 2),
+              help="2: the e-puck arena gets a gateway of its own, joined to the first by a zenoh link (loopback).")
 @reports_errors
-def command(robots: int, drop: float, seed: int, step: float, max_steps: int) -> None:
+def command(robots: int, drop: float, seed: int, step: float, max_steps: int, gateways: int) -> None:
     """Robots split over a virtual CAN bus, a cobs8 radio and an epuck4 radio agree on the highest id.
 
     Everything below the robots is real: python-can's virtual bus, two ptys opened through pyserial,
-    the real framings, and the gateway bridging them.
+    the real framings, and the gateway bridging them. With --gateways 2, two gateways (two arenas)
+    join over a real Zenoh session on loopback, and the summary shows each gateway's traffic.
     """
-    config = DemoConfig(robots=robots, drop=drop, seed=seed, step=step, max_steps=max_steps)
+    config = DemoConfig(robots=robots, drop=drop, seed=seed, step=step, max_steps=max_steps, gateways=gateways)
     with stop_on_signals() as stop:
         if sys.stdout.isatty():
             from rich.live import Live

@@ -61,7 +61,7 @@ class LinkSpecType(click.ParamType):
     name = "LINK"
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> linkspec.LinkSpec:
-        if isinstance(value, linkspec.CanSpec | linkspec.SerialSpec):
+        if isinstance(value, linkspec.LinkSpec):
             return value
         try:
             return linkspec.parse(value)

@@ -9,7 +9,7 @@ from vstig_hw.gateway.oneshot import get_newest
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType
 
-from ._common import build_links
+from ._common import build_links, lossless
 from ._numbers import KEY
 from .errors import LINK, reports_errors
 from .put import shown
@@ -31,7 +31,7 @@ def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: Va
 
     Example: vstig get 3 --on serial:/dev/ttyUSB0?framing=epuck4 --wait 5
     """
-    node = Node(build_links([link], robot_id), robot_id)
+    node = Node(build_links([lossless(link)], robot_id), robot_id)
     name = node.links[0].name
     if getattr(node.links[0].framing, "transmit_only", False):
         raise click.BadParameter(f"{name} only transmits: no neighbour can answer", param_hint="'--on'")

@@ -10,7 +10,7 @@ from vstig_hw.gateway.oneshot import HearsItself, put_confirmed
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
-from ._common import build_links
+from ._common import build_links, lossless
 from ._numbers import KEY, NegativeNumbersAreArguments
 from .errors import LINK, reports_errors
 
@@ -51,7 +51,7 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
         raw = to_raw(value, value_type)
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="VALUE") from None
-    node = Node(build_links([link], robot_id), robot_id)
+    node = Node(build_links([lossless(link)], robot_id), robot_id)
     name = node.links[0].name
     transmit_only = getattr(node.links[0].framing, "transmit_only", False)
     if transmit_only and not no_confirm:

@@ -13,10 +13,10 @@ from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.links import Link
-from vstig_hw.links.spec import CanSpec, LinkSpec
+from vstig_hw.links.spec import CanSpec, LinkSpec, ZenohSpec
 
 from ._capture_options import filter_options
-from ._common import build_links, print_counters, run_until_stopped
+from ._common import build_links, describe_links, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
 
@@ -29,11 +29,16 @@ def _size(text: str) -> int:
     return int(number) * scale
 
 
+def _medium(spec: LinkSpec) -> str:
+    """The capture format a link's units go into without .mcap."""
+    return "can" if isinstance(spec, CanSpec) else "zenoh" if isinstance(spec, ZenohSpec) else "serial"
+
+
 @click.command()
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, writable=True),
-              help="CAN: .log (candump) .asc .blf .csv; serial: any name (our line format); any links: .mcap "
-                   "(rosbag2, decoded messages, one topic per link).")
+              help="CAN: .log (candump) .asc .blf .csv; serial and zenoh: any name (our line formats); any links: "
+                   ".mcap (rosbag2, decoded messages, one topic per link).")
 @click.option("--max-bytes", help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M).")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
 @filter_options
@@ -48,11 +53,12 @@ def command(links: tuple[LinkSpec, ...], output: str, max_bytes: str | None, dur
 
     Example: vstig record can:socketcan:can0 can:socketcan:can1 -o swarm.log --max-bytes 50M
     """
-    is_can = isinstance(links[0], CanSpec)
-    medium = "mcap" if output.lower().endswith(MCAP_EXTENSION) else "can" if is_can else "serial"
-    if medium != "mcap" and any(isinstance(link, CanSpec) != is_can for link in links):
-        raise click.UsageError(f"CAN and serial links together go into a {MCAP_EXTENSION} capture (a CAN log "
-                               "holds CAN frames, a serial capture UART bytes)")
+    media = {_medium(link) for link in links}
+    medium = "mcap" if output.lower().endswith(MCAP_EXTENSION) else media.pop()
+    if medium != "mcap" and media:
+        raise click.UsageError(f"links of different media (CAN, serial, zenoh) go into a {MCAP_EXTENSION} capture "
+                               "together (a CAN log holds CAN frames, a serial capture UART bytes, a zenoh capture "
+                               "samples)")
     if medium == "can" and not output.lower().endswith(CAN_EXTENSIONS):
         raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} or "
                                f"{MCAP_EXTENSION} (got {output})")
@@ -76,6 +82,7 @@ def command(links: tuple[LinkSpec, ...], output: str, max_bytes: str | None, dur
         with node:
             click.echo(f"recording {', '.join(link.name for link in node.links)} to {output}; Ctrl-C stops",
                        err=True)
+            describe_links(node)
             run_until_stopped(node, duration=duration)
     finally:
         capture.close()  # after the node: its close() handed over every unit already read

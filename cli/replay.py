@@ -21,7 +21,7 @@ from vstig_hw.links.spec import CanSpec, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ._capture_options import filter_options
-from ._common import build_links
+from ._common import build_links, lossless
 from .errors import LINK, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
@@ -78,7 +78,7 @@ def _targets(onto: tuple[tuple[str | None, LinkSpec], ...], robot_id: int) -> di
         raise click.UsageError("give one --onto LINK for every link, or --onto NAME=LINK per link, not both")
     if len(set(names)) < len(names):
         raise click.UsageError("each capture link goes onto one target: a NAME appears in two --onto")
-    links = build_links([spec for _, spec in onto], robot_id)
+    links = build_links([lossless(spec) for _, spec in onto], robot_id)
     return dict(zip(names, links, strict=True))
 
 

@@ -15,7 +15,7 @@ from vstig_hw.links import Heard
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._common import build_links, print_counters, run_until_stopped
+from ._common import build_links, describe_links, print_counters, run_until_stopped
 from ._guard import GuardChoice, guard_options, take_warnings
 from .errors import LINK, reports_errors
 
@@ -77,6 +77,7 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
         node.on_heard.append(emit)
         node.on_tick.append(lambda _node: _warn(firewall))
         with node:
+            describe_links(node)
             run_until_stopped(node, duration=duration)
         _warn(firewall)
         print_counters(node)
@@ -88,6 +89,7 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
             _warn(firewall)  # on a terminal, Live prints stderr above the table
             live.update(_table(view, value_type, node))
 
+        describe_links(node)
         run_until_stopped(node, refresh, duration)
     _warn(firewall)
     print_counters(node)

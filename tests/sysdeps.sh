@@ -9,6 +9,7 @@ command -v linux.uml >/dev/null || [ -x /usr/bin/linux.uml ] || want+=(user-mode
 command -v modprobe >/dev/null || [ -x /sbin/modprobe ] || want+=(kmod)
 command -v cansend >/dev/null || want+=(can-utils)
 command -v tshark >/dev/null || want+=(tshark)
+command -v ip >/dev/null || want+=(iproute2)  # network namespaces for the zenoh federation tests
 [ ${#want[@]} -eq 0 ] && exit 0
 if [ "$(id -u)" -ne 0 ]; then
   echo "sysdeps: not root, cannot install: ${want[*]} (their tests will skip)" >&2

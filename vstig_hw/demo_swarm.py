@@ -1,5 +1,8 @@
 """`vstig demo`'s swarm: robots on a virtual CAN bus and two pty radios, the gateway between.
 
+With `gateways=2` the e-puck radio's arena has a gateway of its own, and the two
+gateways meet over a zenoh link on loopback: the answer crosses the network too.
+
 Everything real below the robots' engines: a python-can virtual bus, two ptys
 opened through pyserial by the gateway's serial links, the real framings
 (CAN, cobs8, epuck4). The radios are simulated on the ptys' master side: each
@@ -30,7 +33,7 @@ from .engine import Stigmergy, larger_value_wins
 from .framing import make_serial_framing
 from .gateway import Node
 from .links.link import Link
-from .links.spec import CanSpec, SerialSpec
+from .links.spec import CanSpec, SerialSpec, ZenohSpec
 
 __all__ = ["DemoConfig", "DemoReport", "run_demo"]
 
@@ -46,6 +49,7 @@ class DemoConfig:
     step: float = 0.1  # seconds per control step, robots and gateway alike
     max_steps: int = 300
     channel: str = "vstig-demo"
+    gateways: int = 1  # 2: the e-puck arena has a gateway of its own, joined to the first by a zenoh link
 
 
 @dataclass
@@ -61,7 +65,7 @@ class DemoReport:
     steps: int
     seconds: float
     media: list[Medium]
-    gateway: dict[str, Counters]
+    gateway: dict[str, Counters]  # per link; "<gateway id>/<link>" when there are several gateways
     highest: int
 
 
@@ -188,19 +192,23 @@ def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] 
               PtyRadio(media[2], "epuck4", lambda: make_serial_framing("epuck4"), config.drop, rng)]
     links: list[Link[Any]] = [CanSpec("virtual", channel).build("can", robot_id=GATEWAY_ID)]
     links += [SerialSpec(radio.path, framing=radio.framing).build(radio.framing) for radio in radios]
-    node = Node(links, GATEWAY_ID, period=config.step, onconflict=larger_value_wins)
+    nodes = [Node(arena, GATEWAY_ID + n, period=config.step, onconflict=larger_value_wins)
+             for n, arena in enumerate(_arenas(links, config.gateways, f"demo-{channel}"))]
     highest = config.robots
     everyone = [robot for medium in media for robot in medium.robots]
     for robot in everyone:
         robot.put(KEY, robot.robot_id)
     stopped = stop or threading.Event()
-    gateway = threading.Thread(target=node.run, kwargs={"stop": stopped}, name="gateway", daemon=True)
+    threads = [threading.Thread(target=node.run, kwargs={"stop": stopped}, name=f"gateway-{node_id(node)}",
+                                daemon=True) for node in nodes]
     converged_at = None
     start = time.monotonic()
     step = 0
     try:
-        node.open()
-        gateway.start()
+        for node in nodes:
+            node.open()
+        for thread in threads:
+            thread.start()
         for step in range(1, config.max_steps + 1):
             deadline = start + step * config.step
             can_side.step()
@@ -216,13 +224,34 @@ def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] 
                 break
     finally:
         stopped.set()
-        if gateway.is_alive():
-            gateway.join(timeout=2.0)
-        node.close()
+        for thread in threads:
+            if thread.is_alive():
+                thread.join(timeout=2.0)
+        for node in nodes:
+            node.close()
         can_side.close()
         for radio in radios:
             radio.close()
     media[0].counters.update(can_side.drops())
     for medium, radio in zip(media[1:], radios, strict=True):
         medium.counters.update(radio.drops())
-    return DemoReport(converged_at, step, time.monotonic() - start, media, node.stats(), highest)
+    if len(nodes) == 1:
+        traffic = nodes[0].stats()
+    else:
+        traffic = {f"{node_id(node)}/{name}": c for node in nodes for name, c in node.stats().items()}
+    return DemoReport(converged_at, step, time.monotonic() - start, media, traffic, highest)
+
+
+def node_id(node: Node) -> int:
+    return node.engine.robot_id if node.engine else 0
+
+
+def _arenas(links: list[Link[Any]], gateways: int, swarm: str) -> list[list[Link[Any]]]:
+    """One gateway with every link, or two: CAN and cobs8 on the first, the e-puck radio on the second,
+    each with a zenoh link (the first listens on a free loopback port, the second connects to it)."""
+    if gateways == 1:
+        return [links]
+    first = ZenohSpec(swarm).build("zenoh", robot_id=GATEWAY_ID)
+    endpoints = first.transport.listening  # type: ignore[attr-defined]  # a ZenohTransport
+    second = ZenohSpec(swarm, connect=endpoints).build("zenoh", robot_id=GATEWAY_ID + 1)
+    return [[*links[:2], first], [links[2], second]]

@@ -37,11 +37,14 @@ def default_framings(id_base: int | None = None, extended: bool | None = False,
     """Framings by the name a record carries: `extended=None` takes each CAN link's ID width from its first
     frame; robot dialects (Buzz, BittyBuzz) need their `deployment` file."""
     from ..framing import make_serial_framing
+    from ..framing.zenoh import ZenohFraming, ZenohKeySpace
     from ..links.can import can_framing
 
     def make(record: Record) -> Any:
         if record.framing == CAN_FRAMING:
             return can_framing(id_base, bool(record.unit.is_extended_id) if extended is None else extended)
+        if record.framing == ZenohFraming.name:  # the key space the link subscribed to, read off its first key
+            return ZenohFraming(ZenohKeySpace.of_key(record.unit.key), sender=0)
         if record.framing == MESSAGE_FRAMING:
             from .rosbag import CarriedMessages
 

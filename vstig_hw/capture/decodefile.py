@@ -20,6 +20,7 @@ from .files import read_capture
 from .filters import Filter, RecordFilter
 from .records import CaptureError
 from .serial_log import is_serial_capture
+from .zenoh_log import is_zenoh_capture
 
 __all__ = ["FORMATS", "decode_file", "decode_to_mcap"]
 
@@ -39,7 +40,7 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
     if fmt == "csv":
         out.write(CSV_HEADER)
     if (path.endswith(".log") and fmt == "jsonl" and value_type == "uint16" and not extended and not keep
-            and not is_serial_capture(path)):
+            and not is_serial_capture(path) and not is_zenoh_capture(path)):
         count, drops = _candump_chunks(path, out, decoder, value_type, skip_bad, bad, id_base, progress)
         drops.update(decoder.drops())
         return count, drops, bad

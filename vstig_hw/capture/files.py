@@ -9,7 +9,7 @@ serial header, then by extension.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -18,6 +18,7 @@ import can
 from .candump import read_candump
 from .records import CAN_FRAMING, CaptureError, Record
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
+from .zenoh_log import ZenohCaptureWriter, is_zenoh_capture, read_zenoh_capture
 
 __all__ = ["CAN_EXTENSIONS", "MCAP_EXTENSION", "CaptureWriter", "RotatingCapture", "read_capture", "rotated_name"]
 
@@ -70,6 +71,11 @@ class CanCaptureWriter:
         self.writer.stop()
 
 
+_WRITERS: dict[str, Callable[[str], CaptureWriter]] = {
+    "can": CanCaptureWriter, "serial": SerialCaptureWriter, "zenoh": ZenohCaptureWriter,
+}
+
+
 def rotated_name(path: str, index: int) -> str:
     """capture.log, capture_001.log, capture_002.log... (the extension stays last, so formats still match)."""
     if index == 0:
@@ -83,8 +89,8 @@ class RotatingCapture:
 
     def __init__(self, path: str, medium: str, max_bytes: int | None = None, decoder: Any = None) -> None:
         """`decoder` (a capture.decoded.Decoder) turns units into messages for an mcap capture."""
-        if medium not in ("can", "serial", "mcap"):
-            raise ValueError(f"medium must be can, serial or mcap, got {medium!r}")
+        if medium not in (*_WRITERS, "mcap"):
+            raise ValueError(f"medium must be {', '.join(_WRITERS)} or mcap, got {medium!r}")
         self.base, self.medium, self.max_bytes, self.decoder = path, medium, max_bytes, decoder
         self.index = 0
         self.files = [path]
@@ -96,7 +102,7 @@ class RotatingCapture:
             from .rosbag import McapCaptureWriter
 
             return McapCaptureWriter(path, self.decoder)
-        return CanCaptureWriter(path) if self.medium == "can" else SerialCaptureWriter(path)
+        return _WRITERS[self.medium](path)
 
     def write(self, record: Record) -> None:
         self._writer.write(record)
@@ -117,11 +123,14 @@ class RotatingCapture:
 
 
 def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
-    """Every record of a capture: ours (serial), candump logs, or any python-can format."""
+    """Every record of a capture: ours (serial, zenoh), candump logs, or any python-can format."""
     if not os.path.isfile(path):
         raise CaptureError(path, None, "no such file")
     if is_serial_capture(path):
         yield from read_serial_capture(path, skip_bad, bad)
+        return
+    if is_zenoh_capture(path):
+        yield from read_zenoh_capture(path, skip_bad, bad)
         return
     suffix = _suffix(path)
     if suffix == MCAP_EXTENSION:

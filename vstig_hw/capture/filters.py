@@ -21,7 +21,8 @@ import numpy as np
 import numpy.typing as npt
 
 from ..framing.base import Framing
-from ..wire import KEY_MAX, Message, Op
+from ..framing.zenoh import ZenohFraming, ZenohSample
+from ..wire import KEY_MAX, Message, Op, encode
 from .decoded import Decoded, Decoder
 from .records import CAN_FRAMING, MESSAGE_FRAMING, Record
 
@@ -113,6 +114,10 @@ class RecordFilter:
         _, passed = self.messages(record)
         if record.framing in (CAN_FRAMING, MESSAGE_FRAMING):  # one message per unit (classic CAN, MCAP)
             return [record] if passed else []
+        if record.framing == ZenohFraming.name:  # a sample keeps its key (its sender) and carries what passed
+            payload = b"".join(encode(d.message) for d in passed)
+            sample = ZenohSample(record.unit.key, payload)
+            return [Record(record.t, record.link, record.framing, sample, record.direction)] if payload else []
         encoder = self._encoder(record.framing)
         chunk = b"".join(unit for d in passed for unit in encoder.encode(d.message))
         return [Record(record.t, record.link, record.framing, chunk, record.direction)] if chunk else []

@@ -11,7 +11,7 @@ byte for byte.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import IO
 
 from .records import CaptureError, Record, parse_lines
@@ -28,13 +28,18 @@ def format_line(record: Record) -> str:
 
 
 class SerialCaptureWriter:
+    """A line capture: a header line, then one line per record (the zenoh capture shares it)."""
+
+    header = HEADER
+    format_line = staticmethod(format_line)
+
     def __init__(self, path: str) -> None:
         self.path = path
         self.file: IO[str] = open(path, "w", encoding="utf-8")  # noqa: SIM115 (closed by close())
-        self.file.write(HEADER + "\n")
+        self.file.write(self.header + "\n")
 
     def write(self, record: Record) -> None:
-        self.file.write(format_line(record))
+        self.file.write(self.format_line(record))
 
     def size(self) -> int:
         return self.file.tell()
@@ -46,25 +51,38 @@ class SerialCaptureWriter:
         self.file.close()
 
 
-def parse_line(path: str, number: int, line: str) -> Record | None:
-    """One line of a serial capture; None for comments and blank lines."""
+def match_line(path: str, number: int, line: str, pattern: re.Pattern[str], what: str,
+               expected: str) -> re.Match[str] | None:
+    """A capture line's fields; None for comments and blank lines; CaptureError naming `what` it should be."""
     text = line.rstrip("\r\n")
     if not text.strip() or text.startswith("#"):
         return None
-    match = _LINE.match(text)
+    match = pattern.match(text)
     if match is None:
-        raise CaptureError(path, number, f"not a serial capture line: {text[:60]!r} "
-                           "(expected '(<time>) <link> <framing> rx|tx <hex bytes>')")
+        raise CaptureError(path, number, f"not a {what}: {text[:60]!r} (expected {expected!r})")
+    return match
+
+
+def parse_line(path: str, number: int, line: str) -> Record | None:
+    """One line of a serial capture; None for comments and blank lines."""
+    match = match_line(path, number, line, _LINE, "serial capture line", "(<time>) <link> <framing> rx|tx <hex bytes>")
+    if match is None:
+        return None
     stamp, link, framing, direction, data = match.groups()
     return Record(float(stamp), link, framing, bytes.fromhex(data), direction)
 
 
-def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+def read_line_capture(path: str, parse: Callable[[str, int, str], Record | None], skip_bad: bool = False,
+                      bad: list[CaptureError] | None = None) -> Iterator[Record]:
     """Records in file order; a malformed line raises CaptureError, or with `skip_bad` is collected in `bad`."""
     with open(path, encoding="utf-8", errors="replace") as file:
-        yield from parse_lines(path, file, parse_line, skip_bad, bad)
+        yield from parse_lines(path, file, parse, skip_bad, bad)
 
 
-def is_serial_capture(path: str) -> bool:
+def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+    return read_line_capture(path, parse_line, skip_bad, bad)
+
+
+def is_serial_capture(path: str, header: str = HEADER) -> bool:
     with open(path, "rb") as file:
-        return file.read(len(HEADER)).decode("utf-8", "replace") == HEADER
+        return file.read(len(header)).decode("utf-8", "replace") == header

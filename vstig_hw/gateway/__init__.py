@@ -2,9 +2,11 @@
 
 from .node import DEFAULT_BUDGET, DEFAULT_PERIOD, ENGINE_STATS, Mode, Node, favour_latency
 from .outlet import Outlet, SendWindow
+from .refresh import RoundRobinGet
 from .shutdown import stop_on_signals
 
 __all__ = [
-    "DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "Outlet", "SendWindow", "favour_latency",
+    "DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "Outlet", "RoundRobinGet", "SendWindow",
+    "favour_latency",
     "stop_on_signals",
 ]

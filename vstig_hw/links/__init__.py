@@ -4,7 +4,7 @@ This package is the one place links are assembled:
 
 - `link`: `Link` and `Heard`, the medium-independent unit;
 - `spec`: the link-spec grammar (`parse("can:socketcan:vcan0")`);
-- one builder module per medium (`serial`, `can`).
+- one builder module per medium (`serial`, `can`, `zenoh`).
 
 Framings stay pure: none of them imports a transport or a link. The builders
 are loaded on first use, so a command imports only the media it opens
@@ -17,7 +17,7 @@ from importlib import import_module
 from typing import Any
 
 from .link import Heard, Link
-from .spec import EXAMPLES, GRAMMAR, CanSpec, LinkSpec, SerialSpec, parse
+from .spec import EXAMPLES, GRAMMAR, CanSpec, LinkSpec, SerialSpec, ZenohSpec, parse
 
 __all__ = [
     "EXAMPLES",
@@ -27,14 +27,17 @@ __all__ = [
     "Link",
     "LinkSpec",
     "SerialSpec",
+    "ZenohSpec",
     "can_framing",
     "can_framing_for",
     "can_link",
     "parse",
     "serial_link",
+    "zenoh_link_from_spec",
 ]
 
-_LAZY = {"can_link": "can", "can_framing": "can", "can_framing_for": "can", "serial_link": "serial"}
+_LAZY = {"can_link": "can", "can_framing": "can", "can_framing_for": "can", "serial_link": "serial",
+         "zenoh_link_from_spec": "zenoh"}
 
 
 def __getattr__(name: str) -> Any:

@@ -7,6 +7,8 @@ Grammar (one parser for every command)::
     kilobot-ohc:<port or pyserial URL>
     serial:<port>?framing=kilobot&dialect=bittybuzz&deployment=<file.toml>   (and kilobot-ohc:<port>?dialect=...)
     blabbermouth:<host>[:port],<host>[:port]...?size=N&deployment=<file.toml>
+    zenoh:<swarm>[?mode=peer|client&connect=<endpoint>[,<endpoint>...]&listen=<endpoint>[,...]
+                  &config=<zenoh json5 file>&stigmergy=N&scout=1]
 
 The query after the last `?` is ours. A pyserial URL (`socket://h:7000`,
 `rfc2217://...`) may carry its own options in the same query: keys we do not
@@ -27,7 +29,8 @@ if TYPE_CHECKING:
     from ..framing.can import CanIdScheme
     from .link import Link
 
-__all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "BlabbermouthSpec", "CanSpec", "LinkSpec", "SerialSpec", "parse"]
+__all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "BlabbermouthSpec", "CanSpec", "LinkSpec", "SerialSpec", "ZenohSpec",
+           "parse"]
 
 SERIAL_FRAMINGS = ("cobs8", "epuck4", "kilobot")
 DEFAULT_BAUD = 115200
@@ -41,6 +44,8 @@ GRAMMAR = (
     "serial:<port>?framing=kilobot&dialect=bittybuzz&deployment=<file.toml>, kilobot-ohc:<port>?dialect=bittybuzz&"
     "deployment=<file.toml>",
     "blabbermouth:<host>[:port],<host>[:port]...?size=N&deployment=<file.toml>",
+    "zenoh:<swarm>[?mode=peer|client&connect=<endpoint>[,...]&listen=<endpoint>[,...]&config=<zenoh json5 file>"
+    "&stigmergy=N&scout=0|1]",
 )
 EXAMPLES = {
     "can": ("can:socketcan:vcan0", "can:virtual:lab", "can:slcan:/dev/ttyACM0?bitrate=500000",
@@ -53,6 +58,10 @@ EXAMPLES = {
     "bittybuzz": ("serial:/dev/ttyUSB0?framing=kilobot&dialect=bittybuzz&deployment=lab.toml",),
     "blabbermouth": ("blabbermouth:192.168.1.101,192.168.1.102,192.168.1.103?size=100&deployment=lab.toml",
                      "blabbermouth:k01.lab:24580,k02.lab:24580?size=64&deployment=kheperas.toml"),
+    "zenoh": ("zenoh:lab", "zenoh:lab?listen=tcp/0.0.0.0:7447&config=lab.json5",
+              "zenoh:lab?connect=tcp/10.0.0.5:7447",
+              "zenoh:lab?mode=client&connect=tls/router.lab:7447&config=lab.json5",
+              "zenoh:lab?scout=1&stigmergy=2"),
 }
 # One line per kind for `vstig links`: what the options mean beyond the grammar.
 NOTES = {
@@ -72,6 +81,9 @@ NOTES = {
                     "(bzzkh4 tcp <size> ...): connects to each robot (port 24580 unless given), relays every "
                     "robot's frame to all the others, and sends our own under --robot-id. size= must be the "
                     "robots' msg_size; deployment= maps their Buzz keys and values to ours.",
+    "zenoh": "zenoh: gateways on many PCs as one swarm (key vstig/<swarm>/<stigmergy>/<gateway id>). Closed by "
+             "default: listens on a free loopback port, no multicast scouting; listen=, connect= or scout=1 open "
+             "it, config= passes a Zenoh config file (TLS, user/password, routers) through.",
 }
 _IFACE = re.compile(r"[A-Za-z0-9_]+\Z")
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9._:-]+")
@@ -156,7 +168,33 @@ class BlabbermouthSpec:
         return blabbermouth_link_from_spec(self, name or self.name, robot_id)
 
 
-LinkSpec = CanSpec | SerialSpec | BlabbermouthSpec
+@dataclass(frozen=True, slots=True)
+class ZenohSpec:
+    swarm: str
+    mode: str | None = None  # None: the config file's, else peer
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    config: str | None = None
+    stigmergy: int = 0
+    scout: bool | None = None  # None: the config file's, else off
+    block: bool = False  # Zenoh congestion control BLOCK instead of DROP: set by commands that must not lose a sample
+
+    @property
+    def kind(self) -> str:
+        return "zenoh"
+
+    @property
+    def name(self) -> str:
+        return _safe_name(f"zenoh-{self.swarm}")
+
+    def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
+        """The Link (not yet open); `robot_id` names this gateway in the key space (vstig/<swarm>/<stig>/<id>)."""
+        from .zenoh import zenoh_link_from_spec
+
+        return zenoh_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
+
+
+LinkSpec = CanSpec | SerialSpec | BlabbermouthSpec | ZenohSpec
 
 
 def _safe_name(text: str) -> str:
@@ -306,8 +344,57 @@ def _parse_blabbermouth(spec: str, body: str) -> BlabbermouthSpec:
                             params["deployment"])
 
 
+_ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream", "unixpipe", "vsock", "serial")
+
+
+def _endpoints(spec: str, key: str, text: str) -> tuple[str, ...]:
+    endpoints = tuple(text.split(","))
+    for endpoint in endpoints:
+        protocol, sep, address = endpoint.partition("/")
+        if not sep or not address or any(ch.isspace() for ch in endpoint):
+            raise _bad(spec, f"{key}={endpoint!r} is not a Zenoh endpoint <protocol>/<address> "
+                             "(e.g. tcp/10.0.0.5:7447)", "zenoh")
+        if protocol not in _ZENOH_PROTOCOLS:
+            raise _bad(spec, f"{key}={endpoint!r}: unknown protocol {protocol!r} "
+                             f"(known: {', '.join(_ZENOH_PROTOCOLS)})", "zenoh")
+    return endpoints
+
+
+def _parse_zenoh(spec: str, body: str) -> ZenohSpec:
+    from ..framing.zenoh import MAX_STIGMERGY, check_swarm  # the key space's owner; loaded only for zenoh specs
+
+    swarm, params = _query(spec, body, "zenoh", ("mode", "connect", "listen", "config", "stigmergy", "scout"), False)
+    try:
+        check_swarm(swarm)
+    except ValueError as error:
+        raise _bad(spec, str(error), "zenoh") from None
+    mode = params.get("mode")
+    if mode is not None and mode not in ("peer", "client"):
+        raise _bad(spec, f"mode={mode!r} must be peer or client", "zenoh")
+    connect = _endpoints(spec, "connect", params["connect"]) if "connect" in params else ()
+    listen = _endpoints(spec, "listen", params["listen"]) if "listen" in params else ()
+    if mode == "client" and listen:
+        raise _bad(spec, "a client does not listen: drop listen= or use mode=peer", "zenoh")
+    if mode == "client" and not connect and "config" not in params:
+        raise _bad(spec, "a client needs connect=<router endpoint> (or a config= file naming one)", "zenoh")
+    config = params.get("config")
+    if config is not None and any(ch in config for ch in "\0\n\r"):
+        raise _bad(spec, "the config path contains a control character", "zenoh")
+    return ZenohSpec(
+        swarm=swarm,
+        mode=mode,
+        connect=connect,
+        listen=listen,
+        config=config,
+        stigmergy=_int(spec, "zenoh", "stigmergy", params["stigmergy"], 0, MAX_STIGMERGY)
+        if "stigmergy" in params else 0,
+        scout=_flag(spec, "zenoh", "scout", params["scout"]) if "scout" in params else None,
+    )
+
+
 _SCHEMES: dict[str, Callable[[str, str], LinkSpec]] = {
     "can": _parse_can, "serial": _parse_serial, "kilobot-ohc": _parse_ohc, "blabbermouth": _parse_blabbermouth,
+    "zenoh": _parse_zenoh,
 }
 
 
@@ -317,5 +404,5 @@ def parse(spec: str) -> LinkSpec:
         raise ValueError(f"a link spec is a string, got {type(spec).__name__}")
     scheme, sep, body = spec.partition(":")
     if not sep or scheme not in _SCHEMES:
-        raise _bad(spec, f"unknown kind {scheme!r}; a spec starts with can:, serial:, kilobot-ohc: or blabbermouth:")
+        raise _bad(spec, f"unknown kind {scheme!r}; a spec starts with {', '.join(f'{s}:' for s in _SCHEMES)}")
     return _SCHEMES[scheme](spec, body)

@@ -1,0 +1,307 @@
+"""The zenoh link: its pure framing, its spec, its closed-by-default config, and real sessions on loopback."""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import pytest
+
+from vstig_hw.framing.zenoh import ZenohFraming, ZenohKeySpace, ZenohSample
+from vstig_hw.links import Link, parse
+from vstig_hw.links.spec import EXAMPLES, ZenohSpec
+from vstig_hw.links.zenoh import exposure, zenoh_config
+from vstig_hw.transports.base import TransportError
+from vstig_hw.wire import Message, Op, encode
+
+MESSAGES = [Message(Op.PUT, k, 100 + k, 1, 7) for k in range(5)]
+
+
+# -- framing ----------------------------------------------------------------------
+def test_a_batch_is_one_sample_under_the_gateways_key_and_decodes_back() -> None:
+    framing = ZenohFraming(ZenohKeySpace("lab", 2), sender=201)
+    [sample] = framing.encode_batch(MESSAGES)
+    assert sample.key == "vstig/lab/2/201"
+    assert sample.payload == b"".join(encode(m) for m in MESSAGES)
+    listener = ZenohFraming(ZenohKeySpace("lab", 2), sender=0)
+    assert listener.feed(sample) == MESSAGES
+    assert listener.sender_of(sample) == 201
+    assert framing.encode_batch([]) == []
+    assert framing.encode(MESSAGES[0]) == [ZenohSample("vstig/lab/2/201", encode(MESSAGES[0]))]
+
+
+@pytest.mark.parametrize(("key", "payload", "reason"), [
+    ("vstig/lab/3/201", b"\0" * 8, "foreign_key"),  # another stigmergy
+    ("vstig/other/2/201", b"\0" * 8, "foreign_key"),
+    ("vstig/lab/2/robot", b"\0" * 8, "foreign_key"),
+    ("vstig/lab/2/070000", b"\0" * 8, "foreign_key"),
+    ("vstig/lab/2/201", b"\0" * 9, "bad_length"),
+    ("vstig/lab/2/201", b"", "bad_length"),
+])
+def test_what_is_not_a_batch_of_this_space_is_dropped_and_counted(key: str, payload: bytes, reason: str) -> None:
+    framing = ZenohFraming(ZenohKeySpace("lab", 2), sender=0)
+    assert framing.feed(ZenohSample(key, payload)) == []
+    assert framing.drops == {reason: 1}
+
+
+def test_the_key_space_refuses_names_that_are_not_one_chunk() -> None:
+    for swarm in ("", "a/b", "lab*", "$x", "la b"):
+        with pytest.raises(ValueError, match="swarm name"):
+            ZenohKeySpace(swarm)
+    with pytest.raises(ValueError, match="stigmergy"):
+        ZenohKeySpace("lab", 70000)
+    with pytest.raises(ValueError, match="gateway id"):
+        ZenohKeySpace("lab").key(-1)
+
+
+# -- spec ---------------------------------------------------------------------------
+def test_spec_defaults_and_every_key() -> None:
+    assert parse("zenoh:lab") == ZenohSpec("lab")
+    spec = parse("zenoh:lab?mode=client&connect=tls/router.lab:7447,tcp/10.0.0.5:7447&config=lab.json5"
+                 "&stigmergy=3&scout=0")
+    assert spec == ZenohSpec("lab", mode="client", connect=("tls/router.lab:7447", "tcp/10.0.0.5:7447"),
+                             config="lab.json5", stigmergy=3, scout=False)
+    assert spec.name == "zenoh-lab" and spec.kind == "zenoh"
+    for example in EXAMPLES["zenoh"]:
+        assert isinstance(parse(example), ZenohSpec)
+
+
+@pytest.mark.parametrize(("spec", "names"), [
+    ("zenoh:", "swarm name ''"),
+    ("zenoh:a/b", "swarm name 'a/b'"),
+    ("zenoh:lab?mode=router", "mode='router'"),
+    ("zenoh:lab?connect=10.0.0.5:7447", "connect='10.0.0.5:7447'"),
+    ("zenoh:lab?listen=tcpx/0.0.0.0:7447", "unknown protocol 'tcpx'"),
+    ("zenoh:lab?scout=yes", "scout='yes'"),
+    ("zenoh:lab?stigmergy=70000", "stigmergy=70000"),
+    ("zenoh:lab?mode=client", "a client needs connect="),
+    ("zenoh:lab?mode=client&connect=tcp/h:1&listen=tcp/0.0.0.0:1", "a client does not listen"),
+    ("zenoh:lab?bitrate=5", "unknown parameter 'bitrate=5'"),
+])
+def test_a_bad_zenoh_spec_is_one_line_naming_the_bad_part(spec: str, names: str) -> None:
+    with pytest.raises(ValueError) as caught:
+        parse(spec)
+    text = str(caught.value)
+    assert names in text and "\n" not in text and "e.g. zenoh:lab" in text
+
+
+# -- configuration: closed by default -------------------------------------------------
+def test_by_default_it_listens_on_loopback_only_and_does_not_scout() -> None:
+    config = zenoh_config(ZenohSpec("lab"))
+    listen = config.get_json("listen/endpoints")
+    assert listen.startswith('["tcp/127.0.0.1:') and listen.count("tcp/") == 1
+    assert config.get_json("scouting/multicast/enabled") == "false"
+    assert config.get_json("mode") == '"peer"'
+    assert exposure(config) is None
+
+
+def test_listening_beyond_loopback_or_scouting_without_auth_is_an_exposure() -> None:
+    assert exposure(zenoh_config(parse("zenoh:lab?listen=tcp/0.0.0.0:7447"))) == "listens on tcp/0.0.0.0:7447"
+    assert exposure(zenoh_config(parse("zenoh:lab?scout=1"))) == "scouts the LAN by multicast"
+    assert exposure(zenoh_config(parse("zenoh:lab?listen=tcp/127.0.0.1:7447,unixsock-stream//tmp/z"))) is None
+
+
+def test_a_config_file_passes_through_and_the_spec_overrides_only_what_it_names(tmp_path: Path) -> None:
+    file = tmp_path / "lab.json5"
+    file.write_text('{ connect: { endpoints: ["tcp/10.0.0.9:7447"] }, listen: { endpoints: ["tcp/0.0.0.0:7447"] },'
+                    ' transport: { link: { tx: { lease: 2500 } },'
+                    ' auth: { usrpwd: { user: "lab", password: "pw" } } } }')
+    config = zenoh_config(parse(f"zenoh:lab?config={file}&connect=tcp/10.0.0.5:7447"))
+    assert config.get_json("transport/link/tx/lease") == "2500"
+    assert config.get_json("connect/endpoints") == '["tcp/10.0.0.5:7447"]'
+    assert config.get_json("listen/endpoints") == '["tcp/0.0.0.0:7447"]'
+    assert config.get_json("scouting/multicast/enabled") == "false"  # unset in the file: our closed default
+    assert exposure(config) is None  # user/password configured
+
+
+def test_a_bad_config_file_is_one_line_naming_it(tmp_path: Path) -> None:
+    file = tmp_path / "broken.json5"
+    file.write_text("{ mode: ")
+    for spec in (f"zenoh:lab?config={file}", f"zenoh:lab?config={tmp_path / 'missing.json5'}"):
+        with pytest.raises(TransportError) as caught:
+            parse(spec).build(robot_id=1)
+        assert "Zenoh config file" in str(caught.value) and "\n" not in str(caught.value)
+
+
+# -- real sessions on loopback --------------------------------------------------------
+def _pair() -> tuple[Link[ZenohSample], Link[ZenohSample]]:
+    first = parse("zenoh:lab").build(robot_id=201)
+    [endpoint] = first.transport.listening  # type: ignore[attr-defined]
+    second = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
+    first.open()
+    second.open()
+    return first, second
+
+
+def _until(condition: object, deadline: float = 20.0) -> None:
+    end = time.monotonic() + deadline
+    while not condition():  # type: ignore[operator]
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.05)
+
+
+def test_two_links_exchange_a_batch_as_one_sample_named_by_its_sender() -> None:
+    first, second = _pair()
+    try:
+        heard = []
+        end = time.monotonic() + 20
+        while len(heard) < len(MESSAGES) and time.monotonic() < end:
+            first.send_many(MESSAGES)  # again until the peers have met (a sample before that meets nobody)
+            heard = second.receive(0.5)
+        assert [h.message for h in heard] == MESSAGES
+        assert {h.sender for h in heard} == {201}
+        assert first.stats()["out"] >= 5 and first.transport.counters["tx"] == first.stats()["out"] // 5
+        assert first.receive(0.2) == []  # a session never hears itself
+        alone = parse("zenoh:lab").build(robot_id=203)
+        alone.open()
+        alone.send(MESSAGES[0])
+        alone.close()
+        assert alone.transport.counters["tx_unheard"] == 1  # published while no other session subscribed
+    finally:
+        first.close()
+        second.close()
+
+
+def test_losing_every_peer_is_logged_once_and_counted(caplog: pytest.LogCaptureFixture) -> None:
+    first, second = _pair()
+    try:
+        _until(lambda: first.transport.session.info.peers_zid())  # type: ignore[attr-defined]
+        first.receive(1.1)  # the link notices its peer once a second
+        with caplog.at_level(logging.WARNING):
+            second.close()
+            end = time.monotonic() + 20
+            while not first.transport.counters["lost"] and time.monotonic() < end:
+                first.receive(0.2)
+            for _ in range(10):
+                first.receive(0.2)
+    finally:
+        first.close()
+    assert first.transport.counters["lost"] == 1
+    assert [r.getMessage() for r in caplog.records] == ["zenoh-lab: lost every Zenoh peer; Zenoh reconnects "
+                                                       "with backoff"]
+
+
+def test_a_client_with_no_router_retries_with_backoff_instead_of_failing(caplog: pytest.LogCaptureFixture) -> None:
+    link = parse("zenoh:lab?mode=client&connect=tcp/127.0.0.1:1").build(robot_id=3)
+    with caplog.at_level(logging.WARNING):
+        link.open()  # no exception: the router may come later
+        for _ in range(5):
+            assert link.receive(0.1) == []
+        link.send(MESSAGES[0])
+    link.close()
+    assert not link.transport.connected
+    assert link.transport.counters["unreachable"] == 1 and link.transport.counters["tx_dropped"] == 1
+    assert len(caplog.records) == 1 and "no Zenoh router reachable" in caplog.records[0].getMessage()
+
+
+# -- the zenoh capture -----------------------------------------------------------------
+def test_a_zenoh_capture_round_trips_and_a_bad_line_is_named(tmp_path: Path) -> None:
+    from vstig_hw.capture.files import RotatingCapture, read_capture
+    from vstig_hw.capture.records import CaptureError, Record
+
+    path = str(tmp_path / "lab.zcap")
+    sample = ZenohFraming(ZenohKeySpace("lab"), sender=201).encode_batch(MESSAGES)[0]
+    capture = RotatingCapture(path, "zenoh")
+    capture.write(Record(1700000000.25, "zenoh-lab", "zenoh", sample))
+    capture.close()
+    assert Path(path).read_text().splitlines() == [
+        "# vstig zenoh capture v1", f"(1700000000.250000) zenoh-lab zenoh rx vstig/lab/0/201 {sample.payload.hex()}"]
+    assert list(read_capture(path)) == [Record(1700000000.25, "zenoh-lab", "zenoh", sample)]
+    with open(path, "a") as file:
+        file.write("(1.0) zenoh-lab zenoh rx vstig/lab/0/201\n")
+    with pytest.raises(CaptureError, match=r"lab.zcap:3: not a zenoh capture line"):
+        list(read_capture(path))
+
+
+def _sockets(table: str) -> list[tuple[str, int, str]]:
+    """(local address hex, port, state hex) of every socket in /proc/net/<table> (this network namespace)."""
+    rows = Path(f"/proc/net/{table}").read_text().splitlines()[1:]
+    out = []
+    for row in rows:
+        fields = row.split()
+        address, port = fields[1].split(":")
+        out.append((address, int(port, 16), fields[3]))
+    return out
+
+
+def test_an_open_link_really_listens_on_loopback_only_and_joins_no_multicast_group() -> None:
+    link = parse("zenoh:lab").build(robot_id=1)
+    [endpoint] = link.transport.listening  # type: ignore[attr-defined]
+    port = int(endpoint.rsplit(":", 1)[1])
+    link.open()
+    try:
+        listening = [(a, s) for a, p, s in _sockets("tcp") + _sockets("tcp6") if p == port and s == "0A"]
+        assert listening == [("0100007F", "0A")]  # 127.0.0.1, LISTEN: nothing on 0.0.0.0 or ::
+        assert all(p != 7446 for _, p, _ in _sockets("udp") + _sockets("udp6"))  # Zenoh's scouting port unused
+    finally:
+        link.close()
+
+
+def _router(port: int) -> object:
+    import json
+
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("mode", '"router"')
+    config.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
+def test_clients_survive_their_router_going_away_and_coming_back(caplog: pytest.LogCaptureFixture) -> None:
+    from vstig_hw.links.zenoh import _free_loopback_port
+
+    port = _free_loopback_port()
+    router = _router(port)
+    spec = f"zenoh:lab?mode=client&connect=tcp/127.0.0.1:{port}"
+    sender, receiver = parse(spec).build(robot_id=1), parse(spec).build(robot_id=2)
+    sender.open()
+    receiver.open()
+    try:
+        with caplog.at_level(logging.WARNING):
+            router.close()  # type: ignore[attr-defined]
+            _until(lambda: sender.receive(0.2) == [] and sender.transport.counters["lost"] == 1)
+            router = _router(port)
+            _until(lambda: sender.receive(0.2) == [] and sender.transport.counters["reconnects"] == 1)
+        heard = []
+        end = time.monotonic() + 20
+        while not heard and time.monotonic() < end:
+            sender.send(MESSAGES[0])
+            heard = receiver.receive(0.3)
+        assert [h.message for h in heard] == [MESSAGES[0]]
+        mine = [r.getMessage() for r in caplog.records if r.name.endswith("zenoh")]
+        assert mine.count("zenoh-lab: lost every Zenoh peer; Zenoh reconnects with backoff") >= 1
+        assert sender.transport.counters["lost"] == 1 and sender.transport.counters["unreachable"] == 0
+    finally:
+        sender.close()
+        receiver.close()
+        router.close()  # type: ignore[attr-defined]
+
+
+def test_capture_filters_cut_a_zenoh_sample_by_key_and_sender() -> None:
+    from vstig_hw.capture.filters import Filter, filter_records
+    from vstig_hw.capture.records import Record
+
+    space = ZenohKeySpace("lab")
+    samples = [ZenohFraming(space, sender=gateway).encode_batch(MESSAGES)[0] for gateway in (201, 202)]
+    records = [Record(1.0 + i, "zenoh-lab", "zenoh", sample) for i, sample in enumerate(samples)]
+    kept = list(filter_records(records, Filter(keys=frozenset({1, 3}), senders=frozenset({202}))))
+    assert kept == [Record(2.0, "zenoh-lab", "zenoh", ZenohSample("vstig/lab/0/202", encode(MESSAGES[1])
+                                                                   + encode(MESSAGES[3])))]
+
+
+def test_a_client_opened_before_its_router_joins_when_the_router_comes_up() -> None:
+    from vstig_hw.links.zenoh import _free_loopback_port
+
+    port = _free_loopback_port()
+    link = parse(f"zenoh:lab?mode=client&connect=tcp/127.0.0.1:{port}").build(robot_id=4)
+    link.open()
+    router = _router(port)
+    try:
+        _until(lambda: link.receive(0.2) == [] and link.transport.connected, 30)  # reopened under backoff
+        assert link.transport.counters["unreachable"] == 1 and link.transport.counters["reconnects"] == 1
+    finally:
+        link.close()
+        router.close()  # type: ignore[attr-defined]

@@ -1,0 +1,157 @@
+"""Zenoh links: an embedded Zenoh session + the vstig Zenoh framing (firmware_spec/SPEC.md, "Zenoh").
+
+Closed by default. Zenoh's own defaults listen on every interface and scout the
+LAN by multicast; a gateway built here listens on a free loopback port and does
+no multicast scouting unless the spec (`listen=`, `scout=1`) or the Zenoh config
+file says otherwise. A config file passes through unchanged: only the keys the
+spec names override it, and our closed defaults fill only what it leaves unset.
+
+Opening a link that listens beyond loopback, or scouts, with no authentication
+configured (user/password, public keys or mutual TLS) logs one warning line.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+from typing import TYPE_CHECKING, Any
+
+import zenoh
+
+from ..framing.zenoh import ZenohFraming, ZenohKeySpace
+from ..transports.base import TransportError, one_line
+from ..transports.zenoh import ZenohTransport
+from .link import Link
+
+if TYPE_CHECKING:
+    from .spec import ZenohSpec
+
+__all__ = ["exposure", "zenoh_config", "zenoh_link_from_spec"]
+
+log = logging.getLogger(__name__)
+
+_LOCAL_HOSTS = ("127.", "[::1]", "localhost")
+_LOCAL_PROTOCOLS = ("unixsock-stream", "unixpipe", "vsock")
+
+
+def _free_loopback_port() -> int:
+    """A TCP port free on 127.0.0.1 now, so several gateways on one PC do not collide."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def _json(config: zenoh.Config, key: str) -> Any:
+    return json.loads(config.get_json(key))
+
+
+def zenoh_config(spec: ZenohSpec) -> zenoh.Config:
+    """The Zenoh configuration for `spec`: its file (if any), then the spec's keys, then our closed defaults."""
+    if spec.config:
+        try:
+            config = zenoh.Config.from_file(spec.config)
+        except (zenoh.ZError, OSError) as exc:
+            reason = one_line(exc).split(" at /", 1)[0]
+            raise TransportError(f"cannot read the Zenoh config file {spec.config}: {reason}") from None
+    else:
+        config = zenoh.Config()
+    zenoh_default = zenoh.Config()
+    if spec.mode is not None:
+        config.insert_json5("mode", json.dumps(spec.mode))
+    elif not spec.config:
+        config.insert_json5("mode", '"peer"')
+    if spec.connect:
+        config.insert_json5("connect/endpoints", json.dumps(list(spec.connect)))
+    if spec.listen:
+        config.insert_json5("listen/endpoints", json.dumps(list(spec.listen)))
+    elif _json(config, "listen/endpoints") == _json(zenoh_default, "listen/endpoints"):
+        protocol = _loopback_protocol(config)
+        loopback = [f"{protocol}/127.0.0.1:{_free_loopback_port()}"] if protocol else []
+        config.insert_json5("listen/endpoints", json.dumps(loopback))
+    if spec.scout is not None:
+        config.insert_json5("scouting/multicast/enabled", json.dumps(spec.scout))
+    elif _json(config, "scouting/multicast/enabled") is None:
+        config.insert_json5("scouting/multicast/enabled", "false")
+    return config
+
+
+def _loopback_protocol(config: zenoh.Config) -> str | None:
+    """The default loopback listener's protocol: tcp, or tls where the config allows only TLS; none for a client."""
+    if _mode(config) == "client":
+        return None
+    allowed = _json(config, "transport/link/protocols")
+    if not allowed or "tcp" in allowed:
+        return "tcp"
+    return "tls" if "tls" in allowed else None
+
+
+def _mode(config: zenoh.Config) -> str:
+    mode = _json(config, "mode")
+    return mode if isinstance(mode, str) else "peer"
+
+
+def _endpoints(config: zenoh.Config, key: str) -> list[str]:
+    """A list of endpoints, or Zenoh's per-mode form {router: [...], peer: [...]} resolved for this mode."""
+    value = _json(config, key)
+    if isinstance(value, dict):
+        value = value.get(_mode(config)) or []
+    return [str(v) for v in value or []]
+
+
+def _is_local(endpoint: str) -> bool:
+    protocol, _, address = endpoint.partition("/")
+    return protocol in _LOCAL_PROTOCOLS or address.startswith(_LOCAL_HOSTS)
+
+
+def _authenticated(config: zenoh.Config) -> bool:
+    user = _json(config, "transport/auth/usrpwd/user")
+    dictionary = _json(config, "transport/auth/usrpwd/dictionary_file")
+    pubkey = _json(config, "transport/auth/pubkey")
+    mtls = _json(config, "transport/link/tls/enable_mtls")
+    return bool(user or dictionary or mtls or any(v for v in (pubkey or {}).values()))
+
+
+def exposure(config: zenoh.Config) -> str | None:
+    """Why this configuration is open to the network without authentication, or None if it is not."""
+    if _authenticated(config):
+        return None
+    reasons = []
+    beyond = [e for e in _endpoints(config, "listen/endpoints") if not _is_local(e)]
+    if beyond:
+        reasons.append(f"listens on {', '.join(beyond)}")
+    if _json(config, "scouting/multicast/enabled") is not False:
+        reasons.append("scouts the LAN by multicast")
+    return " and ".join(reasons) or None
+
+
+def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
+                         listen_only: bool = False) -> Link[Any]:
+    """A Zenoh link (not yet open) publishing as gateway `robot_id` (0 when it never transmits)."""
+    space = ZenohKeySpace(spec.swarm, spec.stigmergy)
+    framing = ZenohFraming(space, 0 if listen_only else robot_id)
+    first = zenoh_config(spec)  # read once now, so a bad file or value fails before anything opens
+    listening = _endpoints(first, "listen/endpoints")
+    connecting = _endpoints(first, "connect/endpoints")
+    made = [first]
+
+    def make_config() -> zenoh.Config:  # a reopened session listens where the first one did
+        if made:
+            return made.pop()
+        config = zenoh_config(spec)
+        config.insert_json5("listen/endpoints", json.dumps(listening))
+        return config
+
+    open_to = exposure(first)
+    if open_to:
+        log.warning("%s: WARNING: this gateway %s with no authentication: anyone on the network can read "
+                    "and write the swarm (configure TLS and user/password with config=, see README 'Many PCs')",
+                    name, open_to)
+    about = "; ".join(filter(None, (
+        f"listening on {', '.join(listening)}" if listening else "",
+        f"connecting to {', '.join(connecting)}" if connecting else "",
+        "scouting by multicast" if _json(first, "scouting/multicast/enabled") is not False else "")))
+    transport = ZenohTransport(make_config, space.subscription, name=name, block=spec.block,
+                               expects_peer=bool(connecting) or _mode(first) == "client",
+                               listening=tuple(listening), about=about)
+    return Link(name, transport, framing)

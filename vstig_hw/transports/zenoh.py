@@ -1,0 +1,259 @@
+"""ZenohTransport: an embedded Zenoh session that moves samples, and survives the network going away.
+
+Units are `ZenohSample`s (key, payload). What the session's subscriber hears
+from other sessions is queued by Zenoh's callback thread and handed out by
+`read`; `write` publishes a sample under its key, one publisher per key.
+
+Zenoh keeps its own links alive: a peer re-dials its `connect=` endpoints with
+backoff, forever. What this transport adds is what a user must see: when the
+session has no peer or router left (or none ever came), that is logged once and
+counted (`lost`, `unreachable`), and its return too (`reconnects`). A client
+whose router is down at start cannot even open a session: then the session is
+reopened here with exponential backoff from `read`, as the CAN transport does.
+
+Congestion control is chosen by the caller: BLOCK where losing a sample loses
+data (replay, put), DROP for the gateway, whose protocol repairs losses and whose
+other links must not stall behind a slow network (README, "Many PCs").
+
+Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session subscribed),
+`tx_dropped`, `lost`, `unreachable`, `reconnects`.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from ..counters import Counters
+from ..framing.zenoh import ZenohSample
+from .base import TransportError, one_line
+
+__all__ = ["ZenohTransport"]
+
+log = logging.getLogger(__name__)
+
+_DRAIN_LIMIT = 512  # samples taken per read() after the first, so a busy swarm cannot starve the loop
+_PEER_POLL_S = 1.0  # how often to ask the session whether any peer or router is connected
+_UNREACHABLE_AFTER_S = 3.0  # a session told to connect that has found nobody by then is reported
+_FIRST_PEER_WAIT_S = 3.0  # open() waits this long for a peer it was told to connect to, so a first put is heard
+_UNREACHABLE_MARK = "Unable to connect"  # Zenoh's words when a client finds no router at all
+
+
+class ZenohTransport:
+    """A Zenoh session as a Transport[ZenohSample]."""
+
+    def __init__(
+        self,
+        make_config: Callable[[], zenoh.Config],
+        subscription: str,
+        *,
+        name: str,
+        block: bool = False,
+        expects_peer: bool = False,
+        listening: tuple[str, ...] = (),
+        about: str = "",
+        backoff: tuple[float, float] = (0.5, 10.0),
+    ) -> None:
+        self.name = name
+        self.listening = listening  # the endpoints it listens on (a free loopback port by default)
+        self.about = about  # where it listens and connects, for the start line
+        self.counters = Counters()
+        self.last_error: str | None = None
+        self.subscription = subscription
+        self.congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+        self._make_config = make_config
+        self._expects_peer = expects_peer  # told to connect somewhere: finding nobody is worth a line
+        self._backoff_min, self._backoff_max = backoff
+        self._delay = self._backoff_min
+        self._next_try = 0.0
+        self._lock = threading.Lock()  # session changes (read thread) against publishing (loop thread)
+        self._session: zenoh.Session | None = None
+        self._subscriber: Any = None
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._inbox: queue.SimpleQueue[ZenohSample] = queue.SimpleQueue()
+        self._opened = False
+        self._opened_at = 0.0
+        self._next_poll = 0.0
+        self._had_peer = False
+        self._reported_alone = False
+
+    # -- lifecycle -----------------------------------------------------------
+    def open(self) -> None:
+        """Open the session; a bad configuration raises TransportError, an unreachable router is retried."""
+        self._opened = True
+        self._opened_at = time.monotonic()
+        try:
+            self._start()
+        except _Unreachable as exc:
+            self.counters["unreachable"] += 1
+            self._retry_later(str(exc))
+            log.warning("%s: %s; retrying with backoff", self.name, exc)
+            return
+        if self._expects_peer:
+            self._await_peer(_FIRST_PEER_WAIT_S)
+
+    def _await_peer(self, seconds: float) -> None:
+        """Wait (briefly) for the peer or router we connect to, so what we send first is not sent to nobody."""
+        session, end = self._session, time.monotonic() + seconds
+        while session is not None and time.monotonic() < end:
+            info = session.info
+            if info.peers_zid() or info.routers_zid():
+                self._had_peer = True
+                time.sleep(0.05)  # its subscriptions arrive right after the session opens
+                return
+            time.sleep(0.02)
+
+    def close(self) -> None:
+        self._opened = False
+        with self._lock:
+            self._stop()
+
+    @property
+    def connected(self) -> bool:
+        return self._session is not None
+
+    @property
+    def session(self) -> zenoh.Session | None:
+        """The Zenoh session while open (for diagnostics and tests)."""
+        return self._session
+
+    def _start(self) -> None:
+        try:
+            config = self._make_config()
+            session = zenoh.open(config)
+        except zenoh.ZError as exc:
+            reason = one_line(exc).split(" at /", 1)[0]  # Zenoh appends its source location
+            if _UNREACHABLE_MARK in reason:
+                raise _Unreachable(f"no Zenoh router reachable ({reason}): is it up, and does it accept our "
+                                   "certificates and credentials?") from None
+            raise TransportError(f"{self.name}: cannot open a Zenoh session: {reason}") from None
+        try:
+            subscriber = session.declare_subscriber(self.subscription, self._heard,
+                                                    allowed_origin=zenoh.Locality.REMOTE)
+        except zenoh.ZError as exc:
+            session.close()  # type: ignore[no-untyped-call]  # zenoh's stub leaves close() untyped
+            raise TransportError(f"{self.name}: cannot subscribe to {self.subscription}: {one_line(exc)}") from None
+        with self._lock:
+            self._session, self._subscriber = session, subscriber
+        self.last_error = None
+
+    def _stop(self) -> None:
+        session, self._session = self._session, None
+        self._subscriber = None
+        self._publishers.clear()
+        if session is not None:
+            try:
+                session.close()  # type: ignore[no-untyped-call]  # zenoh's stub leaves close() untyped
+            except zenoh.ZError as exc:  # closing a session whose network is gone may complain
+                log.debug("%s: error while closing: %s", self.name, exc)
+
+    def _heard(self, sample: zenoh.Sample) -> None:
+        """Zenoh's callback thread: hand the sample to `read` (nothing else runs here)."""
+        self._inbox.put(ZenohSample(str(sample.key_expr), sample.payload.to_bytes()))
+
+    # -- moving samples ------------------------------------------------------
+    def read(self, timeout: float) -> list[ZenohSample]:
+        if self._session is None and not self._reopen(timeout):
+            return []
+        samples: list[ZenohSample] = []
+        try:
+            samples.append(self._inbox.get(timeout=timeout) if timeout > 0 else self._inbox.get_nowait())
+            while len(samples) <= _DRAIN_LIMIT:
+                samples.append(self._inbox.get_nowait())
+        except queue.Empty:
+            pass
+        self.counters["rx"] += len(samples)
+        self._watch_peers()
+        return samples
+
+    def write(self, unit: ZenohSample) -> None:
+        with self._lock:
+            session = self._session
+            if session is None:
+                self.counters["tx_dropped"] += 1
+                return
+            publisher = self._publishers.get(unit.key)
+            try:
+                if publisher is None:
+                    publisher = self._publishers[unit.key] = session.declare_publisher(
+                        unit.key, congestion_control=self.congestion, allowed_destination=zenoh.Locality.REMOTE)
+                status: Any = publisher.matching_status  # a MatchingStatus (the stub says bool)
+                if not status.matching:  # no other session subscribes: the sample reaches nobody
+                    self.counters["tx_unheard"] += 1
+                publisher.put(unit.payload)
+            except zenoh.ZError as exc:
+                self.counters["tx_dropped"] += 1
+                if self.last_error is None:
+                    self.last_error = one_line(exc)
+                    log.warning("%s: cannot publish on %s: %s", self.name, unit.key, self.last_error)
+                return
+        self.counters["tx"] += 1
+
+    # -- the network coming and going -----------------------------------------
+    def _watch_peers(self) -> None:
+        now = time.monotonic()
+        session = self._session
+        if session is None or now < self._next_poll:
+            return
+        self._next_poll = now + _PEER_POLL_S
+        try:
+            info = session.info
+            others = len(info.peers_zid()) + len(info.routers_zid())
+        except zenoh.ZError:
+            return
+        if others and not self._had_peer:
+            self._had_peer = True
+            if self._reported_alone:
+                self.counters["reconnects"] += 1
+                log.warning("%s: Zenoh peers reachable again (%d)", self.name, others)
+                self._reported_alone = False
+        elif not others and self._had_peer:
+            self._had_peer = False
+            self._reported_alone = True
+            self.counters["lost"] += 1
+            log.warning("%s: lost every Zenoh peer; Zenoh reconnects with backoff", self.name)
+        elif not others and self._expects_peer and not self._reported_alone \
+                and now - self._opened_at > _UNREACHABLE_AFTER_S:
+            self._reported_alone = True
+            self.counters["unreachable"] += 1
+            log.warning("%s: no Zenoh peer reachable yet (are they up, and do they accept our certificates and "
+                        "credentials?); Zenoh keeps retrying with backoff", self.name)
+
+    def _retry_later(self, reason: str) -> None:
+        self.last_error = reason
+        self._next_try = time.monotonic() + self._delay
+        self._delay = min(self._delay * 2, self._backoff_max)
+
+    def _reopen(self, timeout: float) -> bool:
+        """Reopen a session that could not open (a client with no router), under backoff."""
+        if not self._opened:
+            time.sleep(max(timeout, 0.0))
+            return False
+        wait = self._next_try - time.monotonic()
+        if wait > timeout:
+            time.sleep(max(timeout, 0.0))
+            return False
+        if wait > 0:
+            time.sleep(wait)
+        try:
+            self._start()
+        except _Unreachable as exc:
+            self._retry_later(str(exc))
+            return False
+        except TransportError as exc:  # the configuration broke since (a certificate file removed...)
+            self._retry_later(str(exc))
+            return False
+        self.counters["reconnects"] += 1
+        self._delay = self._backoff_min
+        log.warning("%s: Zenoh session open", self.name)
+        return True
+
+
+class _Unreachable(Exception):
+    """No router answered: worth retrying, unlike a bad configuration."""
