@@ -6,6 +6,8 @@ import contextlib
 import gzip
 import io
 import json
+import threading
+import time
 from pathlib import Path
 
 import can
@@ -189,3 +191,27 @@ def test_line_by_line_fallback_numbers_lines_as_the_file_does(tmp_path: Path) ->
         _, _, bad = decode_file(str(path), io.StringIO(), fmt, skip_bad=True)
         errors[fmt] = [error.line for error in bad]
     assert errors["jsonl"] == errors["text"] == [2, 4]
+
+
+def test_a_stop_during_a_long_gap_ends_the_replay_at_once_and_sends_nothing_more() -> None:
+    records = [Record(100.0, "r", "cobs8", b"a"), Record(120.0, "r", "cobs8", b"b")]
+    sent: list[bytes] = []
+    stop = threading.Event()
+    threading.Timer(0.3, stop.set).start()
+    began, cpu = time.monotonic(), time.process_time()
+    result = replay(records, lambda r: sent.append(r.unit), stop=stop)
+    assert sent == [b"a"] and result.stopped and result.frames == 1
+    assert time.monotonic() - began < 10.0  # not the 20 s gap
+    assert time.process_time() - cpu < 2.0  # slept: no core spun through the gap
+
+
+def test_skip_gaps_shortens_long_waits_and_ignore_timestamps_drops_them() -> None:
+    records = [Record(t, "r", "cobs8", b"") for t in (0.0, 0.01, 50.0, 50.01, 900.0)]
+    began = time.monotonic()
+    result = replay(records, lambda r: None, skip_gaps=0.05)
+    assert result.frames == 5 and time.monotonic() - began < 10.0
+    assert result.skipped == pytest.approx((50.0 - 0.01 - 0.05) + (900.0 - 50.01 - 0.05))
+    result = replay(records, lambda r: None, ignore_timestamps=True)
+    assert result.frames == 5 and result.skipped == pytest.approx(900.0) and result.took < 10.0
+    with pytest.raises(ValueError, match="skip_gaps"):
+        replay(records, lambda r: None, skip_gaps=-1)
