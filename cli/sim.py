@@ -57,12 +57,13 @@ def _config(topology: str, robots: int, drop: float, **model: Any) -> Config:
 
 
 def _progress(transient: bool = False) -> Any:
-    """A bar on stderr, so stdout stays clean for pipes (rich draws nothing when stderr is not a terminal)."""
+    """A bar on stderr, so stdout stays clean for pipes; none at all when stderr is not a terminal."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    console = Console(stderr=True)
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    console=Console(stderr=True), transient=transient)
+                    console=console, transient=transient, disable=not console.is_terminal)
 
 
 @click.group(invoke_without_command=True)

@@ -1,0 +1,65 @@
+"""How every `vstig` run ends, as the installed script: one line per failure, quiet pipes, no tracebacks."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+VSTIG = str(Path(sys.executable).with_name("vstig"))
+
+
+def _shell(command: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(["bash", "-c", command], capture_output=True, text=True, timeout=timeout, check=False)
+
+
+def _one_line(text: str) -> str:
+    assert "Traceback" not in text and "Exception ignored" not in text, text
+    lines = text.strip().splitlines()
+    assert len(lines) == 1, text
+    return lines[0]
+
+
+@pytest.mark.parametrize("args", ["links", "--help", "sim --robots 3 --runs 1 --json", "decode --help"])
+def test_a_full_stdout_is_one_line_and_exit_1(args: str) -> None:
+    done = _shell(f"{VSTIG} {args} > /dev/full")
+    assert done.returncode == 1
+    assert _one_line(done.stderr) == "Error: cannot write to stdout: No space left on device"
+
+
+def test_a_closed_stdout_is_one_line_and_exit_1_not_lost_output() -> None:
+    done = _shell(f"{VSTIG} links >&-")
+    assert done.returncode == 1 and _one_line(done.stderr) == "Error: cannot write to stdout: it is closed"
+
+
+def _candump_log(path: Path, frames: int) -> None:
+    lines = (f"({1700000000 + i / 1000:.6f}) can0 6{i % 128:02X}#{i % 3000:04X}0001{i % 60000 + 1:04X}0007\n"
+             for i in range(frames))
+    path.write_text("".join(lines))
+
+
+@pytest.mark.parametrize("fmt", ["jsonl", "text", "csv"])
+def test_piping_into_head_ends_quietly_with_status_0(tmp_path: Path, fmt: str) -> None:
+    log = tmp_path / "big.log"
+    _candump_log(log, 20000)  # far more than a pipe holds: decode is still writing when head leaves
+    done = _shell(f"{VSTIG} decode {log} --format {fmt} | head -1; exit ${{PIPESTATUS[0]}}")
+    assert done.returncode == 0, done.stderr
+    assert len(done.stdout.splitlines()) == 1 and done.stderr == ""
+
+
+def test_a_closed_stderr_does_not_stop_the_work(tmp_path: Path) -> None:
+    log = tmp_path / "small.log"
+    _candump_log(log, 3)
+    done = _shell(f"{VSTIG} decode {log} --format jsonl 2>&-")
+    assert done.returncode == 0 and len(done.stdout.splitlines()) == 3 and done.stderr == ""
+
+
+@pytest.mark.parametrize(("folder", "says"), [("/proc/vstig-edges", "No such file or directory"),
+                                              ("/sys/vstig-edges", "Operation not permitted"),
+                                              ("/dev/full", "exists")])
+def test_bad_output_folders_are_one_line_naming_the_path(folder: str, says: str) -> None:
+    done = _shell(f"{VSTIG} sim paper --runs 1 --robots 10 -o {folder}")
+    line = _one_line(done.stderr)
+    assert done.returncode == 1 and folder in line and says in line, line
