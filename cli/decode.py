@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
+from collections.abc import Callable, Iterator
 
 import click
 
@@ -11,6 +13,8 @@ from vstig_hw.capture.decodefile import FORMATS, decode_file
 from vstig_hw.values import VALUE_TYPES, ValueType
 
 from .errors import reports_errors
+
+_BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 
 
 def _base(text: str | None) -> int | None:
@@ -39,18 +43,9 @@ def command(files: tuple[str, ...], fmt: str, skip_bad: bool, value_type: ValueT
     base = _base(id_base)
     total_bad = 0
     for path in files:
-        size = os.path.getsize(path)
-        if sys.stderr.isatty() and size > 1 << 20:
-            from rich.progress import Progress
-
-            with Progress(transient=True) as bar:
-                task = bar.add_task(f"decoding {os.path.basename(path)}", total=size)
-                count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                                id_base=base, extended=extended,
-                                                progress=lambda n, t=task: bar.advance(t, n))  # type: ignore[misc]
-        else:
+        with _progress_bar(path) as progress:
             count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                            id_base=base, extended=extended)
+                                            id_base=base, extended=extended, progress=progress)
         sys.stdout.flush()
         total_bad += len(bad)
         for error in bad[:5]:
@@ -59,3 +54,28 @@ def command(files: tuple[str, ...], fmt: str, skip_bad: bool, value_type: ValueT
         if drops:
             summary += f", dropped {drops.summary()}"
         click.echo(summary, err=True)
+
+
+@contextlib.contextmanager
+def _progress_bar(path: str) -> Iterator[Callable[[int], None] | None]:
+    """A bar on stderr for a big file, only when stderr is a terminal and stdout is not the same screen."""
+    size = os.path.getsize(path)
+    if size < _BAR_FROM or not _isatty(sys.stderr) or _isatty(sys.stdout):
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import Progress
+
+    # Never let rich take over sys.stdout: the decoded lines must reach it untouched.
+    with Progress(console=Console(stderr=True), transient=True, redirect_stdout=False,
+                  redirect_stderr=False) as bar:
+        task = bar.add_task(f"decoding {os.path.basename(path)}", total=size)
+        yield lambda done: bar.update(task, completed=done)
+
+
+def _isatty(stream: object) -> bool:
+    isatty = getattr(stream, "isatty", None)
+    try:
+        return bool(isatty and isatty())
+    except (OSError, ValueError):
+        return False

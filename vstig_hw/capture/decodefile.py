@@ -7,6 +7,7 @@ Every other capture type goes record by record through the framings.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from typing import IO, Any
 
@@ -15,20 +16,24 @@ from ..values import ValueType
 from . import candump
 from .decoded import CSV_HEADER, Decoder, as_csv, as_json, as_text, default_framings
 from .fastlog import chunk_to_jsonl
-from .files import read_capture
+from .files import file_position, read_capture
 from .records import CaptureError
 from .serial_log import is_serial_capture
 
 __all__ = ["FORMATS", "decode_file"]
 
 FORMATS = {"text": as_text, "jsonl": as_json, "csv": as_csv}
+_PROGRESS_EVERY = 4096  # records between progress reports on the record-by-record path
 CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small enough for a smooth progress bar
 
 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
                 skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
                 progress: Callable[[int], None] | None = None) -> tuple[int, Counters, list[CaptureError]]:
-    """Write every message in `path` to `out`; returns (messages, drops by reason, bad lines skipped)."""
+    """Write every message in `path` to `out`; returns (messages, drops by reason, bad lines skipped).
+
+    `progress` is told, now and then, how many bytes of the file were read so far (every format).
+    """
     formatter = FORMATS[fmt]
     decoder = Decoder(default_framings(id_base, extended))
     bad: list[CaptureError] = []
@@ -40,10 +45,15 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
         drops.update(decoder.drops())
         return count, drops, bad
     count = 0
-    for record in read_capture(path, skip_bad, bad):
+    reading: list[IO[Any]] = []
+    for number, record in enumerate(read_capture(path, skip_bad, bad, reading.append)):
         for decoded in decoder.decode(record):
             out.write(formatter(decoded, value_type) + "\n")
             count += 1
+        if progress and number % _PROGRESS_EVERY == 0 and reading:
+            progress(file_position(reading[0]) or 0)
+    if progress and reading:
+        progress(os.path.getsize(path))
     return count, decoder.drops(), bad
 
 
@@ -61,6 +71,7 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
     fast_drops: dict[str, int] = {}
     count = 0
     line_no = 1
+    done = 0
     tail = b""
     raw_out: Any = getattr(out, "buffer", None)
     with open(path, "rb") as file:
@@ -86,8 +97,9 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
                 else:
                     count += _slow(path, chunk, line_no, out, decoder, value_type, skip_bad, bad)
                 line_no += lines
+                done += len(chunk)
                 if progress:
-                    progress(len(chunk))
+                    progress(done)
             if not block:
                 break
     return count, Counters(fast_drops)

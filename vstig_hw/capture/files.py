@@ -9,9 +9,9 @@ serial header, then by extension.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Protocol
+from typing import IO, Any, Protocol
 
 import can
 
@@ -19,7 +19,7 @@ from .candump import read_candump
 from .records import CAN_FRAMING, CaptureError, Record
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
 
-__all__ = ["CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "read_capture", "rotated_name"]
+__all__ = ["CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "file_position", "read_capture", "rotated_name"]
 
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
 _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
@@ -69,6 +69,14 @@ class CanCaptureWriter:
         self.writer.stop()
 
 
+def file_position(file: IO[Any]) -> int | None:
+    """How many bytes of the file on disk were read so far (compressed bytes for .gz); None for a pipe."""
+    try:
+        return os.lseek(file.fileno(), 0, os.SEEK_CUR)
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
 def rotated_name(path: str, index: int) -> str:
     """capture.log, capture_001.log, capture_002.log... (the extension stays last, so formats still match)."""
     if index == 0:
@@ -110,23 +118,32 @@ class RotatingCapture:
         self._writer.close()
 
 
-def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
-    """Every record of a capture: ours (serial), candump logs, or any python-can format."""
+def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+                 opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
+    """Every record of a capture: ours (serial), candump logs, or any python-can format.
+
+    `opened` is handed the file being read once it is open, so a caller can tell how far reading got
+    (`file_position`).
+    """
     if not os.path.isfile(path):
         raise CaptureError(path, None, "no such file")
     if is_serial_capture(path):
-        yield from read_serial_capture(path, skip_bad, bad)
+        yield from read_serial_capture(path, skip_bad, bad, opened)
         return
     suffix = _suffix(path)
     if suffix in (".log", ".log.gz"):
-        yield from read_candump(path, skip_bad, bad)
+        yield from read_candump(path, skip_bad, bad, opened)
         return
     if suffix not in CAN_EXTENSIONS:
         raise CaptureError(path, None, f"unknown capture type {suffix or '(no extension)'!r}: expected a "
                            f"serial capture or one of {', '.join(CAN_EXTENSIONS)}")
     options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}
     try:
-        for frame in can.LogReader(path, **options):
+        reader = can.LogReader(path, **options)
+        file = getattr(reader, "file", None)  # python-can's readers keep the open file there
+        if opened and file is not None:
+            opened(file)
+        for frame in reader:
             yield Record(frame.timestamp, str(frame.channel or "can"), CAN_FRAMING, frame)
     except CaptureError:
         raise

@@ -11,8 +11,8 @@ byte for byte.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
-from typing import IO
+from collections.abc import Callable, Iterator
+from typing import IO, Any
 
 from .records import CaptureError, Record, parse_lines
 
@@ -59,9 +59,12 @@ def parse_line(path: str, number: int, line: str) -> Record | None:
     return Record(float(stamp), link, framing, bytes.fromhex(data), direction)
 
 
-def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+                        opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
     """Records in file order; a malformed line raises CaptureError, or with `skip_bad` is collected in `bad`."""
     with open(path, encoding="utf-8", errors="replace") as file:
+        if opened:
+            opened(file)
         yield from parse_lines(path, file, parse_line, skip_bad, bad)
 
 
