@@ -45,8 +45,9 @@ def test_progress_advances_to_the_end_for_every_format(tmp_path: Path, name: str
 
 def test_the_bar_goes_to_a_terminal_stderr_and_never_into_the_output(tmp_path: Path) -> None:
     log = tmp_path / "big.log"
-    log.write_text("".join(f"({1700000000 + i / 1000:.6f}) can0 6{i % 100:02X}#00{i % 100:02X}0001{i % 250 + 1:04X}0007\n"
-                           for i in range(40_000)))
+    lines = (f"({1700000000 + i / 1000:.6f}) can0 6{i % 100:02X}#00{i % 100:02X}0001{i % 250 + 1:04X}0007\n"
+             for i in range(40_000))
+    log.write_text("".join(lines))
     assert log.stat().st_size > 1 << 20
     quiet = subprocess.run([VSTIG, "decode", str(log), "--format", "csv"], capture_output=True, timeout=120,
                            check=True)
