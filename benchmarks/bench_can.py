@@ -14,7 +14,8 @@ import can
 
 from vstig_hw import Stigmergy
 from vstig_hw.engine import larger_value_wins
-from vstig_hw.framing.can import CanFraming, CanIdScheme, can_link
+from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.links.can import can_link
 
 from .bench_wire import realistic_mix
 from .registry import Result, benchmark, rate

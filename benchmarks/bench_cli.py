@@ -197,8 +197,8 @@ def gateway_latency() -> Iterator[Result]:
     import multiprocessing
 
     from vstig_hw.gateway import Node, favour_latency
-    from vstig_hw.links import can_framing_for
-    from vstig_hw.linkspec import parse
+    from vstig_hw.links.can import can_framing_for
+    from vstig_hw.links.spec import parse
 
     rate_hz, count = 5000, 10_000
     fork = multiprocessing.get_context("fork")

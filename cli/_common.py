@@ -8,8 +8,8 @@ from typing import Any
 import click
 
 from vstig_hw.gateway import Node, stop_on_signals
-from vstig_hw.link import Link
-from vstig_hw.linkspec import LinkSpec
+from vstig_hw.links import Link
+from vstig_hw.links.spec import LinkSpec
 
 
 def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool = False) -> list[Link[Any]]:

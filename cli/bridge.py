@@ -8,7 +8,7 @@ import click
 
 from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, favour_latency
-from vstig_hw.linkspec import LinkSpec
+from vstig_hw.links.spec import LinkSpec
 
 from ._common import build_links, print_counters, run_until_stopped
 from .errors import LINK, reports_errors

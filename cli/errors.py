@@ -15,8 +15,8 @@ from typing import Any, TypeVar
 
 import click
 
-from vstig_hw import linkspec
 from vstig_hw.capture.records import CaptureError
+from vstig_hw.links import spec as linkspec
 from vstig_hw.transports.base import TransportError, one_line
 
 F = TypeVar("F", bound=Callable[..., Any])

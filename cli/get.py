@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from vstig_hw.gateway import Node
-from vstig_hw.linkspec import LinkSpec
+from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 from vstig_hw.wire import KEY_MAX
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from vstig_hw.linkspec import EXAMPLES, GRAMMAR
+from vstig_hw.links.spec import EXAMPLES, GRAMMAR, NOTES
 
 
 @click.command()
@@ -17,5 +17,6 @@ def command() -> None:
     for examples in EXAMPLES.values():
         for example in examples:
             click.echo(f"  {example}")
-    click.echo("\nThe query after the last '?' is ours; keys we do not know stay with a pyserial URL "
-               "(socket://, rfc2217://). Defaults: baud=115200, framing=cobs8; kilobot-ohc runs at 38400.")
+    click.echo("\nNotes:")
+    for note in NOTES.values():
+        click.echo(f"  {note}")

@@ -7,7 +7,7 @@ import time
 import click
 
 from vstig_hw.gateway import Node
-from vstig_hw.linkspec import LinkSpec
+from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, to_raw
 from vstig_hw.wire import KEY_MAX
 

@@ -9,8 +9,8 @@ import click
 from vstig_hw.capture.files import CAN_EXTENSIONS, RotatingCapture
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.gateway import Mode, Node
-from vstig_hw.link import Link
-from vstig_hw.linkspec import CanSpec, LinkSpec
+from vstig_hw.links import Link
+from vstig_hw.links.spec import CanSpec, LinkSpec
 
 from ._common import build_links, print_counters, run_until_stopped
 from .errors import LINK, reports_errors

@@ -10,8 +10,8 @@ import click
 
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.gateway.swarmview import SwarmView
-from vstig_hw.link import Heard
-from vstig_hw.linkspec import LinkSpec
+from vstig_hw.links import Heard
+from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ._common import build_links, print_counters, run_until_stopped

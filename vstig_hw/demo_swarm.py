@@ -29,8 +29,8 @@ from .counters import Counters
 from .engine import Stigmergy, larger_value_wins
 from .framing import make_serial_framing
 from .gateway import Node
-from .link import Link
-from .linkspec import CanSpec, SerialSpec
+from .links.link import Link
+from .links.spec import CanSpec, SerialSpec
 
 __all__ = ["DemoConfig", "DemoReport", "run_demo"]
 
@@ -131,7 +131,7 @@ class CanRobots:
     def __init__(self, medium: Medium, channel: str, drop: float, rng: random.Random) -> None:
         import can
 
-        from .links import can_framing_for
+        from .links.can import can_framing_for
 
         self.medium, self.drop, self.rng = medium, drop, rng
         self.buses = [can.Bus(interface="virtual", channel=channel) for _ in medium.robots]

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vstig_hw.linkspec import EXAMPLES, CanSpec, SerialSpec, parse
+from vstig_hw.links.spec import EXAMPLES, CanSpec, SerialSpec, parse
 
 
 def test_can_specs() -> None:
@@ -18,6 +18,9 @@ def test_can_specs() -> None:
     assert spec.name == "dev_ttyACM0"
     spec = parse("can:socketcan:can0?fd=1&id_base=0x18000000&extended=1")
     assert spec == CanSpec("socketcan", "can0", fd=True, id_base=0x18000000, extended=True)
+    spec = parse("can:socketcan:can0?extended=1&stigmergy=0x2a")
+    assert spec == CanSpec("socketcan", "can0", extended=True, stigmergy=42)
+    assert parse("can:virtual:lab?filter=0") == CanSpec("virtual", "lab", kernel_filter=False)
 
 
 def test_serial_specs() -> None:
@@ -26,6 +29,8 @@ def test_serial_specs() -> None:
     spec = parse("serial:socket://localhost:7000?framing=epuck4")
     assert spec == SerialSpec("socket://localhost:7000", 115200, "epuck4")
     assert spec.name == "localhost:7000"
+    spec = parse("serial:/dev/ttyUSB1?framing=epuck4&expiry_ticks=5")
+    assert spec == SerialSpec("/dev/ttyUSB1", 115200, "epuck4", expiry_ticks=5)
 
 
 def test_url_keeps_its_own_options() -> None:
@@ -57,6 +62,11 @@ def test_every_documented_example_parses() -> None:
         ("can:virtual:lab?id_base=0x800", "id_base=0x800 is outside"),
         ("can:vir tual:lab", "interface 'vir tual'"),
         ("can:virtual:lab?bitrate", "parameter 'bitrate' needs a value"),
+        ("serial:/dev/ttyUSB0?expiry_ticks=5", "expiry_ticks is an epuck4 option"),
+        ("serial:/dev/ttyUSB0?framing=epuck4&expiry_ticks=0", "expiry_ticks=0 is outside 1..254"),
+        ("can:virtual:lab?filter=no", "filter='no' must be 0 or 1"),
+        ("can:virtual:lab?stigmergy=2", "stigmergy=2 needs 29-bit IDs (extended=1)"),
+        ("can:virtual:lab?extended=1&stigmergy=256", "stigmergy=256 is outside 0..255"),
     ],
 )
 def test_bad_specs_name_the_bad_part_and_show_an_example(spec: str, names: str) -> None:
@@ -80,3 +90,11 @@ def test_fuzz_only_value_error(spec: str) -> None:
 def test_fuzz_after_a_valid_prefix(prefix: str, tail: str) -> None:
     with contextlib.suppress(ValueError):
         parse(prefix + tail)
+
+
+def test_spec_options_reach_the_link() -> None:
+    """expiry_ticks goes to the epuck4 reassembler; filter=0 leaves the CAN bus without acceptance filters."""
+    serial = parse("serial:/dev/ttyUSB1?framing=epuck4&expiry_ticks=5").build()
+    assert serial.framing.reassembler.expiry_ticks == 5  # type: ignore[attr-defined]
+    assert "can_filters" not in parse("can:virtual:x?filter=0").build().transport._bus_kwargs  # type: ignore[attr-defined]
+    assert "can_filters" in parse("can:virtual:x").build().transport._bus_kwargs  # type: ignore[attr-defined]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from vstig_hw import Message, Op
 from vstig_hw.gateway.swarmview import SwarmView
-from vstig_hw.link import Heard
+from vstig_hw.links import Heard
 
 
 def heard(op: Op, value: int, ts: int, robot: int, sender: int | None, t: float = 1.0) -> Heard:

@@ -14,8 +14,8 @@ import can
 import pytest
 
 from vstig_hw import Message, Op, Stigmergy
-from vstig_hw.framing.can import can_link
-from vstig_hw.link import Link
+from vstig_hw.links import Link
+from vstig_hw.links.can import can_link
 
 _ACK = {"t": b"z\r", "T": b"Z\r"}  # what CANable/Lawicel adapters answer to a transmit
 

@@ -10,8 +10,8 @@ import pytest
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.engine import larger_value_wins
-from vstig_hw.framing.can import can_link
-from vstig_hw.link import Link
+from vstig_hw.links import Link, parse
+from vstig_hw.links.can import can_link
 from vstig_hw.transports.base import TransportError
 
 _channels = itertools.count()
@@ -102,3 +102,54 @@ def test_a_bus_that_dies_underneath_is_reopened_and_traffic_resumes() -> None:
     finally:
         ours.close()
         peer.shutdown()
+
+
+@pytest.mark.parametrize(
+    ("first", "second"),
+    [("extended=1&stigmergy=1", "extended=1&stigmergy=2"),  # 29-bit: the ID's stigmergy field
+     ("id_base=0x200", "id_base=0x400")],                    # 11-bit: one base per stigmergy
+)
+def test_two_stigmergies_share_one_bus_without_crosstalk(first: str, second: str) -> None:
+    """Links built from specs: each hears only its own stigmergy, and counts the other's frames."""
+    channel = _fresh_channel()
+    links = [parse(f"can:virtual:{channel}?{query}").build(robot_id=robot)
+             for query, robot in ((first, 5), (second, 6), (first, 7), (second, 8))]
+    for link in links:
+        link.open()
+    try:
+        a1, b1, a2, b2 = links
+        a1.send(Message(Op.PUT, 1, 100, 1, 5))
+        b1.send(Message(Op.PUT, 1, 200, 1, 6))
+        heard: dict[int, list[Message]] = {7: [], 8: []}
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and not (heard[7] and heard[8]):
+            heard[7] += [h.message for h in a2.receive(0.01)]
+            heard[8] += [h.message for h in b2.receive(0.01)]
+        time.sleep(0.05)  # anything crossing over would have arrived by now
+        heard[7] += [h.message for h in a2.receive(0.01)]
+        heard[8] += [h.message for h in b2.receive(0.01)]
+        assert [m.value for m in heard[7]] == [100]
+        assert [m.value for m in heard[8]] == [200]
+    finally:
+        for link in links:
+            link.close()
+
+
+def test_filter_off_lets_foreign_ids_in_and_counts_them() -> None:
+    """filter=0: the acceptance filter is off, so a foreign ID reaches the framing as drop_unknown_id."""
+    channel = _fresh_channel()
+    ours = parse(f"can:virtual:{channel}?filter=0").build(robot_id=1)
+    stranger = can.Bus(interface="virtual", channel=channel)
+    ours.open()
+    try:
+        stranger.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=bytes(8)))  # not our scheme
+        stranger.send(can.Message(arbitration_id=0x72A, is_extended_id=False, data=bytes.fromhex("8001000200030004")))
+        heard = []
+        deadline = time.monotonic() + 10
+        while not heard and time.monotonic() < deadline:
+            heard = ours.receive(0.05)
+        assert [h.message for h in heard] == [Message(Op.GET, 1, 2, 3, 4)]
+        assert ours.stats()["rx"] == 2 and ours.stats()["drop_unknown_id"] == 1
+    finally:
+        ours.close()
+        stranger.shutdown()

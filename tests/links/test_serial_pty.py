@@ -19,8 +19,8 @@ from serial_robot import OhcReceiver, PtyRobot, decode_stream, encode_for, epuck
 
 from vstig_hw import Message, Op
 from vstig_hw.framing import TransmitOnlyError
-from vstig_hw.link import Link
-from vstig_hw.serial_link import serial_link
+from vstig_hw.links import Link
+from vstig_hw.links.serial import serial_link
 from vstig_hw.transports.base import TransportError
 from vstig_hw.transports.serial import SerialTransport
 

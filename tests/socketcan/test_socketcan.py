@@ -24,8 +24,9 @@ import pytest
 from can_vectors import FrameVector, load
 
 from vstig_hw import Message, Op, encode
-from vstig_hw.framing.can import CanFraming, CanIdScheme, can_link
-from vstig_hw.link import Link
+from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.links import Link
+from vstig_hw.links.can import can_link
 from vstig_hw.transports.base import TransportError
 
 IN_UML = os.environ.get("VSTIG_IN_UML") == "1"
@@ -164,6 +165,15 @@ def candump_ready(tmp_path: Path) -> Iterator[Candump]:
     finally:
         if dump.proc.poll() is None:
             dump.stop()
+
+
+def test_fd_flags_digit_is_written_1_and_logged_5_as_spec_says(candump_ready: Candump) -> None:
+    """SPEC 6.5.5 'FD notation': cansend's `607##1...` is the frame candump -L prints as `607##5...`."""
+    data = "0001000A000100070002001400010007"
+    _cansend(FD, f"607##1{data}")
+    candump_ready.wait_for(FD, f"607##1{data}")
+    raw = [line.split()[2] for line in candump_ready.seen if len(line.split()) == 3 and line.split()[1] == FD]
+    assert f"607##5{data}" in raw, raw
 
 
 def test_our_frames_show_up_in_candump_with_the_spec_ids_and_bytes(candump_ready: Candump) -> None:

@@ -34,7 +34,7 @@ FramingFactory = Callable[[Record], Any]
 
 def default_framings(id_base: int | None = None, extended: bool = False) -> FramingFactory:
     from ..framing import make_serial_framing
-    from ..links import can_framing
+    from ..links.can import can_framing
 
     def make(record: Record) -> Any:
         if record.framing == CAN_FRAMING:

@@ -60,7 +60,7 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
 def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: ValueType, skip_bad: bool,
                     bad: list[CaptureError], id_base: int | None,
                     progress: Callable[[int], None] | None) -> tuple[int, Counters]:
-    from ..links import can_framing
+    from ..links.can import can_framing
 
     scheme = can_framing(id_base, False).scheme
 

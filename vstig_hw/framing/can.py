@@ -27,8 +27,6 @@ from typing import Any
 import can
 
 from ..counters import Counters
-from ..link import Link
-from ..transports.can import CanTransport
 from ..wire import GET_BIT, MESSAGE_SIZE, Message, Op, decode_many, encode
 
 __all__ = [
@@ -38,7 +36,6 @@ __all__ = [
     "FD_BATCH_SIZES",
     "CanFraming",
     "CanIdScheme",
-    "can_link",
 ]
 
 BASES_11BIT = (0x000, 0x200, 0x400, 0x600)
@@ -196,29 +193,3 @@ class CanFraming:
     def tick(self) -> None:
         """Nothing to expire: every CAN frame is complete in itself."""
 
-
-def can_link(
-    interface: str,
-    channel: str,
-    *,
-    robot_id: int,
-    bitrate: int | None = None,
-    fd: bool = False,
-    id_base: int | None = None,
-    extended: bool = False,
-    stigmergy: int = 0,
-    name: str | None = None,
-    **bus_options: Any,
-) -> Link[can.Message]:
-    """A CAN link in one call (not yet open: call `.open()`).
-
-    `interface`/`channel`/`bitrate` go to python-can unchanged (socketcan vcan0,
-    slcan /dev/ttyACM0, pcan PCAN_USBBUS1, virtual ...); `bus_options` too (e.g.
-    `sleep_after_open=0` for slcan). The transport's kernel/hardware filters pass
-    only this scheme's IDs. Raises ValueError for a bad id_base/stigmergy/robot_id.
-    """
-    scheme = CanIdScheme(extended=extended, base=id_base, stigmergy=stigmergy)
-    framing = CanFraming(scheme, sender=robot_id, fd=fd)
-    transport = CanTransport(interface, channel, bitrate=bitrate, fd=fd, can_filters=scheme.can_filters(),
-                             **bus_options)
-    return Link(name or f"{interface}:{channel}", transport, framing)

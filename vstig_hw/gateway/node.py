@@ -29,7 +29,7 @@ from typing import Any
 from ..counters import Counters
 from ..engine import ConflictResolver, Stigmergy
 from ..framing.kilobot_ohc import TransmitOnlyError
-from ..link import Heard, Link
+from ..links.link import Heard, Link
 from .outlet import Outlet
 from .readers import LinkReaders
 

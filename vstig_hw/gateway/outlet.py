@@ -20,7 +20,7 @@ from collections import deque
 from typing import Any
 
 from ..counters import Counters
-from ..link import Link
+from ..links.link import Link
 from ..outqueue import OutQueue
 from ..wire import Message
 

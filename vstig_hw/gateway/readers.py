@@ -12,7 +12,7 @@ import threading
 import time
 from typing import Any
 
-from ..link import Link
+from ..links.link import Link
 
 __all__ = ["Arrival", "LinkReaders"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..link import Heard
+from ..links.link import Heard
 from ..timestamps import is_newer
 from ..wire import Op
 

@@ -6,10 +6,10 @@ import time
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from .counters import Counters
-from .framing.base import Framing
-from .transports.base import Transport
-from .wire import Message
+from ..counters import Counters
+from ..framing.base import Framing
+from ..transports.base import Transport
+from ..wire import Message
 
 Unit = TypeVar("Unit")
 

@@ -1,15 +1,18 @@
-"""One call to a serial Link: `serial_link("/dev/ttyUSB0", "epuck4")`."""
+"""Serial links: one call to a Link, `serial_link("/dev/ttyUSB0", "epuck4")`."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from .framing import make_serial_framing
+from ..framing import make_serial_framing
+from ..transports.serial import SerialTransport
 from .link import Link
-from .transports.serial import SerialTransport
 
-__all__ = ["serial_link"]
+if TYPE_CHECKING:
+    from .spec import SerialSpec
+
+__all__ = ["serial_link", "serial_link_from_spec"]
 
 
 def serial_link(port: str, framing: str = "cobs8", baud: int | None = None, *, name: str | None = None,
@@ -29,3 +32,9 @@ def serial_link(port: str, framing: str = "cobs8", baud: int | None = None, *, n
     if connect:
         link.open()
     return link
+
+
+def serial_link_from_spec(spec: SerialSpec, name: str) -> Link[Any]:
+    """A serial link never names its sender, so unlike CAN it needs no robot id."""
+    options: dict[str, Any] = {} if spec.expiry_ticks is None else {"expiry_ticks": spec.expiry_ticks}
+    return serial_link(spec.port, spec.framing, spec.baud, name=name, connect=False, **options)

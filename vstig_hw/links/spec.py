@@ -2,8 +2,8 @@
 
 Grammar (one parser for every command)::
 
-    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1]
-    serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot]
+    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1&stigmergy=N&filter=0]
+    serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]
     kilobot-ohc:<port or pyserial URL>
 
 The query after the last `?` is ours. A pyserial URL (`socket://h:7000`,
@@ -24,23 +24,37 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .link import Link
 
-__all__ = ["EXAMPLES", "GRAMMAR", "CanSpec", "LinkSpec", "SerialSpec", "parse"]
+__all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "CanSpec", "LinkSpec", "SerialSpec", "parse"]
 
 SERIAL_FRAMINGS = ("cobs8", "epuck4", "kilobot")
 DEFAULT_BAUD = 115200
 OHC_BAUD = 38400  # the Kilobot overhead controller's fixed rate
 
 GRAMMAR = (
-    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1]",
-    "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot]",
+    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1&stigmergy=N&filter=0]",
+    "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]",
     "kilobot-ohc:<port or pyserial URL>",
 )
 EXAMPLES = {
     "can": ("can:socketcan:vcan0", "can:virtual:lab", "can:slcan:/dev/ttyACM0?bitrate=500000",
-            "can:socketcan:can0?fd=1&id_base=0x18000000&extended=1"),
+            "can:socketcan:can0?fd=1&id_base=0x18000000&extended=1",
+            "can:socketcan:can0?extended=1&stigmergy=2", "can:socketcan:can0?filter=0"),
     "serial": ("serial:/dev/ttyUSB0?baud=115200", "serial:socket://localhost:7000?framing=epuck4",
-               "serial:/dev/rfcomm0?framing=kilobot"),
+               "serial:/dev/rfcomm0?framing=kilobot",
+               "serial:/dev/ttyUSB1?framing=epuck4&expiry_ticks=5"),
     "kilobot-ohc": ("kilobot-ohc:/dev/ttyUSB0",),
+}
+# One line per kind for `vstig links`: what the options mean beyond the grammar.
+NOTES = {
+    "can": "can: 11-bit IDs (default base 0x600) keep stigmergies apart by id_base (0x000, 0x200, 0x400, "
+           "0x600); 29-bit IDs (extended=1) carry stigmergy=0..255 in the ID. Each link hears only its own. "
+           "filter=0 turns the kernel/adapter acceptance filter off, so foreign IDs reach vstig-hw and are "
+           "counted as drop_unknown_id (a conformance check; costs CPU on a busy bus).",
+    "serial": "serial: the query after the last '?' is ours; keys we do not know stay with a pyserial URL "
+              "(socket://, rfc2217://). Defaults: baud=115200, framing=cobs8. A serial link carries one "
+              "stigmergy: its framings have no stigmergy field. epuck4's expiry_ticks (default 3) is how many "
+              "control periods a message's three words may take to arrive (firmware_spec/SPEC.md 6.2.2).",
+    "kilobot-ohc": "kilobot-ohc: transmit only, at the overhead controller's fixed 38400 baud.",
 }
 _IFACE = re.compile(r"[A-Za-z0-9_]+\Z")
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9._:-]+")
@@ -54,6 +68,8 @@ class CanSpec:
     fd: bool = False
     id_base: int | None = None
     extended: bool = False
+    stigmergy: int = 0
+    kernel_filter: bool = True  # False: every frame reaches us, and foreign IDs count as drop_unknown_id
 
     @property
     def kind(self) -> str:
@@ -66,7 +82,7 @@ class CanSpec:
 
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` is the sender field a CAN link transmits under."""
-        from .links import can_link_from_spec
+        from .can import can_link_from_spec
 
         return can_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
 
@@ -76,6 +92,7 @@ class SerialSpec:
     port: str
     baud: int = DEFAULT_BAUD
     framing: str = "cobs8"  # cobs8 | epuck4 | kilobot | kilobot-ohc
+    expiry_ticks: int | None = None  # epuck4 only: control periods a fragment waits for the rest
 
     @property
     def kind(self) -> str:
@@ -88,7 +105,7 @@ class SerialSpec:
 
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` and `listen_only` matter only to CAN (same signature as CanSpec)."""
-        from .links import serial_link_from_spec
+        from .serial import serial_link_from_spec
 
         return serial_link_from_spec(self, name or self.name)
 
@@ -160,13 +177,18 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         raise _bad(spec, "expected can:<interface>:<channel>", "can")
     if not _IFACE.match(interface):
         raise _bad(spec, f"interface {interface!r} is not a python-can interface name", "can")
-    channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended"), False)
+    channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended", "stigmergy", "filter"),
+                             False)
     if not channel or any(ch in channel for ch in "\0\n\r "):
         raise _bad(spec, f"channel {channel!r} is missing or has spaces", "can")
     extended = _flag(spec, "can", "extended", params["extended"]) if "extended" in params else False
     id_base = None
     if "id_base" in params:
         id_base = _int(spec, "can", "id_base", params["id_base"], 0, 0x1FFFFFFF if extended else 0x7FF)
+    stigmergy = _int(spec, "can", "stigmergy", params["stigmergy"], 0, 0xFF) if "stigmergy" in params else 0
+    if stigmergy and not extended:
+        raise _bad(spec, f"stigmergy={stigmergy} needs 29-bit IDs (extended=1); on 11-bit IDs give each "
+                         "stigmergy its own id_base (0x000, 0x200, 0x400, 0x600)", "can")
     return CanSpec(
         interface=interface,
         channel=channel,
@@ -174,16 +196,23 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         fd=_flag(spec, "can", "fd", params["fd"]) if "fd" in params else False,
         id_base=id_base,
         extended=extended,
+        stigmergy=stigmergy,
+        kernel_filter=_flag(spec, "can", "filter", params["filter"]) if "filter" in params else True,
     )
 
 
 def _parse_serial(spec: str, body: str) -> SerialSpec:
-    port, params = _query(spec, body, "serial", ("baud", "framing"), "://" in body)
+    port, params = _query(spec, body, "serial", ("baud", "framing", "expiry_ticks"), "://" in body)
     framing = params.get("framing", "cobs8")
     if framing not in SERIAL_FRAMINGS:
         raise _bad(spec, f"framing={framing!r} is not one of {'|'.join(SERIAL_FRAMINGS)}", "serial")
     baud = _int(spec, "serial", "baud", params["baud"], 1, 100_000_000) if "baud" in params else DEFAULT_BAUD
-    return SerialSpec(port=_port(spec, "serial", port), baud=baud, framing=framing)
+    expiry_ticks = None
+    if "expiry_ticks" in params:
+        if framing != "epuck4":
+            raise _bad(spec, f"expiry_ticks is an epuck4 option, not one of framing={framing}", "serial")
+        expiry_ticks = _int(spec, "serial", "expiry_ticks", params["expiry_ticks"], 1, 254)
+    return SerialSpec(port=_port(spec, "serial", port), baud=baud, framing=framing, expiry_ticks=expiry_ticks)
 
 
 def _parse_ohc(spec: str, body: str) -> SerialSpec:
