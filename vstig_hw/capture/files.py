@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any, Protocol
 
@@ -19,9 +20,11 @@ from .candump import read_candump
 from .records import CAN_FRAMING, CaptureError, Record
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
 
-__all__ = ["CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "file_position", "read_capture", "rotated_name"]
+__all__ = ["APPENDABLE", "CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "file_position", "read_capture",
+           "rotated_name"]
 
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
+APPENDABLE = (".log", ".blf", ".csv", ".log.gz")  # the CAN formats python-can's writers can add to
 _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
 
 
@@ -40,11 +43,16 @@ def _suffix(path: str) -> str:
 class CanCaptureWriter:
     """python-can's writer for the extension; frames keep their own timestamps, channel = link name."""
 
-    def __init__(self, path: str) -> None:
-        if _suffix(path) not in CAN_EXTENSIONS:
+    def __init__(self, path: str, append: bool = False) -> None:
+        suffix = _suffix(path)
+        append = append and os.path.isfile(path) and os.path.getsize(path) > 0  # nothing there: a new file
+        if suffix not in CAN_EXTENSIONS:
             raise ValueError(f"{path}: CAN captures are {', '.join(CAN_EXTENSIONS)} (chosen by extension)")
+        if append and suffix not in APPENDABLE:
+            raise ValueError(f"{path}: cannot append to a {suffix} capture (python-can can add to "
+                             f"{', '.join(APPENDABLE)})")
         self.path = path
-        self.writer: Any = can.Logger(path)
+        self.writer: Any = can.Logger(path, append=True) if append else can.Logger(path)
 
     def write(self, record: Record) -> None:
         frame: can.Message = record.unit
@@ -86,36 +94,54 @@ def rotated_name(path: str, index: int) -> str:
 
 
 class RotatingCapture:
-    """Writes records to `path`, starting a new numbered file whenever one exceeds `max_bytes`."""
+    """Writes records to `path`, starting a new numbered file whenever one exceeds `max_bytes`.
 
-    def __init__(self, path: str, medium: str, max_bytes: int | None = None) -> None:
+    `append` adds to an existing `path` instead of replacing it. Rotation never replaces a file: it
+    moves on to the next numbered name that does not exist yet. A failed write names the file.
+    """
+
+    def __init__(self, path: str, medium: str, max_bytes: int | None = None, append: bool = False) -> None:
         if medium not in ("can", "serial"):
             raise ValueError(f"medium must be can or serial, got {medium!r}")
         self.base, self.medium, self.max_bytes = path, medium, max_bytes
         self.index = 0
         self.files = [path]
         self.records = 0
-        self._writer = self._open(path)
+        self._writer = self._open(path, append)
 
-    def _open(self, path: str) -> CaptureWriter:
-        return CanCaptureWriter(path) if self.medium == "can" else SerialCaptureWriter(path)
+    def _open(self, path: str, append: bool = False) -> CaptureWriter:
+        with self._naming(path):
+            return CanCaptureWriter(path, append) if self.medium == "can" else SerialCaptureWriter(path, append)
+
+    @contextmanager
+    def _naming(self, path: str | None = None) -> Iterator[None]:
+        try:
+            yield
+        except OSError as error:
+            raise CaptureError(path or self.files[-1], None, error.strerror or str(error)) from None
 
     def write(self, record: Record) -> None:
-        self._writer.write(record)
+        with self._naming():
+            self._writer.write(record)
         self.records += 1
         if self.max_bytes and self.records % _SIZE_CHECK_EVERY == 0 and self._writer.size() >= self.max_bytes:
-            self._writer.close()
+            with self._naming():
+                self._writer.close()
             self.index += 1
+            while os.path.lexists(rotated_name(self.base, self.index)):
+                self.index += 1
             path = rotated_name(self.base, self.index)
             self.files.append(path)
             self._writer = self._open(path)
 
     def flush(self) -> None:
         """Push what is written to the file (the recorder does this every tick, so `tail -f` works)."""
-        self._writer.flush()
+        with self._naming():
+            self._writer.flush()
 
     def close(self) -> None:
-        self._writer.close()
+        with self._naming():
+            self._writer.close()
 
 
 def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,

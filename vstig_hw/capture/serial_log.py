@@ -10,6 +10,7 @@ byte for byte.
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Callable, Iterator
 from typing import IO, Any
@@ -28,10 +29,14 @@ def format_line(record: Record) -> str:
 
 
 class SerialCaptureWriter:
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str, append: bool = False) -> None:
         self.path = path
-        self.file: IO[str] = open(path, "w", encoding="utf-8")  # noqa: SIM115 (closed by close())
-        self.file.write(HEADER + "\n")
+        if append and os.path.isfile(path) and os.path.getsize(path) and not is_serial_capture(path):
+            raise CaptureError(path, None, "cannot append: not a serial capture (its first line is not "
+                               f"{HEADER!r})")
+        self.file: IO[str] = open(path, "a" if append else "w", encoding="utf-8")  # noqa: SIM115 (closed by close())
+        if self.file.tell() == 0:
+            self.file.write(HEADER + "\n")
 
     def write(self, record: Record) -> None:
         self.file.write(format_line(record))
