@@ -69,21 +69,30 @@ def _table(path: str, at: float | None, value_type: ValueType) -> None:
 @click.option("--onto", type=LINK, help="Send the capture onto this link with its original timing.")
 @click.option("--speed", type=click.FloatRange(0.001, 1000), default=1.0, show_default=True)
 @click.option("--loop", is_flag=True, help="Start again at the end, until Ctrl-C.")
+@click.option("--skip-gaps", type=click.FloatRange(0.0), metavar="SECONDS",
+              help="Wait at most SECONDS between two units, however long the capture's gap.")
+@click.option("--ignore-timestamps", is_flag=True, help="Send every unit at once, one after the other.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=0, show_default=True,
               help="Sender id for messages re-encoded onto another medium.")
 @click.option("--table", is_flag=True, help="Feed an offline engine instead and print its table.")
 @click.option("--at", type=click.FloatRange(0.0), help="With --table: stop at T seconds after the first record.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
 @reports_errors
-def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, robot_id: int, table: bool,
-            at: float | None, value_type: ValueType) -> None:
+def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, skip_gaps: float | None,
+            ignore_timestamps: bool, robot_id: int, table: bool, at: float | None, value_type: ValueType) -> None:
     """Replay FILE onto a live link, or show what the swarm believed (--table).
+
+    Ctrl-C or SIGTERM stops at once, even in a long gap: nothing is sent after it.
 
     Examples: vstig replay swarm.log --onto can:socketcan:vcan0 --speed 2;  vstig replay radio.cap --table --at 30
     """
     if table == (onto is not None):
         raise click.UsageError("give exactly one of --onto LINK or --table")
     if table:
+        ignored = [name for name, given in (("--loop", loop), ("--skip-gaps", skip_gaps is not None),
+                                            ("--ignore-timestamps", ignore_timestamps)) if given]
+        if ignored:
+            raise click.UsageError(f"{', '.join(ignored)} go with --onto, not --table")
         _table(file, at, value_type)
         return
     if at is not None:
@@ -96,7 +105,8 @@ def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, robot_id
         with stop_on_signals() as stop:
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
-                done = replay(read_capture(file), send, speed=speed, stop=stop)
+                done = replay(read_capture(file), send, speed=speed, stop=stop, skip_gaps=skip_gaps,
+                              ignore_timestamps=ignore_timestamps)
                 click.echo(f"replayed {done.frames} units in {done.took:.3f} s (logged {done.logged:.3f} s)",
                            err=True)
                 if stop.is_set() or done.frames == 0:

@@ -1,0 +1,73 @@
+"""replay onto a real pty: Ctrl-C or SIGTERM in a long gap ends it at once and nothing more is sent."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from peers import PtyPeer, run_vstig, start_vstig, wait_for
+
+from vstig_hw.capture.serial_log import HEADER
+
+
+def _two_units(path: Path, gap: float) -> None:
+    path.write_text(f"{HEADER}\n(1700000000.000000) radio cobs8 rx 0a0b0c\n"
+                    f"({1700000000 + gap:.6f}) radio cobs8 rx 0d0e0f\n")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_in_a_long_gap_stops_at_once_and_sends_nothing_more(tmp_path: Path, sig: int) -> None:
+    capture = tmp_path / "gap.cap"
+    _two_units(capture, gap=3600.0)
+    radio = PtyPeer()
+    try:
+        replayer = start_vstig("replay", str(capture), "--onto", f"serial:{radio.path}")
+        got = b""
+
+        def first_arrived() -> bool:
+            nonlocal got
+            got += radio.read(0.1)
+            return bytes.fromhex("0a0b0c") in got
+
+        wait_for(first_arrived, 30)
+        replayer.send_signal(sig)
+        began = time.monotonic()
+        try:
+            replayer.communicate(timeout=20)
+        except subprocess.TimeoutExpired:
+            replayer.kill()
+            replayer.communicate()
+            pytest.fail(f"replay ignored signal {sig} in a one-hour gap")
+        assert time.monotonic() - began < 20
+        got += radio.read(0.5)
+        assert bytes.fromhex("0d0e0f") not in got
+    finally:
+        radio.close()
+
+
+def test_skip_gaps_and_ignore_timestamps_send_everything_without_the_wait(tmp_path: Path) -> None:
+    capture = tmp_path / "gap.cap"
+    _two_units(capture, gap=3600.0)
+    for option in (["--skip-gaps", "0.2"], ["--ignore-timestamps"]):
+        radio = PtyPeer()
+        try:
+            done = run_vstig("replay", str(capture), "--onto", f"serial:{radio.path}", *option, timeout=60)
+            assert done.returncode == 0, done.stderr
+            got = b""
+            while bytes.fromhex("0d0e0f") not in got:
+                chunk = radio.read(1.0)
+                assert chunk, f"{option}: the second unit never came"
+                got += chunk
+            assert got == bytes.fromhex("0a0b0c0d0e0f")
+        finally:
+            radio.close()
+
+
+def test_options_that_replay_onto_a_link_are_refused_with_table(tmp_path: Path) -> None:
+    capture = tmp_path / "gap.cap"
+    _two_units(capture, gap=1.0)
+    done = run_vstig("replay", str(capture), "--table", "--loop")
+    assert done.returncode == 2 and "--loop go with --onto, not --table" in done.stderr
