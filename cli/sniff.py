@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard
@@ -38,15 +39,18 @@ def _table(view: SwarmView, value_type: ValueType) -> Any:
 @click.argument("link", type=LINK)
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--larger-value-wins", "larger", is_flag=True,
+              help="Settle conflicts as a swarm running the paper's Figure 1 rule does (larger value), "
+                   "instead of the default higher robot id.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
 @reports_errors
-def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float | None) -> None:
+def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, duration: float | None) -> None:
     """Decode LINK's traffic live, per key; passive: never transmits.
 
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
     """
     node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN)
-    view = SwarmView()
+    view = SwarmView(larger_value_wins) if larger else SwarmView()
     node.on_heard.append(view.add)
     if jsonl:
         import json
