@@ -246,3 +246,33 @@ def test_a_deleted_interface_is_reported_and_reconnected_when_it_returns() -> No
     finally:
         link.close()
         subprocess.run(["ip", "link", "delete", "vcan2"], check=False, capture_output=True)
+
+
+def test_frames_the_kernel_drops_are_counted_not_lost_silently() -> None:
+    from vstig_hw.transports.can import CanTransport
+
+    burst = 500
+    transport = CanTransport("socketcan", CLASSIC)
+    transport.open()
+    try:
+        assert transport.bus is not None
+        # The smallest receive queue the kernel allows: a burst we do not read overflows it.
+        transport.bus.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1)
+        got: list[can.Message] = []
+        with can.Bus(interface="socketcan", channel=CLASSIC, receive_own_messages=False) as sender:
+            for i in range(burst):
+                sender.send(can.Message(arbitration_id=0x123, data=i.to_bytes(2, "big"), is_extended_id=False),
+                            timeout=5)
+            while frames := transport.read(0.5):
+                got += frames
+            # The count rides on the next frame received: send one more and read it.
+            sender.send(can.Message(arbitration_id=0x124, data=b"end", is_extended_id=False), timeout=5)
+            deadline = time.monotonic() + 10
+            while not (got and got[-1].arbitration_id == 0x124) and time.monotonic() < deadline:
+                got += transport.read(0.5)
+    finally:
+        transport.close()
+    assert got[-1].arbitration_id == 0x124 and got[-1].timestamp > 1e9  # python-can's own stamps still
+    dropped = transport.counters["kernel_dropped"]
+    assert 0 < dropped and len(got) - 1 + dropped == burst, (len(got), dropped)
+    assert transport.counters["rx"] == len(got)

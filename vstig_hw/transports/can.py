@@ -6,7 +6,8 @@ option go to `can.Bus` as given. Units are `can.Message` frames, passed up as
 received (error frames too, so captures keep them; the framing counts them).
 
 Counters: `rx`, `tx`, `tx_dropped` (device gone or TX queue full), `bus_errors`
-(error frames and failed bus calls), `bus_off`, `lost` (outages) and `reconnects`.
+(error frames and failed bus calls), `bus_off`, `lost` (outages), `reconnects`, and on
+SocketCAN `kernel_dropped` (frames the kernel dropped because our receive queue was full).
 An outage is logged once; the bus is reopened with exponential backoff from
 `read`/`write`, which never raise into the caller's loop.
 """
@@ -22,6 +23,7 @@ import can
 
 from ..counters import Counters
 from .base import TransportError, errno_of, one_line
+from .socketcan_drops import count_kernel_drops
 
 __all__ = ["CanTransport"]
 
@@ -93,7 +95,7 @@ class CanTransport:
 
     def _make_bus(self) -> can.BusABC:
         try:
-            return can.Bus(**self._bus_kwargs)
+            return count_kernel_drops(can.Bus(**self._bus_kwargs), self.counters)
         except can.CanInterfaceNotImplementedError as exc:
             raise TransportError(f"CAN interface {self.interface!r} cannot be used here: {one_line(exc)}") from None
         except (can.CanError, OSError, ValueError, TypeError) as exc:

@@ -1,0 +1,94 @@
+"""SocketCAN's receive-queue drops, which python-can cannot see, counted as `kernel_dropped`.
+
+When a socket's receive queue is full the kernel drops the frame and counts it
+(sk_drops). With SO_RXQ_OVFL set, each frame received afterwards carries that
+running count as ancillary data. python-can's socketcan bus makes room for one
+ancillary record only (the timestamp), so the count never reaches it.
+`count_kernel_drops` wraps such a bus: receiving goes through python-can's own
+`capture_message` (same frames, same timestamps) on a socket view that asks
+for both records and keeps the count. It also enlarges the receive queue, so a
+saturated bus fills it less often (what candump's `-r` does).
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+import struct
+from typing import Any
+
+import can
+
+from ..counters import Counters
+
+__all__ = ["RCVBUF", "count_kernel_drops"]
+
+SO_RXQ_OVFL = 40  # linux/socket.h (asm-generic); Python's socket module does not name it
+SO_RCVBUFFORCE = 33  # as SO_RCVBUF, past net.core.rmem_max (needs CAP_NET_ADMIN)
+RCVBUF = 4 << 20  # bytes of receive queue asked for: ~5,000 queued frames (an skb is ~800 bytes)
+_DROPS = struct.Struct("=I")
+_DROPS_SPACE = socket.CMSG_SPACE(_DROPS.size)
+
+
+class _DropReadingSocket:
+    """The bus's socket, as python-can's `capture_message` uses it, with room for the drop count too."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        self.drops = 0  # the kernel's running count for this socket
+
+    def recvmsg(self, bufsize: int, ancbufsize: int = 0,
+                flags: int = 0) -> tuple[bytes, list[tuple[int, int, bytes]], int, Any]:
+        data, ancillary, msg_flags, address = self.sock.recvmsg(bufsize, ancbufsize + _DROPS_SPACE, flags)
+        kept = []
+        for level, kind, payload in ancillary:
+            if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL:
+                self.drops = _DROPS.unpack_from(payload)[0]
+            else:
+                kept.append((level, kind, payload))
+        return data, kept, msg_flags, address
+
+
+class KernelDropCountingBus:
+    """A python-can socketcan bus whose `recv` also counts what the kernel dropped; all else is the bus's."""
+
+    def __init__(self, bus: Any, counters: Counters, rcvbuf: int = RCVBUF) -> None:
+        self.bus = bus
+        self.counters = counters
+        sock: socket.socket = bus.socket
+        sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, rcvbuf)
+        except OSError:  # not privileged: as much as net.core.rmem_max allows
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+        self._socket = _DropReadingSocket(sock)
+        self._counted = 0
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        from can.interfaces.socketcan.socketcan import capture_message
+
+        try:
+            ready, _, _ = select.select([self._socket.sock], [], [], timeout)
+        except OSError as error:  # the interface went away
+            raise can.CanOperationError(f"Failed to receive: {error.strerror}", error.errno) from error
+        if not ready:
+            return None
+        channel = self.bus.channel
+        message = capture_message(self._socket, get_channel=not channel)  # type: ignore[arg-type]
+        if message is not None and not message.channel and channel:
+            message.channel = channel
+        if self._socket.drops != self._counted:  # the count is 32 bits and wraps
+            self.counters["kernel_dropped"] += (self._socket.drops - self._counted) % (1 << 32)
+            self._counted = self._socket.drops
+        return message
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.bus, name)
+
+
+def count_kernel_drops(bus: can.BusABC, counters: Counters) -> can.BusABC:
+    """`bus` itself unless it is a SocketCAN bus, which is wrapped to count kernel drops in `counters`."""
+    if not isinstance(getattr(bus, "socket", None), socket.socket) or bus.__class__.__name__ != "SocketcanBus":
+        return bus
+    wrapped: Any = KernelDropCountingBus(bus, counters)
+    return wrapped  # type: ignore[no-any-return]
