@@ -77,6 +77,8 @@ def command(robots: int, drop: float, seed: int, step: float, max_steps: int) ->
                     click.echo(f"step {s:3d}: {agreed:3d}/{robots} robots hold {robots}")
 
             report = run_demo(config, line, stop)
+    if stop.is_set():
+        click.echo("interrupted", err=True)
     _report(report)
     if report.converged_at is None and not stop.is_set():
         raise click.ClickException(f"the swarm did not converge in {max_steps} steps")

@@ -10,10 +10,12 @@ from __future__ import annotations
 import contextlib
 import os
 import queue
+import re
 import shutil
 import signal
 import socket
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -274,5 +276,24 @@ def test_frames_the_kernel_drops_are_counted_not_lost_silently() -> None:
         transport.close()
     assert got[-1].arbitration_id == 0x124 and got[-1].timestamp > 1e9  # python-can's own stamps still
     dropped = transport.counters["kernel_dropped"]
-    assert 0 < dropped and len(got) - 1 + dropped == burst, (len(got), dropped)
+    assert dropped > 0 and len(got) - 1 + dropped == burst, (len(got), dropped)
     assert transport.counters["rx"] == len(got)
+
+
+def test_record_on_a_bursting_bus_loses_nothing_silently(tmp_path: Path) -> None:
+    vstig = str(Path(sys.executable).with_name("vstig"))
+    out = tmp_path / "burst.log"
+    record = subprocess.Popen([vstig, "record", f"can:socketcan:{CLASSIC}", "-o", str(out)],
+                              stderr=subprocess.PIPE, text=True)
+    try:
+        assert record.stderr is not None and record.stderr.readline().startswith("recording")
+        subprocess.run(["cangen", CLASSIC, "-g", "0", "-n", "5000", "-I", "601", "-L", "8", "-D", "i", "-p", "100"],
+                       check=True, timeout=120)
+        time.sleep(1.0)
+    finally:
+        record.send_signal(signal.SIGINT)
+        _, summary = record.communicate(timeout=60)
+    assert record.returncode == 0, summary
+    recorded = sum(1 for line in out.read_text().splitlines() if line.strip())
+    dropped = sum(int(n) for n in re.findall(r"(?:kernel|interface)_dropped=(\d+)", summary))
+    assert recorded + dropped == 5000, summary  # every frame is in the file or counted as dropped

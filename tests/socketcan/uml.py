@@ -120,8 +120,13 @@ def _env_script() -> str:
     return "".join(f"export {k}={shlex.quote(v)}\n" for k, v in sorted(env.items()))
 
 
-def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: str = "1G") -> UmlRun:
-    """Boot UML, run `python -m pytest ARGS` in the repo inside it, and collect the result from `workdir`."""
+def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: str = "1G",
+        program: list[str] | None = None) -> UmlRun:
+    """Boot UML, run `python -m pytest ARGS` in the repo inside it, and collect the result from `workdir`.
+
+    `program` runs that command instead of pytest (benchmarks do): its output is `pytest_log`, its
+    exit code `exit_code`.
+    """
     uml = uml_binary()
     if uml is None:
         raise RuntimeError(unavailable_reason())
@@ -130,7 +135,8 @@ def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: s
     (moddir / "lib").mkdir(parents=True, exist_ok=True)
     (moddir / "lib" / "modules").symlink_to(UML_MODULES)
     junit = workdir / "junit.xml"
-    pytest = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", f"--junitxml={junit}", *pytest_args]
+    pytest = program or [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", f"--junitxml={junit}",
+                         *pytest_args]
     (workdir / "env.sh").write_text(_env_script())
     init = workdir / "init.sh"
     init.write_text(_INIT.format(moddir=moddir, out=workdir, repo=shlex.quote(str(REPO)),

@@ -1,4 +1,4 @@
-"""SocketCAN's receive-queue drops, which python-can cannot see, counted as `kernel_dropped`.
+"""What the kernel drops on SocketCAN, which python-can cannot see: `kernel_dropped`, `interface_dropped`.
 
 When a socket's receive queue is full the kernel drops the frame and counts it
 (sk_drops). With SO_RXQ_OVFL set, each frame received afterwards carries that
@@ -8,6 +8,12 @@ ancillary record only (the timestamp), so the count never reaches it.
 `capture_message` (same frames, same timestamps) on a socket view that asks
 for both records and keeps the count. It also enlarges the receive queue, so a
 saturated bus fills it less often (what candump's `-r` does).
+
+A frame can also be dropped before any socket sees it: when the kernel's input
+backlog (net.core.netdev_max_backlog) is full, as on a slow machine under a
+burst. The interface counts those (`rx_dropped`, what `ip -s link` shows);
+`interface_dropped` is how much that count grew while the bus was open
+(every receiver on the interface missed those frames, not only us).
 """
 
 from __future__ import annotations
@@ -15,6 +21,8 @@ from __future__ import annotations
 import select
 import socket
 import struct
+import time
+from pathlib import Path
 from typing import Any
 
 import can
@@ -26,6 +34,7 @@ __all__ = ["RCVBUF", "count_kernel_drops"]
 SO_RXQ_OVFL = 40  # linux/socket.h (asm-generic); Python's socket module does not name it
 SO_RCVBUFFORCE = 33  # as SO_RCVBUF, past net.core.rmem_max (needs CAP_NET_ADMIN)
 RCVBUF = 4 << 20  # bytes of receive queue asked for: ~5,000 queued frames (an skb is ~800 bytes)
+_INTERFACE_POLL_S = 1.0  # how often to read the interface's drop count (a sysfs read)
 _DROPS = struct.Struct("=I")
 _DROPS_SPACE = socket.CMSG_SPACE(_DROPS.size)
 
@@ -63,10 +72,30 @@ class KernelDropCountingBus:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
         self._socket = _DropReadingSocket(sock)
         self._counted = 0
+        self._rx_dropped = Path(f"/sys/class/net/{bus.channel}/statistics/rx_dropped")
+        self._interface_base = self._interface_drops()
+        self._next_poll = time.monotonic() + _INTERFACE_POLL_S
+
+    def _interface_drops(self) -> int | None:
+        try:
+            return int(self._rx_dropped.read_text())
+        except (OSError, ValueError):  # no such interface file (channel "" or gone): nothing to count
+            return None
+
+    def _poll_interface(self) -> None:
+        now = time.monotonic()
+        if now < self._next_poll or self._interface_base is None:
+            return
+        self._next_poll = now + _INTERFACE_POLL_S
+        drops = self._interface_drops()
+        if drops is not None and drops > self._interface_base:
+            self.counters["interface_dropped"] += drops - self._interface_base
+            self._interface_base = drops
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         from can.interfaces.socketcan.socketcan import capture_message
 
+        self._poll_interface()
         try:
             ready, _, _ = select.select([self._socket.sock], [], [], timeout)
         except OSError as error:  # the interface went away
@@ -81,6 +110,11 @@ class KernelDropCountingBus:
             self.counters["kernel_dropped"] += (self._socket.drops - self._counted) % (1 << 32)
             self._counted = self._socket.drops
         return message
+
+    def shutdown(self) -> None:
+        self._next_poll = 0.0
+        self._poll_interface()  # the last count, before the bus goes
+        self.bus.shutdown()
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.bus, name)
