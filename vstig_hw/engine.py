@@ -14,6 +14,15 @@ Where the paper is silent we decide, and say so here:
 * Same timestamp and same robot is the same write: nothing happens, even when
   the value differs (only a robot that restarted and reused its counter can do
   that, and neither copy is more right than the other).
+* A conflict winner that is neither entry (a merge) is a new write of the robot
+  it names, at the next timestamp; the other robots keep that robot's entry.
+  Keeping the local timestamp, as Buzz does, lets two robots hold one
+  (timestamp, robot) with different values, and then never agree.
+* `onconflictlost` fires when the entry we held was our write and the winner is
+  not ours: once per lost write, not again when its echo comes back.
+
+Every difference from Buzz, with the test that pins it, is tabled in
+firmware_spec/DECISIONS.md.
 
 The table stores each entry as the PUT message that carries it, so re-broadcasts
 and answers cost no allocation; `receive` reads messages by their wire words.
@@ -29,7 +38,7 @@ from .outqueue import OutQueue
 from .timestamps import TS_NONE, is_newer, next_timestamp
 from .wire import GET_BIT, KEY_MAX, U16_MAX, Message, Op, check_field
 
-__all__ = ["Entry", "Outcome", "Stigmergy", "higher_robot_wins", "larger_value_wins"]
+__all__ = ["Entry", "Outcome", "Stigmergy", "higher_robot_wins", "larger_value_wins", "sum_merge"]
 
 
 class Entry(NamedTuple):
@@ -62,6 +71,15 @@ def higher_robot_wins(key: int, local: Entry, remote: Entry) -> Entry:
 def larger_value_wins(key: int, local: Entry, remote: Entry) -> Entry:
     """The paper's Figure 1 rule: larger value, then larger robot id."""
     return remote if (remote.value, remote.robot) > (local.value, local.robot) else local
+
+
+def sum_merge(key: int, local: Entry, remote: Entry) -> Entry:
+    """A merging rule: the sum of the values (mod 2**16), named for the higher robot.
+
+    The shape every merging rule needs: the robot it names is one of the two
+    writers, picked by an order on robot ids whichever entry is local.
+    """
+    return Entry((local.value + remote.value) & U16_MAX, local.timestamp, max(local.robot, remote.robot))
 
 
 _new = tuple.__new__
@@ -167,13 +185,33 @@ class Stigmergy:
         elif not isinstance(chosen, tuple) or len(chosen) != 3:
             raise TypeError(f"onconflict must return an Entry(value, timestamp, robot), got {chosen!r}")
         else:
-            # The winner keeps the local timestamp, as Buzz does.
-            winner = Message(Op.PUT, key, chosen[0], local[1], chosen[2])
-        lost = local if (winner[1], winner[3]) == (remote[0], remote[2]) else remote
+            winner = self._merged_winner(key, local, remote, chosen[0], chosen[2])
         self._table[key] = winner
-        self._outbox.push(winner, resolved=True)
-        if self.onconflictlost and lost[2] == self.robot_id and winner[3] != self.robot_id:
-            self.onconflictlost(key, lost)
+        self._outbox.push(winner)
+        # Only the entry we held can be our lost write: the echo of a write that
+        # already lost comes back as the remote, and must not be reported again.
+        if self.onconflictlost and local[2] == self.robot_id and winner[3] != self.robot_id:
+            self.onconflictlost(key, local)
+
+    def _merged_winner(self, key: int, local: Entry, remote: Entry, value: int, robot: int) -> Message:
+        """The entry to store for a winner that may be neither of the two entries.
+
+        A new value (a merge) is a new write of the robot it names: that robot
+        stores it at the next timestamp, so it supersedes both inputs everywhere
+        and no two robots hold one (timestamp, robot) with different values.
+        Every other robot keeps the named robot's own entry until that write comes.
+        """
+        for entry in (local, remote):
+            if (value, robot) == (entry[0], entry[2]):
+                return _as_put(key, value, local[1], robot)
+        if robot == self.robot_id:
+            return Message(Op.PUT, key, value, next_timestamp(local[1]), robot)
+        for entry in (local, remote):
+            if robot == entry[2]:
+                return _as_put(key, entry[0], local[1], robot)
+        raise ValueError(f"onconflict returned {Entry(value, local[1], robot)} for key {key}: a new value must "
+                         f"name this robot ({self.robot_id}) or the writer of one of the two entries "
+                         f"({local[2]} or {remote[2]})")
 
     # -- what to broadcast ---------------------------------------------------
     def drain(self, budget: int | None = None) -> list[Message]:

@@ -24,12 +24,15 @@ class OutQueue:
     def __len__(self) -> int:
         return len(self._puts) + len(self._gets)
 
-    def push(self, msg: Message, resolved: bool = False) -> bool:
-        """Queue `msg` unless a newer one for its key is pending; True if queued.
+    def push(self, msg: Message) -> bool:
+        """Queue `msg` unless a message at least as new for its key is pending; True if queued.
 
-        Same timestamp: a PUT replaces a GET (it says at least as much), and a
-        conflict's `resolved` winner replaces whatever is pending, so the stale
-        loser is never sent.
+        At the same timestamp the pending message stays if it carries the same
+        entry, whatever the ops: a GET of an entry repairs every neighbour a PUT
+        of it does, and also makes newer neighbours answer, while a pending PUT
+        already leaves before every GET. If it carries another entry, that entry
+        lost a conflict since (every message queued carries the sender's entry
+        of the moment), so `msg` replaces it and the loser is never sent.
         """
         head = msg[0]
         key = head & KEY_MAX
@@ -40,8 +43,7 @@ class OutQueue:
             pending = self._gets.get(key)
         if pending is not None:
             if msg[2] == pending[2]:
-                pending_is_get = pending[0] & GET_BIT
-                if not (resolved or (pending_is_get and not is_get)):
+                if msg[1] == pending[1] and msg[3] == pending[3]:
                     return False
             elif not is_newer(msg[2], pending[2]):
                 return False

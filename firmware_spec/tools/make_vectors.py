@@ -240,11 +240,12 @@ def timestamp_vectors() -> dict[str, object]:
 
 
 # --------------------------------------------------------------------------
-# receive.json: the receive rules, one case per row of SPEC.md's table
+# receive.json: the receive rules (one case per row of SPEC.md's table), the queue, onconflictlost
 # --------------------------------------------------------------------------
 # (name, self id, local entry (value, ts, robot) or None, incoming (op, key, value, ts, robot),
 #  outcome, entry after, queued messages). Written by hand; key 4 throughout. Conflicts use the
-#  default rule (higher robot id wins; the winner keeps the local timestamp).
+#  default rule (higher robot id wins; the winner keeps the local timestamp) unless a case says
+#  otherwise (`Case` below); `before` lists the robot's own calls after its entry was set.
 RECEIVE_BY_HAND = [
     ("PUT for an unknown key: store, relay", 1, None, ("PUT", 4, 9, 3, 2),
      "STORED", (9, 3, 2), [("PUT", 4, 9, 3, 2)]),
@@ -285,45 +286,127 @@ RECEIVE_BY_HAND = [
 ]
 
 
+class Case:
+    """A case beyond the table's rows: the robot's own calls first, a named resolver, onconflictlost."""
+
+    def __init__(self, row: tuple[object, ...], before: tuple[str, ...] = (), resolver: str = "higher_robot",
+                 lost: tuple[int, int, int] | None = None) -> None:
+        self.row, self.before, self.resolver, self.lost = row, before, resolver, lost
+
+
+# The outgoing queue (SPEC.md section 5) after the robot's own `get`, and onconflictlost (section 4).
+RECEIVE_MORE_BY_HAND = [
+    Case(("pending GET of our view, older GET heard: the GET stays (a newer neighbour answers it)", 1,
+          (9, 3, 2), ("GET", 4, 0, 1, 8), "ANSWERED", (9, 3, 2), [("GET", 4, 9, 3, 2)]), before=("get",)),
+    Case(("pending GET of our view, empty GET heard: the GET stays", 1,
+          (1, 1, 1), ("GET", 4, 0, 0, 8), "ANSWERED", (1, 1, 1), [("GET", 4, 1, 1, 1)]), before=("get",)),
+    Case(("pending GET, conflict won by the entry it carries: the GET stays", 1,
+          (9, 3, 5), ("PUT", 4, 8, 3, 3), "CONFLICT", (9, 3, 5), [("GET", 4, 9, 3, 5)]), before=("get",)),
+    Case(("pending GET, conflict lost: the winner replaces it", 1,
+          (9, 3, 2), ("PUT", 4, 1, 3, 5), "CONFLICT", (1, 3, 5), [("PUT", 4, 1, 3, 5)]), before=("get",)),
+    Case(("our write loses a conflict: onconflictlost", 1,
+          (9, 1, 1), ("PUT", 4, 3, 1, 5), "CONFLICT", (3, 1, 5), [("PUT", 4, 3, 1, 5)]), lost=(9, 1, 1)),
+    Case(("the echo of our lost write: no second onconflictlost", 1,
+          (3, 1, 5), ("PUT", 4, 9, 1, 1), "CONFLICT", (3, 1, 5), [("PUT", 4, 3, 1, 5)])),
+    Case(("our write wins a conflict: no onconflictlost", 5,
+          (9, 1, 5), ("GET", 4, 3, 1, 1), "CONFLICT", (9, 1, 5), [("PUT", 4, 9, 1, 5)])),
+    Case(("merge named for the other writer: keep its entry, our write is lost", 1,
+          (100, 1, 1), ("PUT", 4, 200, 1, 2), "CONFLICT", (200, 1, 2), [("PUT", 4, 200, 1, 2)]),
+         resolver="sum_merge", lost=(100, 1, 1)),
+    Case(("merge named for us: a new write at the next timestamp", 2,
+          (200, 1, 2), ("PUT", 4, 100, 1, 1), "CONFLICT", (300, 2, 2), [("PUT", 4, 300, 2, 2)]),
+         resolver="sum_merge"),
+    Case(("merge named for us at the wrap: next(65535) = 1", 2,
+          (200, 65535, 2), ("GET", 4, 100, 65535, 1), "CONFLICT", (300, 1, 2), [("PUT", 4, 300, 1, 2)]),
+         resolver="sum_merge"),
+    Case(("merge between two other robots: keep the named robot's entry", 9,
+          (200, 1, 2), ("PUT", 4, 100, 1, 1), "CONFLICT", (200, 1, 2), [("PUT", 4, 200, 1, 2)]),
+         resolver="sum_merge"),
+]
+
+RESOLVERS = {
+    "higher_robot": "keep the entry with the higher robot id (the default rule)",
+    "sum_merge": "a new value: the sum of both values mod 65536, named for the higher robot id",
+}
 ENTRY = ("value", "timestamp", "robot")
 
 
 def receive_vectors() -> dict[str, object]:
     cases = []
-    for name, me, local, (op, key, value, ts, robot), outcome, after, queued in RECEIVE_BY_HAND:
-        assert outcome == _receive_model(local, op, value, ts, robot)[0], name
+    for case in [Case(row) for row in RECEIVE_BY_HAND] + RECEIVE_MORE_BY_HAND:
+        name, me, local, (op, key, value, ts, robot), outcome, after, queued = case.row
+        model = _receive_model(me, local, case.before, case.resolver, (op, value, ts, robot))
+        assert model == (outcome, after, [q[:1] + q[2:] for q in queued], case.lost), (name, model)
         cases.append({
             "name": name,
             "self": me,
             "local": None if local is None else dict(zip(ENTRY, local, strict=True)),
+            "before": list(case.before),
+            "resolver": case.resolver,
             "incoming": pack(op, key, value, ts, robot).hex(),
             "outcome": outcome,
             "entry_after": None if after is None else dict(zip(ENTRY, after, strict=True)),
             "queued": [pack(*q).hex() for q in queued],
+            "conflict_lost": None if case.lost is None else dict(zip(ENTRY, case.lost, strict=True)),
         })
     return {
-        "description": "Receive rules (SPEC.md section 4): a robot `self` holding `local` for the key (or "
-                       "nothing) hears `incoming`. It must reach `outcome`, hold `entry_after`, and queue "
-                       "exactly `queued` (wire hex). Conflicts use the default rule: higher robot id wins, "
-                       "the winner keeps the local timestamp.",
+        "description": "Receive rules (SPEC.md sections 4 and 5): a robot `self` holding `local` for the key "
+                       "(or nothing), with an empty outgoing queue, makes the calls in `before` (`get`: read the "
+                       "key) and then hears `incoming`. It must reach `outcome`, hold `entry_after`, queue "
+                       "exactly `queued` (wire hex, in drain order), and call onconflictlost with "
+                       "`conflict_lost` (null: not at all). Conflicts use the rule named by `resolver` "
+                       "(see `resolvers`).",
         "key": 4,
+        "resolvers": RESOLVERS,
         "cases": cases,
     }
 
 
-def _receive_model(local: tuple[int, int, int] | None, op: str, value: int, ts: int,
-                   robot: int) -> tuple[str]:
-    """Just the outcome, from the table in SPEC.md: confirms the hand-written column."""
-    if ts == 0:
-        if op == "PUT":
-            return ("INVALID",)
-        if local is None:
-            return ("UNKNOWN",)
-    if local is None or is_newer(ts, local[1]):
-        return ("STORED",)
-    if ts != local[1]:
-        return ("ANSWERED",) if op == "GET" else ("STALE",)
-    return ("SAME",) if robot == local[2] else ("CONFLICT",)
+def _receive_model(me: int, local: tuple[int, int, int] | None, before: tuple[str, ...], resolver: str,
+                   incoming: tuple[str, int, int, int]) -> tuple[object, ...]:
+    """SPEC.md's receive table and queue rules in the plainest form: confirms the hand-written columns."""
+    op, value, ts, robot = incoming
+    queue: list[tuple[str, int, int, int]] = []  # one pending (op, value, ts, robot) at most: a single key
+
+    def push(msg: tuple[str, int, int, int]) -> None:
+        if queue:
+            pending = queue[0]
+            if msg[2] == pending[2] and msg[1::2] == pending[1::2]:
+                return  # equal ts, same entry: the pending message stays
+            if msg[2] != pending[2] and not is_newer(msg[2], pending[2]):
+                return
+            queue.clear()
+        queue.append(msg)
+
+    for call in before:
+        assert call == "get" and local is not None, call
+        push(("GET", *local))
+    lost = None
+    if ts == 0 and op == "PUT":
+        outcome = "INVALID"
+    elif ts == 0 and local is None:
+        outcome = "UNKNOWN"
+    elif local is None or is_newer(ts, local[1]):
+        outcome, local = "STORED", (value, ts, robot)
+        push(("PUT", *local))
+    elif ts != local[1]:
+        outcome = "ANSWERED" if op == "GET" else "STALE"
+        if op == "GET":
+            push(("PUT", *local))
+    elif robot == local[2]:
+        outcome = "SAME"
+    else:
+        outcome, held, remote = "CONFLICT", local, (value, ts, robot)
+        named = max(held[2], robot)
+        chosen = (held[0] + value) % 65536 if resolver == "sum_merge" else None
+        if chosen is not None and named == me:
+            local = (chosen, next_ts(ts), me)  # a merge: a new write of the robot it names
+        else:
+            local = held if named == held[2] else remote
+        push(("PUT", *local))
+        if held[2] == me and local[2] != me:
+            lost = held
+    return outcome, local, queue, lost
 
 
 # --------------------------------------------------------------------------

@@ -200,7 +200,10 @@ def test_reconnects_when_the_device_vanishes_and_returns(tmp_path: Path,
     assert hear(link, 1) == [a]
 
     robot1.stop()
-    os.close(master1)  # unplugged
+    os.close(master1)  # unplugged: the device node goes away too, so a pty that another
+    gone = tmp_path / "gone"  # process opens meanwhile (and gets the same /dev/pts number) is not "our" dongle
+    os.symlink(tmp_path / "no-such-device", gone)
+    os.replace(gone, name)
     poll(lambda: not link.receive(0.02) and not link.transport.connected, what="the loss to be noticed")
     for _ in range(20):  # the gateway keeps polling; the loss is still reported only once
         link.receive(0.01)

@@ -7,7 +7,7 @@ from adapters import epuck_reassembler, nonzero, serial_framing
 from conftest import load
 
 from vstig_hw import DecodeError, Message, Op, Outcome, Stigmergy, decode, encode
-from vstig_hw.engine import Entry
+from vstig_hw.engine import ConflictResolver, Entry, higher_robot_wins, sum_merge
 from vstig_hw.timestamps import is_newer, next_timestamp
 from vstig_hw.wire import decode_schema, encode_schema
 
@@ -39,9 +39,18 @@ def test_timestamps() -> None:
         assert next_timestamp(case["timestamp"]) == case["next"]
 
 
+RESOLVERS: dict[str, ConflictResolver] = {"higher_robot": higher_robot_wins, "sum_merge": sum_merge}
+
+
+def test_receive_vectors_name_only_resolvers_we_have() -> None:
+    assert set(load("receive.json")["resolvers"]) == set(RESOLVERS)
+
+
 @pytest.mark.parametrize("case", load("receive.json")["cases"], ids=lambda c: c["name"])
 def test_engine_receive_rules(case: dict[str, object]) -> None:
-    engine = Stigmergy(int(case["self"]))  # type: ignore[call-overload]
+    lost: list[Entry] = []
+    engine = Stigmergy(int(case["self"]), onconflict=RESOLVERS[str(case["resolver"])],  # type: ignore[call-overload]
+                       onconflictlost=lambda key, entry: lost.append(entry))
     key = load("receive.json")["key"]
     local = case["local"]
     if local is not None:
@@ -49,11 +58,16 @@ def test_engine_receive_rules(case: dict[str, object]) -> None:
         engine.receive(Message(Op.PUT, key, local["value"], local["timestamp"], local["robot"]))
         engine.drain()
         assert engine.entry(key) == Entry(local["value"], local["timestamp"], local["robot"])
+    for call in case["before"]:  # type: ignore[attr-defined]
+        assert call == "get"
+        engine.get(key)
     outcome = engine.receive(decode(bytes.fromhex(str(case["incoming"]))))
     assert outcome is Outcome[str(case["outcome"])]
     after = case["entry_after"]
     assert engine.entry(key) == (None if after is None else Entry(**after))  # type: ignore[arg-type]
     assert [encode(m).hex() for m in engine.drain()] == case["queued"]
+    expected_lost = case["conflict_lost"]
+    assert lost == ([] if expected_lost is None else [Entry(**expected_lost)])  # type: ignore[arg-type]
 
 
 def _feed_both_ways(name: str, stream: bytes, **options: object) -> list[tuple[list[str], dict[str, int]]]:

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import pytest
+
 from vstig_hw import Entry, Message, Op, Outcome, Stigmergy
-from vstig_hw.engine import larger_value_wins
+from vstig_hw.engine import larger_value_wins, sum_merge
+from vstig_hw.outqueue import OutQueue
 from vstig_hw.timestamps import is_newer, next_timestamp
 
 PUT, GET = Op.PUT, Op.GET
@@ -184,11 +187,144 @@ def test_conflict_winner_replaces_pending_same_timestamp_loser() -> None:
     assert s.drain() == [Message(PUT, 4, 1, 3, 5)]
 
 
+def test_onconflictlost_fires_once_when_the_lost_write_echoes_back() -> None:
+    # Issue 14.3: the echo of our own losing write conflicts again, but it is
+    # the remote then, not the entry we held: Buzz does not report it twice.
+    lost: list[tuple[int, Entry]] = []
+    s = Stigmergy(1, onconflictlost=lambda key, entry: lost.append((key, entry)))
+    s.put(4, 9)
+    assert s.receive(Message(PUT, 4, 3, 1, 5)) is Outcome.CONFLICT
+    assert s.receive(Message(PUT, 4, 9, 1, 1)) is Outcome.CONFLICT  # our write, relayed back
+    assert s.receive(Message(GET, 4, 9, 1, 1)) is Outcome.CONFLICT  # and as someone's view
+    assert lost == [(4, Entry(9, 1, 1))]
+    assert s.entry(4) == Entry(3, 1, 5)
+
+
+def test_merged_winner_of_another_robot_reports_our_lost_write() -> None:
+    # Issue 14.1: robot 2's merge discards our write; we keep robot 2's entry
+    # until its merged write arrives, and are told our write was lost.
+    lost: list[tuple[int, Entry]] = []
+    s = Stigmergy(1, onconflict=sum_merge, onconflictlost=lambda key, entry: lost.append((key, entry)))
+    s.put(5, 100)
+    assert s.receive(Message(PUT, 5, 200, 1, 2)) is Outcome.CONFLICT
+    assert lost == [(5, Entry(100, 1, 1))]
+    assert s.entry(5) == Entry(200, 1, 2)
+    assert s.drain() == [Message(PUT, 5, 200, 1, 2)]  # our loser is never sent
+    assert s.receive(Message(PUT, 5, 300, 2, 2)) is Outcome.STORED
+
+
+def test_merged_winner_is_a_new_write_of_the_robot_it_names() -> None:
+    # Issue 14.4: the merge goes out at the next timestamp, newer than both inputs.
+    lost: list[tuple[int, Entry]] = []
+    s = Stigmergy(2, onconflict=sum_merge, onconflictlost=lambda key, entry: lost.append((key, entry)))
+    s.put(5, 200)
+    assert s.receive(Message(GET, 5, 100, 1, 1)) is Outcome.CONFLICT
+    assert s.entry(5) == Entry(300, 2, 2)
+    assert s.drain() == [Message(PUT, 5, 300, 2, 2)]
+    assert lost == []  # our value lives on in our own new write
+    assert s.receive(Message(PUT, 5, 100, 1, 1)) is Outcome.STALE  # the inputs are now older
+
+
+def test_merged_winner_between_two_other_robots_keeps_the_named_entry() -> None:
+    s = Stigmergy(9, onconflict=sum_merge)
+    s.receive(Message(PUT, 5, 200, 1, 2))
+    assert s.receive(Message(PUT, 5, 100, 1, 1)) is Outcome.CONFLICT
+    assert s.entry(5) == Entry(200, 1, 2)
+
+
+def test_merged_winner_naming_a_third_robot_is_refused_by_name() -> None:
+    s = Stigmergy(9, onconflict=lambda key, local, remote: Entry(1, local.timestamp, 77))
+    s.receive(Message(PUT, 5, 200, 1, 2))
+    with pytest.raises(ValueError, match=r"onconflict returned .*robot=77"):
+        s.receive(Message(PUT, 5, 100, 1, 1))
+
+
+def test_pending_get_is_not_replaced_by_an_answer_of_the_same_timestamp() -> None:
+    # Issue 14.2: a PUT of our view says less than a GET of it: a neighbour with
+    # newer data ignores the PUT but answers the GET.
+    s = Stigmergy(1)
+    s.put(4, 1)
+    s.drain()
+    s.get(4)
+    assert s.receive(Message(GET, 4, 0, 0, 8)) is Outcome.ANSWERED
+    assert s.drain() == [Message(GET, 4, 1, 1, 1)]
+
+
+def test_three_robots_stale_robot_is_repaired_in_the_round_it_answers() -> None:
+    # Issue 14.2 reproducer: A holds (1, ts 1) with a GET queued, C holds (9, ts 2);
+    # A answers B's empty GET. If that answer replaced A's GET, C would ignore it
+    # as stale and A would stay behind for the round.
+    a, b, c = Stigmergy(1), Stigmergy(2), Stigmergy(3)
+    a.put(4, 1)
+    c.put(4, 8)
+    c.put(4, 9)
+    for robot in (a, c):
+        robot.drain()
+    a.get(4)
+    b.get(4)
+    for msg in b.drain():
+        a.receive(msg)
+    for msg in a.drain():
+        b.receive(msg)
+        c.receive(msg)
+    for msg in c.drain():
+        a.receive(msg)
+        b.receive(msg)
+    assert a.entry(4) == b.entry(4) == c.entry(4) == Entry(9, 2, 3)
+
+
+def test_conflict_winner_equal_to_pending_get_keeps_the_get() -> None:
+    s = Stigmergy(1)
+    s.receive(Message(PUT, 4, 9, 3, 5))
+    s.drain()
+    s.get(4)
+    assert s.receive(Message(PUT, 4, 8, 3, 3)) is Outcome.CONFLICT  # robot 5's entry wins: nothing changed
+    assert s.drain() == [Message(GET, 4, 9, 3, 5)]
+
+
+def test_conflict_winner_replaces_pending_get_of_the_loser() -> None:
+    s = Stigmergy(1)
+    s.receive(Message(PUT, 4, 9, 3, 2))
+    s.drain()
+    s.get(4)
+    assert s.receive(Message(PUT, 4, 1, 3, 5)) is Outcome.CONFLICT
+    assert s.drain() == [Message(PUT, 4, 1, 3, 5)]
+
+
+def test_a_queue_fed_from_drains_sends_the_winner_not_the_loser() -> None:
+    # A gateway copies each drain into every link's own queue; a loser that
+    # waits there for bandwidth must give way to the winner drained after it.
+    link_queue = OutQueue()
+    s = Stigmergy(1)
+    s.receive(Message(PUT, 4, 9, 3, 2))
+    for msg in s.drain():
+        link_queue.push(msg)
+    s.receive(Message(PUT, 4, 1, 3, 5))  # robot 5 wins the conflict
+    for msg in s.drain():
+        link_queue.push(msg)
+    assert link_queue.drain() == [Message(PUT, 4, 1, 3, 5)]
+
+
+def test_resolver_returning_no_entry_is_refused_by_name() -> None:
+    s = Stigmergy(1, onconflict=lambda key, local, remote: None)  # type: ignore[arg-type, return-value]
+    s.receive(Message(PUT, 4, 9, 3, 2))
+    with pytest.raises(TypeError, match=r"onconflict must return .*got None"):
+        s.receive(Message(PUT, 4, 1, 3, 5))
+    assert s.entry(4) == Entry(9, 3, 2)
+
+
+def test_outgoing_queue_compares_timestamps_across_the_wrap() -> None:
+    s = Stigmergy(1)
+    s.receive(Message(PUT, 4, 9, 65535, 2))  # the relay is pending at ts 65535
+    s.put(4, 10)  # ts 1 is newer: it replaces the relay (a plain >= would keep the relay)
+    assert s.drain() == [Message(PUT, 4, 10, 1, 1)]
+
+
 def test_outgoing_queue_keeps_only_newest_per_key() -> None:
     s = Stigmergy(1)
     for value in range(5):
         s.put(4, value)
-    s.get(4)  # same timestamp as the pending PUT: the PUT says at least as much
+    s.get(4)  # same timestamp as the pending PUT: the PUT stays, ahead of every GET
     assert s.drain() == [Message(PUT, 4, 4, 5, 1)]
 
 
