@@ -42,10 +42,11 @@ def command(files: tuple[str, ...], fmt: str, skip_bad: bool, value_type: ValueT
     """
     base = _base(id_base)
     total_bad = 0
-    for path in files:
+    for number, path in enumerate(files):
         with _progress_bar(path) as progress:
             count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                            id_base=base, extended=extended, progress=progress)
+                                            id_base=base, extended=extended, progress=progress,
+                                            csv_header=number == 0, file_column=len(files) > 1)
         sys.stdout.flush()
         total_bad += len(bad)
         for error in bad[:5]:

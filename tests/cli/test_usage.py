@@ -79,3 +79,14 @@ def test_every_command_is_listed() -> None:
     assert code == 0
     for name in ("bridge", "sniff", "record", "replay", "decode", "put", "get", "links", "demo"):
         assert name in output
+
+
+def test_csv_of_several_files_has_one_header_and_a_file_column(tmp_path: Path) -> None:
+    a, b = tmp_path / "a.log", tmp_path / "b.log"
+    a.write_text("(1.000000) can0 600#0001000200030004\n")
+    b.write_text("(2.000000) can0 600#0001000200030005\nnot a frame\n")
+    result = CliRunner().invoke(cli, ["decode", str(a), str(b), "--format", "csv", "--skip-bad"])
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert lines[0] == "file,t,link,can_id,op,key,value,timestamp,robot" and len(lines) == 3
+    assert lines[1].startswith(f'"{a}",1.000000,') and lines[2].startswith(f'"{b}",2.000000,')

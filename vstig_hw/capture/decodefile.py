@@ -14,7 +14,7 @@ from typing import IO, Any
 from ..counters import Counters
 from ..values import ValueType
 from . import candump
-from .decoded import CSV_HEADER, Decoder, as_csv, as_json, as_text, default_framings
+from .decoded import CSV_HEADER, Decoded, Decoder, as_csv, as_json, as_text, default_framings
 from .fastlog import chunk_to_jsonl
 from .files import file_position, read_capture
 from .records import CaptureError
@@ -29,16 +29,19 @@ CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small 
 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
                 skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
-                progress: Callable[[int], None] | None = None) -> tuple[int, Counters, list[CaptureError]]:
+                progress: Callable[[int], None] | None = None, csv_header: bool = True,
+                file_column: bool = False) -> tuple[int, Counters, list[CaptureError]]:
     """Write every message in `path` to `out`; returns (messages, drops by reason, bad lines skipped).
 
     `progress` is told, now and then, how many bytes of the file were read so far (every format).
+    CSV: `csv_header=False` leaves the header out (a later file of several); `file_column` adds a
+    first column naming the file.
     """
-    formatter = FORMATS[fmt]
+    formatter = _with_file(path) if fmt == "csv" and file_column else FORMATS[fmt]
     decoder = Decoder(default_framings(id_base, extended))
     bad: list[CaptureError] = []
-    if fmt == "csv":
-        out.write(CSV_HEADER)
+    if fmt == "csv" and csv_header:
+        out.write(("file," if file_column else "") + CSV_HEADER)
     if (path.endswith(".log") and fmt == "jsonl" and value_type == "uint16" and not extended
             and not is_serial_capture(path)):
         count, drops = _candump_chunks(path, out, decoder, value_type, skip_bad, bad, id_base, progress)
@@ -55,6 +58,15 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
     if progress and reading:
         progress(os.path.getsize(path))
     return count, decoder.drops(), bad
+
+
+def _with_file(path: str) -> Callable[[Decoded, ValueType], str]:
+    quoted = '"' + path.replace('"', '""') + '"'
+
+    def row(decoded: Decoded, value_type: ValueType) -> str:
+        return f"{quoted},{as_csv(decoded, value_type)}"
+
+    return row
 
 
 def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: ValueType, skip_bad: bool,
