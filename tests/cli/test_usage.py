@@ -90,3 +90,18 @@ def test_csv_of_several_files_has_one_header_and_a_file_column(tmp_path: Path) -
     lines = result.stdout.splitlines()
     assert lines[0] == "file,t,link,can_id,op,key,value,timestamp,robot" and len(lines) == 3
     assert lines[1].startswith(f'"{a}",1.000000,') and lines[2].startswith(f'"{b}",2.000000,')
+
+
+def test_damaged_python_can_files_name_the_record_and_honour_skip_bad(tmp_path: Path) -> None:
+    damaged = tmp_path / "x.csv"
+    damaged.write_text("timestamp,arbitration_id,extended,remote,error,dlc,data\n"
+                       "1.0,0x600,0,0,0,8,AAEAAgADAAQ=\nnot,a,row\n3.0,0x600,0,0,0,8,AAEAAgADAAQ=\n")
+    result = CliRunner().invoke(cli, ["decode", str(damaged)])
+    assert result.exit_code == 1 and f"{damaged}: record 2: cannot read as .csv" in result.stderr
+    result = CliRunner().invoke(cli, ["decode", str(damaged), "--skip-bad"])
+    assert result.exit_code == 0 and len(result.stdout.splitlines()) == 1
+    assert "1 bad lines skipped" in result.stderr and "record 2" in result.stderr
+    empty = tmp_path / "empty.blf"
+    empty.write_bytes(b"")
+    result = CliRunner().invoke(cli, ["decode", str(empty)])
+    assert result.exit_code == 1 and f"{empty}: empty file: not a .blf capture" in result.stderr

@@ -163,15 +163,21 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
     if suffix not in CAN_EXTENSIONS:
         raise CaptureError(path, None, f"unknown capture type {suffix or '(no extension)'!r}: expected a "
                            f"serial capture or one of {', '.join(CAN_EXTENSIONS)}")
+    if os.path.getsize(path) == 0:
+        raise CaptureError(path, None, f"empty file: not a {suffix} capture")
     options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}
+    frames = 0
     try:
         reader = can.LogReader(path, **options)
         file = getattr(reader, "file", None)  # python-can's readers keep the open file there
         if opened and file is not None:
             opened(file)
         for frame in reader:
+            frames += 1
             yield Record(frame.timestamp, str(frame.channel or "can"), CAN_FRAMING, frame)
-    except CaptureError:
-        raise
     except Exception as error:  # python-can's readers raise many kinds; all mean the file is bad
-        raise CaptureError(path, None, f"cannot read as {suffix}: {error}") from None
+        damage = CaptureError(path, None, f"record {frames + 1}: cannot read as {suffix}: {error}")
+        if not skip_bad:
+            raise damage from None
+        if bad is not None:  # python-can cannot resume past damage: the rest of this file is lost, and said so
+            bad.append(damage)
