@@ -4,16 +4,22 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import sys
+import tempfile
 from collections.abc import Callable, Iterator
 
 import click
 
 from vstig_hw.capture.decodefile import FORMATS, decode_file
+from vstig_hw.capture.files import CAN_EXTENSIONS, sniff_suffix
+from vstig_hw.capture.records import CaptureError
+from vstig_hw.capture.serial_log import is_serial_capture
 from vstig_hw.values import VALUE_TYPES, ValueType
 
 from .errors import reports_errors
 
+INPUT_FORMATS = [*(suffix[1:] for suffix in CAN_EXTENSIONS), "cap"]  # cap: our serial capture
 _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 
 
@@ -27,34 +33,72 @@ def _base(text: str | None) -> int | None:
 
 
 @click.command()
-@click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, allow_dash=True))
+@click.option("--input-format", type=click.Choice(INPUT_FORMATS),
+              help="The capture type, for a name that does not show it (default: by extension, and for - "
+                   "or a pipe by content).")
 @click.option("--format", "fmt", type=click.Choice(list(FORMATS)), default="text", show_default=True)
 @click.option("--skip-bad", is_flag=True, help="Count malformed lines and go on instead of stopping at the first.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
 @click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 with --extended).")
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs.")
 @reports_errors
-def command(files: tuple[str, ...], fmt: str, skip_bad: bool, value_type: ValueType, id_base: str | None,
-            extended: bool) -> None:
-    """Print every message in FILES.
+def command(files: tuple[str, ...], input_format: str | None, fmt: str, skip_bad: bool, value_type: ValueType,
+            id_base: str | None, extended: bool) -> None:
+    """Print every message in FILES (- reads stdin; pipes and <(...) work too).
 
     Example: vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
     """
     base = _base(id_base)
-    total_bad = 0
     for number, path in enumerate(files):
-        with _progress_bar(path) as progress:
-            count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                            id_base=base, extended=extended, progress=progress,
-                                            csv_header=number == 0, file_column=len(files) > 1)
+        name = "<stdin>" if path == "-" else path
+        with _readable(path, name, input_format) as readable, _progress_bar(readable) as progress:
+            try:
+                count, drops, bad = decode_file(readable, sys.stdout, fmt, value_type=value_type,
+                                                skip_bad=skip_bad, id_base=base, extended=extended,
+                                                progress=progress, csv_header=number == 0,
+                                                file_column=len(files) > 1)
+            except CaptureError as error:
+                raise _renamed(error, readable, name) from None
         sys.stdout.flush()
-        total_bad += len(bad)
         for error in bad[:5]:
-            click.echo(f"skipped {error}", err=True)
-        summary = f"{path}: {count} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
+            click.echo(f"skipped {_renamed(error, readable, name)}", err=True)
+        summary = f"{name}: {count} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
         if drops:
             summary += f", dropped {drops.summary()}"
         click.echo(summary, err=True)
+
+
+def _renamed(error: CaptureError, read: str, name: str) -> CaptureError:
+    return error if read == name else CaptureError(name, error.line, error.problem)
+
+
+@contextlib.contextmanager
+def _readable(path: str, name: str, input_format: str | None) -> Iterator[str]:
+    """A regular file to read `path` from whose name shows its type; a stream (-, a pipe) is copied first."""
+    regular = path != "-" and os.path.isfile(path)
+    if regular and input_format is None and (path.lower().endswith(CAN_EXTENSIONS) or is_serial_capture(path)):
+        yield path
+        return
+    with tempfile.TemporaryDirectory(prefix="vstig-decode-") as folder:
+        spooled = os.path.join(folder, "input")
+        if regular:  # a file whose name does not tell (/dev/stdin redirected from a file): look inside
+            os.symlink(os.path.abspath(path), spooled)
+            with open(path, "rb") as file:
+                head = file.read(1 << 16)
+        else:
+            with contextlib.ExitStack() as stack:
+                source = sys.stdin.buffer if path == "-" else stack.enter_context(open(path, "rb"))
+                with open(spooled, "wb") as copy:
+                    head = source.read(1 << 16)
+                    copy.write(head)
+                    shutil.copyfileobj(source, copy, 1 << 20)
+        suffix = f".{input_format}" if input_format else sniff_suffix(head)
+        if suffix is None:
+            raise click.UsageError(f"{name}: cannot tell the capture type from its first bytes: give --input-format "
+                                   f"({', '.join(INPUT_FORMATS)})")
+        os.rename(spooled, spooled + suffix)
+        yield spooled + suffix
 
 
 @contextlib.contextmanager

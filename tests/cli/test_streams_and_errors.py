@@ -63,3 +63,18 @@ def test_bad_output_folders_are_one_line_naming_the_path(folder: str, says: str)
     done = _shell(f"{VSTIG} sim paper --runs 1 --robots 10 -o {folder}")
     line = _one_line(done.stderr)
     assert done.returncode == 1 and folder in line and says in line, line
+
+
+def test_decode_reads_stdin_and_pipes_and_tells_the_type_by_content(tmp_path: Path) -> None:
+    log = tmp_path / "small.log"
+    _candump_log(log, 3)
+    for command in (f"cat {log} | {VSTIG} decode -", f"{VSTIG} decode /dev/stdin < {log}",
+                    f"{VSTIG} decode <(cat {log})", f"cat {log} | {VSTIG} decode - --input-format log"):
+        done = _shell(command)
+        assert done.returncode == 0 and len(done.stdout.splitlines()) == 3, (command, done.stderr)
+    done = _shell(f"echo garbage | {VSTIG} decode -")
+    assert done.returncode == 2 and "<stdin>: cannot tell the capture type" in done.stderr
+    bad = tmp_path / "bad.log"
+    bad.write_text("(1.000000) can0 600#0001000200030004\nnot a frame\n")
+    done = _shell(f"cat {bad} | {VSTIG} decode -")
+    assert done.returncode == 1 and "Error: <stdin>:2: not a candump line" in _one_line(done.stderr)

@@ -21,7 +21,7 @@ from .records import CAN_FRAMING, CaptureError, Record
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
 
 __all__ = ["APPENDABLE", "CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "file_position", "read_capture",
-           "rotated_name"]
+           "rotated_name", "sniff_suffix"]
 
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
 APPENDABLE = (".log", ".blf", ".csv", ".log.gz")  # the CAN formats python-can's writers can add to
@@ -75,6 +75,27 @@ class CanCaptureWriter:
 
     def close(self) -> None:
         self.writer.stop()
+
+
+_PCAP_MAGICS = tuple(m.to_bytes(4, order) for m in (0xA1B2C3D4, 0xA1B23C4D) for order in ("big", "little"))
+
+
+def sniff_suffix(head: bytes) -> str | None:
+    """The capture type a file's first bytes show, as its extension (for a stream with no name to go by)."""
+    if head.startswith(b"# vstig serial capture"):
+        return ".cap"
+    if head.startswith(b"LOGG"):
+        return ".blf"
+    if head[:4] in _PCAP_MAGICS:
+        return ".pcap"
+    if head.startswith(b"\x1f\x8b"):
+        return ".log.gz"
+    text = head.lstrip()
+    for start, suffix in ((b"(", ".log"), (b"date ", ".asc"), (b"base ", ".asc"), (b"timestamp,", ".csv"),
+                          (b";$FILEVERSION", ".trc")):
+        if text.startswith(start):
+            return suffix
+    return None
 
 
 def file_position(file: IO[Any]) -> int | None:
