@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -42,3 +43,21 @@ def run_until_stopped(node: Node, status: Any = None, duration: float | None = N
 def print_counters(node: Node) -> None:
     for name, counters in node.stats().items():
         click.echo(f"{name}: {counters.summary()}", err=True)
+
+
+class StatusLine:
+    """One line on stderr, redrawn in place, only when stderr is a terminal (a log file gets none)."""
+
+    def __init__(self) -> None:
+        self.live = sys.stderr.isatty()
+        self.drawn = False
+
+    def show(self, text: str) -> None:
+        if self.live:
+            click.echo(f"\r\x1b[K{text}", nl=False, err=True)
+            self.drawn = True
+
+    def end(self) -> None:
+        if self.drawn:
+            click.echo(err=True)
+            self.drawn = False

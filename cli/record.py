@@ -14,7 +14,7 @@ from vstig_hw.gateway import Mode, Node
 from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 
-from ._common import build_links, print_counters, run_until_stopped
+from ._common import StatusLine, build_links, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
 
@@ -90,7 +90,12 @@ def command(link: LinkSpec, output: str | None, overwrite: bool, append: bool, m
         with node:
             captures.append(RotatingCapture(path, "can" if is_can else "serial", limit, append=append))
             click.echo(f"recording {node.links[0].name} to {path}; Ctrl-C stops", err=True)
-            run_until_stopped(node, duration=duration)
+            line = StatusLine()
+            status = (lambda: line.show(f"{captures[0].records} units  {node.summary()}")) if line.live else None
+            try:
+                run_until_stopped(node, status, duration)
+            finally:
+                line.end()
     finally:
         if captures:
             captures[0].close()  # after the node: its close() handed over every unit already read

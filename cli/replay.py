@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -18,7 +19,7 @@ from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._common import build_links
+from ._common import StatusLine, build_links
 from .errors import LINK, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
@@ -38,6 +39,23 @@ def _sender(link: Link[Any], is_can: bool) -> Any:
             link.send(decoded.message)
 
     return send
+
+
+class _CountingSender:
+    """`send`, with a live counter line on stderr when it is a terminal (at most twice a second)."""
+
+    def __init__(self, send: Any, link: Link[Any]) -> None:
+        self.send, self.link = send, link
+        self.line = StatusLine()
+        self.sent = 0
+        self.next_draw = 0.0
+
+    def __call__(self, record: Record) -> None:
+        self.send(record)
+        self.sent += 1
+        if self.line.live and time.monotonic() >= self.next_draw:
+            self.next_draw = time.monotonic() + 0.5
+            self.line.show(f"sent {self.sent} units  {self.link.name}: {self.link.stats().summary()}")
 
 
 def _fresh(frame: Any) -> Any:
@@ -99,7 +117,7 @@ def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, skip_gap
         raise click.UsageError("--at goes with --table")
     assert onto is not None
     link = build_links([onto], robot_id)[0]
-    send = _sender(link, isinstance(onto, CanSpec))
+    send = _CountingSender(_sender(link, isinstance(onto, CanSpec)), link)
     link.open()
     try:
         with stop_on_signals() as stop:
@@ -112,5 +130,6 @@ def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, skip_gap
                 if stop.is_set() or done.frames == 0:
                     break
     finally:
+        send.line.end()
         link.close()
     click.echo(f"{link.name}: {link.stats().summary()}", err=True)
