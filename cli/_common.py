@@ -61,3 +61,10 @@ class StatusLine:
         if self.drawn:
             click.echo(err=True)
             self.drawn = False
+
+
+def must_hear(spec: LinkSpec, command: str) -> None:
+    """Refuse a listening command on a transmit-only link, instead of listening to nothing."""
+    if spec.kind == "kilobot-ohc":
+        raise click.UsageError(f"{command} needs a link that receives; kilobot-ohc:{spec.name} is transmit-only "
+                               "(the overhead controller never hears the robots)")

@@ -14,7 +14,7 @@ from vstig_hw.gateway import Mode, Node
 from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 
-from ._common import StatusLine, build_links, print_counters, run_until_stopped
+from ._common import StatusLine, build_links, must_hear, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
 
@@ -72,6 +72,7 @@ def command(link: LinkSpec, output: str | None, overwrite: bool, append: bool, m
 
     Example: vstig record can:socketcan:can0 -o swarm.log --max-bytes 50M
     """
+    must_hear(link, "record")
     is_can = isinstance(link, CanSpec)
     limit = _size(max_bytes) if max_bytes else None
     path = _target(output, link, is_can)

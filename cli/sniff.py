@@ -15,7 +15,7 @@ from vstig_hw.links import Heard
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._common import build_links, print_counters, run_until_stopped
+from ._common import build_links, must_hear, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
 
@@ -49,6 +49,7 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
 
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
     """
+    must_hear(link, "sniff")
     node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN)
     view = SwarmView(larger_value_wins) if larger else SwarmView()
     node.on_heard.append(view.add)

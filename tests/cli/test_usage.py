@@ -30,6 +30,8 @@ def invoke(*args: str) -> tuple[int, str]:
         (["record", "serial:/dev/null", "-o", "o.cap", "--max-bytes", "lots"], "not a size"),
         (["replay", "README.md"], "exactly one of --onto LINK or --table"),
         (["decode", "README.md", "--id-base", "zz"], "'zz' is not an integer"),
+        (["sniff", "kilobot-ohc:/dev/null"], "kilobot-ohc:null is transmit-only"),
+        (["record", "kilobot-ohc:/dev/null", "-o", "x.cap"], "record needs a link that receives"),
     ],
 )
 def test_usage_errors_exit_2_with_one_clear_line(args: list[str], says: str) -> None:
