@@ -78,3 +78,17 @@ def test_decode_reads_stdin_and_pipes_and_tells_the_type_by_content(tmp_path: Pa
     bad.write_text("(1.000000) can0 600#0001000200030004\nnot a frame\n")
     done = _shell(f"cat {bad} | {VSTIG} decode -")
     assert done.returncode == 1 and "Error: <stdin>:2: not a candump line" in _one_line(done.stderr)
+
+
+def test_ctrl_c_ends_a_command_quietly_with_status_130() -> None:
+    import os
+    import signal
+    import time
+
+    # As a terminal delivers it: to the whole process group, simulation workers included.
+    sim = subprocess.Popen([VSTIG, "sim", "--robots", "2000", "--runs", "400", "--workers", "2"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    time.sleep(3)
+    os.killpg(sim.pid, signal.SIGINT)
+    _, err = sim.communicate(timeout=60)
+    assert sim.returncode == 130 and err.strip() == "", err
