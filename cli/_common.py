@@ -22,7 +22,10 @@ def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool 
         seen[name] = seen.get(name, 0) + 1
         if seen[name] > 1:
             name = f"{name}-{seen[name]}"
-        links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
+        try:
+            links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
+        except ValueError as error:  # building opens nothing: what fails here is how the link was asked for
+            raise click.UsageError(f"{spec.kind}:{spec.name}: {error}") from None
     return links
 
 

@@ -31,6 +31,8 @@ def invoke(*args: str) -> tuple[int, str]:
         (["replay", "README.md"], "exactly one of --onto LINK or --table"),
         (["decode", "README.md", "--id-base", "zz"], "'zz' is not an integer"),
         (["sniff", "kilobot-ohc:/dev/null"], "kilobot-ohc:null is transmit-only"),
+        (["sniff", "can:virtual:x?id_base=0x601"], "must be one of 0x000, 0x200, 0x400, 0x600, got 0x601"),
+        (["bridge", "can:virtual:x", "--robot-id", "300"], "a node id in 0..255, got 300"),
         (["record", "kilobot-ohc:/dev/null", "-o", "x.cap"], "record needs a link that receives"),
     ],
 )
@@ -48,6 +50,8 @@ def test_runtime_failures_exit_1_in_one_line(tmp_path: Path) -> None:
     assert result.stderr.strip().count("\n") == 0 and "Traceback" not in result.output
     code, output = invoke("sniff", "serial:/dev/vstig-no-such-port", "--jsonl", "--for", "1")
     assert code == 1 and "vstig-no-such-port" in output and "Traceback" not in output
+    code, output = invoke("sniff", "can:vstignosuch:x", "--for", "0.1")
+    assert code == 1 and "python-can knows: " in output and "socketcan" in output
     code, output = invoke("decode", str(tmp_path / "missing.log"))
     assert code == 2 and "does not exist" in output
 

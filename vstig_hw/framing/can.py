@@ -68,14 +68,14 @@ class CanIdScheme:
             base = DEFAULT_BASE_29BIT if self.base is None else self.base
             _require(isinstance(base, int) and base == base & BASE_MASK_29BIT,
                      "a 29-bit id_base may use bits 28..25 only "
-                     f"(0x00000000..0x1E000000 in steps of 0x02000000), got {self.base!r}")
+                     f"(0x00000000..0x1E000000 in steps of 0x02000000), got {_hex(self.base)}")
             _require(isinstance(self.stigmergy, int) and 0 <= self.stigmergy <= 0xFF,
                      f"stigmergy must be 0..255 for 29-bit IDs, got {self.stigmergy!r}")
             derived = (base, 0x1FFE0000, base | self.stigmergy << 17, 16, 0xFFFF)
         else:
             base = DEFAULT_BASE_11BIT if self.base is None else self.base
             _require(base in BASES_11BIT,
-                     f"an 11-bit id_base must be one of 0x000, 0x200, 0x400, 0x600, got {self.base!r}")
+                     f"an 11-bit id_base must be one of 0x000, 0x200, 0x400, 0x600, got {_hex(self.base)}")
             _require(self.stigmergy == 0,
                      "11-bit IDs have no stigmergy field: give each stigmergy its own id_base "
                      f"(0x000, 0x200, 0x400, 0x600), got stigmergy={self.stigmergy!r}")
@@ -105,6 +105,10 @@ class CanIdScheme:
     def can_filters(self) -> list[dict[str, Any]]:
         """python-can `can_filters` that pass exactly this scheme's IDs (both ops, every sender)."""
         return [{"can_id": self._match_value, "can_mask": self._match_mask, "extended": self.extended}]
+
+
+def _hex(value: object) -> str:
+    return f"{value:#x}" if isinstance(value, int) and not isinstance(value, bool) else repr(value)
 
 
 def _require(ok: bool, complaint: str) -> None:

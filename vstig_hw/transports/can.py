@@ -98,7 +98,13 @@ class CanTransport:
         try:
             return count_kernel_drops(can.Bus(**self._bus_kwargs), self.counters)
         except can.CanInterfaceNotImplementedError as exc:
-            raise TransportError(f"CAN interface {self.interface!r} cannot be used here: {one_line(exc)}") from None
+            known = "" if self.interface in can.VALID_INTERFACES else f" (python-can knows: " \
+                f"{', '.join(sorted(can.VALID_INTERFACES))})"
+            raise TransportError(f"CAN interface {self.interface!r} cannot be used here: {one_line(exc)}{known}") \
+                from None
+        except (NameError, ImportError, AttributeError) as exc:  # a vendor driver whose library is not installed
+            raise TransportError(f"CAN interface {self.interface!r} cannot be used here: its vendor library is "
+                                 f"missing or incomplete ({one_line(exc)})") from None
         except (can.CanError, OSError, ValueError, TypeError) as exc:
             raise TransportError(self._explain(exc)) from None
 
