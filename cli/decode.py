@@ -17,6 +17,7 @@ from vstig_hw.capture.records import CaptureError
 from vstig_hw.capture.serial_log import is_serial_capture
 from vstig_hw.values import VALUE_TYPES, ValueType
 
+from ._common import VALUE_TYPE_HELP
 from .errors import reports_errors
 
 INPUT_FORMATS = [*(suffix[1:] for suffix in CAN_EXTENSIONS), "cap"]  # cap: our serial capture
@@ -37,9 +38,11 @@ def _base(text: str | None) -> int | None:
 @click.option("--input-format", type=click.Choice(INPUT_FORMATS),
               help="The capture type, for a name that does not show it (default: by extension, and for - "
                    "or a pipe by content).")
-@click.option("--format", "fmt", type=click.Choice(list(FORMATS)), default="text", show_default=True)
+@click.option("--format", "fmt", type=click.Choice(list(FORMATS)), default="text", show_default=True,
+              help="text: one readable line per message; jsonl: one JSON object per line; csv: a header, then rows.")
 @click.option("--skip-bad", is_flag=True, help="Count malformed lines and go on instead of stopping at the first.")
-@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
+              help=VALUE_TYPE_HELP)
 @click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 with --extended).")
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs.")
 @reports_errors

@@ -19,7 +19,7 @@ from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._common import StatusLine, build_links
+from ._common import VALUE_TYPE_HELP, StatusLine, build_links
 from .errors import LINK, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
@@ -85,7 +85,8 @@ def _table(path: str, at: float | None, value_type: ValueType) -> None:
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
 @click.option("--onto", type=LINK, help="Send the capture onto this link with its original timing.")
-@click.option("--speed", type=click.FloatRange(0.001, 1000), default=1.0, show_default=True)
+@click.option("--speed", type=click.FloatRange(0.001, 1000), default=1.0, show_default=True,
+              help="Play this many times faster than recorded (0.5: half speed).")
 @click.option("--loop", is_flag=True, help="Start again at the end, until Ctrl-C.")
 @click.option("--skip-gaps", type=click.FloatRange(0.0), metavar="SECONDS",
               help="Wait at most SECONDS between two units, however long the capture's gap.")
@@ -94,7 +95,8 @@ def _table(path: str, at: float | None, value_type: ValueType) -> None:
               help="Sender id for messages re-encoded onto another medium.")
 @click.option("--table", is_flag=True, help="Feed an offline engine instead and print its table.")
 @click.option("--at", type=click.FloatRange(0.0), help="With --table: stop at T seconds after the first record.")
-@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
+              help=VALUE_TYPE_HELP)
 @reports_errors
 def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, skip_gaps: float | None,
             ignore_timestamps: bool, robot_id: int, table: bool, at: float | None, value_type: ValueType) -> None:

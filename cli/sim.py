@@ -39,7 +39,8 @@ def _model_options(fn: Any) -> Any:
                      help="re-draw split layouts (else each robot must learn its own component's highest id)"),
         click.option("--max-steps", default=200_000, show_default=True, type=click.IntRange(1),
                      help="give up on a run after this many control steps"),
-        click.option("--seed", default=1, show_default=True, type=int),
+        click.option("--seed", default=1, show_default=True, type=int,
+                     help="Base random seed (each run derives its own from it): the same seed, the same results."),
         click.option("--workers", default=None, type=click.IntRange(1), help="processes [default: all cores]"),
     ]
     for option in reversed(options):
@@ -67,12 +68,14 @@ def _progress(transient: bool = False) -> Any:
 
 
 @click.group(invoke_without_command=True)
-@click.option("--topology", type=click.Choice(list(TOPOLOGIES)), default="cluster", show_default=True)
+@click.option("--topology", type=click.Choice(list(TOPOLOGIES)), default="cluster", show_default=True,
+              help="How robots are placed (the paper's layouts): who hears whom follows from it.")
 @click.option("--robots", default=100, show_default=True, type=click.IntRange(1, U16_MAX + 1),
               help="swarm size N (robot ids 0..N-1)")
 @click.option("--drop", default=0.0, show_default=True, type=click.FloatRange(0, 1, max_open=True),
               help="packet drop probability P")
-@click.option("--runs", default=10, show_default=True, type=click.IntRange(1))
+@click.option("--runs", default=10, show_default=True, type=click.IntRange(1),
+              help="Independent runs (new layout and losses each); the summary is over all of them.")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @_model_options
 @click.pass_context

@@ -15,7 +15,7 @@ from vstig_hw.links import Heard
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._common import build_links, must_hear, print_counters, run_until_stopped
+from ._common import VALUE_TYPE_HELP, build_links, must_hear, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
 
@@ -38,7 +38,8 @@ def _table(view: SwarmView, value_type: ValueType) -> Any:
 @click.command()
 @click.argument("link", type=LINK)
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
-@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
+              help=VALUE_TYPE_HELP)
 @click.option("--larger-value-wins", "larger", is_flag=True,
               help="Settle conflicts as a swarm running the paper's Figure 1 rule does (larger value), "
                    "instead of the default higher robot id.")
