@@ -25,12 +25,18 @@ from .errors import LINK, reports_errors
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 
 
-def _sender(link: Link[Any], is_can: bool) -> Any:
-    """Write a record as is when the medium and framing match; otherwise re-encode its messages."""
+def _sender(link: Link[Any], onto: LinkSpec) -> Any:
+    """Write a record as is when the medium and framing match; otherwise re-encode its messages.
+
+    A CAN capture is read with the default ID scheme (11-bit, base 0x600); a target that asks for
+    another (id_base, extended, stigmergy) gets the messages re-encoded in its own IDs.
+    """
     decoder = Decoder()
+    is_can = isinstance(onto, CanSpec)
+    default_ids = is_can and onto.id_base in (None, 0x600) and not onto.extended and onto.stigmergy == 0
 
     def send(record: Record) -> None:
-        same = (record.framing == CAN_FRAMING) if is_can else (record.framing == link.framing.name)
+        same = (record.framing == CAN_FRAMING and default_ids) if is_can else (record.framing == link.framing.name)
         if same:
             link.transport.write(_fresh(record.unit) if is_can else record.unit)
             link.counters["out_units"] += 1
@@ -119,7 +125,7 @@ def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, skip_gap
         raise click.UsageError("--at goes with --table")
     assert onto is not None
     link = build_links([onto], robot_id)[0]
-    send = _CountingSender(_sender(link, isinstance(onto, CanSpec)), link)
+    send = _CountingSender(_sender(link, onto), link)
     link.open()
     try:
         with stop_on_signals() as stop:

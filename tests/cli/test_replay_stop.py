@@ -105,3 +105,21 @@ def test_record_and_replay_show_a_live_counter_line_on_a_terminal(tmp_path: Path
     finally:
         radio.close()
     assert code == 0 and b"\r\x1b[Ksent 1 units" in shown, shown
+
+
+def test_replay_onto_another_can_id_scheme_re_encodes_in_its_ids(tmp_path: Path) -> None:
+    import can
+    from click.testing import CliRunner
+
+    from vstig_cli.main import cli
+
+    capture = tmp_path / "swarm.log"
+    capture.write_text("(1.000000) can0 603#0005006400010003\n(1.001000) can0 603#0005006400010003\n")
+    with can.Bus(interface="virtual", channel="vstig-edges-ext") as listener:
+        targets = (("can:virtual:vstig-edges-ext?extended=1", True), ("can:virtual:vstig-edges-ext", False))
+        for spec, extended in targets:
+            result = CliRunner().invoke(cli, ["replay", str(capture), "--onto", spec, "--robot-id", "9"])
+            assert result.exit_code == 0, result.output
+            frames = [listener.recv(2.0) for _ in range(2)]
+            assert all(f is not None and f.is_extended_id == extended for f in frames), (spec, frames)
+            assert all(f is not None and f.data == bytes.fromhex("0005006400010003") for f in frames)
