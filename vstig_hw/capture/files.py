@@ -9,6 +9,7 @@ serial header, then by extension.
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,6 +26,7 @@ __all__ = ["APPENDABLE", "CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "
 
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
 APPENDABLE = (".log", ".blf", ".csv", ".log.gz")  # the CAN formats python-can's writers can add to
+_BLF_CONTAINER_EVERY = 2.0  # seconds between BLF blocks written while recording
 _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
 
 
@@ -53,6 +55,7 @@ class CanCaptureWriter:
                              f"{', '.join(APPENDABLE)})")
         self.path = path
         self.writer: Any = can.Logger(path, append=True) if append else can.Logger(path)
+        self._next_container = time.monotonic() + _BLF_CONTAINER_EVERY
 
     def write(self, record: Record) -> None:
         frame: can.Message = record.unit
@@ -62,16 +65,26 @@ class CanCaptureWriter:
         self.writer.on_message_received(frame)
 
     def size(self) -> int:
+        """Bytes written so far, counting what the writer still holds (BLF: its uncompressed block)."""
         file = getattr(self.writer, "file", None)
         try:
+            if hasattr(self.writer, "file_size"):
+                return int(self.writer.file_size())
             return int(file.tell()) if file is not None else os.path.getsize(self.path)
         except (OSError, ValueError):
             return 0
 
     def flush(self) -> None:
         file = getattr(self.writer, "file", None)
-        if file is not None and hasattr(file, "flush") and not isinstance(self.writer, can.BLFWriter):
-            file.flush()  # BLF compresses whole blocks: flushing mid-block would write a short one
+        if isinstance(self.writer, can.BLFWriter):
+            # BLF compresses blocks: one per tick would compress poorly, none until close would lose
+            # everything to a SIGKILL. Close a block every few seconds (python-can has no public call).
+            if time.monotonic() < self._next_container:
+                return
+            self._next_container = time.monotonic() + _BLF_CONTAINER_EVERY
+            self.writer._flush()
+        if file is not None and hasattr(file, "flush"):
+            file.flush()
 
     def close(self) -> None:
         self.writer.stop()
