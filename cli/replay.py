@@ -127,17 +127,22 @@ def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, skip_gap
     link = build_links([onto], robot_id)[0]
     send = _CountingSender(_sender(link, onto), link)
     link.open()
+    passes_done = 0
     try:
         with stop_on_signals() as stop:
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
                 done = replay(read_capture(file), send, speed=speed, stop=stop, skip_gaps=skip_gaps,
                               ignore_timestamps=ignore_timestamps)
-                click.echo(f"replayed {done.frames} units in {done.took:.3f} s (logged {done.logged:.3f} s)",
-                           err=True)
+                passes_done += 1
                 if stop.is_set() or done.frames == 0:
                     break
     finally:
         send.line.end()
         link.close()
-    click.echo(f"{link.name}: {link.stats().summary()}", err=True)
+    stats = link.stats()
+    lost = stats["tx_dropped"] + stats["tx_timeout"]
+    over = f" over {passes_done} passes" if loop else f" in {done.took:.3f} s (logged {done.logged:.3f} s)"
+    click.echo(f"sent {stats['tx']} units{over}" + (f"; {lost} the link could not send" if lost else "")
+               + ("; stopped by a signal" if done.stopped else ""), err=True)
+    click.echo(f"{link.name}: {stats.summary()}", err=True)

@@ -123,3 +123,25 @@ def test_replay_onto_another_can_id_scheme_re_encodes_in_its_ids(tmp_path: Path)
             frames = [listener.recv(2.0) for _ in range(2)]
             assert all(f is not None and f.is_extended_id == extended for f in frames), (spec, frames)
             assert all(f is not None and f.data == bytes.fromhex("0005006400010003") for f in frames)
+
+
+def test_loop_says_once_how_many_passes_it_made(tmp_path: Path) -> None:
+    capture = tmp_path / "short.cap"
+    _two_units(capture, gap=0.05)
+    radio = PtyPeer()
+    try:
+        replayer = start_vstig("replay", str(capture), "--onto", f"serial:{radio.path}", "--loop")
+        got = b""
+
+        def looped() -> bool:
+            nonlocal got
+            got += radio.read(0.1)
+            return got.count(bytes.fromhex("0d0e0f")) >= 3
+
+        wait_for(looped, 30)
+        replayer.send_signal(signal.SIGTERM)
+        _, err = replayer.communicate(timeout=20)
+    finally:
+        radio.close()
+    summary = [line for line in err.splitlines() if line.startswith("sent ")]
+    assert replayer.returncode == 0 and len(summary) == 1 and " passes" in summary[0], err
