@@ -74,6 +74,10 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
         return
     from rich.live import Live
 
+    if not sys.stdout.isatty():
+        click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
+                   "(--jsonl streams every message instead)", err=True)
+
     with node, Live(_table(view, value_type), refresh_per_second=4, transient=False) as live:
         run_until_stopped(node, lambda: live.update(_table(view, value_type)), duration)
     print_counters(node)

@@ -111,3 +111,9 @@ def test_damaged_python_can_files_name_the_record_and_honour_skip_bad(tmp_path: 
     empty.write_bytes(b"")
     result = CliRunner().invoke(cli, ["decode", str(empty)])
     assert result.exit_code == 1 and f"{empty}: empty file: not a .blf capture" in result.stderr
+
+
+def test_sniff_into_a_pipe_says_when_its_table_comes(tmp_path: Path) -> None:
+    result = CliRunner().invoke(cli, ["sniff", "can:virtual:vstig-edges-pipe", "--for", "0.1"])
+    assert result.exit_code == 0, result.output
+    assert "the table is printed once, when sniff ends" in result.stderr and "vstig sniff" in result.stdout
