@@ -117,3 +117,16 @@ def test_sniff_into_a_pipe_says_when_its_table_comes(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["sniff", "can:virtual:vstig-edges-pipe", "--for", "0.1"])
     assert result.exit_code == 0, result.output
     assert "the table is printed once, when sniff ends" in result.stderr and "vstig sniff" in result.stdout
+
+
+def test_serial_capture_damage_names_file_and_line(tmp_path: Path) -> None:
+    cap = tmp_path / "radio.cap"
+    cap.write_text("# vstig serial capture v1\n(1.000000) radio bogus rx 0102\n(2.000000) radio cobs8 rx 00\n")
+    result = CliRunner().invoke(cli, ["decode", str(cap)])
+    assert result.exit_code == 1 and f"{cap}:2: unknown serial framing 'bogus'" in result.stderr
+    result = CliRunner().invoke(cli, ["decode", str(cap), "--skip-bad"])
+    assert result.exit_code == 0 and "1 bad lines skipped" in result.stderr
+    cap.write_text("# vstig serial capture v2\n(1.000000) radio cobs8 rx 00\n")
+    result = CliRunner().invoke(cli, ["decode", str(cap)])
+    assert result.exit_code == 1 and f"{cap}:1: serial capture 'v2' is not a version this vstig-hw reads" \
+        in result.stderr

@@ -15,6 +15,7 @@ import re
 from collections.abc import Callable, Iterator
 from typing import IO, Any
 
+from ..framing import SERIAL_FRAMINGS
 from .records import CaptureError, Record, parse_lines
 
 __all__ = ["HEADER", "SerialCaptureWriter", "format_line", "read_serial_capture"]
@@ -61,6 +62,8 @@ def parse_line(path: str, number: int, line: str) -> Record | None:
         raise CaptureError(path, number, f"not a serial capture line: {text[:60]!r} "
                            "(expected '(<time>) <link> <framing> rx|tx <hex bytes>')")
     stamp, link, framing, direction, data = match.groups()
+    if framing not in SERIAL_FRAMINGS:
+        raise CaptureError(path, number, f"unknown serial framing {framing!r} (known: {', '.join(SERIAL_FRAMINGS)})")
     return Record(float(stamp), link, framing, bytes.fromhex(data), direction)
 
 
@@ -70,9 +73,17 @@ def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureErro
     with open(path, encoding="utf-8", errors="replace") as file:
         if opened:
             opened(file)
-        yield from parse_lines(path, file, parse_line, skip_bad, bad)
+        first = file.readline()
+        if first.rstrip("\r\n") != HEADER:
+            raise CaptureError(path, 1, f"serial capture {first.strip()[len(_HEADER_STEM):].strip()!r} is not a "
+                               f"version this vstig-hw reads (it reads {HEADER.rsplit(' ', 1)[1]})")
+        yield from parse_lines(path, file, parse_line, skip_bad, bad, first_line=2)
+
+
+_HEADER_STEM = HEADER.rsplit(" ", 1)[0]  # "# vstig serial capture", before the version
 
 
 def is_serial_capture(path: str) -> bool:
+    """The file starts like a serial capture of any version (a version we cannot read is said so on reading)."""
     with open(path, "rb") as file:
-        return file.read(len(HEADER)).decode("utf-8", "replace") == HEADER
+        return file.read(len(_HEADER_STEM)).decode("utf-8", "replace") == _HEADER_STEM
