@@ -130,3 +130,19 @@ def test_serial_capture_damage_names_file_and_line(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["decode", str(cap)])
     assert result.exit_code == 1 and f"{cap}:1: serial capture 'v2' is not a version this vstig-hw reads" \
         in result.stderr
+
+
+def test_a_blf_cut_short_is_an_error_not_a_quiet_success(tmp_path: Path) -> None:
+    import can
+
+    whole = tmp_path / "whole.blf"
+    writer = can.Logger(str(whole))
+    for i in range(2000):
+        writer.on_message_received(can.Message(timestamp=1700000000 + i / 100, arbitration_id=0x600 | i % 100,
+                                               data=i.to_bytes(8, "big"), is_extended_id=False))
+    writer.stop()
+    cut = tmp_path / "cut.blf"
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size * 2 // 3])
+    assert CliRunner().invoke(cli, ["decode", str(whole)]).exit_code == 0
+    result = CliRunner().invoke(cli, ["decode", str(cut)])
+    assert result.exit_code == 1 and f"{cut}: record " in result.stderr and "cut short" in result.stderr

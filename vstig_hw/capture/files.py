@@ -93,6 +93,14 @@ class CanCaptureWriter:
 _PCAP_MAGICS = tuple(m.to_bytes(4, order) for m in (0xA1B2C3D4, 0xA1B23C4D) for order in ("big", "little"))
 
 
+def _check_complete(path: str, reader: Any, frames: int) -> None:
+    """A BLF names its own size in its header: a file shorter than that was cut short (python-can stops quietly)."""
+    expected = getattr(reader, "file_size", 0) if isinstance(reader, can.BLFReader) else 0
+    actual = os.path.getsize(path)
+    if expected > actual:
+        raise ValueError(f"cut short: {actual} of the {expected} bytes its header announces ({frames} records read)")
+
+
 def sniff_suffix(head: bytes) -> str | None:
     """The capture type a file's first bytes show, as its extension (for a stream with no name to go by)."""
     if head.startswith(b"# vstig serial capture"):
@@ -209,6 +217,7 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
         for frame in reader:
             frames += 1
             yield Record(frame.timestamp, str(frame.channel or "can"), CAN_FRAMING, frame)
+        _check_complete(path, reader, frames)
     except Exception as error:  # python-can's readers raise many kinds; all mean the file is bad
         damage = CaptureError(path, None, f"record {frames + 1}: cannot read as {suffix}: {error}")
         if not skip_bad:
