@@ -9,6 +9,7 @@ a real python-can driver, needs no privileges, and loses nothing.
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 
 import can
@@ -27,14 +28,26 @@ def _frame(msg: Message) -> can.Message:
     return can.Message(arbitration_id=0x600 | int(msg.op) << 8 | sender, data=encode(msg), is_extended_id=False)
 
 
-def test_record_decode_replay_round_trip(tmp_path: Path) -> None:
-    capture = tmp_path / "swarm.log"
-    adapter = SlcanAdapter()
+def _record_messages(adapter: SlcanAdapter, capture: Path) -> subprocess.Popen[str]:
+    """`vstig record` on the adapter's bus, once it has opened it and been sent MESSAGES."""
     recorder = start_vstig("record", f"can:slcan:{adapter.path}", "-o", str(capture))
     try:
         wait_for(lambda: "O" in adapter.commands or "L" in adapter.commands, 30)
-        for msg in MESSAGES:
-            adapter.inject(_frame(msg))
+    except AssertionError:
+        recorder.kill()
+        recorder.communicate()
+        adapter.close()
+        raise
+    for msg in MESSAGES:
+        adapter.inject(_frame(msg))
+    return recorder
+
+
+def test_record_decode_replay_round_trip(tmp_path: Path) -> None:
+    capture = tmp_path / "swarm.log"
+    adapter = SlcanAdapter()
+    recorder = _record_messages(adapter, capture)
+    try:
         adapter.inject(can.Message(arbitration_id=0x123, data=b"\x01", is_extended_id=False))  # not ours
         wait_for(lambda: capture.exists() and capture.read_text().count("\n") >= len(MESSAGES), 20)
     finally:
@@ -67,11 +80,8 @@ def test_record_decode_replay_round_trip(tmp_path: Path) -> None:
 def test_a_blf_recording_killed_outright_keeps_what_it_recorded(tmp_path: Path) -> None:
     capture = tmp_path / "swarm.blf"
     adapter = SlcanAdapter()
-    recorder = start_vstig("record", f"can:slcan:{adapter.path}", "-o", str(capture))
+    recorder = _record_messages(adapter, capture)
     try:
-        wait_for(lambda: "O" in adapter.commands or "L" in adapter.commands, 30)
-        for msg in MESSAGES:
-            adapter.inject(_frame(msg))
         wait_for(lambda: capture.exists() and capture.stat().st_size > 200, 20)  # a block reached the disk
     finally:
         recorder.kill()  # SIGKILL: no chance to close the file

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 import pytest
-from peers import VSTIG, PtyPeer, run_vstig, start_vstig, wait_for
+from peers import PtyPeer, run_vstig, run_vstig_on_a_terminal_stderr, start_vstig, wait_for
 
 from vstig_hw.capture.serial_log import HEADER
 
@@ -73,35 +73,15 @@ def test_options_that_replay_onto_a_link_are_refused_with_table(tmp_path: Path) 
     assert done.returncode == 2 and "--loop go with --onto, not --table" in done.stderr
 
 
-def _on_a_terminal_stderr(*args: str) -> tuple[int, bytes]:
-    import os
-    import pty
-
-    primary, secondary = pty.openpty()
-    done = subprocess.run([VSTIG, *args], stdout=subprocess.DEVNULL, stderr=secondary, timeout=60, check=False)
-    os.close(secondary)
-    shown = b""
-    while True:
-        try:
-            chunk = os.read(primary, 65536)
-        except OSError:
-            break
-        if not chunk:
-            break
-        shown += chunk
-    os.close(primary)
-    return done.returncode, shown
-
-
 def test_record_and_replay_show_a_live_counter_line_on_a_terminal(tmp_path: Path) -> None:
-    code, shown = _on_a_terminal_stderr("record", "can:virtual:vstig-edges-live", "-o", str(tmp_path / "x.log"),
-                                        "--for", "1.2")
+    code, shown = run_vstig_on_a_terminal_stderr("record", "can:virtual:vstig-edges-live",
+                                                 "-o", str(tmp_path / "x.log"), "--for", "1.2")
     assert code == 0 and b"\r\x1b[K0 units" in shown, shown
     capture = tmp_path / "gap.cap"
     _two_units(capture, gap=0.2)
     radio = PtyPeer()
     try:
-        code, shown = _on_a_terminal_stderr("replay", str(capture), "--onto", f"serial:{radio.path}")
+        code, shown = run_vstig_on_a_terminal_stderr("replay", str(capture), "--onto", f"serial:{radio.path}")
     finally:
         radio.close()
     assert code == 0 and b"\r\x1b[Ksent 1 units" in shown, shown
