@@ -45,9 +45,11 @@ def _base(text: str | None) -> int | None:
               help=VALUE_TYPE_HELP)
 @click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 with --extended).")
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs.")
+@click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
+              help="For Buzz/BittyBuzz captures (blabbermouth, bittybuzz-kilobot): the TOML file mapping their keys.")
 @reports_errors
 def command(files: tuple[str, ...], input_format: str | None, fmt: str, skip_bad: bool, value_type: ValueType,
-            id_base: str | None, extended: bool) -> None:
+            id_base: str | None, extended: bool, deployment: str | None) -> None:
     """Print every message in FILES (- reads stdin; pipes and <(...) work too).
 
     Example: vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
@@ -59,7 +61,7 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, skip_bad
             try:
                 count, drops, bad = decode_file(readable, sys.stdout, fmt, value_type=value_type,
                                                 skip_bad=skip_bad, id_base=base, extended=extended,
-                                                progress=progress, csv_header=number == 0,
+                                                deployment=deployment, progress=progress, csv_header=number == 0,
                                                 file_column=len(files) > 1)
             except CaptureError as error:
                 raise _renamed(error, readable, name) from None

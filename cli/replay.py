@@ -9,7 +9,7 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.decoded import Decoder
+from vstig_hw.capture.decoded import Decoder, default_framings
 from vstig_hw.capture.files import read_capture
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.capture.replay import replay
@@ -25,13 +25,13 @@ from .errors import LINK, reports_errors
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 
 
-def _sender(link: Link[Any], onto: LinkSpec) -> Any:
+def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
     """Write a record as is when the medium and framing match; otherwise re-encode its messages.
 
     A CAN capture is read with the default ID scheme (11-bit, base 0x600); a target that asks for
     another (id_base, extended, stigmergy) gets the messages re-encoded in its own IDs.
     """
-    decoder = Decoder()
+    decoder = Decoder(default_framings(deployment=deployment))
     is_can = isinstance(onto, CanSpec)
     default_ids = is_can and onto.id_base in (None, 0x600) and not onto.extended and onto.stigmergy == 0
 
@@ -72,9 +72,9 @@ def _fresh(frame: Any) -> Any:
                        dlc=frame.dlc, check=False)
 
 
-def _table(path: str, at: float | None, value_type: ValueType) -> None:
+def _table(path: str, at: float | None, value_type: ValueType, deployment: str | None) -> None:
     engine = Stigmergy(_OBSERVER_ID)
-    decoder = Decoder()
+    decoder = Decoder(default_framings(deployment=deployment))
     t0 = None
     for decoded in decoder.decode_all(read_capture(path)):
         t0 = decoded.t if t0 is None else t0
@@ -103,9 +103,12 @@ def _table(path: str, at: float | None, value_type: ValueType) -> None:
 @click.option("--at", type=click.FloatRange(0.0), help="With --table: stop at T seconds after the first record.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
               help=VALUE_TYPE_HELP)
+@click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
+              help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
 @reports_errors
 def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, skip_gaps: float | None,
-            ignore_timestamps: bool, robot_id: int, table: bool, at: float | None, value_type: ValueType) -> None:
+            ignore_timestamps: bool, robot_id: int, table: bool, at: float | None, value_type: ValueType,
+            deployment: str | None) -> None:
     """Replay FILE onto a live link, or show what the swarm believed (--table).
 
     Ctrl-C or SIGTERM stops at once, even in a long gap: nothing is sent after it.
@@ -119,13 +122,13 @@ def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, skip_gap
                                             ("--ignore-timestamps", ignore_timestamps)) if given]
         if ignored:
             raise click.UsageError(f"{', '.join(ignored)} go with --onto, not --table")
-        _table(file, at, value_type)
+        _table(file, at, value_type, deployment)
         return
     if at is not None:
         raise click.UsageError("--at goes with --table")
     assert onto is not None
     link = build_links([onto], robot_id)[0]
-    send = _CountingSender(_sender(link, onto), link)
+    send = _CountingSender(_sender(link, onto, deployment), link)
     link.open()
     passes_done = 0
     try:

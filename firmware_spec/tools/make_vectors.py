@@ -822,6 +822,11 @@ def main(argv: list[str]) -> int:
         "ohc.json": ohc_vectors(),
         "can_frames.json": can_vectors(),
     }
+    # The dialects' vectors live beside this script; -I leaves its folder off sys.path.
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from dialect_vectors import dialect_files
+
+    files.update(dialect_files(crc16_mcrf4xx))
     for name, content in files.items():
         (outdir / name).write_text(json.dumps(content, indent=1) + "\n", encoding="utf-8")
     return 0

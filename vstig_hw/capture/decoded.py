@@ -32,13 +32,24 @@ class Decoded:
 FramingFactory = Callable[[Record], Any]
 
 
-def default_framings(id_base: int | None = None, extended: bool = False) -> FramingFactory:
+def default_framings(id_base: int | None = None, extended: bool = False,
+                     deployment: str | None = None) -> FramingFactory:
+    """Framings by the name a record carries; robot dialects (Buzz, BittyBuzz) need their `deployment` file."""
     from ..framing import make_serial_framing
     from ..links.can import can_framing
 
     def make(record: Record) -> Any:
         if record.framing == CAN_FRAMING:
             return can_framing(id_base, extended)
+        from ..dialects.framing import DIALECT_FRAMINGS, make_dialect_framing
+
+        if record.framing in DIALECT_FRAMINGS:
+            if deployment is None:
+                raise ValueError(f"{record.framing} records are in a robot dialect: give the deployment file that "
+                                 "maps its keys (--deployment FILE.toml)")
+            from ..dialects.mapping import load_deployment
+
+            return make_dialect_framing(record.framing, load_deployment(deployment))
         return make_serial_framing(record.framing)
 
     return make

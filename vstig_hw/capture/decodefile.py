@@ -30,7 +30,7 @@ CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
                 skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
                 progress: Callable[[int], None] | None = None, csv_header: bool = True,
-                file_column: bool = False) -> tuple[int, Counters, list[CaptureError]]:
+                file_column: bool = False, deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
     """Write every message in `path` to `out`; returns (messages, drops by reason, bad lines skipped).
 
     `progress` is told, now and then, how many bytes of the file were read so far (every format).
@@ -38,7 +38,7 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
     first column naming the file.
     """
     formatter = _with_file(path) if fmt == "csv" and file_column else FORMATS[fmt]
-    decoder = Decoder(default_framings(id_base, extended))
+    decoder = Decoder(default_framings(id_base, extended, deployment))
     bad: list[CaptureError] = []
     if fmt == "csv" and csv_header:
         out.write(("file," if file_column else "") + CSV_HEADER)

@@ -15,6 +15,7 @@ import re
 from collections.abc import Callable, Iterator
 from typing import IO, Any
 
+from ..dialects.framing import DIALECT_FRAMINGS
 from ..framing import SERIAL_FRAMINGS
 from .records import CaptureError, Record, parse_lines
 
@@ -62,8 +63,9 @@ def parse_line(path: str, number: int, line: str) -> Record | None:
         raise CaptureError(path, number, f"not a serial capture line: {text[:60]!r} "
                            "(expected '(<time>) <link> <framing> rx|tx <hex bytes>')")
     stamp, link, framing, direction, data = match.groups()
-    if framing not in SERIAL_FRAMINGS:
-        raise CaptureError(path, number, f"unknown serial framing {framing!r} (known: {', '.join(SERIAL_FRAMINGS)})")
+    if framing not in SERIAL_FRAMINGS and framing not in DIALECT_FRAMINGS:
+        known = ", ".join([*SERIAL_FRAMINGS, *DIALECT_FRAMINGS])
+        raise CaptureError(path, number, f"unknown serial framing {framing!r} (known: {known})")
     return Record(float(stamp), link, framing, bytes.fromhex(data), direction)
 
 

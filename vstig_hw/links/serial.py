@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from ..framing import make_serial_framing
+from ..framing import SerialFraming, make_serial_framing
 from ..transports.serial import SerialTransport
 from .link import Link
 
@@ -36,5 +36,18 @@ def serial_link(port: str, framing: str = "cobs8", baud: int | None = None, *, n
 
 def serial_link_from_spec(spec: SerialSpec, name: str) -> Link[Any]:
     """A serial link never names its sender, so unlike CAN it needs no robot id."""
+    if spec.dialect is not None:
+        return _dialect_link(spec, name)
     options: dict[str, Any] = {} if spec.expiry_ticks is None else {"expiry_ticks": spec.expiry_ticks}
     return serial_link(spec.port, spec.framing, spec.baud, name=name, connect=False, **options)
+
+
+def _dialect_link(spec: SerialSpec, name: str) -> Link[bytes]:
+    """Kilobots running BittyBuzz: the Kilobot framings with a deployment's translator inside."""
+    from ..dialects.framing import BittyBuzzKilobotFraming, BittyBuzzOhcFraming
+    from ..dialects.mapping import load_deployment
+
+    deployment = load_deployment(str(spec.deployment))
+    codec: SerialFraming = (BittyBuzzOhcFraming(deployment) if spec.framing == "kilobot-ohc"
+                            else BittyBuzzKilobotFraming(deployment))
+    return Link(name, SerialTransport(spec.port, spec.baud, name=name), codec)

@@ -5,6 +5,8 @@ Grammar (one parser for every command)::
     can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1&stigmergy=N&filter=0&bus.KEY=V]
     serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]
     kilobot-ohc:<port or pyserial URL>
+    serial:<port>?framing=kilobot&dialect=bittybuzz&deployment=<file.toml>   (and kilobot-ohc:<port>?dialect=...)
+    blabbermouth:<host>[:port],<host>[:port]...?size=N&deployment=<file.toml>
 
 The query after the last `?` is ours. A pyserial URL (`socket://h:7000`,
 `rfc2217://...`) may carry its own options in the same query: keys we do not
@@ -24,17 +26,21 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .link import Link
 
-__all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "CanSpec", "LinkSpec", "SerialSpec", "parse"]
+__all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "BlabbermouthSpec", "CanSpec", "LinkSpec", "SerialSpec", "parse"]
 
 SERIAL_FRAMINGS = ("cobs8", "epuck4", "kilobot")
 DEFAULT_BAUD = 115200
 OHC_BAUD = 38400  # the Kilobot overhead controller's fixed rate
+KH4_PORT = 24580  # the port bzzkh4 listens on (BuzzKH4 buzz_utility.c)
 
 GRAMMAR = (
     "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1&stigmergy=N&filter=0"
     "&bus.KEY=VALUE]",
     "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]",
     "kilobot-ohc:<port or pyserial URL>",
+    "serial:<port>?framing=kilobot&dialect=bittybuzz&deployment=<file.toml>, kilobot-ohc:<port>?dialect=bittybuzz&"
+    "deployment=<file.toml>",
+    "blabbermouth:<host>[:port],<host>[:port]...?size=N&deployment=<file.toml>",
 )
 EXAMPLES = {
     "can": ("can:socketcan:vcan0", "can:virtual:lab", "can:slcan:/dev/ttyACM0?bitrate=500000",
@@ -44,7 +50,10 @@ EXAMPLES = {
     "serial": ("serial:/dev/ttyUSB0?baud=115200", "serial:socket://localhost:7000?framing=epuck4",
                "serial:/dev/rfcomm0?framing=kilobot",
                "serial:/dev/ttyUSB1?framing=epuck4&expiry_ticks=5"),
-    "kilobot-ohc": ("kilobot-ohc:/dev/ttyUSB0",),
+    "kilobot-ohc": ("kilobot-ohc:/dev/ttyUSB0", "kilobot-ohc:/dev/ttyUSB0?dialect=bittybuzz&deployment=lab.toml"),
+    "bittybuzz": ("serial:/dev/ttyUSB0?framing=kilobot&dialect=bittybuzz&deployment=lab.toml",),
+    "blabbermouth": ("blabbermouth:192.168.1.101,192.168.1.102,192.168.1.103?size=100&deployment=lab.toml",
+                     "blabbermouth:k01.lab:24580,k02.lab:24580?size=64&deployment=kheperas.toml"),
 }
 # One line per kind for `vstig links`: what the options mean beyond the grammar.
 NOTES = {
@@ -59,6 +68,13 @@ NOTES = {
               "stigmergy: its framings have no stigmergy field. epuck4's expiry_ticks (default 3) is how many "
               "control periods a message's three words may take to arrive (firmware_spec/SPEC.md 6.2.2).",
     "kilobot-ohc": "kilobot-ohc: transmit only, at the overhead controller's fixed 38400 baud.",
+    "bittybuzz": "bittybuzz: Kilobots running BittyBuzz, through a bridge radio (framing=kilobot) or the overhead "
+                 "controller; deployment= names the TOML file that maps their string ids and values to our keys "
+                 "(firmware_spec/dialects.md section 5).",
+    "blabbermouth": "blabbermouth: replaces MISTLab's blabbermouth relay for Khepera IV robots running BuzzKH4 "
+                    "(bzzkh4 tcp <size> ...): connects to each robot (port 24580 unless given), relays every "
+                    "robot's frame to all the others, and sends our own under --robot-id. size= must be the "
+                    "robots' msg_size; deployment= maps their Buzz keys and values to ours.",
 }
 _IFACE = re.compile(r"[A-Za-z0-9_]+\Z")
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9._:-]+")
@@ -98,6 +114,8 @@ class SerialSpec:
     baud: int = DEFAULT_BAUD
     framing: str = "cobs8"  # cobs8 | epuck4 | kilobot | kilobot-ohc
     expiry_ticks: int | None = None  # epuck4 only: control periods a fragment waits for the rest
+    dialect: str | None = None  # "bittybuzz": the robots speak BittyBuzz, translated through `deployment`
+    deployment: str | None = None  # the deployment TOML file of a dialect link
 
     @property
     def kind(self) -> str:
@@ -115,7 +133,28 @@ class SerialSpec:
         return serial_link_from_spec(self, name or self.name)
 
 
-LinkSpec = CanSpec | SerialSpec
+@dataclass(frozen=True, slots=True)
+class BlabbermouthSpec:
+    robots: tuple[tuple[str, int], ...]
+    size: int
+    deployment: str
+
+    @property
+    def kind(self) -> str:
+        return "blabbermouth"
+
+    @property
+    def name(self) -> str:
+        return "blabbermouth"
+
+    def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
+        """The Link (not yet open); our frames go out under `robot_id` (a sniffer sends none, but relays)."""
+        from .blabbermouth import blabbermouth_link_from_spec
+
+        return blabbermouth_link_from_spec(self, name or self.name, robot_id)
+
+
+LinkSpec = CanSpec | SerialSpec | BlabbermouthSpec
 
 
 def _safe_name(text: str) -> str:
@@ -241,8 +280,27 @@ def _bus_value(text: str) -> Any:
     return {"true": True, "false": False}.get(text.lower(), text)
 
 
+_DIALECT_KEYS = ("dialect", "deployment")
+
+
+def _dialect(spec: str, scheme: str, params: dict[str, str], framing: str) -> dict[str, Any]:
+    """`dialect=bittybuzz&deployment=FILE` of a Kilobot link; {} when the link speaks our own format.
+    The file is read when the link is built, as a port is opened then."""
+    if "dialect" not in params:
+        if "deployment" in params:
+            raise _bad(spec, "deployment= goes with dialect=bittybuzz", scheme)
+        return {}
+    if params["dialect"] != "bittybuzz":
+        raise _bad(spec, f"dialect={params['dialect']!r}: a serial link speaks bittybuzz (or our own format)", scheme)
+    if framing not in ("kilobot", "kilobot-ohc"):
+        raise _bad(spec, "dialect=bittybuzz rides on Kilobot messages: use framing=kilobot or kilobot-ohc:", scheme)
+    if "deployment" not in params:
+        raise _bad(spec, "dialect=bittybuzz needs deployment=<file.toml> (its keys and value types)", scheme)
+    return {"dialect": "bittybuzz", "deployment": params["deployment"]}
+
+
 def _parse_serial(spec: str, body: str) -> SerialSpec:
-    port, params = _query(spec, body, "serial", ("baud", "framing", "expiry_ticks"), "://" in body)
+    port, params = _query(spec, body, "serial", ("baud", "framing", "expiry_ticks", *_DIALECT_KEYS), "://" in body)
     framing = params.get("framing", "cobs8")
     if framing not in SERIAL_FRAMINGS:
         raise _bad(spec, f"framing={framing!r} is not one of {'|'.join(SERIAL_FRAMINGS)}", "serial")
@@ -252,16 +310,32 @@ def _parse_serial(spec: str, body: str) -> SerialSpec:
         if framing != "epuck4":
             raise _bad(spec, f"expiry_ticks is an epuck4 option, not one of framing={framing}", "serial")
         expiry_ticks = _int(spec, "serial", "expiry_ticks", params["expiry_ticks"], 1, 254)
-    return SerialSpec(port=_port(spec, "serial", port), baud=baud, framing=framing, expiry_ticks=expiry_ticks)
+    return SerialSpec(port=_port(spec, "serial", port), baud=baud, framing=framing, expiry_ticks=expiry_ticks,
+                      **_dialect(spec, "serial", params, framing))
 
 
 def _parse_ohc(spec: str, body: str) -> SerialSpec:
-    port, _ = _query(spec, body, "kilobot-ohc", (), "://" in body)
-    return SerialSpec(port=_port(spec, "kilobot-ohc", port), baud=OHC_BAUD, framing="kilobot-ohc")
+    port, params = _query(spec, body, "kilobot-ohc", _DIALECT_KEYS, "://" in body)
+    return SerialSpec(port=_port(spec, "kilobot-ohc", port), baud=OHC_BAUD, framing="kilobot-ohc",
+                      **_dialect(spec, "kilobot-ohc", params, "kilobot-ohc"))
+
+
+def _parse_blabbermouth(spec: str, body: str) -> BlabbermouthSpec:
+    addresses, params = _query(spec, body, "blabbermouth", ("size", "deployment"), False)
+    robots = []
+    for address in addresses.split(","):
+        host, sep, port = address.strip().rpartition(":") if ":" in address else (address.strip(), "", "")
+        if not host or any(ch in host for ch in "\0\n\r /?&"):
+            raise _bad(spec, f"robot address {address!r} is not host[:port]", "blabbermouth")
+        robots.append((host, _int(spec, "blabbermouth", "port", port, 1, 65535) if sep else KH4_PORT))
+    if "size" not in params or "deployment" not in params:
+        raise _bad(spec, "size=N (the robots' msg_size) and deployment=<file.toml> are both needed", "blabbermouth")
+    return BlabbermouthSpec(tuple(robots), _int(spec, "blabbermouth", "size", params["size"], 5, 65535),
+                            params["deployment"])
 
 
 _SCHEMES: dict[str, Callable[[str, str], LinkSpec]] = {
-    "can": _parse_can, "serial": _parse_serial, "kilobot-ohc": _parse_ohc,
+    "can": _parse_can, "serial": _parse_serial, "kilobot-ohc": _parse_ohc, "blabbermouth": _parse_blabbermouth,
 }
 
 
@@ -271,5 +345,5 @@ def parse(spec: str) -> LinkSpec:
         raise ValueError(f"a link spec is a string, got {type(spec).__name__}")
     scheme, sep, body = spec.partition(":")
     if not sep or scheme not in _SCHEMES:
-        raise _bad(spec, f"unknown kind {scheme!r}; a spec starts with can:, serial: or kilobot-ohc:")
+        raise _bad(spec, f"unknown kind {scheme!r}; a spec starts with can:, serial:, kilobot-ohc: or blabbermouth:")
     return _SCHEMES[scheme](spec, body)

@@ -1,0 +1,166 @@
+"""A Khepera IV running BuzzKH4 with the paper's script, as a separate process, written from Buzz's C alone.
+
+Independent of vstig_hw. The robot listens on 127.0.0.1 (port 0: the first line it
+prints is `port N`), accepts one connection and only then starts, as bzzkh4 does
+(BuzzKH4 buzz_utility.c). Every step it sends one `size`-byte frame: u16 robot id,
+[u16 length][message]..., zero padding, little-endian (buzz_utility.c:479-511). Its
+script: stigmergy.create(1), put("leader", id) once, get("leader") every step, with
+Buzz's vstig rules (buzzvm.c:276-420), its default conflict rule (higher robot id,
+non-nil first) and its out-queue (one pending message per key, replaced only by a
+higher timestamp; PUTs before QUERYs).
+
+It prints `leader VALUE TS ROBOT` each time its entry changes, and `bad HEX` for any
+vstig message that does not parse to its exact end in the current dialect.
+
+Usage: python kh4_robot.py ROBOT_ID SIZE
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+import struct
+import sys
+import time
+
+PUT, QUERY = 2, 3
+STIG, KEY = 1, b"leader"
+
+
+def obj(value: int | None) -> bytes:
+    return b"\x00" if value is None else b"\x01" + struct.pack(">i", value)
+
+
+def message(kind: int, entry: tuple[int | None, int, int]) -> bytes:
+    value, ts, robot = entry
+    return bytes((kind,)) + struct.pack(">HBH", STIG, 3, len(KEY)) + KEY + obj(value) + struct.pack(">HH", ts, robot)
+
+
+def parse_obj(data: bytes, pos: int) -> tuple[object, int]:
+    tag = data[pos]
+    if tag == 0:
+        return None, pos + 1
+    if tag == 1:
+        return struct.unpack_from(">i", data, pos + 1)[0], pos + 5
+    if tag == 3:
+        (size,) = struct.unpack_from(">H", data, pos + 1)
+        if pos + 3 + size > len(data):
+            raise ValueError("string past the end")
+        return data[pos + 3:pos + 3 + size], pos + 3 + size
+    raise ValueError(f"tag {tag}")
+
+
+def parse(data: bytes) -> tuple[int, int, object, object, int, int]:
+    (stig,) = struct.unpack_from(">H", data, 1)
+    key, pos = parse_obj(data, 3)
+    value, pos = parse_obj(data, pos)
+    ts, robot = struct.unpack_from(">HH", data, pos)
+    if pos + 4 != len(data):
+        raise ValueError("length")
+    return data[0], stig, key, value, ts, robot
+
+
+class Robot:
+    def __init__(self, rid: int) -> None:
+        self.rid = rid
+        self.entry: tuple[int | None, int, int] | None = None
+        self.pending: tuple[int, tuple[int | None, int, int]] | None = None
+
+    def queue(self, kind: int, entry: tuple[int | None, int, int]) -> None:
+        if self.pending is not None and self.pending[1][1] >= entry[1]:
+            return
+        self.pending = (kind, entry)
+
+    def store(self, entry: tuple[int | None, int, int]) -> None:
+        if entry != self.entry:
+            print(f"leader {entry[0]} {entry[1]} {entry[2]}", flush=True)
+        self.entry = entry
+
+    def conflict(self, remote: tuple[int | None, int, int]) -> tuple[int | None, int, int]:
+        local = self.entry
+        assert local is not None
+        if (local[0] is None) == (remote[0] is None):
+            winner = remote if remote[2] > local[2] else local
+        else:
+            winner = remote if local[0] is None else local
+        return (winner[0], local[1], winner[2])
+
+    def receive(self, kind: int, value: object, ts: int, robot: int) -> None:
+        remote = (value if isinstance(value, int) else None, ts, robot)
+        local = self.entry
+        if kind == PUT:
+            if local is None or local[1] < ts:
+                self.store(remote)
+                self.queue(PUT, remote)
+            elif local[1] == ts and local[2] != robot:
+                self.store(self.conflict(remote))
+                self.queue(PUT, self.entry)  # type: ignore[arg-type]
+        elif local is None:
+            if remote[0] is None:
+                self.queue(QUERY, remote)
+            else:
+                self.store(remote)
+                self.queue(PUT, remote)
+        elif local[1] < ts:
+            self.store(remote)
+            self.queue(PUT, remote)
+        elif local[1] > ts:
+            self.queue(PUT, local)
+        elif local[2] != robot:
+            self.store(self.conflict(remote))
+            self.queue(PUT, self.entry)  # type: ignore[arg-type]
+
+
+def main() -> int:
+    rid, size = int(sys.argv[1]), int(sys.argv[2])
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    print(f"port {server.getsockname()[1]}", flush=True)
+    conn, _ = server.accept()
+    server.close()
+    robot = Robot(rid)
+    robot.store((rid, 1, rid))  # put("leader", id)
+    robot.queue(PUT, robot.entry)  # type: ignore[arg-type]
+    inbox = b""
+    while True:
+        end = time.monotonic() + 0.05
+        while (left := end - time.monotonic()) > 0:
+            if select.select([conn], [], [], left)[0]:
+                chunk = conn.recv(65536)
+                if not chunk:
+                    return 0
+                inbox += chunk
+        while len(inbox) >= size:
+            frame, inbox = inbox[:size], inbox[size:]
+            pos = 2
+            while size - pos > 2:
+                (length,) = struct.unpack_from("<H", frame, pos)
+                pos += 2
+                if length == 0 or length > size - pos:
+                    break
+                data = frame[pos:pos + length]
+                pos += length
+                if data[0] in (PUT, QUERY):
+                    try:
+                        kind, stig, key, value, ts, writer = parse(data)
+                    except (ValueError, struct.error, IndexError):
+                        print(f"bad {data.hex()}", flush=True)
+                        continue
+                    if stig == STIG and key == KEY:
+                        robot.receive(kind, value, ts, writer)
+        if robot.entry is not None:
+            robot.queue(QUERY, robot.entry)  # get("leader")
+        out = struct.pack("<H", rid)
+        if robot.pending is not None:
+            data = message(*robot.pending)
+            out += struct.pack("<H", len(data)) + data
+            robot.pending = None
+        try:
+            conn.sendall(out.ljust(size, b"\0"))
+        except OSError:
+            return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,171 @@
+"""`vstig bridge` between swarms that speak Buzz or BittyBuzz and our own radios, as subprocesses."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+import can
+from bbz_swarm import KilobotSwarm
+from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, stop, wait_for
+
+from vstig_hw import Message, Op, Stigmergy, decode, encode
+from vstig_hw.engine import larger_value_wins
+from vstig_hw.framing import make_serial_framing
+
+X = 41  # BittyBuzz's string id of "x" in every build
+
+
+def test_bittybuzz_kilobots_and_can_converge_with_both_clocks(tmp_path: Path) -> None:
+    deployment = tmp_path / "kilobots.toml"
+    deployment.write_text('[keys]\nx = { key = 1, type = "int16" }\n', encoding="utf-8")
+    adapter, radio = SlcanAdapter(), PtyPeer()
+    swarm = KilobotSwarm(radio, [11, 12, 13], [X])
+    for robot in swarm.robots:  # the paper's task: every robot puts its id; here the higher id wins
+        robot.put(X, robot.rid)
+    bridge = start_vstig("bridge", f"can:slcan:{adapter.path}",
+                         f"serial:{radio.path}?framing=kilobot&dialect=bittybuzz&deployment={deployment}",
+                         "--robot-id", "200")
+    try:
+        wait_for(lambda: "O" in adapter.commands, 30)
+        swarm.start()
+        # A CAN robot joins with a higher id at timestamp 1: the same version number the Kilobots started at.
+        adapter.inject(can.Message(arbitration_id=0x600 | 40, data=encode(Message(Op.PUT, 1, 40, 1, 40)),
+                                   is_extended_id=False))
+        wait_for(lambda: all(e is not None and e.value == 40 for e in swarm.held(X)), 30)
+        # A Kilobot writes: its next lamport becomes the next timestamp on CAN, writer kept.
+        swarm.act(13, X, -7)
+
+        def on_can(value: int) -> list[Message]:
+            return [m for m in (decode(bytes(f.data)) for f in list(adapter.sent)) if m.key == 1 and m.value == value]
+
+        wait_for(lambda: bool(on_can(0xFFF9)), 30)
+        wait_for(lambda: all(e is not None and e.value == -7 for e in swarm.held(X)), 30)
+    finally:
+        _out, err = stop(bridge)
+        swarm.stop()
+        adapter.close()
+        radio.close()
+    assert bridge.returncode == 0, err
+    kilobot_write = on_can(0xFFF9)[0]
+    winner = next(e for e in swarm.held(X) if e is not None)
+    assert (kilobot_write.op, kilobot_write.robot) == (Op.PUT, 13)
+    assert kilobot_write.timestamp == 2 and winner.lamport == 3  # lamport 3 = one past the bridge's 2
+    # What the bridge told the Kilobots: PUTs only, each lamport one step past the previous.
+    sent = [m for m in swarm.from_bridge if m[2] == X]
+    assert sent and all(m[0] == 1 for m in sent)
+    lamports = [m[5] for m in sent]
+    assert all(1 <= (b - a) & 0xFF <= 2 or b == a for a, b in itertools.pairwise(lamports)), lamports
+    assert sent[0][1] == 40 and sent[0][4] == 40  # the CAN robot's version, under its own id
+
+
+KH4_ROBOT = Path(__file__).with_name("kh4_robot.py")
+FRAME = 64
+
+
+def _start_khepera(robot_id: int) -> tuple[subprocess.Popen[str], int]:
+    robot = subprocess.Popen([sys.executable, str(KH4_ROBOT), str(robot_id), str(FRAME)], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    assert robot.stdout is not None
+    first = robot.stdout.readline().split()
+    assert first[:1] == ["port"], first
+    return robot, int(first[1])
+
+
+def test_blabbermouth_kheperas_and_a_pty_robot_converge_on_the_largest_id(tmp_path: Path) -> None:
+    deployment = tmp_path / "kheperas.toml"
+    deployment.write_text('[buzz]\nstigmergy = 1\n[keys]\nleader = { key = 1, type = "int16" }\n', encoding="utf-8")
+    kheperas = [_start_khepera(robot_id) for robot_id in (5, 6, 7)]
+    lines: dict[int, list[str]] = {index: [] for index in range(3)}
+    readers = [threading.Thread(target=_collect, args=(robot.stdout, lines[i]), daemon=True)
+               for i, (robot, _) in enumerate(kheperas)]
+    for reader in readers:
+        reader.start()
+    radio = PtyPeer()
+    far_robot = Stigmergy(300, onconflict=larger_value_wins)
+    far_robot.put(1, 300)  # the paper's task: every robot puts its id
+    framing = make_serial_framing("cobs8")
+    addresses = ",".join(f"127.0.0.1:{port}" for _, port in kheperas)
+    bridge = start_vstig("bridge", f"blabbermouth:{addresses}?size={FRAME}&deployment={deployment}",
+                         f"serial:{radio.path}?framing=cobs8", "--robot-id", "200", "--larger-value-wins")
+
+    def radio_robot_step() -> None:
+        for msg in framing.feed(radio.read(0.05)):
+            far_robot.receive(msg)
+        far_robot.get(1)
+        for msg in far_robot.drain():
+            radio.write(b"".join(framing.encode(msg)))
+
+    try:
+        wait_for(lambda: all(lines[i] and lines[i][-1] == "leader 300 1 300" for i in range(3)), 60,
+                 step=radio_robot_step)
+    finally:
+        _out, err = stop(bridge)
+        for robot, _ in kheperas:
+            robot.terminate()
+            robot.wait(timeout=10)
+        radio.close()
+    assert bridge.returncode == 0, err
+    every_line = [line for i in range(3) for line in lines[i]]
+    assert not [line for line in every_line if line.startswith("bad")], every_line  # byte-exact Buzz
+    assert far_robot.entry(1) == (300, 1, 300)
+    assert "relayed=" in err
+
+
+def test_sniffing_a_khepera_swarm_relays_it_whole_and_decodes_it(tmp_path: Path) -> None:
+    """Without the relay the robots never hear each other; a sniffer relays and only listens."""
+    deployment = tmp_path / "kheperas.toml"
+    deployment.write_text('[buzz]\nstigmergy = 1\n[keys]\nleader = { key = 1, type = "int16" }\n', encoding="utf-8")
+    kheperas = [_start_khepera(robot_id) for robot_id in (5, 6, 7)]
+    lines: dict[int, list[str]] = {index: [] for index in range(3)}
+    for i, (robot, _) in enumerate(kheperas):
+        threading.Thread(target=_collect, args=(robot.stdout, lines[i]), daemon=True).start()
+    addresses = ",".join(f"127.0.0.1:{port}" for _, port in kheperas)
+    sniffer = start_vstig("sniff", f"blabbermouth:{addresses}?size={FRAME}&deployment={deployment}", "--jsonl")
+    rows: list[str] = []
+    threading.Thread(target=_collect, args=(sniffer.stdout, rows), daemon=True).start()
+    try:
+        wait_for(lambda: all(lines[i] and lines[i][-1] == "leader 7 1 7" for i in range(3)), 60)
+        wait_for(lambda: len(rows) >= 3, 30)
+    finally:
+        stop(sniffer)
+        for robot, _ in kheperas:
+            robot.terminate()
+            robot.wait(timeout=10)
+    decoded = [json.loads(row) for row in rows]
+    assert {(r["op"], r["key"], r["value"], r["timestamp"], r["robot"]) for r in decoded} >= {("PUT", 1, 7, 1, 7)}
+    assert all(r["key"] == 1 for r in decoded)
+    assert not [line for i in range(3) for line in lines[i] if line.startswith("bad")]
+
+
+def _collect(stream: Any, into: list[str]) -> None:
+    for line in stream:
+        into.append(line.strip())
+
+
+def test_record_and_decode_a_khepera_swarm(tmp_path: Path) -> None:
+    deployment = tmp_path / "kheperas.toml"
+    deployment.write_text('[buzz]\nstigmergy = 1\n[keys]\nleader = { key = 1, type = "int16" }\n', encoding="utf-8")
+    kheperas = [_start_khepera(robot_id) for robot_id in (5, 9)]
+    capture = tmp_path / "kheperas.cap"
+    addresses = ",".join(f"127.0.0.1:{port}" for _, port in kheperas)
+    try:
+        done = run_vstig("record", f"blabbermouth:{addresses}?size={FRAME}&deployment={deployment}",
+                         "-o", str(capture), "--for", "2")
+    finally:
+        for robot, _ in kheperas:
+            robot.terminate()
+            robot.wait(timeout=10)
+    assert done.returncode == 0, done.stderr
+    decoded = run_vstig("decode", str(capture), "--format", "jsonl", "--deployment", str(deployment))
+    assert decoded.returncode == 0, decoded.stderr
+    rows = [json.loads(line) for line in decoded.stdout.splitlines()]
+    assert ("PUT", 1, 9, 1, 9) in {(r["op"], r["key"], r["value"], r["timestamp"], r["robot"]) for r in rows}
+    undeployed = run_vstig("decode", str(capture))
+    assert undeployed.returncode == 1 and "--deployment" in undeployed.stderr
+    assert len(undeployed.stderr.strip().splitlines()) == 1 and "Traceback" not in undeployed.stderr
