@@ -10,7 +10,7 @@ import click
 
 from vstig_hw.gateway import Node, stop_on_signals
 from vstig_hw.links import Link
-from vstig_hw.links.spec import LinkSpec
+from vstig_hw.links.spec import CanSpec, LinkSpec
 
 VALUE_TYPE_HELP = "How to show the 16-bit value field: unsigned, signed (two's complement) or half-precision float."
 
@@ -24,6 +24,9 @@ def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool 
         seen[name] = seen.get(name, 0) + 1
         if seen[name] > 1:
             name = f"{name}-{seen[name]}"
+        if isinstance(spec, CanSpec) and spec.interface == "virtual":
+            click.echo(f"note: can:virtual:{spec.channel} is a bus inside this process only: no other program "
+                       "hears it (vcan or can:udp_multicast: reach other processes)", err=True)
         try:
             links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
         except ValueError as error:  # building opens nothing: what fails here is how the link was asked for

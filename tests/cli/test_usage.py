@@ -118,6 +118,7 @@ def test_sniff_into_a_pipe_says_when_its_table_comes(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["sniff", "can:virtual:vstig-edges-pipe", "--for", "0.1"])
     assert result.exit_code == 0, result.output
     assert "the table is printed once, when sniff ends" in result.stderr and "vstig sniff" in result.stdout
+    assert "can:virtual:vstig-edges-pipe is a bus inside this process only" in result.stderr
 
 
 def test_serial_capture_damage_names_file_and_line(tmp_path: Path) -> None:
