@@ -110,3 +110,12 @@ def test_rotation_skips_numbered_files_that_exist(tmp_path: Path) -> None:
     capture.close()
     assert (tmp_path / "r_001.cap").read_text() == "older run"
     assert capture.files[1].endswith("r_002.cap")
+
+
+def test_a_file_that_cannot_take_the_capture_is_named(tmp_path: Path) -> None:
+    radio = PtyPeer()
+    try:
+        code, output = _record(f"serial:{radio.path}", "-o", "/dev/full", "--for", "1")
+    finally:
+        radio.close()
+    assert code == 1 and "/dev/full: No space left on device" in output and "Traceback" not in output
