@@ -92,3 +92,32 @@ def test_ctrl_c_ends_a_command_quietly_with_status_130() -> None:
     os.killpg(sim.pid, signal.SIGINT)
     _, err = sim.communicate(timeout=60)
     assert sim.returncode == 130 and err.strip() == "", err
+
+
+def test_sniff_jsonl_into_head_ends_quietly_with_status_0() -> None:
+    import threading
+    import time
+
+    from peers import PtyPeer
+
+    from vstig_hw import Message, Op
+    from vstig_hw.framing import make_serial_framing
+
+    radio = PtyPeer()
+    cobs8 = make_serial_framing("cobs8")
+    burst = b"".join(unit for i in range(50) for unit in cobs8.encode(Message(Op.PUT, 3, i, i + 1, 7)))
+    stop = threading.Event()
+
+    def robot() -> None:
+        while not stop.is_set():
+            radio.write(burst)
+            time.sleep(0.01)
+
+    threading.Thread(target=robot, daemon=True).start()
+    try:
+        done = _shell(f"{VSTIG} sniff serial:{radio.path} --jsonl | head -2; exit ${{PIPESTATUS[0]}}", timeout=60)
+    finally:
+        stop.set()
+        time.sleep(0.05)
+        radio.close()
+    assert done.returncode == 0 and len(done.stdout.splitlines()) == 2 and done.stderr == "", done.stderr
