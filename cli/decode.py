@@ -12,7 +12,7 @@ from collections.abc import Callable, Iterator
 import click
 
 from vstig_hw.capture.decodefile import FORMATS, decode_file
-from vstig_hw.capture.files import CAN_EXTENSIONS, sniff_suffix
+from vstig_hw.capture.files import READABLE_EXTENSIONS, sniff_suffix
 from vstig_hw.capture.records import CaptureError
 from vstig_hw.capture.serial_log import is_serial_capture
 from vstig_hw.values import VALUE_TYPES, ValueType
@@ -20,7 +20,7 @@ from vstig_hw.values import VALUE_TYPES, ValueType
 from ._common import VALUE_TYPE_HELP
 from .errors import reports_errors
 
-INPUT_FORMATS = [*(suffix[1:] for suffix in CAN_EXTENSIONS), "cap"]  # cap: our serial capture
+INPUT_FORMATS = [*(suffix[1:] for suffix in READABLE_EXTENSIONS), "cap"]  # cap: our serial capture
 _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 
 
@@ -82,7 +82,7 @@ def _renamed(error: CaptureError, read: str, name: str) -> CaptureError:
 def _readable(path: str, name: str, input_format: str | None) -> Iterator[str]:
     """A regular file to read `path` from whose name shows its type; a stream (-, a pipe) is copied first."""
     regular = path != "-" and os.path.isfile(path)
-    if regular and input_format is None and (path.lower().endswith(CAN_EXTENSIONS) or is_serial_capture(path)):
+    if regular and input_format is None and (path.lower().endswith(READABLE_EXTENSIONS) or is_serial_capture(path)):
         yield path
         return
     with tempfile.TemporaryDirectory(prefix="vstig-decode-") as folder:

@@ -21,10 +21,12 @@ from .candump import read_candump
 from .records import CAN_FRAMING, CaptureError, Record
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
 
-__all__ = ["APPENDABLE", "CAN_EXTENSIONS", "CaptureWriter", "RotatingCapture", "file_position", "read_capture",
-           "rotated_name", "sniff_suffix"]
+__all__ = ["APPENDABLE", "CAN_EXTENSIONS", "READABLE_EXTENSIONS", "CaptureWriter", "RotatingCapture",
+           "file_position", "read_capture", "rotated_name", "sniff_suffix"]
 
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
+READ_ONLY_EXTENSIONS = (".pcapng",)  # formats we read but do not write (Wireshark's default)
+READABLE_EXTENSIONS = CAN_EXTENSIONS + READ_ONLY_EXTENSIONS
 APPENDABLE = (".log", ".blf", ".csv", ".log.gz")  # the CAN formats python-can's writers can add to
 _BLF_CONTAINER_EVERY = 2.0  # seconds between BLF blocks written while recording
 _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
@@ -109,6 +111,8 @@ def sniff_suffix(head: bytes) -> str | None:
         return ".blf"
     if head[:4] in _PCAP_MAGICS:
         return ".pcap"
+    if head.startswith(b"\x0a\x0d\x0d\x0a"):
+        return ".pcapng"
     if head.startswith(b"\x1f\x8b"):
         return ".log.gz"
     text = head.lstrip()
@@ -202,9 +206,9 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
     if suffix in (".log", ".log.gz"):
         yield from read_candump(path, skip_bad, bad, opened)
         return
-    if suffix not in CAN_EXTENSIONS:
+    if suffix not in READABLE_EXTENSIONS:
         raise CaptureError(path, None, f"unknown capture type {suffix or '(no extension)'!r}: expected a "
-                           f"serial capture or one of {', '.join(CAN_EXTENSIONS)}")
+                           f"serial capture or one of {', '.join(READABLE_EXTENSIONS)}")
     if os.path.getsize(path) == 0:
         raise CaptureError(path, None, f"empty file: not a {suffix} capture")
     options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}
