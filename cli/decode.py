@@ -11,12 +11,14 @@ from collections.abc import Callable, Iterator
 
 import click
 
-from vstig_hw.capture.decodefile import FORMATS, decode_file
-from vstig_hw.capture.files import READABLE_EXTENSIONS, sniff_suffix
+from vstig_hw.capture.decodefile import FORMATS, decode_file, decode_to_mcap
+from vstig_hw.capture.files import MCAP_EXTENSION, READABLE_EXTENSIONS, sniff_suffix
+from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError
 from vstig_hw.capture.serial_log import is_serial_capture
 from vstig_hw.values import VALUE_TYPES, ValueType
 
+from ._capture_options import filter_options, parse_id_base
 from ._common import VALUE_TYPE_HELP
 from .errors import reports_errors
 
@@ -24,13 +26,16 @@ INPUT_FORMATS = [*(suffix[1:] for suffix in READABLE_EXTENSIONS), "cap"]  # cap:
 _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 
 
-def _base(text: str | None) -> int | None:
-    if text is None:
-        return None
-    try:
-        return int(text, 0)
-    except ValueError:
-        raise click.BadParameter(f"{text!r} is not an integer (e.g. 0x600)", param_hint="--id-base") from None
+def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | None, extended: bool,
+             deployment: str | None, keep: Filter) -> None:
+    if not output.lower().endswith(MCAP_EXTENSION):
+        raise click.UsageError(f"an MCAP capture is named *{MCAP_EXTENSION} (got {output})")
+    count, drops, bad = decode_to_mcap(files, output, skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
+                                       deployment=deployment)
+    for error in bad[:5]:
+        click.echo(f"skipped {error}", err=True)
+    summary = f"{output}: {count} messages from {len(files)} files" + (f", {len(bad)} bad lines skipped" if bad else "")
+    click.echo(summary + (f", dropped {drops.summary()}" if drops else ""), err=True)
 
 
 @click.command()
@@ -38,8 +43,10 @@ def _base(text: str | None) -> int | None:
 @click.option("--input-format", type=click.Choice(INPUT_FORMATS),
               help="The capture type, for a name that does not show it (default: by extension, and for - "
                    "or a pipe by content).")
-@click.option("--format", "fmt", type=click.Choice(list(FORMATS)), default="text", show_default=True,
-              help="text: one readable line per message; jsonl: one JSON object per line; csv: a header, then rows.")
+@click.option("--format", "fmt", type=click.Choice([*FORMATS, "mcap"]), default="text", show_default=True,
+              help="text: one readable line per message; jsonl: one JSON object per line; csv: a header, then rows; "
+                   "mcap: a rosbag2 MCAP file (-o), one topic per link, for Foxglove and ros2 bag.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True), help="The file --format mcap writes.")
 @click.option("--skip-bad", is_flag=True, help="Count malformed lines and go on instead of stopping at the first.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
               help=VALUE_TYPE_HELP)
@@ -47,20 +54,29 @@ def _base(text: str | None) -> int | None:
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs.")
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
               help="For Buzz/BittyBuzz captures (blabbermouth, bittybuzz-kilobot): the TOML file mapping their keys.")
+@filter_options
 @reports_errors
-def command(files: tuple[str, ...], input_format: str | None, fmt: str, skip_bad: bool, value_type: ValueType,
-            id_base: str | None, extended: bool, deployment: str | None) -> None:
-    """Print every message in FILES (- reads stdin; pipes and <(...) work too).
+def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: str | None, skip_bad: bool,
+            value_type: ValueType, id_base: str | None, extended: bool, deployment: str | None, keep: Filter) -> None:
+    """Print every message in FILES (or write them as rosbag2 MCAP); - reads stdin, pipes and <(...) work too.
+
+    The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
+    which messages are printed.
 
     Example: vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
     """
-    base = _base(id_base)
+    base = parse_id_base(id_base)
+    if (fmt == "mcap") != (output is not None):
+        raise click.UsageError("--format mcap writes to -o FILE.mcap; the other formats print to stdout")
+    if output is not None:
+        _to_mcap(files, output, skip_bad, base, extended, deployment, keep)
+        return
     for number, path in enumerate(files):
         name = "<stdin>" if path == "-" else path
         with _readable(path, name, input_format) as readable, _progress_bar(readable) as progress:
             try:
                 count, drops, bad = decode_file(readable, sys.stdout, fmt, value_type=value_type,
-                                                skip_bad=skip_bad, id_base=base, extended=extended,
+                                                skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
                                                 deployment=deployment, progress=progress, csv_header=number == 0,
                                                 file_column=len(files) > 1)
             except CaptureError as error:

@@ -1,4 +1,5 @@
-"""`vstig record LINK [-o FILE|FOLDER]`: capture a link's raw units; no frame lost on Ctrl-C, no file lost ever."""
+"""`vstig record LINK... [-o FILE|FOLDER]`: capture links' raw units into one file; no frame lost on Ctrl-C,
+and no capture lost ever: an existing file is replaced only when asked."""
 
 from __future__ import annotations
 
@@ -8,12 +9,16 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.files import APPENDABLE, CAN_EXTENSIONS, RotatingCapture
+from vstig_hw.capture.decoded import Decoder, default_framings
+from vstig_hw.capture.files import APPENDABLE, CAN_EXTENSIONS, MCAP_EXTENSION, RotatingCapture
+from vstig_hw.capture.filters import Filter, RecordFilter
 from vstig_hw.capture.records import CAN_FRAMING, Record
+from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 
+from ._capture_options import filter_options
 from ._common import StatusLine, build_links, must_hear, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
@@ -27,16 +32,13 @@ def _size(text: str) -> int:
     return int(number) * scale
 
 
-def _target(output: str | None, link: LinkSpec, is_can: bool) -> str:
-    """The file to write: OUTPUT itself, or a new timestamped name in OUTPUT (a folder) or here."""
+def _target(output: str | None, link: LinkSpec, extension: str) -> str:
+    """The file to write: OUTPUT itself, or a new timestamped name (named after the first link) in OUTPUT
+    (a folder) or here."""
     if output is not None and not os.path.isdir(output):
-        if is_can and not output.lower().endswith(CAN_EXTENSIONS):
-            raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} "
-                                   f"(got {output})")
         return output
     folder = output or ""
     stem = os.path.join(folder, f"vstig-{link.name}-{time.strftime('%Y-%m-%d_%H%M%S')}")
-    extension = ".log" if is_can else ".cap"
     path, n = stem + extension, 1
     while os.path.lexists(path):  # two recorders started in the same second
         n += 1
@@ -52,45 +54,68 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
 
 
 @click.command()
-@click.argument("link", type=LINK)
+@click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("-o", "--output", type=click.Path(path_type=str),
               help="FILE, or a folder for a timestamped name (the default: one here, as candump -l). "
                    f"CAN by extension: {' '.join(CAN_EXTENSIONS)} (.log is candump's); serial: any name "
-                   "(our line format).")
+                   f"(our line format); any links: {MCAP_EXTENSION} (rosbag2, decoded messages, one topic per link).")
 @click.option("--overwrite", is_flag=True, help="Replace FILE if it exists (never done without this).")
 @click.option("--append", is_flag=True, help=f"Add to FILE if it exists (CAN: {' '.join(APPENDABLE)}; serial).")
 @click.option("--max-bytes", help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
                                   "an existing numbered file is skipped, never replaced.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@filter_options
 @reports_errors
-def command(link: LinkSpec, output: str | None, overwrite: bool, append: bool, max_bytes: str | None,
-            duration: float | None) -> None:
-    """Record LINK's traffic to a file until Ctrl-C (passive: never transmits).
+def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: str | None,
+            duration: float | None, keep: Filter) -> None:
+    """Record the LINKS' traffic into a file until Ctrl-C (passive: never transmits).
 
-    The link is opened before the file, and an existing capture is never replaced
+    The links are opened before the file, and an existing capture is never replaced
     unless you say so (--overwrite, --append).
 
-    Example: vstig record can:socketcan:can0 -o swarm.log --max-bytes 50M
+    Each record keeps its link's name, so several links make one capture in time
+    order. The filters (--key, --robot, --sender, --op, --link, --since, --until)
+    choose what is kept; a serial chunk they cut is re-encoded in its framing.
+
+    Example: vstig record can:socketcan:can0 can:socketcan:can1 -o swarm.log --max-bytes 50M
     """
-    must_hear(link, "record")
-    is_can = isinstance(link, CanSpec)
+    for link in links:
+        must_hear(link, "record")
+    is_can = isinstance(links[0], CanSpec)
+    mixed = any(isinstance(link, CanSpec) != is_can for link in links)
+    path = _target(output, links[0], ".mcap" if mixed else ".log" if is_can else ".cap")
+    medium = "mcap" if path.lower().endswith(MCAP_EXTENSION) else "can" if is_can else "serial"
+    if medium != "mcap" and mixed:
+        raise click.UsageError(f"CAN and serial links together go into a {MCAP_EXTENSION} capture (a CAN log "
+                               "holds CAN frames, a serial capture UART bytes)")
+    if medium == "can" and not path.lower().endswith(CAN_EXTENSIONS):
+        raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} or "
+                               f"{MCAP_EXTENSION} (got {path})")
     limit = _size(max_bytes) if max_bytes else None
-    path = _target(output, link, is_can)
     _refuse_to_destroy(path, overwrite, append)
-    node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN)
-    captures: list[RotatingCapture] = []  # opened once the link is: a dead link leaves the file alone
+    node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
+    # Units become messages again for an .mcap file and for filters that look into messages: robot dialects'
+    # links name the deployment file that maps their keys.
+    deployment = next((d for spec in links if (d := getattr(spec, "deployment", None))), None)
+    passing = RecordFilter(keep, Decoder(default_framings(deployment=deployment)))
+    captures: list[RotatingCapture] = []  # opened once the links are: a dead link leaves the file alone
 
     def write(source: Link[Any], t: float, unit: Any) -> None:
-        if captures:  # units handed over while a failed file open closes the node have nowhere to go
-            framing = CAN_FRAMING if is_can else source.framing.name
-            captures[0].write(Record(t, source.name, framing, unit))
+        if not captures:  # units handed over while a failed file open closes the node have nowhere to go
+            return
+        framing = CAN_FRAMING if isinstance(source.framing, CanFraming) else source.framing.name
+        record = Record(t, source.name, framing, unit)
+        for kept in passing.units(record) if keep else (record,):
+            captures[0].write(kept)
 
     node.on_unit.append(write)
     node.on_tick.append(lambda _: captures and captures[0].flush())
     try:
         with node:
-            captures.append(RotatingCapture(path, "can" if is_can else "serial", limit, append=append))
-            click.echo(f"recording {node.links[0].name} to {path}; Ctrl-C stops", err=True)
+            captures.append(RotatingCapture(path, medium, limit, Decoder(default_framings(deployment=deployment)),
+                                            append=append))
+            click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
+                       err=True)
             line = StatusLine()
             status = (lambda: line.show(f"{captures[0].records} units  {node.summary()}")) if line.live else None
             try:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import time
+from collections import Counter
 from collections.abc import Iterator
 from typing import Any
 
@@ -11,6 +12,7 @@ import click
 
 from vstig_hw.capture.decoded import Decoder, default_framings
 from vstig_hw.capture.files import read_capture
+from vstig_hw.capture.filters import Filter, filter_records
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.capture.replay import replay
 from vstig_hw.engine import Stigmergy
@@ -19,6 +21,7 @@ from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
+from ._capture_options import filter_options
 from ._common import VALUE_TYPE_HELP, StatusLine, build_links
 from .errors import LINK, reports_errors
 
@@ -50,8 +53,8 @@ def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
 class _CountingSender:
     """`send`, with a live counter line on stderr when it is a terminal (at most twice a second)."""
 
-    def __init__(self, send: Any, link: Link[Any]) -> None:
-        self.send, self.link = send, link
+    def __init__(self, send: Any, links: list[Link[Any]]) -> None:
+        self.send, self.links = send, links
         self.line = StatusLine()
         self.sent = 0
         self.next_draw = 0.0
@@ -61,7 +64,8 @@ class _CountingSender:
         self.sent += 1
         if self.line.live and time.monotonic() >= self.next_draw:
             self.next_draw = time.monotonic() + 0.5
-            self.line.show(f"sent {self.sent} units  {self.link.name}: {self.link.stats().summary()}")
+            self.line.show(f"sent {self.sent} units  " + "  ".join(f"{link.name}: {link.stats().summary()}"
+                                                                     for link in self.links))
 
 
 def _fresh(frame: Any) -> Any:
@@ -72,11 +76,42 @@ def _fresh(frame: Any) -> Any:
                        dlc=frame.dlc, check=False)
 
 
-def _table(path: str, at: float | None, value_type: ValueType, deployment: str | None) -> None:
+class OntoType(click.ParamType):
+    """`--onto SPEC` (every link of the capture) or `--onto NAME=SPEC` (the capture's link NAME)."""
+
+    name = "[NAME=]LINK"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> tuple[str | None, Any]:
+        if isinstance(value, tuple):
+            return value
+        name, sep, spec = value.partition("=")
+        # A spec starts with its kind and a colon; link names never hold "=", so NAME=SPEC is unambiguous.
+        if not sep or ":" in name:
+            return None, LINK.convert(value, param, ctx)
+        if not name:
+            self.fail(f"{value!r}: the link name before '=' is empty", param, ctx)
+        return name, LINK.convert(spec, param, ctx)
+
+
+ONTO = OntoType()
+
+
+def _targets(onto: tuple[tuple[str | None, LinkSpec], ...], robot_id: int) -> dict[str | None, Link[Any]]:
+    """Link name (None: every link) -> the target link, built but not open."""
+    names = [name for name, _ in onto]
+    if None in names and len(onto) > 1:
+        raise click.UsageError("give one --onto LINK for every link, or --onto NAME=LINK per link, not both")
+    if len(set(names)) < len(names):
+        raise click.UsageError("each capture link goes onto one target: a NAME appears in two --onto")
+    links = build_links([spec for _, spec in onto], robot_id)
+    return dict(zip(names, links, strict=True))
+
+
+def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, deployment: str | None) -> None:
     engine = Stigmergy(_OBSERVER_ID)
-    decoder = Decoder(default_framings(deployment=deployment))
+    decoder, reader = (Decoder(default_framings(deployment=deployment)) for _ in range(2))  # framings keep state
     t0 = None
-    for decoded in decoder.decode_all(read_capture(path)):
+    for decoded in decoder.decode_all(filter_records(read_capture(path), keep, reader)):
         t0 = decoded.t if t0 is None else t0
         if at is not None and decoded.t - t0 > at:
             break
@@ -90,7 +125,9 @@ def _table(path: str, at: float | None, value_type: ValueType, deployment: str |
 
 @click.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False))
-@click.option("--onto", type=LINK, help="Send the capture onto this link with its original timing.")
+@click.option("--onto", type=ONTO, multiple=True,
+              help="Send the capture onto this link with its original timing; NAME=LINK sends only the capture's "
+                   "link NAME there (repeat for each link; links not named are skipped).")
 @click.option("--speed", type=click.FloatRange(0.001, 1000), default=1.0, show_default=True,
               help="Play this many times faster than recorded (0.5: half speed).")
 @click.option("--loop", is_flag=True, help="Start again at the end, until Ctrl-C.")
@@ -105,47 +142,74 @@ def _table(path: str, at: float | None, value_type: ValueType, deployment: str |
               help=VALUE_TYPE_HELP)
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
               help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
+@filter_options
 @reports_errors
-def command(file: str, onto: LinkSpec | None, speed: float, loop: bool, skip_gaps: float | None,
-            ignore_timestamps: bool, robot_id: int, table: bool, at: float | None, value_type: ValueType,
-            deployment: str | None) -> None:
-    """Replay FILE onto a live link, or show what the swarm believed (--table).
+def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: float, loop: bool,
+            skip_gaps: float | None, ignore_timestamps: bool, robot_id: int, table: bool, at: float | None,
+            value_type: ValueType, deployment: str | None, keep: Filter) -> None:
+    """Replay FILE onto live links, or show what the swarm believed (--table).
 
     Ctrl-C or SIGTERM stops at once, even in a long gap: nothing is sent after it.
 
-    Examples: vstig replay swarm.log --onto can:socketcan:vcan0 --speed 2;  vstig replay radio.cap --table --at 30
+    The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
+    what is replayed; a serial chunk they cut is re-encoded in its framing.
+
+    Examples: vstig replay swarm.log --onto can:socketcan:vcan0 --speed 2;
+    vstig replay bridged.log --onto can0=can:socketcan:vcan0 --onto radio0=serial:/dev/ttyUSB1;
+    vstig replay radio.cap --table --at 30
     """
-    if table == (onto is not None):
+    if table == bool(onto):
         raise click.UsageError("give exactly one of --onto LINK or --table")
     if table:
         ignored = [name for name, given in (("--loop", loop), ("--skip-gaps", skip_gaps is not None),
                                             ("--ignore-timestamps", ignore_timestamps)) if given]
         if ignored:
             raise click.UsageError(f"{', '.join(ignored)} go with --onto, not --table")
-        _table(file, at, value_type, deployment)
+        _table(file, at, value_type, keep, deployment)
         return
     if at is not None:
         raise click.UsageError("--at goes with --table")
-    assert onto is not None
-    link = build_links([onto], robot_id)[0]
-    send = _CountingSender(_sender(link, onto, deployment), link)
-    link.open()
+    targets = _targets(onto, robot_id)
+    senders = {name: _sender(link, spec, deployment)
+               for (name, link), (_, spec) in zip(targets.items(), onto, strict=True)}
+    every_link = senders.get(None)
+    reader = Decoder(default_framings(deployment=deployment))  # for filters that look into the messages
+    unmapped: Counter[str] = Counter()
+
+    def dispatch(record: Record) -> None:
+        target = every_link or senders.get(record.link)
+        if target is None:
+            unmapped[record.link] += 1
+        else:
+            target(record)
+
+    send = _CountingSender(dispatch, list(targets.values()))
+    opened: list[Link[Any]] = []
     passes_done = 0
     try:
+        for link in targets.values():
+            link.open()
+            opened.append(link)
         with stop_on_signals() as stop:
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
-                done = replay(read_capture(file), send, speed=speed, stop=stop, skip_gaps=skip_gaps,
-                              ignore_timestamps=ignore_timestamps)
+                done = replay(filter_records(read_capture(file), keep, reader), send, speed=speed, stop=stop,
+                              skip_gaps=skip_gaps, ignore_timestamps=ignore_timestamps)
                 passes_done += 1
                 if stop.is_set() or done.frames == 0:
                     break
     finally:
         send.line.end()
-        link.close()
-    stats = link.stats()
-    lost = stats["tx_dropped"] + stats["tx_timeout"]
+        for link in opened:
+            link.close()
+    stats = [link.stats() for link in targets.values()]
+    sent = sum(s["tx"] for s in stats)
+    lost = sum(s["tx_dropped"] + s["tx_timeout"] for s in stats)
     over = f" over {passes_done} passes" if loop else f" in {done.took:.3f} s (logged {done.logged:.3f} s)"
-    click.echo(f"sent {stats['tx']} units{over}" + (f"; {lost} the link could not send" if lost else "")
+    click.echo(f"sent {sent} units{over}" + (f"; {lost} the links could not send" if lost else "")
                + ("; stopped by a signal" if done.stopped else ""), err=True)
-    click.echo(f"{link.name}: {stats.summary()}", err=True)
+    for link in targets.values():
+        click.echo(f"{link.name}: {link.stats().summary()}", err=True)
+    if unmapped:
+        skipped = ", ".join(f"{name} ({count} units)" for name, count in sorted(unmapped.items()))
+        click.echo(f"skipped links with no --onto: {skipped}", err=True)

@@ -77,10 +77,13 @@ def _progress(transient: bool = False) -> Any:
 @click.option("--runs", default=10, show_default=True, type=click.IntRange(1),
               help="Independent runs (new layout and losses each); the summary is over all of them.")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
+@click.option("--capture", type=click.Path(dir_okay=False, writable=True),
+              help="also write run 0's radio traffic as a CAN capture (.log candump, .asc, .blf...): robot i is "
+                   "CAN node i, time = step x 0.1 s; for checking `vstig analyze`")
 @_model_options
 @click.pass_context
 def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: int, as_json: bool,
-            seed: int, workers: int | None, **model: Any) -> None:
+            capture: str | None, seed: int, workers: int | None, **model: Any) -> None:
     """Simulate the paper's task (agree on the highest id) on real engines over a lossy radio."""
     if ctx.invoked_subcommand is not None:
         return
@@ -95,6 +98,8 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
         summary = summarize(results)
     except ValueError as error:  # a layout that cannot be built (e.g. a density too high to place bodies)
         raise click.ClickException(str(error)) from None
+    if capture:
+        _capture(config, seed, capture)
     if as_json:
         click.echo(json.dumps({**summary.as_json(), "config": {**vars(config), "seed": seed}}))
         return
@@ -103,6 +108,19 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
     click.echo(_bandwidth_line(summary))
     click.echo(f"graph: mean degree {summary.mean_degree:.2f}" + _split_note(summary))
     _unconverged_note(summary, config.max_steps)
+
+
+def _capture(config: Config, seed: int, path: str) -> None:
+    """Run 0 again (its seed makes it the same run) with every broadcast written to `path`."""
+    from vstig_hw.sim.capture import capture_run
+    from vstig_hw.sim.experiment import seed_for
+
+    try:
+        result = capture_run(config, seed_for(config, seed, 0), path)
+    except ValueError as error:  # an extension no CAN writer knows
+        raise click.UsageError(str(error)) from None
+    ending = f"converged at step {result.steps}" if result.steps is not None else f"{result.steps_run} steps"
+    click.echo(f"captured run 0 ({ending}, {result.messages} messages) to {path}", err=True)
 
 
 def _steps_line(s: Summary) -> str:

@@ -6,6 +6,7 @@ import contextlib
 import gzip
 import io
 import json
+import sys
 import threading
 import time
 from pathlib import Path
@@ -215,3 +216,34 @@ def test_skip_gaps_shortens_long_waits_and_ignore_timestamps_drops_them() -> Non
     assert result.frames == 5 and result.skipped == pytest.approx(900.0) and result.took < 10.0
     with pytest.raises(ValueError, match="skip_gaps"):
         replay(records, lambda r: None, skip_gaps=-1)
+def test_replay_sleeps_short_by_the_overshoot_it_measures_and_spins_only_the_rest() -> None:
+    now = [0.0]
+    reads = [0]
+
+    def clock() -> float:
+        reads[0] += 1
+        now[0] += 1e-6  # a clock read costs 1 us
+        return now[0]
+
+    def sleep(seconds: float) -> None:  # a kernel that wakes us 70 us late, every time
+        now[0] += seconds + 70e-6
+
+    records = [Record(i * 0.001, "r", "cobs8", b"") for i in range(300)]
+    result = replay(records, lambda r: None, clock=clock, keep_lateness=True, sleep=sleep)
+    assert abs(result.sleep_overshoot - 70e-6) <= 4e-6  # it learned how late its sleeps wake
+    assert max(result.lateness[50:]) < 5e-6  # once learned, every frame leaves on its deadline
+    assert reads[0] < 300 * 20  # and waits by sleeping: spinning 0.2 ms a frame would read the clock ~60,000 times
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="timer slack is a Linux setting")
+def test_replay_asks_for_a_fine_timer_slack_and_gives_it_back() -> None:
+    import ctypes
+
+    prctl = ctypes.CDLL(None).prctl
+    get_slack = 30  # PR_GET_TIMERSLACK
+    before = prctl(get_slack, 0, 0, 0, 0)
+    during: list[int] = []
+    replay([Record(0.0, "r", "cobs8", b""), Record(0.001, "r", "cobs8", b"")],
+           lambda r: during.append(prctl(get_slack, 0, 0, 0, 0)))
+    assert during == [1000, 1000] and before != 1000
+    assert prctl(get_slack, 0, 0, 0, 0) == before

@@ -17,7 +17,7 @@ import can
 
 from .records import CAN_FRAMING, CaptureError, Record, parse_lines
 
-__all__ = ["candump_records", "parse_line", "read_candump"]
+__all__ = ["candump_records", "chunk_records", "chunks", "parse_line", "read_candump"]
 
 _ERROR_FLAG = 0x20000000
 _FD_LENGTHS = frozenset((0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64))
@@ -89,6 +89,34 @@ def candump_records(path: str, lines: Iterable[str], skip_bad: bool, bad: list[C
     """The records on candump lines numbered from `first_line` (a whole file, or one chunk of it)."""
     for frame in parse_lines(path, lines, parse_line, skip_bad, bad, first_line):
         yield Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)
+
+
+def chunk_records(path: str, chunk: bytes, first_line: int, skip_bad: bool,
+                  bad: list[CaptureError] | None) -> Iterator[Record]:
+    """The records of one chunk from `chunks`, numbered as the file numbers its lines."""
+    # Split on "\n" only, as `chunks` counts lines: splitlines() also cuts at \r, \f, \x1c... and
+    # would misnumber every later line in the file:line of an error.
+    return candump_records(path, chunk.decode("utf-8", "replace").split("\n"), skip_bad, bad, first_line)
+
+
+def chunks(path: str, size: int) -> Iterator[tuple[int, bytes]]:
+    """(number of its first line, chunk): about `size` bytes of whole lines each (the last may lack a newline)."""
+    line_no = 1
+    tail = b""
+    with open(path, "rb") as file:
+        while True:
+            block = file.read(size)
+            data = tail + block
+            if not block:
+                tail, chunk = b"", data
+            else:
+                cut = data.rfind(b"\n") + 1
+                tail, chunk = data[cut:], data[:cut]
+            if chunk:
+                yield line_no, chunk
+                line_no += chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
+            if not block:
+                return
 
 
 def _open_text(path: str) -> IO[str]:

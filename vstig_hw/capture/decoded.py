@@ -14,7 +14,7 @@ from typing import Any
 from ..counters import Counters
 from ..values import ValueType, from_raw
 from ..wire import Message
-from .records import CAN_FRAMING, Record
+from .records import CAN_FRAMING, MESSAGE_FRAMING, Record
 
 __all__ = ["CSV_HEADER", "Decoded", "Decoder", "as_csv", "as_json", "as_text"]
 
@@ -32,15 +32,20 @@ class Decoded:
 FramingFactory = Callable[[Record], Any]
 
 
-def default_framings(id_base: int | None = None, extended: bool = False,
+def default_framings(id_base: int | None = None, extended: bool | None = False,
                      deployment: str | None = None) -> FramingFactory:
-    """Framings by the name a record carries; robot dialects (Buzz, BittyBuzz) need their `deployment` file."""
+    """Framings by the name a record carries: `extended=None` takes each CAN link's ID width from its first
+    frame; robot dialects (Buzz, BittyBuzz) need their `deployment` file."""
     from ..framing import make_serial_framing
     from ..links.can import can_framing
 
     def make(record: Record) -> Any:
         if record.framing == CAN_FRAMING:
-            return can_framing(id_base, extended)
+            return can_framing(id_base, bool(record.unit.is_extended_id) if extended is None else extended)
+        if record.framing == MESSAGE_FRAMING:
+            from .rosbag import CarriedMessages
+
+            return CarriedMessages()
         from ..dialects.framing import DIALECT_FRAMINGS, make_dialect_framing
 
         if record.framing in DIALECT_FRAMINGS:
@@ -66,11 +71,20 @@ class Decoder:
             total.update(framing.drops)
         return total
 
-    def decode(self, record: Record) -> list[Decoded]:
+    def _framing(self, record: Record) -> Any:
         slot = (record.link, record.framing, record.direction)
         framing = self._framings.get(slot)
         if framing is None:
             framing = self._framings[slot] = self._make(record)
+        return framing
+
+    def sender_of(self, record: Record) -> int | None:
+        """The node that sent a record, where its medium names one (a CAN frame's ID); else None."""
+        sender_of = getattr(self._framing(record), "sender_of", None)
+        return None if sender_of is None else sender_of(record.unit)
+
+    def decode(self, record: Record) -> list[Decoded]:
+        framing = self._framing(record)
         is_can = record.framing == CAN_FRAMING
         can_id = int(record.unit.arbitration_id) if is_can else None
         return [Decoded(record.t, record.link, can_id, msg) for msg in framing.feed(record.unit)]

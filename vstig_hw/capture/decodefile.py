@@ -7,8 +7,9 @@ Every other capture type goes record by record through the framings.
 
 from __future__ import annotations
 
+import heapq
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import IO, Any
 
 from ..counters import Counters
@@ -17,10 +18,11 @@ from . import candump
 from .decoded import CSV_HEADER, Decoded, Decoder, as_csv, as_json, as_text, default_framings
 from .fastlog import chunk_to_jsonl
 from .files import file_position, read_capture
+from .filters import Filter, RecordFilter
 from .records import CaptureError
 from .serial_log import is_serial_capture
 
-__all__ = ["FORMATS", "decode_file"]
+__all__ = ["FORMATS", "decode_file", "decode_to_mcap"]
 
 FORMATS = {"text": as_text, "jsonl": as_json, "csv": as_csv}
 _PROGRESS_EVERY = 4096  # records between progress reports on the record-by-record path
@@ -29,9 +31,10 @@ CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small 
 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
                 skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
-                progress: Callable[[int], None] | None = None, csv_header: bool = True,
-                file_column: bool = False, deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
-    """Write every message in `path` to `out`; returns (messages, drops by reason, bad lines skipped).
+                progress: Callable[[int], None] | None = None, keep: Filter | None = None,
+                csv_header: bool = True, file_column: bool = False,
+                deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
+    """Write every message in `path` that `keep` passes to `out`; returns (messages, drops, bad lines skipped).
 
     `progress` is told, now and then, how many bytes of the file were read so far (every format).
     CSV: `csv_header=False` leaves the header out (a later file of several); `file_column` adds a
@@ -42,15 +45,16 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
     bad: list[CaptureError] = []
     if fmt == "csv" and csv_header:
         out.write(("file," if file_column else "") + CSV_HEADER)
-    if (path.endswith(".log") and fmt == "jsonl" and value_type == "uint16" and not extended
+    if (path.endswith(".log") and fmt == "jsonl" and value_type == "uint16" and not extended and not keep
             and not is_serial_capture(path)):
         count, drops = _candump_chunks(path, out, decoder, value_type, skip_bad, bad, id_base, progress)
         drops.update(decoder.drops())
         return count, drops, bad
     count = 0
     reading: list[IO[Any]] = []
+    passing = RecordFilter(keep or Filter(), decoder)
     for number, record in enumerate(read_capture(path, skip_bad, bad, reading.append)):
-        for decoded in decoder.decode(record):
+        for decoded in passing.messages(record)[1]:
             out.write(formatter(decoded, value_type) + "\n")
             count += 1
         if progress and number % _PROGRESS_EVERY == 0 and reading:
@@ -69,6 +73,26 @@ def _with_file(path: str) -> Callable[[Decoded, ValueType], str]:
     return row
 
 
+def decode_to_mcap(paths: Sequence[str], output: str, *, skip_bad: bool = False, id_base: int | None = None,
+                   extended: bool = False, keep: Filter | None = None,
+                   deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
+    """Write the messages of `paths` (merged by time) that `keep` passes as a rosbag2 MCAP file."""
+    from .rosbag import McapCaptureWriter
+
+    decoder = Decoder(default_framings(id_base, extended, deployment))
+    passing = RecordFilter(keep or Filter(), decoder)
+    bad: list[CaptureError] = []
+    writer = McapCaptureWriter(output)
+    try:
+        for record in heapq.merge(*(read_capture(path, skip_bad, bad) for path in paths), key=lambda r: r.t):
+            sender, decoded = passing.messages(record)
+            for d in decoded:
+                writer.write_message(d.t, d.link, sender, d.message)
+    finally:
+        writer.close()
+    return writer.messages, decoder.drops(), bad
+
+
 def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: ValueType, skip_bad: bool,
                     bad: list[CaptureError], id_base: int | None,
                     progress: Callable[[int], None] | None) -> tuple[int, Counters]:
@@ -82,48 +106,31 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
 
     fast_drops: dict[str, int] = {}
     count = 0
-    line_no = 1
     done = 0
-    tail = b""
     raw_out: Any = getattr(out, "buffer", None)
-    with open(path, "rb") as file:
-        while True:
-            block = file.read(CHUNK)
-            data = tail + block
-            if not block:
-                tail, chunk = b"", data
+    for line_no, chunk in candump.chunks(path, CHUNK):
+        lines = chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
+        dropped_before = sum(fast_drops.values())
+        fast = chunk_to_jsonl(chunk, classify, fast_drops)
+        if fast is not None:
+            count += lines - sum(fast_drops.values()) + dropped_before
+            if raw_out is not None:
+                out.flush()
+                raw_out.write(fast)
             else:
-                cut = data.rfind(b"\n") + 1
-                tail, chunk = data[cut:], data[:cut]
-            if chunk:
-                lines = chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
-                dropped_before = sum(fast_drops.values())
-                fast = chunk_to_jsonl(chunk, classify, fast_drops)
-                if fast is not None:
-                    count += lines - sum(fast_drops.values()) + dropped_before
-                    if raw_out is not None:
-                        out.flush()
-                        raw_out.write(fast)
-                    else:
-                        out.write(fast.decode())
-                else:
-                    count += _slow(path, chunk, line_no, out, decoder, value_type, skip_bad, bad)
-                line_no += lines
-                done += len(chunk)
-                if progress:
-                    progress(done)
-            if not block:
-                break
+                out.write(fast.decode())
+        else:
+            count += _slow(path, chunk, line_no, out, decoder, value_type, skip_bad, bad)
+        done += len(chunk)
+        if progress:
+            progress(done)
     return count, Counters(fast_drops)
 
 
 def _slow(path: str, chunk: bytes, first_line: int, out: IO[str], decoder: Decoder, value_type: ValueType,
           skip_bad: bool, bad: list[CaptureError]) -> int:
     count = 0
-    # Split on "\n" only, as the line counter does: splitlines() also cuts at \r, \f, \x1c... and
-    # would misnumber every later line in the file:line of an error.
-    lines = chunk.decode("utf-8", "replace").split("\n")
-    for decoded in decoder.decode_all(candump.candump_records(path, lines, skip_bad, bad, first_line)):
+    for decoded in decoder.decode_all(candump.chunk_records(path, chunk, first_line, skip_bad, bad)):
         out.write(as_json(decoded, value_type) + "\n")
         count += 1
     return count

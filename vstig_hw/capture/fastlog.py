@@ -15,11 +15,12 @@ which also reports the file:line of a bad line.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["chunk_to_jsonl"]
+__all__ = ["Chunk", "chunk_to_jsonl", "parse_chunk", "seconds"]
 
 _HEX = np.full(256, 255, dtype=np.uint8)
 for _i, _c in enumerate(b"0123456789abcdef"):
@@ -29,6 +30,7 @@ for _i, _c in enumerate(b"ABCDEF"):
 
 Classify = Callable[[int], int | None]  # 11-bit CAN id -> the op its frames carry, or None if not ours
 U8 = npt.NDArray[np.uint8]
+I64 = npt.NDArray[np.int64]
 
 
 def _hex(cols: U8) -> npt.NDArray[np.int64] | None:
@@ -59,8 +61,42 @@ def _digits(out: U8, col: int, values: npt.NDArray[np.int64], width: int) -> Non
     out[:, col:col + width] = _DECIMAL[values][:, 5 - width:]
 
 
+@dataclass(frozen=True)
+class Chunk:
+    """The frames of a uniform chunk, column by column (frames the classifier rejects already dropped)."""
+
+    stamp: U8  # the timestamp's characters, one row per frame ("1700000000.250000")
+    link: bytes  # the interface name, the same on every line
+    can_id: I64
+    op: I64
+    key: I64
+    value: I64
+    timestamp: I64
+    robot: I64
+
+
 def chunk_to_jsonl(chunk: bytes, classify: Classify, drops: dict[str, int]) -> bytes | None:
     """JSON lines for a chunk of complete candump lines, or None if it is not uniform."""
+    parsed = parse_chunk(chunk, classify, drops)
+    if parsed is None:
+        return None
+    return _render(parsed.stamp, parsed.link, parsed.can_id, parsed.op, parsed.key, parsed.value,
+                   parsed.timestamp, parsed.robot)
+
+
+def seconds(stamp: U8) -> npt.NDArray[np.float64]:
+    """Timestamps as float seconds from `Chunk.stamp` rows (digits around one point)."""
+    point = int(np.argmax(stamp[0] == 46))
+    digits = (np.delete(stamp, point, axis=1) - 48).astype(np.int64)
+    whole = digits[:, :point] @ (10 ** np.arange(point - 1, -1, -1, dtype=np.int64))
+    places = digits.shape[1] - point
+    fraction = digits[:, point:] @ (10 ** np.arange(places - 1, -1, -1, dtype=np.int64))
+    result: npt.NDArray[np.float64] = whole.astype(np.float64) + fraction / float(10**places)
+    return result
+
+
+def parse_chunk(chunk: bytes, classify: Classify, drops: dict[str, int]) -> Chunk | None:
+    """The frames of a chunk of complete candump lines, or None if it is not uniform."""
     raw = np.frombuffer(chunk, dtype=np.uint8)
     if not len(raw) or raw[-1] != 10:
         return None
@@ -105,7 +141,7 @@ def chunk_to_jsonl(chunk: bytes, classify: Classify, drops: dict[str, int]) -> b
     if not keep.all():
         stamp = stamp[keep]
         can_id, op, w0, w1, w2, w3 = (x[keep] for x in (can_id, op, w0, w1, w2, w3))
-    return _render(stamp, first[close + 2:space], can_id, op, w0 & 0x7FFF, w1, w2, w3)
+    return Chunk(stamp, first[close + 2:space], can_id, op, w0 & 0x7FFF, w1, w2, w3)
 
 
 def _render(stamp: U8, link: bytes, can_id: npt.NDArray[np.int64], op: npt.NDArray[np.int64],

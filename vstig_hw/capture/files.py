@@ -21,10 +21,11 @@ from .candump import read_candump
 from .records import CAN_FRAMING, CaptureError, Record
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
 
-__all__ = ["APPENDABLE", "CAN_EXTENSIONS", "READABLE_EXTENSIONS", "CaptureWriter", "RotatingCapture",
-           "file_position", "read_capture", "rotated_name", "sniff_suffix"]
+__all__ = ["APPENDABLE", "CAN_EXTENSIONS", "MCAP_EXTENSION", "READABLE_EXTENSIONS", "CaptureWriter",
+           "RotatingCapture", "file_position", "read_capture", "rotated_name", "sniff_suffix"]
 
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
+MCAP_EXTENSION = ".mcap"  # rosbag2 MCAP (capture.rosbag): decoded messages of any links
 READ_ONLY_EXTENSIONS = (".pcapng",)  # formats we read but do not write (Wireshark's default)
 READABLE_EXTENSIONS = CAN_EXTENSIONS + READ_ONLY_EXTENSIONS
 APPENDABLE = (".log", ".blf", ".csv", ".log.gz")  # the CAN formats python-can's writers can add to
@@ -144,12 +145,14 @@ class RotatingCapture:
 
     `append` adds to an existing `path` instead of replacing it. Rotation never replaces a file: it
     moves on to the next numbered name that does not exist yet. A failed write names the file.
+    `decoder` (a capture.decoded.Decoder) turns units into messages for an mcap capture.
     """
 
-    def __init__(self, path: str, medium: str, max_bytes: int | None = None, append: bool = False) -> None:
-        if medium not in ("can", "serial"):
-            raise ValueError(f"medium must be can or serial, got {medium!r}")
-        self.base, self.medium, self.max_bytes = path, medium, max_bytes
+    def __init__(self, path: str, medium: str, max_bytes: int | None = None, decoder: Any = None,
+                 append: bool = False) -> None:
+        if medium not in ("can", "serial", "mcap"):
+            raise ValueError(f"medium must be can, serial or mcap, got {medium!r}")
+        self.base, self.medium, self.max_bytes, self.decoder = path, medium, max_bytes, decoder
         self.index = 0
         self.files = [path]
         self.records = 0
@@ -157,6 +160,12 @@ class RotatingCapture:
 
     def _open(self, path: str, append: bool = False) -> CaptureWriter:
         with self._naming(path):
+            if self.medium == "mcap":
+                if append:
+                    raise ValueError(f"{path}: cannot append to an MCAP capture")
+                from .rosbag import McapCaptureWriter
+
+                return McapCaptureWriter(path, self.decoder)
             return CanCaptureWriter(path, append) if self.medium == "can" else SerialCaptureWriter(path, append)
 
     @contextmanager
@@ -203,12 +212,17 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
         yield from read_serial_capture(path, skip_bad, bad, opened)
         return
     suffix = _suffix(path)
+    if suffix == MCAP_EXTENSION:
+        from .rosbag import read_mcap
+
+        yield from read_mcap(path)
+        return
     if suffix in (".log", ".log.gz"):
         yield from read_candump(path, skip_bad, bad, opened)
         return
     if suffix not in READABLE_EXTENSIONS:
         raise CaptureError(path, None, f"unknown capture type {suffix or '(no extension)'!r}: expected a "
-                           f"serial capture or one of {', '.join(READABLE_EXTENSIONS)}")
+                           f"serial capture, {MCAP_EXTENSION} or one of {', '.join(READABLE_EXTENSIONS)}")
     if os.path.getsize(path) == 0:
         raise CaptureError(path, None, f"empty file: not a {suffix} capture")
     options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}

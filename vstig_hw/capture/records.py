@@ -6,11 +6,12 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-__all__ = ["CAN_FRAMING", "CaptureError", "Record", "parse_lines"]
+__all__ = ["CAN_FRAMING", "MESSAGE_FRAMING", "CaptureError", "Record", "parse_lines"]
 
 T = TypeVar("T")
 
 CAN_FRAMING = "can"  # the framing name CAN records carry (CAN logs have no framing field)
+MESSAGE_FRAMING = "message"  # records whose unit is a decoded (Message, sender): MCAP captures hold those
 
 
 class CaptureError(ValueError):

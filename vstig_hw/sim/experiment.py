@@ -124,10 +124,13 @@ def layout(config: Config, rng: np.random.Generator) -> tuple[Links, int]:
 
 
 StepHook = Callable[[int, list[int | None]], None]
+BroadcastHook = Callable[[int, list[list[Message]]], None]
 
 
-def run_once(config: Config, seed: np.random.SeedSequence, run: int = 0, on_step: StepHook | None = None) -> RunResult:
-    """One run; `on_step(step, values)` sees what every robot's get returned at each step."""
+def run_once(config: Config, seed: np.random.SeedSequence, run: int = 0, on_step: StepHook | None = None,
+             on_broadcast: BroadcastHook | None = None) -> RunResult:
+    """One run; `on_step(step, values)` sees what every robot's get returned at each step,
+    `on_broadcast(step, outgoing)` what every robot broadcast at its end."""
     rng = np.random.default_rng(seed)
     hearing, layouts = layout(config, rng)
     radio = Radio(hearing, config.drop, rng)
@@ -152,6 +155,8 @@ def run_once(config: Config, seed: np.random.SeedSequence, run: int = 0, on_step
             on_step(step, values)
         outgoing = [drain(budget) for drain in drains]
         messages += sum(map(len, outgoing))
+        if on_broadcast:
+            on_broadcast(step, outgoing)
         if agreed:
             converged = step
             break

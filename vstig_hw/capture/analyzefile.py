@@ -1,0 +1,112 @@
+"""Feed captures into an `Analyzer`: several files merged by time, a big candump log in bulk.
+
+A single candump log goes chunk by chunk: a uniform chunk becomes columns through
+`fastlog.parse_chunk` with no per-frame Python, any other chunk goes line by line
+(which also names a bad line's file:line). Everything else, and several files at
+once, goes record by record, merged by time.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Callable, Iterable, Iterator, Sequence
+
+import numpy as np
+
+from ..analysis import NO_SENDER, Analyzer, Batch
+from ..counters import Counters
+from ..wire import Message
+from . import candump
+from .decoded import Decoder, default_framings
+from .fastlog import parse_chunk, seconds
+from .files import read_capture
+from .filters import Filter, RecordFilter
+from .records import CaptureError, Record
+from .serial_log import is_serial_capture
+
+__all__ = ["analyze_captures"]
+
+CHUNK = 1 << 22  # bytes per candump chunk, as decode reads them
+
+
+def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, skip_bad: bool = False,
+                     id_base: int | None = None, extended: bool | None = None, keep: Filter | None = None,
+                     progress: Callable[[int], None] | None = None,
+                     deployment: str | None = None) -> tuple[Counters, list[CaptureError]]:
+    """Feed every message of `paths` that `keep` passes; returns (drops by reason, bad lines skipped).
+
+    `extended=None` reads each CAN link's ID width from its frames. `progress(n)`
+    hears of each n bytes read, on the bulk path.
+    """
+    decoder = Decoder(default_framings(id_base, extended, deployment))
+    sink = _Sink(analyzer, decoder, keep or Filter())
+    bad: list[CaptureError] = []
+    if len(paths) == 1 and _bulk_readable(paths[0]) and not extended:
+        drops = _candump_chunks(paths[0], sink, skip_bad, bad, id_base, progress)
+        drops.update(decoder.drops())
+        return drops, bad
+    sink.add_records(heapq.merge(*(read_capture(path, skip_bad, bad) for path in paths), key=lambda r: r.t))
+    return decoder.drops(), bad
+
+
+def _bulk_readable(path: str) -> bool:
+    return path.endswith(".log") and not is_serial_capture(path)
+
+
+class _Sink:
+    """Hands the analyzer what passes the filter, record by record or in batches."""
+
+    def __init__(self, analyzer: Analyzer, decoder: Decoder, keep: Filter) -> None:
+        self.analyzer = analyzer
+        self.passing = RecordFilter(keep, decoder)
+
+    def add_records(self, records: Iterable[Record]) -> None:
+        def rows() -> Iterator[tuple[float, int, int, Message]]:
+            links: dict[str, int] = {}
+            for record in records:
+                sender, decoded = self.passing.messages(record)
+                if not decoded:
+                    continue
+                link = links.get(record.link)
+                if link is None:
+                    link = links[record.link] = self.analyzer.link(record.link)
+                for d in decoded:
+                    yield d.t, link, NO_SENDER if sender is None else sender, d.message
+
+        self.analyzer.add_messages(rows())
+
+    def add_batch(self, batch: Batch) -> None:
+        if not len(batch):
+            return
+        keep = self.passing.keep
+        if keep:
+            first = float(batch.t[0])
+            t0 = first - self.passing.since_start(first)
+            batch = batch.where(keep.mask(batch.t - t0, batch.link, self.analyzer.links, batch.sender, batch.op,
+                                          batch.key, batch.robot))
+        self.analyzer.add(batch)
+
+
+def _candump_chunks(path: str, sink: _Sink, skip_bad: bool, bad: list[CaptureError], id_base: int | None,
+                    progress: Callable[[int], None] | None) -> Counters:
+    from ..links.can import can_framing
+
+    scheme = can_framing(id_base, False).scheme
+
+    def classify(can_id: int) -> int | None:
+        parsed = scheme.parse(can_id, False)
+        return None if parsed is None else int(parsed[0])
+
+    fast_drops: dict[str, int] = {}
+    for line_no, chunk in candump.chunks(path, CHUNK):
+        columns = parse_chunk(chunk, classify, fast_drops)
+        if columns is None:
+            sink.add_records(candump.chunk_records(path, chunk, line_no, skip_bad, bad))
+        elif len(columns.op):
+            link = sink.analyzer.link(columns.link.decode())
+            sink.add_batch(Batch(seconds(columns.stamp), np.full(len(columns.op), link),
+                                 columns.can_id & scheme.max_sender, columns.op, columns.key, columns.value,
+                                 columns.timestamp, columns.robot))
+        if progress:
+            progress(len(chunk))
+    return Counters(fast_drops)

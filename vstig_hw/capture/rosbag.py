@@ -1,0 +1,160 @@
+"""Captures as rosbag2 MCAP files: one topic per link, `vstig_msgs/msg/Message` in CDR.
+
+Written with the `mcap` library (the container) and `rosbags` (the message
+definition and its CDR encoding), so the file opens in Foxglove and `ros2 bag`.
+An MCAP capture holds decoded messages, not link units: each keeps its op, key,
+value, timestamp, robot and sender (-1 where the medium names none), stamped
+with the time it was heard. Reading one back yields records of the
+`MESSAGE_FRAMING` "framing", which hands the message on as it is.
+
+Both libraries come with the `mcap` extra (`pip install 'vstig-hw[mcap]'`).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from typing import IO, Any
+
+from ..counters import Counters
+from ..wire import Message, Op
+from .decoded import Decoder
+from .records import MESSAGE_FRAMING, CaptureError, Record
+
+__all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "CarriedMessages", "McapCaptureWriter",
+           "read_mcap", "topic_for"]
+
+TYPE_NAME = "vstig_msgs/msg/Message"
+MSGDEF = """\
+# One virtual stigmergy message as heard on a link (vstig-hw; firmware_spec/SPEC.md section 7).
+uint8 PUT=0
+uint8 GET=1
+uint8 op
+uint16 key
+uint16 value
+uint16 timestamp
+uint16 robot
+int32 sender
+"""
+TOPIC_PREFIX = "/vstig/"
+NO_SENDER = -1
+_TOPIC_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
+
+
+def _needs_extra(path: str) -> CaptureError:
+    return CaptureError(path, None, "reading or writing .mcap needs the mcap extra: pip install 'vstig-hw[mcap]'")
+
+
+def _typestore(path: str) -> Any:
+    try:
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    except ImportError:
+        raise _needs_extra(path) from None
+    store = get_typestore(Stores.EMPTY)
+    store.register(get_types_from_msg(MSGDEF, TYPE_NAME))
+    return store
+
+
+def topic_for(link: str) -> str:
+    """A valid ROS 2 topic for a link name (letters, digits, underscores; no leading digit)."""
+    token = _TOPIC_UNSAFE.sub("_", link) or "link"
+    return TOPIC_PREFIX + ("link_" + token if token[0].isdigit() else token)
+
+
+class McapCaptureWriter:
+    """Writes every message in the records it is given, on its link's topic; `CaptureWriter` for .mcap files."""
+
+    def __init__(self, path: str, decoder: Decoder | None = None) -> None:
+        try:
+            from mcap.writer import Writer
+        except ImportError:
+            raise _needs_extra(path) from None
+        self.path = path
+        self._store = _typestore(path)
+        self._type = self._store.types[TYPE_NAME]
+        self._file: IO[bytes] = open(path, "wb")  # noqa: SIM115 - closed in close()
+        self._writer = Writer(self._file)
+        self._writer.start(profile="ros2", library="vstig-hw")
+        self._schema = self._writer.register_schema(name=TYPE_NAME, encoding="ros2msg", data=MSGDEF.encode())
+        self._channels: dict[str, int] = {}
+        self._decoder = decoder or Decoder()
+        self.messages = 0
+
+    @property
+    def drops(self) -> Counters:
+        return self._decoder.drops()
+
+    def write(self, record: Record) -> None:
+        decoded = self._decoder.decode(record)
+        if not decoded:
+            return
+        sender = self._decoder.sender_of(record)
+        channel = self._channels.get(record.link)
+        if channel is None:
+            channel = self._channels[record.link] = self._writer.register_channel(
+                topic=topic_for(record.link), message_encoding="cdr", schema_id=self._schema,
+                metadata={"link": record.link})
+        stamp = round(record.t * 1e9)
+        for d in decoded:
+            m = d.message
+            data = self._store.serialize_cdr(
+                self._type(op=int(m.op), key=m.key, value=m.value, timestamp=m.timestamp, robot=m.robot,
+                           sender=NO_SENDER if sender is None else sender), TYPE_NAME)
+            self._writer.add_message(channel, log_time=stamp, data=bytes(data), publish_time=stamp,
+                                     sequence=self.messages)
+            self.messages += 1
+
+    def write_message(self, t: float, link: str, sender: int | None, message: Message) -> None:
+        self.write(Record(t, link, MESSAGE_FRAMING, (message, sender)))
+
+    def size(self) -> int:
+        return self._file.tell()
+
+    def flush(self) -> None:
+        """MCAP writes whole chunks: what is buffered is flushed at close."""
+
+    def close(self) -> None:
+        self._writer.finish()  # type: ignore[no-untyped-call]
+        self._file.close()
+
+
+class CarriedMessages:
+    """The framing of records that carry `(Message, sender)` already (read from MCAP)."""
+
+    name = MESSAGE_FRAMING
+
+    def __init__(self) -> None:
+        self.drops = Counters()
+
+    def feed(self, unit: tuple[Message, int | None]) -> list[Message]:
+        return [unit[0]]
+
+    def encode(self, msg: Message) -> list[tuple[Message, int | None]]:
+        return [(msg, None)]
+
+    def sender_of(self, unit: tuple[Message, int | None]) -> int | None:
+        return unit[1]
+
+    def tick(self) -> None:
+        """Nothing to expire."""
+
+
+def read_mcap(path: str) -> Iterator[Record]:
+    """The messages of an MCAP capture in log-time order, as `MESSAGE_FRAMING` records named by link."""
+    try:
+        from mcap.exceptions import McapError
+        from mcap.reader import make_reader
+    except ImportError:
+        raise _needs_extra(path) from None
+    store = _typestore(path)
+    try:
+        with open(path, "rb") as file:
+            for schema, channel, raw in make_reader(file).iter_messages(log_time_order=True):
+                if schema is None or schema.name != TYPE_NAME:
+                    continue  # another type on another topic: not ours
+                m = store.deserialize_cdr(raw.data, TYPE_NAME)
+                link = channel.metadata.get("link") or channel.topic.removeprefix(TOPIC_PREFIX)
+                message = Message(Op(m.op), m.key, m.value, m.timestamp, m.robot)
+                yield Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, None if m.sender < 0 else m.sender))
+    except (McapError, ValueError, KeyError, IndexError, EOFError) as error:
+        raise CaptureError(path, None, f"cannot read as rosbag2 MCAP: {error}") from None
