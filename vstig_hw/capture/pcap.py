@@ -78,16 +78,18 @@ class PcapWriter(BinaryIOMessageWriter):
         self.file.write(struct.pack("<" + _RECORD, seconds, micros, len(body), len(body)) + body)
 
 
+def _opened(file: str | os.PathLike[str] | BinaryIO, unnamed: str) -> tuple[str, BinaryIO]:
+    """(name for messages, binary file) of a path, opened here, or of a file the caller opened."""
+    if isinstance(file, str | os.PathLike):
+        return str(file), open(file, "rb")  # closed by stop(), as python-can readers do
+    return getattr(file, "name", unnamed), file
+
+
 class PcapReader(FileIOMessageReader[BinaryIO]):
     """Iterates the `can.Message`s of a SocketCAN pcap file (either byte order, us or ns timestamps)."""
 
     def __init__(self, file: str | os.PathLike[str] | BinaryIO, **kwargs: Any) -> None:
-        if isinstance(file, str | os.PathLike):
-            self.name = str(file)
-            self.file = open(file, "rb")  # noqa: SIM115 (closed by stop(), as python-can readers do)
-        else:
-            self.name = getattr(file, "name", "<pcap>")
-            self.file = file
+        self.name, self.file = _opened(file, "<pcap>")
         header = self.file.read(_GLOBAL.size)
         if len(header) < _GLOBAL.size:
             raise PcapError(f"{self.name}: not a pcap file (only {len(header)} bytes)")
@@ -162,12 +164,7 @@ class PcapngReader(FileIOMessageReader[BinaryIO]):
     """
 
     def __init__(self, file: str | os.PathLike[str] | BinaryIO, **kwargs: Any) -> None:
-        if isinstance(file, str | os.PathLike):
-            self.name = str(file)
-            self.file = open(file, "rb")  # noqa: SIM115 (closed by stop(), as python-can readers do)
-        else:
-            self.name = getattr(file, "name", "<pcapng>")
-            self.file = file
+        self.name, self.file = _opened(file, "<pcapng>")
         self.skipped = 0
 
     def __iter__(self) -> Iterator[can.Message]:
