@@ -8,7 +8,7 @@ for the same reason: importing them all would load numpy and python-can.
 
 Every command, loaded here, goes through `reports_errors`, and `main` is the
 one place a run ends: usage errors exit 2, runtime failures 1 (one line each),
-Ctrl-C 130 quietly (as candump), a closed output pipe 0 quietly (`| head`).
+Ctrl-C 130 quietly (a shell's status for SIGINT), a closed output pipe 0 quietly (`| head`).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from vstig_hw import __version__
 from . import _streams
 from .errors import reports_errors
 
-INTERRUPTED = 128 + 2  # the shell's status for SIGINT, as candump returns it
+INTERRUPTED = 128 + 2  # the shell's status for a command ended by SIGINT
 
 _NOT_COMMANDS = {"main", "errors"}
 _HERE = Path(__file__).parent

@@ -28,7 +28,7 @@ def scheme_and_sender(draw: st.DrawFn) -> tuple[CanIdScheme, int]:
 
 def test_defaults_and_bad_parameters_name_the_input() -> None:
     assert CanIdScheme().base == 0x600 and CanIdScheme(extended=True).base == 0x18000000
-    with pytest.raises(ValueError, match="0x000, 0x200, 0x400, 0x600, got 256"):
+    with pytest.raises(ValueError, match="0x000, 0x200, 0x400, 0x600, got 0x100"):
         CanIdScheme(base=0x100)
     with pytest.raises(ValueError, match="no stigmergy field"):
         CanIdScheme(stigmergy=1)

@@ -7,7 +7,7 @@ received (error frames too, so captures keep them; the framing counts them).
 
 Counters: `rx`, `tx`, `tx_dropped` (device gone or TX queue full), `bus_errors`
 (error frames and failed bus calls), `bus_off`, `lost` (outages), `reconnects`, and on
-SocketCAN `kernel_dropped` (frames the kernel dropped because our receive queue was full) and
+SocketCAN `kernel_dropped` (frames the kernel dropped because our receive queue was full, as candump -d reports) and
 `interface_dropped` (frames the interface dropped before any socket got them).
 An outage is logged once; the bus is reopened with exponential backoff from
 `read`/`write`, which never raise into the caller's loop.
