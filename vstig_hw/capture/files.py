@@ -27,7 +27,7 @@ __all__ = ["APPENDABLE", "CAN_EXTENSIONS", "MCAP_EXTENSION", "READABLE_EXTENSION
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
 MCAP_EXTENSION = ".mcap"  # rosbag2 MCAP (capture.rosbag): decoded messages of any links
 READ_ONLY_EXTENSIONS = (".pcapng",)  # formats we read but do not write (Wireshark's default)
-READABLE_EXTENSIONS = CAN_EXTENSIONS + READ_ONLY_EXTENSIONS
+READABLE_EXTENSIONS = (*CAN_EXTENSIONS, *READ_ONLY_EXTENSIONS, MCAP_EXTENSION)
 APPENDABLE = (".log", ".blf", ".csv", ".log.gz")  # the CAN formats python-can's writers can add to
 _BLF_CONTAINER_EVERY = 2.0  # seconds between BLF blocks written while recording
 _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
@@ -114,6 +114,8 @@ def sniff_suffix(head: bytes) -> str | None:
         return ".pcap"
     if head.startswith(b"\x0a\x0d\x0d\x0a"):
         return ".pcapng"
+    if head.startswith(b"\x89MCAP"):
+        return MCAP_EXTENSION
     if head.startswith(b"\x1f\x8b"):
         return ".log.gz"
     text = head.lstrip()
@@ -222,7 +224,7 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
         return
     if suffix not in READABLE_EXTENSIONS:
         raise CaptureError(path, None, f"unknown capture type {suffix or '(no extension)'!r}: expected a "
-                           f"serial capture, {MCAP_EXTENSION} or one of {', '.join(READABLE_EXTENSIONS)}")
+                           f"serial capture or one of {', '.join(READABLE_EXTENSIONS)}")
     if os.path.getsize(path) == 0:
         raise CaptureError(path, None, f"empty file: not a {suffix} capture")
     options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}
