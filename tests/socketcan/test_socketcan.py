@@ -289,7 +289,12 @@ def test_record_on_a_bursting_bus_loses_nothing_silently(tmp_path: Path) -> None
         assert record.stderr is not None and record.stderr.readline().startswith("recording")
         subprocess.run(["cangen", CLASSIC, "-g", "0", "-n", "5000", "-I", "601", "-L", "8", "-D", "i", "-p", "100"],
                        check=True, timeout=120)
-        time.sleep(1.0)
+        # Stop only once the recorder has read its queue dry: frames still queued at a stop are not a drop.
+        sizes = [-1]
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and (len(sizes) < 3 or sizes[-1] != sizes[-3]):
+            time.sleep(0.5)
+            sizes.append(out.stat().st_size if out.exists() else 0)
     finally:
         record.send_signal(signal.SIGINT)
         _, summary = record.communicate(timeout=60)

@@ -2,8 +2,10 @@
 
 When a socket's receive queue is full the kernel drops the frame and counts it
 (sk_drops). With SO_RXQ_OVFL set, each frame received afterwards carries that
-running count as ancillary data. python-can's socketcan bus makes room for one
-ancillary record only (the timestamp), so the count never reaches it.
+running count as ancillary data (as candump -d reads it). python-can's socketcan
+bus makes room for one ancillary record only (the timestamp), so the count never
+reaches it. Drops at the end of a burst have no later frame to carry them, so
+the count is also read directly (SO_MEMINFO) every second and at close.
 `count_kernel_drops` wraps such a bus: receiving goes through python-can's own
 `capture_message` (same frames, same timestamps) on a socket view that asks
 for both records and keeps the count. It also enlarges the receive queue, so a
@@ -33,7 +35,9 @@ __all__ = ["RCVBUF", "count_kernel_drops"]
 
 SO_RXQ_OVFL = 40  # linux/socket.h (asm-generic); Python's socket module does not name it
 SO_RCVBUFFORCE = 33  # as SO_RCVBUF, past net.core.rmem_max (needs CAP_NET_ADMIN)
-RCVBUF = 4 << 20  # bytes of receive queue asked for: ~5,000 queued frames (an skb is ~800 bytes)
+SO_MEMINFO = 55  # u32[SK_MEMINFO_VARS]: the socket's memory use, and its drop count at SK_MEMINFO_DROPS
+_SK_MEMINFO_DROPS = 8
+RCVBUF = 8 << 20  # bytes of receive queue asked for: ~8,000 queued frames (an skb takes ~1 KiB)
 _INTERFACE_POLL_S = 1.0  # how often to read the interface's drop count (a sysfs read)
 _DROPS = struct.Struct("=I")
 _DROPS_SPACE = socket.CMSG_SPACE(_DROPS.size)
@@ -82,11 +86,29 @@ class KernelDropCountingBus:
         except (OSError, ValueError):  # no such interface file (channel "" or gone): nothing to count
             return None
 
-    def _poll_interface(self) -> None:
+    def _socket_drops(self) -> int | None:
+        try:
+            meminfo = self._socket.sock.getsockopt(socket.SOL_SOCKET, SO_MEMINFO, 4 * (_SK_MEMINFO_DROPS + 1))
+        except OSError:  # a kernel before 4.6, or the socket is gone
+            return None
+        return int(struct.unpack_from(f"={_SK_MEMINFO_DROPS + 1}I", meminfo)[_SK_MEMINFO_DROPS])
+
+    def _count_socket_drops(self) -> None:
+        if self._socket.drops != self._counted:  # the count is 32 bits and wraps
+            self.counters["kernel_dropped"] += (self._socket.drops - self._counted) % (1 << 32)
+            self._counted = self._socket.drops
+
+    def _poll_counts(self) -> None:
         now = time.monotonic()
-        if now < self._next_poll or self._interface_base is None:
+        if now < self._next_poll:
             return
         self._next_poll = now + _INTERFACE_POLL_S
+        latest = self._socket_drops()
+        if latest is not None:
+            self._socket.drops = latest
+            self._count_socket_drops()
+        if self._interface_base is None:
+            return
         drops = self._interface_drops()
         if drops is not None and drops > self._interface_base:
             self.counters["interface_dropped"] += drops - self._interface_base
@@ -95,7 +117,7 @@ class KernelDropCountingBus:
     def recv(self, timeout: float | None = None) -> can.Message | None:
         from can.interfaces.socketcan.socketcan import capture_message
 
-        self._poll_interface()
+        self._poll_counts()
         try:
             ready, _, _ = select.select([self._socket.sock], [], [], timeout)
         except OSError as error:  # the interface went away
@@ -106,14 +128,12 @@ class KernelDropCountingBus:
         message = capture_message(self._socket, get_channel=not channel)  # type: ignore[arg-type]
         if message is not None and not message.channel and channel:
             message.channel = channel
-        if self._socket.drops != self._counted:  # the count is 32 bits and wraps
-            self.counters["kernel_dropped"] += (self._socket.drops - self._counted) % (1 << 32)
-            self._counted = self._socket.drops
+        self._count_socket_drops()
         return message
 
     def shutdown(self) -> None:
         self._next_poll = 0.0
-        self._poll_interface()  # the last count, before the bus goes
+        self._poll_counts()  # the last count, before the bus goes
         self.bus.shutdown()
 
     def __getattr__(self, name: str) -> Any:
