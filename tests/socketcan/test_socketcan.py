@@ -300,5 +300,18 @@ def test_record_on_a_bursting_bus_loses_nothing_silently(tmp_path: Path) -> None
         _, summary = record.communicate(timeout=60)
     assert record.returncode == 0, summary
     recorded = sum(1 for line in out.read_text().splitlines() if line.strip())
-    dropped = sum(int(n) for n in re.findall(r"(?:kernel|interface)_dropped=(\d+)", summary))
+    dropped = sum(int(n) for n in re.findall(r"(?:kernel_dropped|interface_dropped|unread_at_close)=(\d+)", summary))
     assert recorded + dropped == 5000, summary  # every frame is in the file or counted as dropped
+
+
+def test_frames_still_queued_at_close_are_counted_not_lost_silently() -> None:
+    from vstig_hw.transports.can import CanTransport
+
+    transport = CanTransport("socketcan", CLASSIC)
+    transport.open()
+    with can.Bus(interface="socketcan", channel=CLASSIC) as sender:
+        for i in range(50):
+            sender.send(can.Message(arbitration_id=0x125, data=bytes([i]), is_extended_id=False), timeout=5)
+        time.sleep(0.5)
+    transport.close()  # never read: all 50 are still queued, and go with the socket
+    assert transport.counters["unread_at_close"] == 50, transport.counters

@@ -20,6 +20,7 @@ burst. The interface counts those (`rx_dropped`, what `ip -s link` shows);
 
 from __future__ import annotations
 
+import errno
 import select
 import socket
 import struct
@@ -49,10 +50,12 @@ class _DropReadingSocket:
     def __init__(self, sock: socket.socket) -> None:
         self.sock = sock
         self.drops = 0  # the kernel's running count for this socket
+        self.flags = 0  # MSG_DONTWAIT while draining: one system call per frame, no select
 
     def recvmsg(self, bufsize: int, ancbufsize: int = 0,
                 flags: int = 0) -> tuple[bytes, list[tuple[int, int, bytes]], int, Any]:
-        data, ancillary, msg_flags, address = self.sock.recvmsg(bufsize, ancbufsize + _DROPS_SPACE, flags)
+        data, ancillary, msg_flags, address = self.sock.recvmsg(bufsize, ancbufsize + _DROPS_SPACE,
+                                                                flags | self.flags)
         kept = []
         for level, kind, payload in ancillary:
             if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL:
@@ -118,22 +121,39 @@ class KernelDropCountingBus:
         from can.interfaces.socketcan.socketcan import capture_message
 
         self._poll_counts()
-        try:
-            ready, _, _ = select.select([self._socket.sock], [], [], timeout)
-        except OSError as error:  # the interface went away
-            raise can.CanOperationError(f"Failed to receive: {error.strerror}", error.errno) from error
-        if not ready:
-            return None
+        if timeout == 0:  # draining after a frame: try the queue directly instead of asking select first
+            self._socket.flags = socket.MSG_DONTWAIT
+        else:
+            try:
+                ready, _, _ = select.select([self._socket.sock], [], [], timeout)
+            except OSError as error:  # the interface went away
+                raise can.CanOperationError(f"Failed to receive: {error.strerror}", error.errno) from error
+            if not ready:
+                return None
         channel = self.bus.channel
-        message = capture_message(self._socket, get_channel=not channel)  # type: ignore[arg-type]
+        try:
+            message = capture_message(self._socket, get_channel=not channel)  # type: ignore[arg-type]
+        except can.CanOperationError as error:
+            if error.error_code in (errno.EAGAIN, errno.EWOULDBLOCK):
+                return None  # the queue is empty
+            raise
+        finally:
+            self._socket.flags = 0
         if message is not None and not message.channel and channel:
             message.channel = channel
         self._count_socket_drops()
         return message
 
     def shutdown(self) -> None:
+        """Close the bus; frames still queued for us are lost with the socket, so count them as dropped."""
         self._next_poll = 0.0
         self._poll_counts()  # the last count, before the bus goes
+        try:
+            while True:
+                self._socket.sock.recvmsg(72, 0, socket.MSG_DONTWAIT)
+                self.counters["unread_at_close"] += 1
+        except OSError:  # the queue is empty (or the interface is gone)
+            pass
         self.bus.shutdown()
 
     def __getattr__(self, name: str) -> Any:
