@@ -9,6 +9,7 @@ from typing import Any
 import click
 
 from vstig_hw.engine import larger_value_wins
+from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard
@@ -59,11 +60,17 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
 
         out = sys.stdout
 
+        # The same row as `decode --format jsonl`: can_id on CAN links only, sender where the medium names one.
+        can_schemes = {link.name: link.framing.scheme for link in node.links if isinstance(link.framing, CanFraming)}
+
         def emit(heard: Heard) -> None:
             m = heard.message
-            row = {"t": round(heard.t, 6), "link": heard.link, "op": m.op.name, "key": m.key,
-                   "value": from_raw(m.value, value_type), "timestamp": m.timestamp, "robot": m.robot,
-                   "sender": heard.sender}
+            row: dict[str, Any] = {"t": round(heard.t, 6), "link": heard.link}
+            scheme = can_schemes.get(heard.link)
+            if scheme is not None and heard.sender is not None:
+                row["can_id"] = scheme.can_id(m.op, heard.sender)
+            row.update(op=m.op.name, key=m.key, value=from_raw(m.value, value_type), timestamp=m.timestamp,
+                       robot=m.robot, sender=heard.sender)
             out.write(json.dumps(row) + "\n")
             out.flush()
 

@@ -148,3 +148,29 @@ def test_a_blf_cut_short_is_an_error_not_a_quiet_success(tmp_path: Path) -> None
     assert CliRunner().invoke(cli, ["decode", str(whole)]).exit_code == 0
     result = CliRunner().invoke(cli, ["decode", str(cut)])
     assert result.exit_code == 1 and f"{cut}: record " in result.stderr and "cut short" in result.stderr
+
+
+def test_sniff_and_decode_print_one_json_schema(tmp_path: Path) -> None:
+    import json
+    import threading
+    import time
+
+    import can
+
+    frame = can.Message(arbitration_id=0x607, data=bytes.fromhex("0003000a00020007"), is_extended_id=False)
+    log = tmp_path / "one.log"
+    log.write_text("(1700000000.000000) vcan0 607#0003000A00020007\n")
+    decoded = json.loads(CliRunner().invoke(cli, ["decode", str(log), "--format", "jsonl"]).stdout)
+
+    def robot() -> None:
+        time.sleep(0.5)
+        with can.Bus(interface="virtual", channel="vstig-edges-schema") as bus:
+            bus.send(frame)
+
+    threading.Thread(target=robot, daemon=True).start()
+    result = CliRunner().invoke(cli, ["sniff", "can:virtual:vstig-edges-schema", "--jsonl", "--for", "1.5"])
+    sniffed = json.loads(result.stdout.splitlines()[0])
+    assert list(sniffed) == list(decoded) == ["t", "link", "can_id", "op", "key", "value", "timestamp", "robot",
+                                              "sender"]
+    assert {k: sniffed[k] for k in list(sniffed)[2:]} == {k: decoded[k] for k in list(decoded)[2:]}
+    assert decoded["sender"] == 7 and decoded["can_id"] == 0x607

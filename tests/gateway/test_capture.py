@@ -172,7 +172,7 @@ def test_fast_candump_path_matches_the_line_parser() -> None:
         word0, value, ts, robot = (int.from_bytes(frame.data[i:i + 2], "big") for i in range(0, 8, 2))
         assert row == {"t": pytest.approx(frame.timestamp, abs=1e-6), "link": "can0", "can_id": frame.arbitration_id,
                        "op": "GET" if word0 >> 15 else "PUT", "key": word0 & 0x7FFF, "value": value,
-                       "timestamp": ts, "robot": robot}
+                       "timestamp": ts, "robot": robot, "sender": frame.arbitration_id & 0xFF}
 
 
 def test_fast_path_declines_mixed_or_bad_chunks() -> None:
