@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import click
 
+from vstig_hw.capture.filters import Filter
 from vstig_hw.engine import larger_value_wins
 from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
@@ -16,18 +18,27 @@ from vstig_hw.links import Heard
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
+from ._capture_options import filter_options
 from ._common import VALUE_TYPE_HELP, build_links, must_hear, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
+_TABLE_CHROME = 7  # lines a table needs besides its rows: title, borders, header, the line below
 
-def _table(view: SwarmView, value_type: ValueType) -> Any:
+
+def _table(view: SwarmView, value_type: ValueType, height: int | None = None) -> Any:
+    """The table, keys in order; on a terminal only the rows that fit, and the title says how many."""
     from rich.table import Table
 
-    table = Table(title=f"vstig sniff: {view.messages} messages")
+    keys = sorted(view.keys)
+    shown = keys if height is None else keys[:max(1, height - _TABLE_CHROME)]
+    title = f"vstig sniff: {view.messages} messages, {len(keys)} keys"
+    if len(shown) < len(keys):
+        title += f" (keys {shown[0]}..{shown[-1]} fit here; --key K shows chosen ones)"
+    table = Table(title=title)
     for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders"):
         table.add_column(column, justify="left" if column == "stale senders" else "right")
     now = time.time()
-    for key in sorted(view.keys):
+    for key in shown:
         k = view.keys[key]
         stale = k.stale_senders()
         table.add_row(str(key), str(from_raw(k.value, value_type)), str(k.timestamp), str(k.robot),
@@ -45,16 +56,30 @@ def _table(view: SwarmView, value_type: ValueType) -> Any:
               help="Settle conflicts as a swarm running the paper's Figure 1 rule does (larger value), "
                    "instead of the default higher robot id.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@filter_options
 @reports_errors
-def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, duration: float | None) -> None:
+def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
+            keep: Filter) -> None:
     """Decode LINK's traffic live, per key; passive: never transmits.
+
+    The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
+    what is shown; --since and --until count from the first message heard.
 
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
     """
     must_hear(link, "sniff")
     node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN)
     view = SwarmView(larger_value_wins) if larger else SwarmView()
-    node.on_heard.append(view.add)
+    listeners: list[Callable[[Heard], None]] = [view.add]
+    first: list[float] = []
+
+    def heard(message: Heard) -> None:
+        first[:] = first or [message.t]
+        if not keep or keep.accepts(message.t - first[0], message.link, message.sender, message.message):
+            for listener in listeners:
+                listener(message)
+
+    node.on_heard.append(heard)
     if jsonl:
         import json
 
@@ -74,7 +99,7 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
             out.write(json.dumps(row) + "\n")
             out.flush()
 
-        node.on_heard.append(emit)
+        listeners.append(emit)
         with node:
             run_until_stopped(node, duration=duration)
         print_counters(node)
@@ -86,5 +111,8 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
                    "(--jsonl streams every message instead)", err=True)
 
     with node, Live(_table(view, value_type), refresh_per_second=4, transient=False) as live:
-        run_until_stopped(node, lambda: live.update(_table(view, value_type)), duration)
+        def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
+            live.update(_table(view, value_type, live.console.size.height if live.console.is_terminal else None))
+
+        run_until_stopped(node, redraw, duration)
     print_counters(node)

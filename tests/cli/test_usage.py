@@ -174,3 +174,36 @@ def test_sniff_and_decode_print_one_json_schema(tmp_path: Path) -> None:
                                               "sender"]
     assert {k: sniffed[k] for k in list(sniffed)[2:]} == {k: decoded[k] for k in list(decoded)[2:]}
     assert decoded["sender"] == 7 and decoded["can_id"] == 0x607
+
+
+def test_sniff_filters_what_it_shows_and_its_table_says_what_fits() -> None:
+    import json
+    import threading
+    import time
+
+    import can
+
+    from vstig_cli.sniff import _table
+    from vstig_hw import Message, Op
+    from vstig_hw.gateway.swarmview import SwarmView
+    from vstig_hw.links import Heard
+
+    def robot() -> None:
+        time.sleep(0.5)
+        with can.Bus(interface="virtual", channel="vstig-edges-filter") as bus:
+            for key in (3, 4, 3):
+                bus.send(can.Message(arbitration_id=0x607, data=bytes([0, key, 0, 1, 0, 1, 0, 7]),
+                                     is_extended_id=False))
+
+    threading.Thread(target=robot, daemon=True).start()
+    result = CliRunner().invoke(cli, ["sniff", "can:virtual:vstig-edges-filter", "--jsonl", "--key", "3",
+                                      "--for", "1.5"])
+    rows = [json.loads(line) for line in result.stdout.splitlines()]
+    assert result.exit_code == 0 and [row["key"] for row in rows] == [3, 3], result.output
+
+    view = SwarmView()
+    for key in range(20):
+        view.add(Heard(Message(Op.PUT, key, 1, 1, 2), "can0", 1.0, 2))
+    table = _table(view, "uint16", height=10)
+    assert table.row_count == 3 and "keys 0..2 fit here; --key K shows chosen ones" in str(table.title)
+    assert _table(view, "uint16").row_count == 20
