@@ -207,3 +207,9 @@ def test_sniff_filters_what_it_shows_and_its_table_says_what_fits() -> None:
     table = _table(view, "uint16", height=10)
     assert table.row_count == 3 and "keys 0..2 fit here; --key K shows chosen ones" in str(table.title)
     assert _table(view, "uint16").row_count == 20
+
+
+def test_a_raw_bridge_says_which_node_it_sends_as() -> None:
+    result = CliRunner().invoke(cli, ["bridge", "can:virtual:vstig-edges-a", "can:virtual:vstig-edges-b", "--raw",
+                                      "--for", "0.2"])
+    assert result.exit_code == 0 and "messages re-encoded onto CAN go out as node 0" in result.stderr
