@@ -59,7 +59,7 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
             count += 1
         if progress and number % _PROGRESS_EVERY == 0 and reading:
             progress(file_position(reading[0]) or 0)
-    if progress and reading:
+    if progress:  # the end, also for a reader that does not show its file (MCAP)
         progress(os.path.getsize(path))
     return count, decoder.drops(), bad
 
