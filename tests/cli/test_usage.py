@@ -213,3 +213,22 @@ def test_a_raw_bridge_says_which_node_it_sends_as() -> None:
     result = CliRunner().invoke(cli, ["bridge", "can:virtual:vstig-edges-a", "can:virtual:vstig-edges-b", "--raw",
                                       "--for", "0.2"])
     assert result.exit_code == 0 and "messages re-encoded onto CAN go out as node 0" in result.stderr
+
+
+def test_a_garbage_line_in_an_asc_file_is_file_line_not_silence(tmp_path: Path) -> None:
+    import can
+
+    asc = tmp_path / "x.asc"
+    writer = can.Logger(str(asc))
+    for i in range(3):
+        writer.on_message_received(can.Message(timestamp=1700000000.0 + i, arbitration_id=0x600, channel=1,
+                                               data=bytes.fromhex("0001000200030004"), is_extended_id=False))
+    writer.stop()
+    assert CliRunner().invoke(cli, ["decode", str(asc)]).exit_code == 0
+    lines = asc.read_text().splitlines()
+    lines.insert(6, "garbage here")
+    asc.write_text("\n".join(lines) + "\n")
+    result = CliRunner().invoke(cli, ["decode", str(asc)])
+    assert result.exit_code == 1 and f"{asc}:7: not an ASC line: 'garbage here'" in result.stderr
+    result = CliRunner().invoke(cli, ["decode", str(asc), "--skip-bad"])
+    assert result.exit_code == 0 and len(result.stdout.splitlines()) == 3 and "1 bad lines skipped" in result.stderr

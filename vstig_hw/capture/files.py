@@ -96,6 +96,25 @@ class CanCaptureWriter:
 _PCAP_MAGICS = tuple(m.to_bytes(4, order) for m in (0xA1B2C3D4, 0xA1B23C4D) for order in ("big", "little"))
 
 
+_ASC_KEYWORDS = ("date ", "base ", "internal events", "no internal events", "begin triggerblock",
+                 "end triggerblock", "//")
+
+
+def _check_asc_lines(path: str, skip_bad: bool, bad: list[CaptureError] | None) -> None:
+    """Lines python-can's ASC reader would pass over in silence: neither a header keyword nor a timestamped event."""
+    with open(path, encoding="utf-8", errors="replace") as file:
+        for number, line in enumerate(file, 1):
+            text = line.strip()
+            first = text.split(maxsplit=1)[0] if text else ""
+            if not text or text.lower().startswith(_ASC_KEYWORDS) or first.replace(".", "", 1).isdigit():
+                continue
+            error = CaptureError(path, number, f"not an ASC line: {text[:60]!r}")
+            if not skip_bad:
+                raise error
+            if bad is not None:
+                bad.append(error)
+
+
 def _check_complete(path: str, reader: Any, frames: int) -> None:
     """A BLF names its own size in its header: a file shorter than that was cut short (python-can stops quietly)."""
     expected = getattr(reader, "file_size", 0) if isinstance(reader, can.BLFReader) else 0
@@ -228,6 +247,8 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
     if os.path.getsize(path) == 0:
         raise CaptureError(path, None, f"empty file: not a {suffix} capture")
     options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}
+    if suffix == ".asc":
+        _check_asc_lines(path, skip_bad, bad)
     frames = 0
     try:
         reader = can.LogReader(path, **options)
