@@ -315,3 +315,18 @@ def test_frames_still_queued_at_close_are_counted_not_lost_silently() -> None:
         time.sleep(0.5)
     transport.close()  # never read: all 50 are still queued, and go with the socket
     assert transport.counters["unread_at_close"] == 50, transport.counters
+
+
+def test_a_classic_link_on_an_fd_bus_hears_fd_frames() -> None:
+    link = can_link("socketcan", FD, robot_id=1)  # classic: no fd=1
+    link.open()
+    try:
+        # Two PUTs in one 16-byte CAN FD frame from node 7 (cansend's ## marks FD).
+        _cansend(FD, "607##0" + "0003000a00020007" + "0004000b00020007")
+        heard = []
+        deadline = time.monotonic() + DEADLINE_S
+        while len(heard) < 2 and time.monotonic() < deadline:
+            heard += link.receive(0.2)
+    finally:
+        link.close()
+    assert [(h.message.key, h.message.value) for h in heard] == [(3, 10), (4, 11)]

@@ -9,7 +9,8 @@ the count is also read directly (SO_MEMINFO) every second and at close.
 `count_kernel_drops` wraps such a bus: receiving goes through python-can's own
 `capture_message` (same frames, same timestamps) on a socket view that asks
 for both records and keeps the count. It also enlarges the receive queue, so a
-saturated bus fills it less often (what candump's `-r` does).
+saturated bus fills it less often (what candump's `-r` does), and lets CAN FD
+frames through to a classic link, which decodes them rather than never seeing them.
 
 A frame can also be dropped before any socket sees it: when the kernel's input
 backlog (net.core.netdev_max_backlog) is full, as on a slow machine under a
@@ -73,6 +74,9 @@ class KernelDropCountingBus:
         self.counters = counters
         sock: socket.socket = bus.socket
         sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+        # Hear CAN FD frames too (as candump does): without this the kernel hides them from a classic
+        # socket without counting them, so a classic link on an FD bus would miss them in silence.
+        sock.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_FD_FRAMES, 1)
         try:
             sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, rcvbuf)
         except OSError:  # not privileged: as much as net.core.rmem_max allows
