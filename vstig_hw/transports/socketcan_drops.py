@@ -40,6 +40,7 @@ SO_RCVBUFFORCE = 33  # as SO_RCVBUF, past net.core.rmem_max (needs CAP_NET_ADMIN
 SO_MEMINFO = 55  # u32[SK_MEMINFO_VARS]: the socket's memory use, and its drop count at SK_MEMINFO_DROPS
 _SK_MEMINFO_DROPS = 8
 RCVBUF = 8 << 20  # bytes of receive queue asked for: ~8,000 queued frames (an skb takes ~1 KiB)
+_CANFD_MTU = 72  # bytes of the largest SocketCAN frame (struct canfd_frame)
 _INTERFACE_POLL_S = 1.0  # how often to read the interface's drop count (a sysfs read)
 _DROPS = struct.Struct("=I")
 _DROPS_SPACE = socket.CMSG_SPACE(_DROPS.size)
@@ -83,6 +84,7 @@ class KernelDropCountingBus:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
         self._socket = _DropReadingSocket(sock)
         self._counted = 0
+        self._reading = False  # a link that only sends (replay) never reads: what it hears is not a loss
         self._rx_dropped = Path(f"/sys/class/net/{bus.channel}/statistics/rx_dropped")
         self._interface_base = self._interface_drops()
         self._next_poll = time.monotonic() + _INTERFACE_POLL_S
@@ -124,6 +126,7 @@ class KernelDropCountingBus:
     def recv(self, timeout: float | None = None) -> can.Message | None:
         from can.interfaces.socketcan.socketcan import capture_message
 
+        self._reading = True
         self._poll_counts()
         if timeout == 0:  # draining after a frame: try the queue directly instead of asking select first
             self._socket.flags = socket.MSG_DONTWAIT
@@ -153,8 +156,8 @@ class KernelDropCountingBus:
         self._next_poll = 0.0
         self._poll_counts()  # the last count, before the bus goes
         try:
-            while True:
-                self._socket.sock.recvmsg(72, 0, socket.MSG_DONTWAIT)
+            while self._reading:
+                self._socket.sock.recvmsg(_CANFD_MTU, 0, socket.MSG_DONTWAIT)
                 self.counters["unread_at_close"] += 1
         except OSError:  # the queue is empty (or the interface is gone)
             pass
