@@ -54,7 +54,7 @@ class _GuardedFile(io.FileIO):
         except OSError as error:
             self.failed = True
             if self.label == "stderr":
-                return len(data)  # a status line nobody can see must not stop the work (as candump)
+                return len(data)  # a status line nobody can see must not stop the work
             if isinstance(error, BrokenPipeError):
                 raise PipeClosed() from None
             raise OutputFailed(f"cannot write to {self.label}: {error.strerror or error}") from None
