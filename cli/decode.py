@@ -69,7 +69,10 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: 
     if (fmt == "mcap") != (output is not None):
         raise click.UsageError("--format mcap writes to -o FILE.mcap; the other formats print to stdout")
     if output is not None:
-        _to_mcap(files, output, skip_bad, base, extended, deployment, keep)
+        with contextlib.ExitStack() as spooled:  # stdin and pipes too
+            readable = tuple(spooled.enter_context(_readable(path, "<stdin>" if path == "-" else path, input_format))
+                             for path in files)
+            _to_mcap(readable, output, skip_bad, base, extended, deployment, keep)
         return
     for number, path in enumerate(files):
         name = "<stdin>" if path == "-" else path

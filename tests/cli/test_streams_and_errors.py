@@ -121,3 +121,13 @@ def test_sniff_jsonl_into_head_ends_quietly_with_status_0() -> None:
         time.sleep(0.05)
         radio.close()
     assert done.returncode == 0 and len(done.stdout.splitlines()) == 2 and done.stderr == "", done.stderr
+
+
+def test_decode_from_stdin_into_mcap(tmp_path: Path) -> None:
+    log = tmp_path / "small.log"
+    _candump_log(log, 3)
+    bag = tmp_path / "out.mcap"
+    done = _shell(f"cat {log} | {VSTIG} decode - --format mcap -o {bag}")
+    assert done.returncode == 0, done.stderr
+    back = _shell(f"{VSTIG} decode {bag} --format jsonl")
+    assert back.returncode == 0 and len(back.stdout.splitlines()) == 3, back.stderr
