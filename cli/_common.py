@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from vstig_hw.gateway import Node, stop_on_signals
+from vstig_hw.gateway import ENGINE_STATS, Node, stop_on_signals
 from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec
 
@@ -16,9 +16,19 @@ VALUE_TYPE_HELP = "How to show the 16-bit value field: unsigned, signed (two's c
 
 
 def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool = False) -> list[Link[Any]]:
-    """One Link per spec, named after its device (made unique: radio, radio-2...)."""
+    """One Link per spec, named after its device (made unique: radio, radio-2...).
+
+    A robot id that a CAN link's ID scheme has no room for is a usage error naming --robot-id.
+    """
+    if not listen_only:
+        for spec in specs:
+            if isinstance(spec, CanSpec) and robot_id > spec.scheme().max_sender:
+                raise click.BadParameter(f"{robot_id} does not fit can:{spec.interface}:{spec.channel}: its "
+                                         f"{29 if spec.extended else 11}-bit IDs carry node ids "
+                                         f"0..{spec.scheme().max_sender} (extended=1 gives 29-bit IDs: 0..65535)",
+                                         param_hint="'--robot-id'")
     links: list[Link[Any]] = []
-    seen: dict[str, int] = {}
+    seen: dict[str, int] = {ENGINE_STATS: 1}  # that name is taken by the engine's counters
     for spec in specs:
         name = spec.name
         seen[name] = seen.get(name, 0) + 1

@@ -37,6 +37,10 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
             larger: bool, duration: float | None) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
+    The status line and the counters printed on exit have each link's counters
+    and the engine's receive outcomes (stored, answered, stale, same, conflict,
+    unknown, invalid).
+
     Example: vstig bridge can:socketcan:can0 serial:/dev/ttyUSB0?framing=epuck4 --robot-id 200
     """
     if robot_id is None and not raw:

@@ -1,31 +1,49 @@
-"""`vstig put KEY VALUE --on LINK`: write one value into the swarm and leave."""
+"""`vstig put KEY VALUE --on LINK`: write one value into the swarm, and exit 0 only once a neighbour took it."""
 
 from __future__ import annotations
 
-import time
-
 import click
 
+from vstig_hw.engine import Entry
 from vstig_hw.gateway import Node
+from vstig_hw.gateway.oneshot import HearsItself, put_confirmed
 from vstig_hw.links.spec import LinkSpec
-from vstig_hw.values import VALUE_TYPES, ValueType, to_raw
-from vstig_hw.wire import KEY_MAX
+from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
 from ._common import build_links
+from ._numbers import KEY, NegativeNumbersAreArguments
 from .errors import LINK, reports_errors
 
 
-@click.command()
-@click.argument("key", type=click.IntRange(0, KEY_MAX))
+def shown(entry: Entry, value_type: ValueType) -> str:
+    return f"value={from_raw(entry.value, value_type)} timestamp={entry.timestamp} robot={entry.robot}"
+
+
+@click.command(cls=NegativeNumbersAreArguments)
+@click.argument("key", type=KEY)
 @click.argument("value")
 @click.option("--on", "link", type=LINK, required=True, help="The link to put through.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=254, show_default=True)
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
 @click.option("--learn", type=click.FloatRange(0.0, 60.0), default=0.5, show_default=True,
-              help="Seconds to ask the swarm for the key's current timestamp first, so the write is newer.")
+              help="Seconds to ask the swarm for the key first (every control step), so the write is newer.")
+@click.option("--wait", type=click.FloatRange(0.0, 3600.0), default=2.0, show_default=True,
+              help="Seconds each write waits for a neighbour to show it took the write.")
+@click.option("--tries", type=click.IntRange(1, 100), default=3, show_default=True,
+              help="Writes at most, when the swarm answers with a newer or conflicting entry.")
+@click.option("--no-confirm", is_flag=True,
+              help="Write and exit 0 without a neighbour's answer (radios that cannot answer, e.g. kilobot-ohc).")
 @reports_errors
-def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: ValueType, learn: float) -> None:
-    """Put VALUE under KEY, as a robot would.
+def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: ValueType, learn: float,
+            wait: float, tries: int, no_confirm: bool) -> None:
+    """Put VALUE under KEY, as a robot would; exit 0 only when a neighbour shows it took the write.
+
+    It asks the swarm for KEY every control step for --learn seconds and writes
+    with a timestamp newer than anything heard. A neighbour shows the write was
+    taken by re-broadcasting it or by a GET carrying it. If the swarm answers with
+    a newer or conflicting entry, it writes again (--tries in all); if no
+    neighbour shows the write within --wait, it exits 1 saying what the swarm
+    holds instead. KEY and VALUE take decimal or 0x hex; negative values need no --.
 
     Example: vstig put 3 1500 --on can:socketcan:can0 --robot-id 200
     """
@@ -34,15 +52,25 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="VALUE") from None
     node = Node(build_links([link], robot_id), robot_id)
-    engine = node.engine
-    assert engine is not None
+    name = node.links[0].name
+    transmit_only = getattr(node.links[0].framing, "transmit_only", False)
+    if transmit_only and not no_confirm:
+        raise click.BadParameter(f"{name} only transmits: no neighbour can answer, so nothing can confirm "
+                                 "the write (add --no-confirm to write anyway)", param_hint="'--on'")
     with node:
-        if learn:
-            node.get(key)
-            node.run(until=lambda: engine.has(key), duration=learn)
-        node.put(key, raw)
-        node.run(until=lambda: all(not len(o) for o in node.outlets), duration=5.0)
-        time.sleep(0.05)  # let the device's own buffer drain before the port closes
-    entry = engine.entry(key)
-    assert entry is not None
-    click.echo(f"put key={key} value={value} timestamp={entry.timestamp} robot={robot_id} on {node.links[0].name}")
+        try:
+            result = put_confirmed(node, key, raw, learn=0.0 if transmit_only else learn, wait=wait, tries=tries,
+                                   confirm=not no_confirm)
+        except HearsItself as error:
+            raise click.ClickException(str(error)) from None
+    ours = shown(result.written, value_type)
+    if result.superseded:
+        assert result.holds is not None
+        raise click.ClickException(f"key {key}: the swarm holds {shown(result.holds, value_type)} on {name}, "
+                                   f"not our write ({ours}), after {result.tries} writes")
+    if not result.confirmed and not no_confirm:
+        said = (f"the last entry heard was {shown(result.heard, value_type)}" if result.heard
+                else "nothing was heard for the key")
+        raise click.ClickException(f"key {key}: no neighbour on {name} took our write ({ours}) within "
+                                   f"{wait:g} s; {said}")
+    click.echo(f"put key={key} {ours} on {name}" + (" (not confirmed: --no-confirm)" if no_confirm else ""))

@@ -22,10 +22,10 @@ from ._capture_options import filter_options
 from ._common import VALUE_TYPE_HELP, build_links, must_hear, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
-_TABLE_CHROME = 7  # lines a table needs besides its rows: title, borders, header, the line below
+_TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
 
 
-def _table(view: SwarmView, value_type: ValueType, height: int | None = None) -> Any:
+def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, height: int | None = None) -> Any:
     """The table, keys in order; on a terminal only the rows that fit, and the title says how many."""
     from rich.table import Table
 
@@ -34,7 +34,7 @@ def _table(view: SwarmView, value_type: ValueType, height: int | None = None) ->
     title = f"vstig sniff: {view.messages} messages, {len(keys)} keys"
     if len(shown) < len(keys):
         title += f" (keys {shown[0]}..{shown[-1]} fit here; --key K shows chosen ones)"
-    table = Table(title=title)
+    table = Table(title=title, caption=node.summary() if node else None)
     for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders"):
         table.add_column(column, justify="left" if column == "stale senders" else "right")
     now = time.time()
@@ -65,11 +65,17 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
     what is shown; --since and --until count from the first message heard.
 
+    The counters (live under the table, and on exit) include the receive outcomes
+    an engine that heard every message would count: stored, answered, stale,
+    same, conflict, unknown, invalid.
+
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
     """
     must_hear(link, "sniff")
-    node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN)
-    view = SwarmView(larger_value_wins) if larger else SwarmView()
+    rule = larger_value_wins if larger else None
+    # The engine never transmits: it counts what each message would do to a robot that heard them all.
+    node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN, count_outcomes=True, onconflict=rule)
+    view = SwarmView(rule) if rule else SwarmView()
     listeners: list[Callable[[Heard], None]] = [view.add]
     first: list[float] = []
 
@@ -110,9 +116,10 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
         click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
                    "(--jsonl streams every message instead)", err=True)
 
-    with node, Live(_table(view, value_type), refresh_per_second=4, transient=False) as live:
+    with node, Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
         def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
-            live.update(_table(view, value_type, live.console.size.height if live.console.is_terminal else None))
+            height = live.console.size.height if live.console.is_terminal else None
+            live.update(_table(view, value_type, node, height))
 
         run_until_stopped(node, redraw, duration)
     print_counters(node)

@@ -24,7 +24,7 @@ def invoke(*args: str) -> tuple[int, str]:
         (["sniff", "serial:/dev/null?framing=hdlc"], "framing='hdlc'"),
         (["sniff", "serial:/dev/null", "--value-type", "int8"], "'int8' is not one of"),
         (["put", "3", "70000", "--on", "can:virtual:x"], "outside uint16"),
-        (["put", "40000", "1", "--on", "can:virtual:x"], "40000 is not in the range"),
+        (["put", "40000", "1", "--on", "can:virtual:x"], "40000 is outside 0..32767"),
         (["get", "1"], "Missing option '--on'"),
         (["record", "can:virtual:x", "-o", "out.txt"], "chosen by extension"),
         (["record", "serial:/dev/null", "-o", "o.cap", "--max-bytes", "lots"], "not a size"),
@@ -204,7 +204,7 @@ def test_sniff_filters_what_it_shows_and_its_table_says_what_fits() -> None:
     view = SwarmView()
     for key in range(20):
         view.add(Heard(Message(Op.PUT, key, 1, 1, 2), "can0", 1.0, 2))
-    table = _table(view, "uint16", height=10)
+    table = _table(view, "uint16", height=12)
     assert table.row_count == 3 and "keys 0..2 fit here; --key K shows chosen ones" in str(table.title)
     assert _table(view, "uint16").row_count == 20
 

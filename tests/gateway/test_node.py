@@ -143,6 +143,31 @@ def test_listen_mode_never_transmits_and_reports_what_it_heard(channels: tuple[s
     observer.shutdown()
 
 
+def test_status_has_the_engine_outcomes_and_a_counting_listener_still_never_transmits(
+        channels: tuple[str, str]) -> None:
+    a, b = channels
+    tap = can.Bus(interface="virtual", channel=a)
+    observer = can.Bus(interface="virtual", channel=a)
+    bridge = Node([bus_link(b)], robot_id=100)
+    listener = Node([bus_link(a)], mode=Mode.LISTEN, count_outcomes=True)
+    assert "engine" not in Node([bus_link(a, "plain")], mode=Mode.LISTEN).stats()  # record pays for no engine
+    with listener:
+        for msg in (Message(Op.PUT, 2, 7, 3, 42), Message(Op.GET, 2, 0, 0, 43), Message(Op.GET, 9, 0, 0, 43)):
+            for frame in can_framing_for(42).encode(msg):
+                tap.send(frame)
+        run_until(listener, lambda: listener.stats()["engine"].total() == 3)
+        listener.run(duration=0.3)  # ticks in which a robot would answer the GET and re-broadcast the PUT
+        assert listener.summary().endswith("engine: answered=1 stored=1 unknown=1")
+        with pytest.raises(RuntimeError):
+            listener.put(1, 1)
+    assert [observer.recv(0) is not None for _ in range(4)] == [True, True, True, False]  # only the tap's frames
+    with bridge:
+        bridge.put(1, 1)
+        assert "engine: -" in bridge.summary()  # no message heard yet: no outcome
+    tap.shutdown()
+    observer.shutdown()
+
+
 def test_budget_holds_each_link_to_k_messages_per_tick(channels: tuple[str, str]) -> None:
     a, _ = channels
     observer = can.Bus(interface="virtual", channel=a)

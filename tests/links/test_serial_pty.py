@@ -19,7 +19,7 @@ from serial_robot import OhcReceiver, PtyRobot, decode_stream, encode_for, epuck
 
 from vstig_hw import Message, Op
 from vstig_hw.framing import TransmitOnlyError
-from vstig_hw.links import Link
+from vstig_hw.links import Link, parse
 from vstig_hw.links.serial import serial_link
 from vstig_hw.transports.base import TransportError
 from vstig_hw.transports.serial import SerialTransport
@@ -82,7 +82,7 @@ def test_send_many_is_one_write_of_the_same_bytes(pty: tuple[int, str], framing:
     link = serial_link(path, framing)
     try:
         messages = random_messages(40, seed=3)
-        expected = b"".join(unit for msg in messages for unit in link.framing.encode(msg))
+        expected = link.framing.preamble + b"".join(unit for msg in messages for unit in link.framing.encode(msg))
         link.send_many(messages)
         poll(lambda: len(robot.snapshot()) >= len(expected), what="the robot's inbox")
         assert bytes(robot.snapshot()) == expected
@@ -232,6 +232,58 @@ def test_reconnects_when_the_device_vanishes_and_returns(tmp_path: Path,
         robot2.stop()
         os.close(master2)
         os.close(slave2)
+
+
+def test_the_first_byte_after_every_open_is_a_delimiter(tmp_path: Path) -> None:
+    """SPEC 6.0.3: 0x00 before the first frame after opening, so a robot that holds half a frame resyncs."""
+    name = tmp_path / "ttyROBOT"
+    master1, slave1 = os.openpty()
+    os.symlink(os.ttyname(slave1), name)
+    link = serial_link(str(name), "cobs8", transport_options=FAST_BACKOFF)
+    os.close(slave1)
+    robot1 = PtyRobot(master1)
+    a, b, c = random_messages(3, seed=8)
+    half_a_frame = encode_for("cobs8", c)[:5]  # what the robot's receiver held when we opened the port
+    try:
+        link.send(a)
+        link.send(b)
+        poll(lambda: len(robot1.snapshot()) >= 25, what="two frames")
+        assert robot1.snapshot() == b"\0" + encode_for("cobs8", a) + encode_for("cobs8", b)  # one 0x00, first
+        assert decode_stream("cobs8", half_a_frame + robot1.snapshot()) == [a, b]  # a survives the junk
+
+        robot1.stop()
+        os.close(master1)  # unplugged
+        poll(lambda: not link.receive(0.02) and not link.transport.connected, what="the loss to be noticed")
+        master2, slave2 = os.openpty()  # plugged back in
+        fresh = tmp_path / "fresh"
+        os.symlink(os.ttyname(slave2), fresh)
+        os.replace(fresh, name)
+        robot2 = PtyRobot(master2)
+        poll(lambda: not link.receive(0.02) and link.transport.connected, what="the reconnect")
+        link.send(c)
+        poll(lambda: len(robot2.snapshot()) >= 13, what="the frame after the reconnect")
+        assert robot2.snapshot() == b"\0" + encode_for("cobs8", c)
+    finally:
+        link.close()
+    robot2.stop()
+    os.close(master2)
+    os.close(slave2)
+
+
+def test_a_bittybuzz_kilobot_link_starts_with_a_delimiter_too(pty: tuple[int, str], tmp_path: Path) -> None:
+    master, path = pty
+    deployment = tmp_path / "kilobots.toml"
+    deployment.write_text('[keys]\nx = { key = 1, type = "int16" }\n', encoding="utf-8")
+    robot = PtyRobot(master)
+    link = parse(f"serial:{path}?framing=kilobot&dialect=bittybuzz&deployment={deployment}").build("bbz")
+    link.open()
+    try:
+        link.send(Message(Op.PUT, 1, 5, 1, 3))
+        poll(lambda: robot.snapshot().count(0) >= 2, what="the frame")
+        assert robot.snapshot()[:1] == b"\0" and robot.snapshot().count(0) == 2  # the preamble, then one frame
+    finally:
+        link.close()
+        robot.stop()
 
 
 def test_reconnects_to_a_socket_server_that_restarts() -> None:

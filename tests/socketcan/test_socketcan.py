@@ -8,6 +8,7 @@ them, this module runs directly.
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import queue
 import re
@@ -331,3 +332,108 @@ def test_a_classic_link_on_an_fd_bus_hears_fd_frames() -> None:
     finally:
         link.close()
     assert [(h.message.key, h.message.value) for h in heard] == [(3, 10), (4, 11)]
+
+
+def _read_for(link: Link[can.Message], seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        link.receive(0.05)
+
+
+def _heard_again(link: Link[can.Message], channel: str) -> None:
+    """Send from can-utils until the link hears it: the interface is back and the link reopened."""
+    deadline = time.monotonic() + DEADLINE_S
+    while time.monotonic() < deadline:
+        _cansend(channel, "602#0001000500010002")
+        if [h.message for h in link.receive(0.1)] == [Message(Op.PUT, 1, 5, 1, 2)]:
+            return
+    raise AssertionError(f"never heard {channel} again")
+
+
+@pytest.mark.skipif(os.geteuid() != 0 and not IN_UML, reason="taking vcan interfaces down needs root")
+def test_an_interface_that_is_down_is_one_outage_logged_once_not_a_reconnect_storm(
+        caplog: pytest.LogCaptureFixture) -> None:
+    # SocketCAN binds to an interface that is down, then fails the first read with ENETDOWN:
+    # each reopen "succeeds", and must not count (or log) as the device coming back.
+    caplog.set_level(logging.DEBUG, logger="vstig_hw.transports.can")
+    _ip("add", "dev", "vcan4", "type", "vcan")
+    _ip("set", "up", "vcan4")
+    link = can_link("socketcan", "vcan4", robot_id=1)
+    link.open()
+    try:
+        _ip("set", "down", "vcan4")
+        _read_for(link, 1.5)
+        _ip("set", "up", "vcan4")
+        _heard_again(link, "vcan4")
+        _ip("delete", "vcan4")  # then the adapter is unplugged and plugged back in
+        _read_for(link, 1.5)
+        _ip("add", "dev", "vcan4", "type", "vcan")
+        _ip("set", "up", "vcan4")
+        _heard_again(link, "vcan4")
+    finally:
+        link.close()
+        subprocess.run(["ip", "link", "delete", "vcan4"], check=False, capture_output=True)
+    counters = link.transport.counters
+    assert (counters["lost"], counters["reconnects"]) == (2, 2), counters
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert sum("CAN device lost" in line for line in said) == 2, said
+    assert sum("CAN device back" in line for line in said) == 2, said
+    # Backoff 0.1 s doubling to 2 s: at most 4 tries in each 1.5 s outage (a fixed 0.1 s made ~15);
+    # a loaded machine only makes fewer.
+    retries = [r.getMessage() for r in caplog.records if "still lost" in r.getMessage()]
+    assert len(retries) <= 8, retries
+
+
+@pytest.mark.skipif(os.geteuid() != 0 and not IN_UML, reason="taking vcan interfaces down needs root")
+def test_bridge_says_once_per_unplug_that_the_interface_is_lost_and_once_that_it_is_back() -> None:
+    # The field report: `ip link set vcan0 down` for a second, then delete and re-create it:
+    # 15 "CAN device lost" lines and reconnects=15 for two unplugs.
+    _ip("add", "dev", "vcan5", "type", "vcan")
+    _ip("set", "up", "vcan5")
+    vstig = str(Path(sys.executable).with_name("vstig"))
+    bridge = subprocess.Popen([vstig, "bridge", "can:socketcan:vcan5", "--robot-id", "5"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    said: queue.Queue[str] = queue.Queue()
+    lines: list[str] = []
+
+    def pump() -> None:
+        assert bridge.stderr is not None
+        for line in bridge.stderr:
+            said.put(line.rstrip("\n"))
+
+    def wait_for_line(text: str) -> None:
+        deadline = time.monotonic() + DEADLINE_S
+        while not any(text in line for line in lines):
+            assert time.monotonic() < deadline, f"bridge never said {text!r}: {lines}"
+            with contextlib.suppress(queue.Empty):
+                lines.append(said.get(timeout=0.2))
+
+    threading.Thread(target=pump, daemon=True).start()
+    try:
+        wait_for_line("bridging")
+        _ip("set", "down", "vcan5")
+        wait_for_line("CAN device lost")
+        time.sleep(1.5)
+        _ip("set", "up", "vcan5")
+        wait_for_line("CAN device back")
+        _ip("delete", "vcan5")
+        time.sleep(1.5)
+        _ip("add", "dev", "vcan5", "type", "vcan")
+        _ip("set", "up", "vcan5")
+        deadline = time.monotonic() + DEADLINE_S
+        while sum("CAN device back" in line for line in lines) < 2:
+            assert time.monotonic() < deadline, f"the bridge never came back twice: {lines}"
+            with contextlib.suppress(queue.Empty):
+                lines.append(said.get(timeout=0.2))
+    finally:
+        bridge.send_signal(signal.SIGINT)
+        bridge.wait(timeout=DEADLINE_S)
+        subprocess.run(["ip", "link", "delete", "vcan5"], check=False, capture_output=True)
+    time.sleep(0.2)
+    while not said.empty():
+        lines.append(said.get_nowait())
+    assert bridge.returncode == 0, lines
+    assert sum("CAN device lost" in line for line in lines) == 2, lines
+    assert sum("CAN device back" in line for line in lines) == 2, lines
+    (counters,) = [line for line in lines if line.startswith("vcan5: ")]
+    assert " lost=2 " in f" {counters} " and " reconnects=2 " in f" {counters} ", counters

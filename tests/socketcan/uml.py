@@ -7,13 +7,17 @@ from the user-mode-linux package's modules, creates vcan0 (classic) and vcan1
 (CAN FD, MTU 72), runs pytest, writes pytest's exit code and junit file into a
 work directory on the shared file system, and powers the guest off.
 
+A boot that dies before PID 1 runs anything (the kernel sometimes dies in its
+early memory setup, exit 134) is retried up to BOOT_RETRIES times; when every try
+dies, the result says so with the kernel log's last lines. Anything that ran
+(setup, pytest) is never retried, so a real failure still fails.
+
 By hand: `.venv/bin/python tests/socketcan/uml.py [pytest args]` (default: the
 socketcan module); it prints pytest's output and exits with its code.
 """
 
 from __future__ import annotations
 
-import contextlib
 import os
 import platform
 import shlex
@@ -32,6 +36,8 @@ UML_MODULES = Path("/usr/lib/uml/modules")
 _PASSED_ENV = ("PATH", "HOME", "LANG", "LC_ALL", "TMPDIR", "VIRTUAL_ENV", "CI")
 _PASSED_PREFIXES = ("VSTIG_", "HYPOTHESIS")
 _STANDARD_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
+BOOT_RETRIES = 2  # extra boots after one that died before running anything
+KERNEL_TAIL = 15  # kernel log lines shown when a run fails
 
 _INIT = """#!/bin/sh
 # PID 1 inside User-Mode Linux, written by tests/socketcan/uml.py for one run.
@@ -85,11 +91,13 @@ class UmlRun:
     kernel_log: str
     junit: Path
     seconds: float
+    boots: int = 1  # how many times the kernel was started (more than 1: earlier boots died)
 
     def explain(self) -> str:
         tail = "\n".join(self.pytest_log.splitlines()[-40:])
-        return (f"UML run: status={self.status!r} after {self.seconds:.1f}s\n--- setup ---\n{self.setup_log}"
-                f"\n--- pytest ---\n{tail}\n--- kernel (tail) ---\n" + "\n".join(self.kernel_log.splitlines()[-15:]))
+        return (f"UML run: status={self.status!r} after {self.seconds:.1f}s, {self.boots} boot(s)\n"
+                f"--- setup ---\n{self.setup_log}\n--- pytest ---\n{tail}\n--- kernel (tail) ---\n"
+                + "\n".join(self.kernel_log.splitlines()[-KERNEL_TAIL:]))
 
 
 def uml_binary() -> str | None:
@@ -121,13 +129,13 @@ def _env_script() -> str:
 
 
 def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: str = "1G",
-        program: list[str] | None = None) -> UmlRun:
+        program: list[str] | None = None, binary: str | None = None) -> UmlRun:
     """Boot UML, run `python -m pytest ARGS` in the repo inside it, and collect the result from `workdir`.
 
     `program` runs that command instead of pytest (benchmarks do): its output is `pytest_log`, its
-    exit code `exit_code`.
+    exit code `exit_code`. `binary` is the kernel to boot (default: the installed linux.uml).
     """
-    uml = uml_binary()
+    uml = binary or uml_binary()
     if uml is None:
         raise RuntimeError(unavailable_reason())
     workdir = workdir.resolve()
@@ -144,24 +152,43 @@ def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: s
     init.chmod(0o755)
     if any(c.isspace() for c in str(init)):
         raise RuntimeError(f"the UML kernel command line cannot carry spaces: {init}")
-    (workdir / "uml").mkdir(exist_ok=True)
     command = [uml, f"mem={mem}", "root=/dev/root", "rootfstype=hostfs", "rw", f"init={init}",
                f"uml_dir={workdir / 'uml'}", "umid=vstig", "con=null", "con0=null,fd:1", "ssl=null"]
     started = time.monotonic()
-    # A timeout is reported below, as a run with no status.
-    with open(workdir / "kernel.log", "wb") as kernel_log, contextlib.suppress(subprocess.TimeoutExpired):
-        subprocess.run(command, stdin=subprocess.DEVNULL, stdout=kernel_log, stderr=subprocess.STDOUT,
-                       timeout=timeout, check=False)
+    boots = 0
+    while True:
+        boots += 1
+        exit_code = _boot(command, workdir, timeout)
+        died_at_boot = exit_code is not None and not (workdir / "setup.log").exists()
+        if not died_at_boot or boots > BOOT_RETRIES:
+            break
+        print(f"uml: the kernel died at boot (exit {exit_code}) before running anything; booting again",
+              file=sys.stderr)
     seconds = time.monotonic() - started
 
     def text(name: str) -> str:
         path = workdir / name
         return path.read_text(errors="replace") if path.exists() else ""
 
-    status = text("status").strip() or f"no status: the guest did not finish within {timeout:.0f}s or crashed"
+    if died_at_boot:
+        status = f"the kernel died at boot {boots} times (last exit {exit_code}) before running anything"
+    else:
+        status = text("status").strip() or f"no status: the guest did not finish within {timeout:.0f}s or crashed"
     rc = text("pytest.rc").strip()
     return UmlRun(int(rc) if rc.isdigit() else None, status, text("pytest.log"), text("setup.log"),
-                  text("kernel.log"), junit, seconds)
+                  text("kernel.log"), junit, seconds, boots)
+
+
+def _boot(command: list[str], workdir: Path, timeout: float) -> int | None:
+    """One boot: the kernel's exit code, or None if it outlived `timeout` (then it is killed)."""
+    shutil.rmtree(workdir / "uml", ignore_errors=True)  # a dead kernel's leftovers
+    (workdir / "uml").mkdir()
+    with open(workdir / "kernel.log", "wb") as kernel_log:
+        try:
+            return subprocess.run(command, stdin=subprocess.DEVNULL, stdout=kernel_log, stderr=subprocess.STDOUT,
+                                  timeout=timeout, check=False).returncode
+        except subprocess.TimeoutExpired:
+            return None
 
 
 def main(argv: list[str]) -> int:

@@ -27,7 +27,7 @@ from __future__ import annotations
 from typing import Literal
 
 from ..counters import Counters
-from ..framing.cobsframe import CobsFrameReader, encode_frame
+from ..framing.cobsframe import DELIMITER, CobsFrameReader, encode_frame
 from ..framing.kilobot_ohc import OHC_FORWARDMSG, OHC_FORWARDMSGSINGLE, TransmitOnlyError, ohc_packet
 from ..wire import Message
 from .bittybuzz import BBZ_KILOBOT_TYPE, BBZ_MESSAGE_SIZE, BbzOther, decode_bittybuzz, encode_bittybuzz
@@ -60,6 +60,7 @@ class BittyBuzzKilobotFraming:
     name = "bittybuzz-kilobot"
     default_baud = 115200
     transmit_only = False
+    preamble = DELIMITER  # sent before the first frame after the port opens (SPEC 6.0.3)
 
     def __init__(self, deployment: Deployment) -> None:
         self.drops = Counters()
@@ -94,6 +95,7 @@ class BittyBuzzOhcFraming:
     name = "bittybuzz-ohc"
     default_baud = 38400
     transmit_only = True
+    preamble = b""  # fixed-size controller packets: nothing to resynchronise
 
     def __init__(self, deployment: Deployment, mode: Literal["single", "repeat"] = "single") -> None:
         self.drops = Counters()

@@ -25,6 +25,7 @@ class SerialFraming(Protocol):
     name: str
     default_baud: int  # the line speed its radios use unless told otherwise
     transmit_only: bool  # True: `feed` raises TransmitOnlyError (nothing comes back)
+    preamble: bytes  # written before the first frame after every (re)open of the port
     drops: Counters
 
     def encode(self, msg: Message) -> list[bytes]: ...

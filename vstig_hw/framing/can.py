@@ -68,14 +68,14 @@ class CanIdScheme:
             base = DEFAULT_BASE_29BIT if self.base is None else self.base
             _require(isinstance(base, int) and base == base & BASE_MASK_29BIT,
                      "a 29-bit id_base may use bits 28..25 only "
-                     f"(0x00000000..0x1E000000 in steps of 0x02000000), got {_hex(self.base)}")
+                     f"(0x00000000..0x1E000000 in steps of 0x02000000), got {_shown(self.base)}")
             _require(isinstance(self.stigmergy, int) and 0 <= self.stigmergy <= 0xFF,
                      f"stigmergy must be 0..255 for 29-bit IDs, got {self.stigmergy!r}")
             derived = (base, 0x1FFE0000, base | self.stigmergy << 17, 16, 0xFFFF)
         else:
             base = DEFAULT_BASE_11BIT if self.base is None else self.base
             _require(base in BASES_11BIT,
-                     f"an 11-bit id_base must be one of 0x000, 0x200, 0x400, 0x600, got {_hex(self.base)}")
+                     f"an 11-bit id_base must be one of 0x000, 0x200, 0x400, 0x600, got {_shown(self.base)}")
             _require(self.stigmergy == 0,
                      "11-bit IDs have no stigmergy field: give each stigmergy its own id_base "
                      f"(0x000, 0x200, 0x400, 0x600), got stigmergy={self.stigmergy!r}")
@@ -91,9 +91,8 @@ class CanIdScheme:
     def can_id(self, op: Op, sender: int) -> int:
         """The arbitration ID node `sender` transmits `op` messages under."""
         if isinstance(sender, bool) or not isinstance(sender, int) or not 0 <= sender <= self._sender_mask:
-            width = 29 if self.extended else 11
-            raise ValueError(f"a sender on a {width}-bit CAN bus must be a node id in 0..{self._sender_mask}, "
-                             f"got {sender!r}")
+            raise ValueError(f"a sender on {'a 29' if self.extended else 'an 11'}-bit CAN bus must be a node id "
+                             f"in 0..{self._sender_mask}, got {sender!r}")
         return self._match_value | int(op) << self._op_shift | sender
 
     def parse(self, arbitration_id: int, is_extended_id: bool) -> tuple[Op, int] | None:
@@ -107,8 +106,9 @@ class CanIdScheme:
         return [{"can_id": self._match_value, "can_mask": self._match_mask, "extended": self.extended}]
 
 
-def _hex(value: object) -> str:
-    return f"{value:#x}" if isinstance(value, int) and not isinstance(value, bool) else repr(value)
+def _shown(base: object) -> str:
+    """An id_base as the user wrote it: in hex."""
+    return f"{base:#05x}" if isinstance(base, int) and not isinstance(base, bool) else repr(base)
 
 
 def _require(ok: bool, complaint: str) -> None:

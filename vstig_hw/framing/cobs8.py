@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from ..counters import Counters
 from ..wire import MESSAGE_SIZE, Message, decode, encode
-from .cobsframe import CobsFrameReader, encode_frame
+from .cobsframe import DELIMITER, CobsFrameReader, encode_frame
 
 __all__ = ["Cobs8Framing"]
 
@@ -17,6 +17,7 @@ class Cobs8Framing:
     name = "cobs8"
     default_baud = 115200
     transmit_only = False
+    preamble = DELIMITER  # sent before the first frame after the port opens (SPEC 6.0.3)
 
     def __init__(self) -> None:
         self.drops = Counters()

@@ -28,7 +28,7 @@ from __future__ import annotations
 from ..counters import Counters
 from ..crc import crc32
 from ..wire import Message, decode, encode
-from .cobsframe import CobsFrameReader, encode_frame
+from .cobsframe import DELIMITER, CobsFrameReader, encode_frame
 
 __all__ = ["WORDS_PER_MESSAGE", "WORD_SIZE", "Epuck4Framing", "EpuckFragmenter", "EpuckReassembler"]
 
@@ -156,6 +156,7 @@ class Epuck4Framing:
     name = "epuck4"
     default_baud = 115200
     transmit_only = False
+    preamble = DELIMITER  # sent before the first frame after the port opens (SPEC 6.0.3)
 
     def __init__(self, expiry_ticks: int = 3) -> None:
         self.drops = Counters()

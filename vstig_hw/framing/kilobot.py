@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from ..counters import Counters
 from ..wire import MESSAGE_SIZE, Message, decode, encode
-from .cobsframe import CobsFrameReader, encode_frame
+from .cobsframe import DELIMITER, CobsFrameReader, encode_frame
 
 __all__ = ["KILOBOT_DEFAULT_TYPE", "KILOBOT_PAYLOAD_SIZE", "VSTIG_FORMAT_VERSION", "KilobotFraming",
            "check_kilobot_type", "kilobot_payload"]
@@ -42,6 +42,7 @@ class KilobotFraming:
     name = "kilobot"
     default_baud = 115200
     transmit_only = False
+    preamble = DELIMITER  # sent before the first frame after the port opens (SPEC 6.0.3)
 
     def __init__(self, msg_type: int = KILOBOT_DEFAULT_TYPE) -> None:
         self.msg_type = check_kilobot_type(msg_type)

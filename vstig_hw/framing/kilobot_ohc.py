@@ -49,6 +49,7 @@ class KilobotOhcFraming:
     name = "kilobot-ohc"
     default_baud = OHC_BAUD
     transmit_only = True
+    preamble = b""  # fixed-size packets, recognised by header and XOR: nothing to resynchronise
 
     def __init__(self, msg_type: int = KILOBOT_DEFAULT_TYPE, mode: Literal["single", "repeat"] = "single") -> None:
         # "single" by default: a repeating controller keeps the IR channel busy with

@@ -8,7 +8,13 @@ Modes:
   and answers stale GETs, not because the gateway relays.
 * RAW: a transparent bridge. Every message heard on one link is re-encoded in
   each other link's framing and sent as is: no engine, no merging.
-* LISTEN: a sniffer or recorder. Nothing is ever written to any link.
+* LISTEN: a sniffer or recorder. Nothing is ever written to any link. With
+  `count_outcomes` an engine that never transmits still hears everything, so
+  `stats()` tells what the traffic would do to a robot (sniff shows it).
+
+`stats()` has the engine's receive outcomes (stored, answered, stale, same,
+conflict, unknown, invalid: firmware_spec/SPEC.md section 4) beside the links'
+counters, under ENGINE_STATS.
 
 One event loop: `run` (or `poll`, one step of it) drains the reader threads'
 queue, ticks every `period`, and flushes the outlets whenever their budget
@@ -30,13 +36,16 @@ from ..counters import Counters
 from ..engine import ConflictResolver, Stigmergy
 from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
+from ..timestamps import TS_NONE
+from ..wire import Message, Op
 from .outlet import Outlet
 from .readers import LinkReaders
 
-__all__ = ["DEFAULT_BUDGET", "DEFAULT_PERIOD", "Mode", "Node", "favour_latency"]
+__all__ = ["DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "favour_latency"]
 
 DEFAULT_PERIOD = 0.1  # the paper's control step
 DEFAULT_BUDGET = 64  # messages per link per tick: ~8 kB/s of cobs8, within a 115200-baud radio
+ENGINE_STATS = "engine"  # the stats() entry of the engine's outcome counts
 
 
 SWITCH_INTERVAL = 0.0005  # seconds: how soon a reader thread with a frame gets the GIL from the loop
@@ -82,6 +91,7 @@ class Node:
         period: float = DEFAULT_PERIOD,
         budget: int | None = DEFAULT_BUDGET,
         onconflict: ConflictResolver | None = None,
+        count_outcomes: bool = False,
     ) -> None:
         self.links = list(links)
         if not self.links:
@@ -93,7 +103,8 @@ class Node:
             raise ValueError("a raw bridge needs at least two links")
         self.mode = mode
         self.period = period
-        self.engine = Stigmergy(robot_id, onconflict=onconflict) if mode is Mode.ENGINE else None
+        judge = mode is Mode.ENGINE or (count_outcomes and mode is Mode.LISTEN)
+        self.engine = Stigmergy(robot_id, onconflict=onconflict) if judge else None
         self.outlets = [] if mode is Mode.LISTEN else [
             Outlet(link, budget, period, keep_all=mode is Mode.RAW) for link in self.links
         ]
@@ -151,9 +162,20 @@ class Node:
         self._spread(time.monotonic())
         return value
 
+    def ask(self, key: int) -> None:
+        """Broadcast an empty GET for `key` (timestamp 0): every neighbour holding it answers with its entry.
+
+        `get` carries our view of the key, which only holders of a newer entry
+        answer; this asks everyone, whatever we hold (SPEC section 4, row 5).
+        """
+        ask = Message(Op.GET, key, 0, TS_NONE, self._engine().robot_id)
+        for outlet in self.outlets:
+            outlet.push(ask)  # a PUT already queued for the key says more and stays (SPEC section 5)
+        self._spread(time.monotonic())
+
     def _engine(self) -> Stigmergy:
-        if self.engine is None:
-            raise RuntimeError(f"a {self.mode.value} node has no engine")
+        if self.engine is None or self.mode is not Mode.ENGINE:
+            raise RuntimeError(f"a {self.mode.value} node cannot put, get or ask: only an engine node transmits")
         return self.engine
 
     # -- the loop ----------------------------------------------------------------
@@ -258,11 +280,13 @@ class Node:
 
     # -- what happened ------------------------------------------------------------
     def stats(self) -> dict[str, Counters]:
-        """Per link: in/out, queued, and every drop by reason."""
+        """Per link: in/out, queued, and every drop by reason; then the engine's outcomes, if it has one."""
         out = {link.name: link.stats() for link in self.links}
         for outlet in self.outlets:
             if len(outlet):
                 out[outlet.link.name]["queued"] = len(outlet)
+        if self.engine is not None:
+            out[ENGINE_STATS] = Counters({outcome.name.lower(): n for outcome, n in self.engine.counts.items()})
         return out
 
     def summary(self) -> str:

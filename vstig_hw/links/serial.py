@@ -27,7 +27,8 @@ def serial_link(port: str, framing: str = "cobs8", baud: int | None = None, *, n
     Unknown framings or options raise ValueError naming them.
     """
     codec = make_serial_framing(framing, **framing_options)
-    transport = SerialTransport(port, baud or codec.default_baud, name=name, **dict(transport_options or {}))
+    transport = SerialTransport(port, baud or codec.default_baud, name=name, preamble=codec.preamble,
+                                **dict(transport_options or {}))
     link: Link[bytes] = Link(name or port, transport, codec)
     if connect:
         link.open()
@@ -50,4 +51,4 @@ def _dialect_link(spec: SerialSpec, name: str) -> Link[bytes]:
     deployment = load_deployment(str(spec.deployment))
     codec: SerialFraming = (BittyBuzzOhcFraming(deployment) if spec.framing == "kilobot-ohc"
                             else BittyBuzzKilobotFraming(deployment))
-    return Link(name, SerialTransport(spec.port, spec.baud, name=name), codec)
+    return Link(name, SerialTransport(spec.port, spec.baud, name=name, preamble=codec.preamble), codec)

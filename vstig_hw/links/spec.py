@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from ..framing.can import CanIdScheme
     from .link import Link
 
 __all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "BlabbermouthSpec", "CanSpec", "LinkSpec", "SerialSpec", "parse"]
@@ -100,6 +101,12 @@ class CanSpec:
     def name(self) -> str:
         """A short, space-free name for status lines and captures."""
         return _safe_name(self.channel)
+
+    def scheme(self) -> CanIdScheme:
+        """The arbitration-ID scheme these parameters name; ValueError if they name none."""
+        from ..framing.can import CanIdScheme
+
+        return CanIdScheme(extended=self.extended, base=self.id_base, stigmergy=self.stigmergy)
 
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` is the sender field a CAN link transmits under."""
@@ -237,7 +244,7 @@ def _parse_can(spec: str, body: str) -> CanSpec:
     if stigmergy and not extended:
         raise _bad(spec, f"stigmergy={stigmergy} needs 29-bit IDs (extended=1); on 11-bit IDs give each "
                          "stigmergy its own id_base (0x000, 0x200, 0x400, 0x600)", "can")
-    return CanSpec(
+    parsed = CanSpec(
         interface=interface,
         channel=channel,
         bitrate=_int(spec, "can", "bitrate", params["bitrate"], 1, 10_000_000) if "bitrate" in params else None,
@@ -248,6 +255,11 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         kernel_filter=_flag(spec, "can", "filter", params["filter"]) if "filter" in params else True,
         bus_options=_bus_options(spec, params),
     )
+    try:
+        parsed.scheme()  # an id_base the ID scheme has no room for (0x601) is the spec's fault
+    except ValueError as error:
+        raise _bad(spec, str(error), "can") from None
+    return parsed
 
 
 _BUS_PREFIX = "bus."

@@ -6,11 +6,15 @@ option go to `can.Bus` as given. Units are `can.Message` frames, passed up as
 received (error frames too, so captures keep them; the framing counts them).
 
 Counters: `rx`, `tx`, `tx_dropped` (device gone or TX queue full), `bus_errors`
-(error frames and failed bus calls), `bus_off`, `lost` (outages), `reconnects`, and on
-SocketCAN `kernel_dropped` (frames the kernel dropped because our receive queue was full, as candump -d reports) and
-`interface_dropped` (frames the interface dropped before any socket got them).
-An outage is logged once; the bus is reopened with exponential backoff from
-`read`/`write`, which never raise into the caller's loop.
+(error frames and failed bus calls), `bus_off`, `lost` (outages) and `reconnects`
+(recoveries), and on SocketCAN `kernel_dropped` (frames the kernel dropped because
+our receive queue was full, as candump -d reports), `interface_dropped` (frames the
+interface dropped before any socket got them) and `unread_at_close`. An outage is
+logged once and its end once; meanwhile the bus is reopened with exponential
+backoff (0.1 s doubling to 2 s) from `read`/`write`, which never raise into the
+caller's loop. A bus that opens but fails at its first call (SocketCAN binds to an
+interface that is down, then reports ENETDOWN) has not come back: the outage goes
+on and the backoff keeps growing.
 """
 
 from __future__ import annotations
@@ -51,7 +55,7 @@ class CanTransport:
         fd: bool = False,
         can_filters: list[dict[str, Any]] | None = None,
         name: str | None = None,
-        backoff: tuple[float, float] = (0.1, 5.0),
+        backoff: tuple[float, float] = (0.1, 2.0),
         send_timeout: float = 0.1,
         **options: Any,
     ) -> None:
@@ -71,6 +75,7 @@ class CanTransport:
         self._backoff_min, self._backoff_max = backoff
         self._bus: can.BusABC | None = None
         self._opened = False
+        self._outage = False  # from a loss until a reopened bus has worked once
         self._delay = self._backoff_min
         self._next_try = 0.0
         self._next_state_poll = 0.0
@@ -141,6 +146,9 @@ class CanTransport:
                 self._poll_state(bus)
         except (can.CanError, OSError) as exc:
             self._lost(one_line(exc))
+        else:
+            if self._outage and self._bus is not None:
+                self._recovered()
         self.counters["rx"] += len(frames)
         return frames
 
@@ -157,6 +165,8 @@ class CanTransport:
             if errno_of(exc) not in _TRANSIENT_ERRNOS and "buffer full" not in str(exc).lower():
                 self._lost(one_line(exc))
             return
+        if self._outage:
+            self._recovered()
         self.counters["tx"] += 1
 
     # -- errors and reconnection ---------------------------------------------
@@ -188,13 +198,29 @@ class CanTransport:
                 log.debug("%s: error while closing: %s", self.name, exc)
 
     def _lost(self, reason: str) -> None:
-        """The device failed: report once, then reopen it with backoff from read/write."""
+        """The device failed: report once per outage, then reopen it with backoff from read/write."""
         self._drop_bus()
-        self.counters["lost"] += 1
         self.last_error = reason
+        if self._outage:  # the reopened bus failed at once: still the same outage
+            self._retry_later(reason)
+            return
+        self._outage = True
+        self.counters["lost"] += 1
         log.warning("%s: CAN device lost (%s); reconnecting with backoff", self.name, reason)
         self._delay = self._backoff_min
         self._next_try = time.monotonic() + self._delay
+
+    def _retry_later(self, reason: str) -> None:
+        self._delay = min(self._delay * 2, self._backoff_max)
+        self._next_try = time.monotonic() + self._delay
+        log.debug("%s: still lost (%s); next try in %.1f s", self.name, reason, self._delay)
+
+    def _recovered(self) -> None:
+        """A reopened bus worked (a read or a send without error): the outage is over."""
+        self._outage = False
+        self.counters["reconnects"] += 1
+        self.last_error = None
+        log.warning("%s: CAN device back", self.name)
 
     def _reconnect(self, timeout: float) -> can.BusABC | None:
         if not self._opened:
@@ -209,10 +235,6 @@ class CanTransport:
             self._bus = self._make_bus()
         except TransportError as exc:
             self.last_error = str(exc)
-            self._delay = min(self._delay * 2, self._backoff_max)
-            self._next_try = time.monotonic() + self._delay
+            self._retry_later(str(exc))
             return None
-        self.counters["reconnects"] += 1
-        log.warning("%s: CAN device back", self.name)
-        self.last_error = None
-        return self._bus
+        return self._bus  # not back yet: `_recovered` once a call on it has worked

@@ -8,6 +8,10 @@ When the device disappears (a USB dongle pulled out, a server gone) the loss is
 logged once, `read` returns nothing and `write` drops and counts, while the port
 is retried with exponential backoff; when it comes back, traffic resumes and
 `reconnects` counts it.
+
+A `preamble` (the framing's: 0x00 for COBS framings) goes out ahead of the first
+write after every open and reconnect, so a receiver that holds half a frame from
+before drops it at once instead of losing our first frame too (SPEC 6.0.3).
 """
 
 from __future__ import annotations
@@ -54,7 +58,8 @@ class SerialTransport:
 
     def __init__(self, port: str, baudrate: int = 115200, *, bytesize: int = 8, parity: str = "N",
                  stopbits: float = 1, rtscts: bool = False, xonxoff: bool = False, write_timeout: float = 1.0,
-                 backoff_initial: float = 0.1, backoff_max: float = 2.0, name: str | None = None) -> None:
+                 backoff_initial: float = 0.1, backoff_max: float = 2.0, name: str | None = None,
+                 preamble: bytes = b"") -> None:
         self.port = port
         self.name = name or port
         self.settings: dict[str, Any] = {
@@ -63,6 +68,7 @@ class SerialTransport:
         }
         self.backoff_initial = backoff_initial
         self.backoff_max = backoff_max
+        self.preamble = preamble
         self.counters = Counters()
         self._serial: serial.Serial | None = None
         self._wanted = False  # open() was called and close() was not
@@ -70,6 +76,7 @@ class SerialTransport:
         self._backoff = backoff_initial
         self._retry_at = 0.0
         self._lost_at = 0.0
+        self._fresh = False  # the port was (re)opened and nothing written since: the preamble goes first
 
     @property
     def connected(self) -> bool:
@@ -116,6 +123,9 @@ class SerialTransport:
             if port is None:
                 self.counters["tx_dropped"] += 1
                 return
+        if self._fresh:
+            unit = self.preamble + unit
+            self._fresh = False
         try:
             port.write(unit)
         except serial.SerialTimeoutException:
@@ -141,9 +151,11 @@ class SerialTransport:
 
     def _connect(self) -> serial.Serial:
         try:
-            return serial.serial_for_url(self.port, exclusive=True, timeout=self._timeout, **self.settings)
+            port = serial.serial_for_url(self.port, exclusive=True, timeout=self._timeout, **self.settings)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise open_error(self.port, exc) from None
+        self._fresh = bool(self.preamble)
+        return port
 
     def _require_open(self) -> None:
         if not self._wanted:
