@@ -33,7 +33,7 @@ def invoke(*args: str) -> tuple[int, str]:
         (["sniff", "kilobot-ohc:/dev/null"], "kilobot-ohc:null is transmit-only"),
         (["sim", "--topology", "line", "--density", "2"], "a line layout is built by distance"),
         (["sniff", "can:virtual:x?id_base=0x601"], "must be one of 0x000, 0x200, 0x400, 0x600, got 0x601"),
-        (["bridge", "can:virtual:x", "--robot-id", "300"], "a node id in 0..255, got 300"),
+        (["bridge", "can:virtual:x", "--robot-id", "300"], "300 does not fit can:virtual:x"),
         (["record", "kilobot-ohc:/dev/null", "-o", "x.cap"], "record needs a link that receives"),
     ],
 )
