@@ -298,7 +298,7 @@ def test_record_on_a_bursting_bus_loses_nothing_silently(tmp_path: Path) -> None
             sizes.append(out.stat().st_size if out.exists() else 0)
     finally:
         record.send_signal(signal.SIGINT)
-        _, summary = record.communicate(timeout=60)
+        _, summary = record.communicate(timeout=300)  # a guest on a loaded machine writes slowly
     assert record.returncode == 0, summary
     recorded = sum(1 for line in out.read_text().splitlines() if line.strip())
     dropped = sum(int(n) for n in re.findall(r"(?:kernel_dropped|interface_dropped|unread_at_close)=(\d+)", summary))
