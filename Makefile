@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck pytest bench sysdeps clean
+.PHONY: demo test lint typecheck pytest bench sysdeps clean fuzz soak
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -32,6 +32,21 @@ test: lint typecheck pytest
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
+
+# The long runs (not part of `make test`). FUZZ_RUNS inputs per parser; SOAK_SECONDS of gateway traffic.
+FUZZ_RUNS ?= 1000000
+SOAK_SECONDS ?= 600
+FUZZ_STAMP := $(VENV)/.fuzz-installed
+
+$(FUZZ_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[test,fuzz]'
+	touch $@
+
+fuzz: $(FUZZ_STAMP)
+	$(BIN)/python tests/fuzz/run.py --runs $(FUZZ_RUNS)
+
+soak: $(STAMP)
+	$(BIN)/python tests/soak/run.py --seconds $(SOAK_SECONDS)
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

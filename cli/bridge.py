@@ -11,6 +11,7 @@ from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, favour_
 from vstig_hw.links.spec import LinkSpec
 
 from ._common import build_links, print_counters, run_until_stopped
+from ._guard import GuardChoice, guard_options, take_warnings
 from .errors import LINK, reports_errors
 
 
@@ -32,9 +33,10 @@ def _raw_note(robot_id: int | None) -> str:
 @click.option("--larger-value-wins", "larger", is_flag=True,
               help="Resolve conflicts by the larger value (the paper's Figure 1) instead of the higher robot id.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@guard_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
-            larger: bool, duration: float | None) -> None:
+            larger: bool, duration: float | None, guard: GuardChoice) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
     The status line and the counters printed on exit have each link's counters
@@ -42,19 +44,28 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     unknown, invalid).
 
     Example: vstig bridge can:socketcan:can0 serial:/dev/ttyUSB0?framing=epuck4 --robot-id 200
+
+    A guard checks what every link hears before the engine sees it: timestamp jumps are refused by
+    default; --rate, --trust, --deny, --keys, --read-only and --flap add policies. LINK names are
+    those printed at start (the device's name: can0, ttyUSB0...). Refusals are counted per link
+    (drop_jump, drop_rate, drop_untrusted, drop_key).
     """
     if robot_id is None and not raw:
         raise click.UsageError("--robot-id is required (the PC's id in the swarm), or use --raw")
     if raw and len(links) < 2:
         raise click.UsageError("--raw needs at least two links to bridge")
-    node = Node(build_links(links, robot_id or 0), robot_id or 0, mode=Mode.RAW if raw else Mode.ENGINE,
+    built = build_links(links, robot_id or 0)
+    firewall = guard.build(built)
+    node = Node(built, robot_id or 0, mode=Mode.RAW if raw else Mode.ENGINE,
                 period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
-                onconflict=larger_value_wins if larger else None)
+                onconflict=larger_value_wins if larger else None, guard=firewall)
     live = sys.stderr.isatty()
     favour_latency()
 
     def status() -> None:
         line = node.summary()
+        for warning in take_warnings(firewall):
+            click.echo(f"\r\x1b[K{warning}" if live else warning, err=True)
         if live:
             click.echo(f"\r\x1b[K{line}", nl=False, err=True)
 
@@ -66,4 +77,6 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
         finally:
             if live:
                 click.echo(err=True)
+    for warning in take_warnings(firewall):
+        click.echo(warning, err=True)
     print_counters(node)

@@ -13,6 +13,7 @@ from vstig_hw.capture.filters import Filter
 from vstig_hw.engine import larger_value_wins
 from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
+from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard
 from vstig_hw.links.spec import LinkSpec
@@ -20,6 +21,7 @@ from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ._capture_options import filter_options
 from ._common import VALUE_TYPE_HELP, build_links, must_hear, print_counters, run_until_stopped
+from ._guard import GuardChoice, guard_options, take_warnings
 from .errors import LINK, reports_errors
 
 _TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
@@ -57,9 +59,10 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
                    "instead of the default higher robot id.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
 @filter_options
+@guard_options
 @reports_errors
 def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
-            keep: Filter) -> None:
+            keep: Filter, guard: GuardChoice) -> None:
     """Decode LINK's traffic live, per key; passive: never transmits.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
@@ -70,11 +73,16 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
     same, conflict, unknown, invalid.
 
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
+
+    The guard options are bridge's: what a bridge with them would refuse is left out of the
+    table and counted under the table (drop_jump, drop_rate...); --max-jump 0 shows everything.
     """
     must_hear(link, "sniff")
     rule = larger_value_wins if larger else None
+    built = build_links([link], listen_only=True)
+    firewall = guard.build(built)
     # The engine never transmits: it counts what each message would do to a robot that heard them all.
-    node = Node(build_links([link], listen_only=True), mode=Mode.LISTEN, count_outcomes=True, onconflict=rule)
+    node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule)
     view = SwarmView(rule) if rule else SwarmView()
     listeners: list[Callable[[Heard], None]] = [view.add]
     first: list[float] = []
@@ -106,8 +114,10 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
             out.flush()
 
         listeners.append(emit)
+        node.on_tick.append(lambda _node: _warn(firewall))
         with node:
             run_until_stopped(node, duration=duration)
+        _warn(firewall)
         print_counters(node)
         return
     from rich.live import Live
@@ -118,8 +128,15 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
 
     with node, Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
         def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
+            _warn(firewall)  # on a terminal, Live prints stderr above the table
             height = live.console.size.height if live.console.is_terminal else None
             live.update(_table(view, value_type, node, height))
 
         run_until_stopped(node, redraw, duration)
+    _warn(firewall)
     print_counters(node)
+
+
+def _warn(firewall: Guard) -> None:
+    for warning in take_warnings(firewall):
+        click.echo(warning, err=True)

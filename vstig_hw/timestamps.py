@@ -32,3 +32,12 @@ def is_newer(a: int, b: int) -> bool:
 def next_timestamp(ts: int) -> int:
     """The timestamp after `ts`, skipping the reserved 0 on wrap (65535 -> 1)."""
     return ts + 1 if ts < TS_MAX else 1
+
+
+def steps_ahead(newer: int, older: int) -> int:
+    """How many `next_timestamp` steps lead from `older` to `newer` (for `newer` newer than a nonzero `older`).
+
+    The modular distance, less one when the path wrapped past the skipped 0.
+    """
+    distance = (newer - older) & TS_MAX
+    return distance - 1 if newer < older else distance

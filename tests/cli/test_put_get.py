@@ -226,11 +226,13 @@ def test_put_on_a_radio_that_echoes_what_we_send_does_not_take_the_echo_for_an_a
                 radio.write(data)
                 sent.extend(framing.feed(data))
 
-    threading.Thread(target=echo, daemon=True).start()
+    echoing = threading.Thread(target=echo, daemon=True)
+    echoing.start()
     try:
         put = run_vstig("put", "23", "9", "--on", f"serial:{radio.path}", "--robot-id", "33", "--learn", "0.3")
     finally:
         stop.set()
+        echoing.join(timeout=5)  # before the fds close: a later pty reuses their numbers
         radio.close()
     assert put.returncode == 1 and put.stdout == ""
     assert "brings our own GETs back (robot id 33)" in put.stderr

@@ -216,6 +216,16 @@ def test_skip_gaps_shortens_long_waits_and_ignore_timestamps_drops_them() -> Non
     assert result.frames == 5 and result.skipped == pytest.approx(900.0) and result.took < 10.0
     with pytest.raises(ValueError, match="skip_gaps"):
         replay(records, lambda r: None, skip_gaps=-1)
+
+
+def test_fast_path_with_every_frame_dropped_renders_nothing() -> None:
+    """Found by `make fuzz`: a chunk of foreign IDs only used to raise IndexError in _render."""
+    drops: dict[str, int] = {}
+    chunk = "".join(f"(1700000000.00000{i}) can0 {ident}#0001000200030004\n" for i, ident in enumerate(("599", "407")))
+    assert chunk_to_jsonl(chunk.encode(), _classify, drops) == b""
+    assert drops == {"unknown_id": 2}
+
+
 def test_replay_sleeps_short_by_the_overshoot_it_measures_and_spins_only_the_rest() -> None:
     now = [0.0]
     reads = [0]

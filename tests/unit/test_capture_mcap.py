@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from vstig_cli.main import cli
 from vstig_hw.capture.files import read_capture
-from vstig_hw.capture.records import CAN_FRAMING, Record
+from vstig_hw.capture.records import CAN_FRAMING, CaptureError, Record
 from vstig_hw.capture.rosbag import TYPE_NAME, McapCaptureWriter, topic_for
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.wire import Message, Op, encode
@@ -123,6 +123,18 @@ def test_a_damaged_mcap_names_the_file(tmp_path: Path, bag: Path) -> None:
     cut.write_bytes(bag.read_bytes()[:40])
     result = CliRunner().invoke(cli, ["decode", str(cut)])
     assert result.exit_code == 1 and f"{cut}: cannot read as rosbag2 MCAP" in result.output
+
+
+def test_every_damaged_byte_is_read_or_refused_as_a_capture_error(tmp_path: Path, bag: Path) -> None:
+    """Found by `make fuzz`: a corrupt compressed chunk escaped as zstandard's ZstdError."""
+    data = bag.read_bytes()
+    damaged = tmp_path / "damaged.mcap"
+    for at in range(0, len(data), max(1, len(data) // 400)):
+        damaged.write_bytes(data[:at] + bytes([data[at] ^ 0x5A]) + data[at + 1:])
+        try:
+            list(read_capture(str(damaged)))
+        except CaptureError as error:
+            assert str(error).startswith(str(damaged))
 
 
 def test_topics_are_valid_ros_names() -> None:

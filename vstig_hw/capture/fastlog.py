@@ -83,6 +83,8 @@ def chunk_to_jsonl(chunk: bytes, classify: Classify, drops: dict[str, int]) -> b
     parsed = parse_chunk(chunk, classify, drops)
     if parsed is None:
         return None
+    if not len(parsed.op):
+        return b""  # every frame dropped (a bus of other traffic): nothing to render, and _render needs a row
     return _render(parsed.stamp, parsed.link, parsed.can_id, parsed.op, parsed.key, parsed.value,
                    parsed.timestamp, parsed.robot)
 

@@ -12,6 +12,7 @@ Both libraries come with the `mcap` extra (`pip install 'vstig-hw[mcap]'`).
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Iterator
 from typing import IO, Any
@@ -47,9 +48,16 @@ def _needs_extra(path: str) -> CaptureError:
 
 def _typestore(path: str) -> Any:
     try:
-        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+        return _our_typestore()
     except ImportError:
         raise _needs_extra(path) from None
+
+
+@functools.cache
+def _our_typestore() -> Any:
+    """Built once per process: parsing the message definition takes ~10 ms, more than reading a small capture."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
     store = get_typestore(Stores.EMPTY)
     store.register(get_types_from_msg(MSGDEF, TYPE_NAME))
     return store
@@ -142,7 +150,6 @@ class CarriedMessages:
 def read_mcap(path: str) -> Iterator[Record]:
     """The messages of an MCAP capture in log-time order, as `MESSAGE_FRAMING` records named by link."""
     try:
-        from mcap.exceptions import McapError
         from mcap.reader import make_reader
     except ImportError:
         raise _needs_extra(path) from None
@@ -156,5 +163,5 @@ def read_mcap(path: str) -> Iterator[Record]:
                 link = channel.metadata.get("link") or channel.topic.removeprefix(TOPIC_PREFIX)
                 message = Message(Op(m.op), m.key, m.value, m.timestamp, m.robot)
                 yield Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, None if m.sender < 0 else m.sender))
-    except (McapError, ValueError, KeyError, IndexError, EOFError) as error:
-        raise CaptureError(path, None, f"cannot read as rosbag2 MCAP: {error}") from None
+    except Exception as error:  # a damaged file surfaces as any of McapError, zstd, lz4, CDR, struct errors...
+        raise CaptureError(path, None, f"cannot read as rosbag2 MCAP: {type(error).__name__}: {error}") from None

@@ -18,7 +18,8 @@ counters, under ENGINE_STATS.
 
 One event loop: `run` (or `poll`, one step of it) drains the reader threads'
 queue, ticks every `period`, and flushes the outlets whenever their budget
-window allows.
+window allows. An optional `guard` (see `guard`) sees what each link heard
+before the engine, a raw relay or a listener does.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
 from ..timestamps import TS_NONE
 from ..wire import Message, Op
+from .guard import Guard
 from .outlet import Outlet
 from .readers import LinkReaders
 
@@ -92,6 +94,7 @@ class Node:
         budget: int | None = DEFAULT_BUDGET,
         onconflict: ConflictResolver | None = None,
         count_outcomes: bool = False,
+        guard: Guard | None = None,
     ) -> None:
         self.links = list(links)
         if not self.links:
@@ -103,6 +106,7 @@ class Node:
             raise ValueError("a raw bridge needs at least two links")
         self.mode = mode
         self.period = period
+        self.guard = guard  # what links hear passes it before the engine, a relay or a listener sees it
         judge = mode is Mode.ENGINE or (count_outcomes and mode is Mode.LISTEN)
         self.engine = Stigmergy(robot_id, onconflict=onconflict) if judge else None
         self.outlets = [] if mode is Mode.LISTEN else [
@@ -220,6 +224,8 @@ class Node:
         sender_of = link.sender_of
         engine = self.engine
         outlets = self.outlets
+        guard = self.guard
+        relays = guard is None or not guard.read_only(link.name)
         heard_count = 0
         for unit in units:
             for listener in self.on_unit:
@@ -232,8 +238,10 @@ class Node:
             if not messages:
                 continue
             heard_count += len(messages)
+            sender = sender_of(unit) if guard is not None or self.on_heard else None
+            if guard is not None:
+                messages = guard.filter(link.name, sender, messages, t, link.counters)
             if self.on_heard:
-                sender = sender_of(unit)
                 for msg in messages:
                     heard = Heard(msg, link.name, t, sender)
                     for h_listener in self.on_heard:
@@ -241,7 +249,7 @@ class Node:
             if engine is not None:
                 for msg in messages:
                     engine.receive(msg)
-            elif self.mode is Mode.RAW:
+            elif self.mode is Mode.RAW and relays:
                 for outlet in outlets:
                     if outlet.link is not link:
                         for msg in messages:
@@ -265,9 +273,12 @@ class Node:
         """
         if self.engine is not None and self.engine.pending():
             outgoing = self.engine.drain()
+            confined_to = self.guard.confined_to if self.guard is not None and self.guard.confines else None
             for outlet in self.outlets:
+                name = outlet.link.name
                 for msg in outgoing:
-                    outlet.push(msg)
+                    if confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay there
+                        outlet.push(msg)
         outlets = self.outlets  # outlets[i] belongs to links[i]
         if heard_on:  # a stable sort: those links move to the end, the others keep their order
             outlets = [outlets[i] for i in sorted(range(len(outlets)), key=lambda i: heard_on >> i & 1)]
