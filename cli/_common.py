@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
@@ -11,6 +12,8 @@ import click
 from vstig_hw.gateway import ENGINE_STATS, Node, stop_on_signals
 from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec, ZenohSpec
+
+VALUE_TYPE_HELP = "How to show the 16-bit value field: unsigned, signed (two's complement) or half-precision float."
 
 
 def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool = False) -> list[Link[Any]]:
@@ -32,7 +35,13 @@ def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool 
         seen[name] = seen.get(name, 0) + 1
         if seen[name] > 1:
             name = f"{name}-{seen[name]}"
-        links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
+        if isinstance(spec, CanSpec) and spec.interface == "virtual":
+            click.echo(f"note: can:virtual:{spec.channel} is a bus inside this process only: no other program "
+                       "hears it (vcan or can:udp_multicast: reach other processes)", err=True)
+        try:
+            links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
+        except ValueError as error:  # building opens nothing: what fails here is how the link was asked for
+            raise click.UsageError(f"{spec.kind}:{spec.name}: {error}") from None
     return links
 
 
@@ -66,3 +75,28 @@ def run_until_stopped(node: Node, status: Any = None, duration: float | None = N
 def print_counters(node: Node) -> None:
     for name, counters in node.stats().items():
         click.echo(f"{name}: {counters.summary()}", err=True)
+
+
+class StatusLine:
+    """One line on stderr, redrawn in place, only when stderr is a terminal (a log file gets none)."""
+
+    def __init__(self) -> None:
+        self.live = sys.stderr.isatty()
+        self.drawn = False
+
+    def show(self, text: str) -> None:
+        if self.live:
+            click.echo(f"\r\x1b[K{text}", nl=False, err=True)
+            self.drawn = True
+
+    def end(self) -> None:
+        if self.drawn:
+            click.echo(err=True)
+            self.drawn = False
+
+
+def must_hear(spec: LinkSpec, command: str) -> None:
+    """Refuse a listening command on a transmit-only link, instead of listening to nothing."""
+    if spec.kind == "kilobot-ohc":
+        raise click.UsageError(f"{command} needs a link that receives; kilobot-ohc:{spec.name} is transmit-only "
+                               "(the overhead controller never hears the robots)")

@@ -15,6 +15,13 @@ from ._guard import GuardChoice, guard_options, take_warnings
 from .errors import LINK, reports_errors
 
 
+def _raw_note(robot_id: int | None) -> str:
+    """What a raw bridge sends as: messages re-encoded onto CAN carry a sender id in the CAN ID."""
+    if robot_id is None:
+        return "raw; messages re-encoded onto CAN go out as node 0, --robot-id N chooses"
+    return f"raw; messages re-encoded onto CAN go out as node {robot_id}"
+
+
 @click.command()
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), help="The PC's robot id (required unless --raw).")
@@ -73,7 +80,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
 
     with node:
         click.echo(f"bridging {', '.join(link.name for link in node.links)} "
-                   f"({'raw' if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
+                   f"({_raw_note(robot_id) if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
         describe_links(node)
         try:
             run_until_stopped(node, status, duration)

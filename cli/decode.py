@@ -2,18 +2,28 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import shutil
 import sys
+import tempfile
+from collections.abc import Callable, Iterator
 
 import click
 
 from vstig_hw.capture.decodefile import FORMATS, decode_file, decode_to_mcap
-from vstig_hw.capture.files import MCAP_EXTENSION
+from vstig_hw.capture.files import MCAP_EXTENSION, READABLE_EXTENSIONS, sniff_suffix
 from vstig_hw.capture.filters import Filter
+from vstig_hw.capture.records import CaptureError
+from vstig_hw.capture.serial_log import is_serial_capture
 from vstig_hw.values import VALUE_TYPES, ValueType
 
 from ._capture_options import filter_options, parse_id_base
+from ._common import VALUE_TYPE_HELP
 from .errors import reports_errors
+
+INPUT_FORMATS = [*(suffix[1:] for suffix in READABLE_EXTENSIONS), "cap"]  # cap: our serial capture
+_BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 
 
 def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | None, extended: bool,
@@ -29,21 +39,26 @@ def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | No
 
 
 @click.command()
-@click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, allow_dash=True))
+@click.option("--input-format", type=click.Choice(INPUT_FORMATS),
+              help="The capture type, for a name that does not show it (default: by extension, and for - "
+                   "or a pipe by content).")
 @click.option("--format", "fmt", type=click.Choice([*FORMATS, "mcap"]), default="text", show_default=True,
-              help="mcap: a rosbag2 MCAP file (-o), one topic per link, for Foxglove and ros2 bag.")
+              help="text: one readable line per message; jsonl: one JSON object per line; csv: a header, then rows; "
+                   "mcap: a rosbag2 MCAP file (-o), one topic per link, for Foxglove and ros2 bag.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True), help="The file --format mcap writes.")
 @click.option("--skip-bad", is_flag=True, help="Count malformed lines and go on instead of stopping at the first.")
-@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
+              help=VALUE_TYPE_HELP)
 @click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 with --extended).")
 @click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs.")
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
               help="For Buzz/BittyBuzz captures (blabbermouth, bittybuzz-kilobot): the TOML file mapping their keys.")
 @filter_options
 @reports_errors
-def command(files: tuple[str, ...], fmt: str, output: str | None, skip_bad: bool, value_type: ValueType,
-            id_base: str | None, extended: bool, deployment: str | None, keep: Filter) -> None:
-    """Print every message in FILES (or write them as rosbag2 MCAP).
+def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: str | None, skip_bad: bool,
+            value_type: ValueType, id_base: str | None, extended: bool, deployment: str | None, keep: Filter) -> None:
+    """Print every message in FILES (or write them as rosbag2 MCAP); - reads stdin, pipes and <(...) work too.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
     which messages are printed.
@@ -54,29 +69,82 @@ def command(files: tuple[str, ...], fmt: str, output: str | None, skip_bad: bool
     if (fmt == "mcap") != (output is not None):
         raise click.UsageError("--format mcap writes to -o FILE.mcap; the other formats print to stdout")
     if output is not None:
-        _to_mcap(files, output, skip_bad, base, extended, deployment, keep)
+        with contextlib.ExitStack() as spooled:  # stdin and pipes too
+            readable = tuple(spooled.enter_context(_readable(path, "<stdin>" if path == "-" else path, input_format))
+                             for path in files)
+            _to_mcap(readable, output, skip_bad, base, extended, deployment, keep)
         return
-    total_bad = 0
-    for path in files:
-        size = os.path.getsize(path)
-        if sys.stderr.isatty() and size > 1 << 20:
-            from rich.progress import Progress
-
-            with Progress(transient=True) as bar:
-                task = bar.add_task(f"decoding {os.path.basename(path)}", total=size)
-                count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                                id_base=base, extended=extended, keep=keep,
-                                                deployment=deployment,
-                                                progress=lambda n, t=task: bar.advance(t, n))  # type: ignore[misc]
-        else:
-            count, drops, bad = decode_file(path, sys.stdout, fmt, value_type=value_type, skip_bad=skip_bad,
-                                            id_base=base, extended=extended, keep=keep,
-                                            deployment=deployment)
+    for number, path in enumerate(files):
+        name = "<stdin>" if path == "-" else path
+        with _readable(path, name, input_format) as readable, _progress_bar(readable) as progress:
+            try:
+                count, drops, bad = decode_file(readable, sys.stdout, fmt, value_type=value_type,
+                                                skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
+                                                deployment=deployment, progress=progress, csv_header=number == 0,
+                                                file_column=len(files) > 1)
+            except CaptureError as error:
+                raise _renamed(error, readable, name) from None
         sys.stdout.flush()
-        total_bad += len(bad)
         for error in bad[:5]:
-            click.echo(f"skipped {error}", err=True)
-        summary = f"{path}: {count} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
+            click.echo(f"skipped {_renamed(error, readable, name)}", err=True)
+        summary = f"{name}: {count} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
         if drops:
             summary += f", dropped {drops.summary()}"
         click.echo(summary, err=True)
+
+
+def _renamed(error: CaptureError, read: str, name: str) -> CaptureError:
+    return error if read == name else CaptureError(name, error.line, error.problem)
+
+
+@contextlib.contextmanager
+def _readable(path: str, name: str, input_format: str | None) -> Iterator[str]:
+    """A regular file to read `path` from whose name shows its type; a stream (-, a pipe) is copied first."""
+    regular = path != "-" and os.path.isfile(path)
+    if regular and input_format is None and (path.lower().endswith(READABLE_EXTENSIONS) or is_serial_capture(path)):
+        yield path
+        return
+    with tempfile.TemporaryDirectory(prefix="vstig-decode-") as folder:
+        spooled = os.path.join(folder, "input")
+        if regular:  # a file whose name does not tell (/dev/stdin redirected from a file): look inside
+            os.symlink(os.path.abspath(path), spooled)
+            with open(path, "rb") as file:
+                head = file.read(1 << 16)
+        else:
+            with contextlib.ExitStack() as stack:
+                source = sys.stdin.buffer if path == "-" else stack.enter_context(open(path, "rb"))
+                with open(spooled, "wb") as copy:
+                    head = source.read(1 << 16)
+                    copy.write(head)
+                    shutil.copyfileobj(source, copy, 1 << 20)
+        suffix = f".{input_format}" if input_format else sniff_suffix(head)
+        if suffix is None:
+            raise click.UsageError(f"{name}: cannot tell the capture type from its first bytes: give --input-format "
+                                   f"({', '.join(INPUT_FORMATS)})")
+        os.rename(spooled, spooled + suffix)
+        yield spooled + suffix
+
+
+@contextlib.contextmanager
+def _progress_bar(path: str) -> Iterator[Callable[[int], None] | None]:
+    """A bar on stderr for a big file, only when stderr is a terminal and stdout is not the same screen."""
+    size = os.path.getsize(path)
+    if size < _BAR_FROM or not _isatty(sys.stderr) or _isatty(sys.stdout):
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import Progress
+
+    # Never let rich take over sys.stdout: the decoded lines must reach it untouched.
+    with Progress(console=Console(stderr=True), transient=True, redirect_stdout=False,
+                  redirect_stderr=False) as bar:
+        task = bar.add_task(f"decoding {os.path.basename(path)}", total=size)
+        yield lambda done: bar.update(task, completed=done)
+
+
+def _isatty(stream: object) -> bool:
+    isatty = getattr(stream, "isatty", None)
+    try:
+        return bool(isatty and isatty())
+    except (OSError, ValueError):
+        return False

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import functools
 import os
-import sys
 import traceback
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -30,28 +29,36 @@ def debugging() -> bool:
     return bool(os.environ.get("VSTIG_DEBUG")) or bool(root and (root.obj or {}).get("debug"))
 
 
+def describe(error: BaseException) -> str:
+    """One line for the user: an OS error names its file first (`/proc/x: No such file or directory`)."""
+    if isinstance(error, OSError) and error.strerror and error.filename is not None:
+        return f"{error.filename}: {error.strerror}"
+    return one_line(error)
+
+
 def reports_errors(fn: F) -> F:
-    """Turn the runtime errors a user can cause into one line and exit status 1."""
+    """Turn the runtime errors a user can cause into one line and exit status 1.
+
+    Ctrl-C passes through to `main`, which ends every command the same way (status 130, quietly).
+    """
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return fn(*args, **kwargs)
-        except (click.ClickException, click.exceptions.Exit, click.Abort):
+        except (click.ClickException, click.exceptions.Exit, click.Abort, KeyboardInterrupt):
             raise
-        except KeyboardInterrupt:
-            click.echo("interrupted", err=True)
-            sys.exit(130)
         except RUNTIME_ERRORS as error:
             if debugging():
                 traceback.print_exc()
-            raise click.ClickException(one_line(error)) from None
+            raise click.ClickException(describe(error)) from None
         except Exception as error:  # a bug, not the user's fault: still one line unless debugging
             if debugging():
                 traceback.print_exc()
             raise click.ClickException(f"unexpected {type(error).__name__}: {one_line(error)} "
                                        "(run `vstig --debug ...` for the traceback)") from None
 
+    wrapper.reports_errors = True  # type: ignore[attr-defined]
     return wrapper  # type: ignore[return-value]
 
 

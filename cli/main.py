@@ -5,18 +5,29 @@ and exposes it as `command`. The group finds them by module name and imports one
 only when it runs, so `vstig put` does not pay for numpy or matplotlib. The
 command list in `vstig --help` reads each command's docstring from its source
 for the same reason: importing them all would load numpy and python-can.
+
+Every command, loaded here, goes through `reports_errors`, and `main` is the
+one place a run ends: usage errors exit 2, runtime failures 1 (one line each),
+Ctrl-C 130 quietly (a shell's status for SIGINT), a closed output pipe 0 quietly (`| head`).
 """
 
 from __future__ import annotations
 
 import ast
+import contextlib
 import importlib
 import pkgutil
+import sys
 from pathlib import Path
 
 import click
 
 from vstig_hw import __version__
+
+from . import _streams
+from .errors import reports_errors
+
+INTERRUPTED = 128 + 2  # the shell's status for a command ended by SIGINT
 
 _NOT_COMMANDS = {"main", "errors"}
 _HERE = Path(__file__).parent
@@ -45,6 +56,7 @@ class CommandFolder(click.Group):
             return None
         module = importlib.import_module(f"{__package__}.{_module(cmd_name)}")
         command: click.Command = module.command
+        _report_errors(command)
         return command
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
@@ -67,8 +79,40 @@ def cli(ctx: click.Context, debug: bool) -> None:
     ctx.obj = {"debug": debug}
 
 
+def _report_errors(command: click.Command) -> None:
+    """Put the command (and a group's subcommands) behind the one error wrapper, once."""
+    if command.callback is not None and not getattr(command.callback, "reports_errors", False):
+        command.callback = reports_errors(command.callback)
+    for sub in getattr(command, "commands", {}).values():
+        _report_errors(sub)
+
+
+def run(args: list[str] | None = None) -> int:
+    """Run the CLI and return its exit status; no exception escapes."""
+    try:
+        result = cli.main(args, standalone_mode=False)
+        _streams.flush()
+    except click.ClickException as error:  # usage errors (2), runtime failures and failed output (1)
+        error.show()
+        return error.exit_code
+    except click.exceptions.Exit as end:  # also a closed pipe: status 0, nothing said
+        return end.exit_code
+    except click.Abort as abort:  # click's form of Ctrl-C (or a declined prompt)
+        if isinstance(abort.__context__, KeyboardInterrupt):
+            return INTERRUPTED
+        click.echo("Aborted!", err=True)
+        return 1
+    except KeyboardInterrupt:
+        return INTERRUPTED
+    finally:
+        with contextlib.suppress(click.ClickException, click.exceptions.Exit):
+            _streams.flush()  # after a failure we already report: do not replace it
+    return result if isinstance(result, int) else 0
+
+
 def main() -> None:
-    cli()
+    _streams.guard()
+    sys.exit(run())
 
 
 if __name__ == "__main__":

@@ -1,13 +1,16 @@
-"""`vstig record LINK... -o FILE`: capture links' raw units into one file; no frame lost on Ctrl-C."""
+"""`vstig record LINK... [-o FILE|FOLDER]`: capture links' raw units into one file; no frame lost on Ctrl-C,
+and no capture lost ever: an existing file is replaced only when asked."""
 
 from __future__ import annotations
 
+import os
+import time
 from typing import Any
 
 import click
 
 from vstig_hw.capture.decoded import Decoder, default_framings
-from vstig_hw.capture.files import CAN_EXTENSIONS, MCAP_EXTENSION, RotatingCapture
+from vstig_hw.capture.files import APPENDABLE, CAN_EXTENSIONS, MCAP_EXTENSION, RotatingCapture
 from vstig_hw.capture.filters import Filter, RecordFilter
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.framing.can import CanFraming
@@ -16,7 +19,7 @@ from vstig_hw.links import Link
 from vstig_hw.links.spec import CanSpec, LinkSpec, ZenohSpec
 
 from ._capture_options import filter_options
-from ._common import build_links, describe_links, print_counters, run_until_stopped
+from ._common import StatusLine, build_links, describe_links, must_hear, print_counters, run_until_stopped
 from .errors import LINK, reports_errors
 
 
@@ -34,18 +37,46 @@ def _medium(spec: LinkSpec) -> str:
     return "can" if isinstance(spec, CanSpec) else "zenoh" if isinstance(spec, ZenohSpec) else "serial"
 
 
+def _target(output: str | None, link: LinkSpec, extension: str) -> str:
+    """The file to write: OUTPUT itself, or a new timestamped name (named after the first link) in OUTPUT
+    (a folder) or here."""
+    if output is not None and not os.path.isdir(output):
+        return output
+    folder = output or ""
+    stem = os.path.join(folder, f"vstig-{link.name}-{time.strftime('%Y-%m-%d_%H%M%S')}")
+    path, n = stem + extension, 1
+    while os.path.lexists(path):  # two recorders started in the same second
+        n += 1
+        path = f"{stem}-{n}{extension}"
+    return path
+
+
+def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
+    if overwrite and append:
+        raise click.UsageError("give --overwrite or --append, not both")
+    if os.path.isfile(path) and os.path.getsize(path) > 0 and not (overwrite or append):
+        raise click.UsageError(f"{path} exists: --overwrite replaces it, --append adds to it")
+
+
 @click.command()
 @click.argument("links", nargs=-1, required=True, type=LINK)
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, writable=True),
-              help="CAN: .log (candump) .asc .blf .csv; serial and zenoh: any name (our line formats); any links: "
-                   ".mcap (rosbag2, decoded messages, one topic per link).")
-@click.option("--max-bytes", help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M).")
+@click.option("-o", "--output", type=click.Path(path_type=str),
+              help="FILE, or a folder for a timestamped name (the default: one here, as candump -l). "
+                   f"CAN by extension: {' '.join(CAN_EXTENSIONS)} (.log is candump's); serial and zenoh: any name "
+                   f"(our line formats); any links: {MCAP_EXTENSION} (rosbag2, decoded messages, one topic per link).")
+@click.option("--overwrite", is_flag=True, help="Replace FILE if it exists (never done without this).")
+@click.option("--append", is_flag=True, help=f"Add to FILE if it exists (CAN: {' '.join(APPENDABLE)}; serial).")
+@click.option("--max-bytes", help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
+                                  "an existing numbered file is skipped, never replaced.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
 @filter_options
 @reports_errors
-def command(links: tuple[LinkSpec, ...], output: str, max_bytes: str | None, duration: float | None,
-            keep: Filter) -> None:
-    """Record the LINKS' traffic into FILE until Ctrl-C (passive: never transmits).
+def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: str | None,
+            duration: float | None, keep: Filter) -> None:
+    """Record the LINKS' traffic into a file until Ctrl-C (passive: never transmits).
+
+    The links are opened before the file, and an existing capture is never replaced
+    unless you say so (--overwrite, --append).
 
     Each record keeps its link's name, so several links make one capture in time
     order. The filters (--key, --robot, --sender, --op, --link, --since, --until)
@@ -53,38 +84,53 @@ def command(links: tuple[LinkSpec, ...], output: str, max_bytes: str | None, dur
 
     Example: vstig record can:socketcan:can0 can:socketcan:can1 -o swarm.log --max-bytes 50M
     """
+    for link in links:
+        must_hear(link, "record")
     media = {_medium(link) for link in links}
-    medium = "mcap" if output.lower().endswith(MCAP_EXTENSION) else media.pop()
-    if medium != "mcap" and media:
+    first = _medium(links[0])
+    path = _target(output, links[0], MCAP_EXTENSION if len(media) > 1 else ".log" if first == "can" else ".cap")
+    medium = "mcap" if path.lower().endswith(MCAP_EXTENSION) else first
+    if medium != "mcap" and len(media) > 1:
         raise click.UsageError(f"links of different media (CAN, serial, zenoh) go into a {MCAP_EXTENSION} capture "
                                "together (a CAN log holds CAN frames, a serial capture UART bytes, a zenoh capture "
                                "samples)")
-    if medium == "can" and not output.lower().endswith(CAN_EXTENSIONS):
+    if medium == "can" and not path.lower().endswith(CAN_EXTENSIONS):
         raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} or "
-                               f"{MCAP_EXTENSION} (got {output})")
+                               f"{MCAP_EXTENSION} (got {path})")
     limit = _size(max_bytes) if max_bytes else None
+    _refuse_to_destroy(path, overwrite, append)
     node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
     # Units become messages again for an .mcap file and for filters that look into messages: robot dialects'
     # links name the deployment file that maps their keys.
     deployment = next((d for spec in links if (d := getattr(spec, "deployment", None))), None)
-    capture = RotatingCapture(output, medium, limit, Decoder(default_framings(deployment=deployment)))
     passing = RecordFilter(keep, Decoder(default_framings(deployment=deployment)))
+    captures: list[RotatingCapture] = []  # opened once the links are: a dead link leaves the file alone
 
     def write(source: Link[Any], t: float, unit: Any) -> None:
+        if not captures:  # units handed over while a failed file open closes the node have nowhere to go
+            return
         framing = CAN_FRAMING if isinstance(source.framing, CanFraming) else source.framing.name
         record = Record(t, source.name, framing, unit)
         for kept in passing.units(record) if keep else (record,):
-            capture.write(kept)
+            captures[0].write(kept)
 
     node.on_unit.append(write)
-    node.on_tick.append(lambda _: capture.flush())
+    node.on_tick.append(lambda _: captures and captures[0].flush())
     try:
         with node:
-            click.echo(f"recording {', '.join(link.name for link in node.links)} to {output}; Ctrl-C stops",
+            captures.append(RotatingCapture(path, medium, limit, Decoder(default_framings(deployment=deployment)),
+                                            append=append))
+            click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
                        err=True)
             describe_links(node)
-            run_until_stopped(node, duration=duration)
+            line = StatusLine()
+            status = (lambda: line.show(f"{captures[0].records} units  {node.summary()}")) if line.live else None
+            try:
+                run_until_stopped(node, status, duration)
+            finally:
+                line.end()
     finally:
-        capture.close()  # after the node: its close() handed over every unit already read
+        if captures:
+            captures[0].close()  # after the node: its close() handed over every unit already read
     print_counters(node)
-    click.echo(f"{capture.records} units in {', '.join(capture.files)}", err=True)
+    click.echo(f"{captures[0].records} units in {', '.join(captures[0].files)}", err=True)

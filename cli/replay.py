@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import time
 from collections import Counter
 from collections.abc import Iterator
 from typing import Any
@@ -21,18 +22,24 @@ from vstig_hw.links.spec import CanSpec, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ._capture_options import filter_options
-from ._common import build_links, lossless
+from ._common import VALUE_TYPE_HELP, StatusLine, build_links, lossless
 from .errors import LINK, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 
 
-def _sender(link: Link[Any], is_can: bool, deployment: str | None) -> Any:
-    """Write a record as is when the medium and framing match; otherwise re-encode its messages."""
+def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
+    """Write a record as is when the medium and framing match; otherwise re-encode its messages.
+
+    A CAN capture is read with the default ID scheme (11-bit, base 0x600); a target that asks for
+    another (id_base, extended, stigmergy) gets the messages re-encoded in its own IDs.
+    """
     decoder = Decoder(default_framings(deployment=deployment))
+    is_can = isinstance(onto, CanSpec)
+    default_ids = is_can and onto.id_base in (None, 0x600) and not onto.extended and onto.stigmergy == 0
 
     def send(record: Record) -> None:
-        same = (record.framing == CAN_FRAMING) if is_can else (record.framing == link.framing.name)
+        same = (record.framing == CAN_FRAMING and default_ids) if is_can else (record.framing == link.framing.name)
         if same:
             link.transport.write(_fresh(record.unit) if is_can else record.unit)
             link.counters["out_units"] += 1
@@ -41,6 +48,24 @@ def _sender(link: Link[Any], is_can: bool, deployment: str | None) -> Any:
             link.send(decoded.message)
 
     return send
+
+
+class _CountingSender:
+    """`send`, with a live counter line on stderr when it is a terminal (at most twice a second)."""
+
+    def __init__(self, send: Any, links: list[Link[Any]]) -> None:
+        self.send, self.links = send, links
+        self.line = StatusLine()
+        self.sent = 0
+        self.next_draw = 0.0
+
+    def __call__(self, record: Record) -> None:
+        self.send(record)
+        self.sent += 1
+        if self.line.live and time.monotonic() >= self.next_draw:
+            self.next_draw = time.monotonic() + 0.5
+            self.line.show(f"sent {self.sent} units  " + "  ".join(f"{link.name}: {link.stats().summary()}"
+                                                                     for link in self.links))
 
 
 def _fresh(frame: Any) -> Any:
@@ -103,20 +128,28 @@ def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, dep
 @click.option("--onto", type=ONTO, multiple=True,
               help="Send the capture onto this link with its original timing; NAME=LINK sends only the capture's "
                    "link NAME there (repeat for each link; links not named are skipped).")
-@click.option("--speed", type=click.FloatRange(0.001, 1000), default=1.0, show_default=True)
+@click.option("--speed", type=click.FloatRange(0.001, 1000), default=1.0, show_default=True,
+              help="Play this many times faster than recorded (0.5: half speed).")
 @click.option("--loop", is_flag=True, help="Start again at the end, until Ctrl-C.")
+@click.option("--skip-gaps", type=click.FloatRange(0.0), metavar="SECONDS",
+              help="Wait at most SECONDS between two units, however long the capture's gap.")
+@click.option("--ignore-timestamps", is_flag=True, help="Send every unit at once, one after the other.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=0, show_default=True,
               help="Sender id for messages re-encoded onto another medium.")
 @click.option("--table", is_flag=True, help="Feed an offline engine instead and print its table.")
 @click.option("--at", type=click.FloatRange(0.0), help="With --table: stop at T seconds after the first record.")
-@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
+              help=VALUE_TYPE_HELP)
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
               help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
 @filter_options
 @reports_errors
-def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: float, loop: bool, robot_id: int,
-            table: bool, at: float | None, value_type: ValueType, deployment: str | None, keep: Filter) -> None:
+def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: float, loop: bool,
+            skip_gaps: float | None, ignore_timestamps: bool, robot_id: int, table: bool, at: float | None,
+            value_type: ValueType, deployment: str | None, keep: Filter) -> None:
     """Replay FILE onto live links, or show what the swarm believed (--table).
+
+    Ctrl-C or SIGTERM stops at once, even in a long gap: nothing is sent after it.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
     what is replayed; a serial chunk they cut is re-encoded in its framing.
@@ -128,25 +161,31 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     if table == bool(onto):
         raise click.UsageError("give exactly one of --onto LINK or --table")
     if table:
+        ignored = [name for name, given in (("--loop", loop), ("--skip-gaps", skip_gaps is not None),
+                                            ("--ignore-timestamps", ignore_timestamps)) if given]
+        if ignored:
+            raise click.UsageError(f"{', '.join(ignored)} go with --onto, not --table")
         _table(file, at, value_type, keep, deployment)
         return
     if at is not None:
         raise click.UsageError("--at goes with --table")
     targets = _targets(onto, robot_id)
-    senders = {name: _sender(link, isinstance(spec, CanSpec), deployment)
+    senders = {name: _sender(link, spec, deployment)
                for (name, link), (_, spec) in zip(targets.items(), onto, strict=True)}
     every_link = senders.get(None)
     reader = Decoder(default_framings(deployment=deployment))  # for filters that look into the messages
     unmapped: Counter[str] = Counter()
 
-    def send(record: Record) -> None:
+    def dispatch(record: Record) -> None:
         target = every_link or senders.get(record.link)
         if target is None:
             unmapped[record.link] += 1
         else:
             target(record)
 
+    send = _CountingSender(dispatch, list(targets.values()))
     opened: list[Link[Any]] = []
+    passes_done = 0
     try:
         for link in targets.values():
             link.open()
@@ -154,14 +193,21 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
         with stop_on_signals() as stop:
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
-                done = replay(filter_records(read_capture(file), keep, reader), send, speed=speed, stop=stop)
-                click.echo(f"replayed {done.frames} units in {done.took:.3f} s (logged {done.logged:.3f} s)",
-                           err=True)
+                done = replay(filter_records(read_capture(file), keep, reader), send, speed=speed, stop=stop,
+                              skip_gaps=skip_gaps, ignore_timestamps=ignore_timestamps)
+                passes_done += 1
                 if stop.is_set() or done.frames == 0:
                     break
     finally:
+        send.line.end()
         for link in opened:
             link.close()
+    stats = [link.stats() for link in targets.values()]
+    sent = sum(s["tx"] for s in stats)
+    lost = sum(s["tx_dropped"] + s["tx_timeout"] for s in stats)
+    over = f" over {passes_done} passes" if loop else f" in {done.took:.3f} s (logged {done.logged:.3f} s)"
+    click.echo(f"sent {sent} units{over}" + (f"; {lost} the links could not send" if lost else "")
+               + ("; stopped by a signal" if done.stopped else ""), err=True)
     for link in targets.values():
         click.echo(f"{link.name}: {link.stats().summary()}", err=True)
     if unmapped:

@@ -43,7 +43,8 @@ def _model_options(fn: Any) -> Any:
                      help="re-draw split layouts (else each robot must learn its own component's highest id)"),
         click.option("--max-steps", default=200_000, show_default=True, type=click.IntRange(1),
                      help="give up on a run after this many control steps"),
-        click.option("--seed", default=1, show_default=True, type=int),
+        click.option("--seed", default=1, show_default=True, type=int,
+                     help="Base random seed (each run derives its own from it): the same seed, the same results."),
         click.option("--workers", default=None, type=click.IntRange(1), help="processes [default: all cores]"),
     ]
     for option in reversed(options):
@@ -80,22 +81,25 @@ def _config(topology: str, robots: int, drop: float, **model: Any) -> Config:
 
 
 def _progress(transient: bool = False) -> Any:
-    """A bar on stderr, so stdout stays clean for pipes (rich draws nothing when stderr is not a terminal)."""
+    """A bar on stderr, so stdout stays clean for pipes; none at all when stderr is not a terminal."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    console = Console(stderr=True)
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    console=Console(stderr=True), transient=transient)
+                    console=console, transient=transient, disable=not console.is_terminal)
 
 
 @click.group(invoke_without_command=True)
 @click.option("--topology", type=click.Choice(TOPOLOGY_NAMES), default="cluster", show_default=True,
-              help="a static layout of section 4.1, or motion: robots diffusing through the arena of section 4.2")
+              help="How robots are placed: a static layout of section 4.1 (who hears whom follows from it), "
+                   "or motion: robots diffusing through the arena of section 4.2.")
 @click.option("--robots", default=100, show_default=True, type=click.IntRange(1, U16_MAX + 1),
               help="swarm size N (robot ids 0..N-1)")
 @click.option("--drop", default=0.0, show_default=True, type=click.FloatRange(0, 1, max_open=True),
               help="packet drop probability P")
-@click.option("--runs", default=10, show_default=True, type=click.IntRange(1))
+@click.option("--runs", default=10, show_default=True, type=click.IntRange(1),
+              help="Independent runs (new layout and losses each); the summary is over all of them.")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--capture", type=click.Path(dir_okay=False, writable=True),
               help="also write run 0's radio traffic as a CAN capture (.log candump, .asc, .blf...): robot i is "
@@ -115,6 +119,9 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
     """Simulate the paper's task (agree on the highest id) on real engines over a lossy radio."""
     if ctx.invoked_subcommand is not None:
         return
+    if topology != "cluster" and ctx.get_parameter_source("density") is click.core.ParameterSource.COMMANDLINE:
+        raise click.UsageError(f"--density sets the cluster's arena; a {topology} layout is built by distance "
+                               "and does not use it")
     config = _config(topology, robots, drop, **model)
     if snapshot is not None:
         _draw_snapshot(config, seed, snapshot_step, snapshot)

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import click
 
+from vstig_hw.capture.filters import Filter
+from vstig_hw.engine import larger_value_wins
+from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.swarmview import SwarmView
@@ -15,19 +19,28 @@ from vstig_hw.links import Heard
 from vstig_hw.links.spec import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._common import build_links, describe_links, print_counters, run_until_stopped
+from ._capture_options import filter_options
+from ._common import VALUE_TYPE_HELP, build_links, describe_links, must_hear, print_counters, run_until_stopped
 from ._guard import GuardChoice, guard_options, take_warnings
 from .errors import LINK, reports_errors
 
+_TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
 
-def _table(view: SwarmView, value_type: ValueType, node: Node) -> Any:
+
+def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, height: int | None = None) -> Any:
+    """The table, keys in order; on a terminal only the rows that fit, and the title says how many."""
     from rich.table import Table
 
-    table = Table(title=f"vstig sniff: {view.messages} messages", caption=node.summary())
+    keys = sorted(view.keys)
+    shown = keys if height is None else keys[:max(1, height - _TABLE_CHROME)]
+    title = f"vstig sniff: {view.messages} messages, {len(keys)} keys"
+    if len(shown) < len(keys):
+        title += f" (keys {shown[0]}..{shown[-1]} fit here; --key K shows chosen ones)"
+    table = Table(title=title, caption=node.summary() if node else None)
     for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders"):
         table.add_column(column, justify="left" if column == "stale senders" else "right")
     now = time.time()
-    for key in sorted(view.keys):
+    for key in shown:
         k = view.keys[key]
         stale = k.stale_senders()
         table.add_row(str(key), str(from_raw(k.value, value_type)), str(k.timestamp), str(k.robot),
@@ -39,12 +52,21 @@ def _table(view: SwarmView, value_type: ValueType, node: Node) -> Any:
 @click.command()
 @click.argument("link", type=LINK)
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
-@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
+              help=VALUE_TYPE_HELP)
+@click.option("--larger-value-wins", "larger", is_flag=True,
+              help="Settle conflicts as a swarm running the paper's Figure 1 rule does (larger value), "
+                   "instead of the default higher robot id.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@filter_options
 @guard_options
 @reports_errors
-def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float | None, guard: GuardChoice) -> None:
+def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
+            keep: Filter, guard: GuardChoice) -> None:
     """Decode LINK's traffic live, per key; passive: never transmits.
+
+    The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
+    what is shown; --since and --until count from the first message heard.
 
     The counters (live under the table, and on exit) include the receive outcomes
     an engine that heard every message would count: stored, answered, stale,
@@ -55,26 +77,43 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
     The guard options are bridge's: what a bridge with them would refuse is left out of the
     table and counted under the table (drop_jump, drop_rate...); --max-jump 0 shows everything.
     """
+    must_hear(link, "sniff")
+    rule = larger_value_wins if larger else None
     built = build_links([link], listen_only=True)
     firewall = guard.build(built)
     # The engine never transmits: it counts what each message would do to a robot that heard them all.
-    node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall)
-    view = SwarmView()
-    node.on_heard.append(view.add)
+    node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule)
+    view = SwarmView(rule) if rule else SwarmView()
+    listeners: list[Callable[[Heard], None]] = [view.add]
+    first: list[float] = []
+
+    def heard(message: Heard) -> None:
+        first[:] = first or [message.t]
+        if not keep or keep.accepts(message.t - first[0], message.link, message.sender, message.message):
+            for listener in listeners:
+                listener(message)
+
+    node.on_heard.append(heard)
     if jsonl:
         import json
 
         out = sys.stdout
 
+        # The same row as `decode --format jsonl`: can_id on CAN links only, sender where the medium names one.
+        can_schemes = {link.name: link.framing.scheme for link in node.links if isinstance(link.framing, CanFraming)}
+
         def emit(heard: Heard) -> None:
             m = heard.message
-            row = {"t": round(heard.t, 6), "link": heard.link, "op": m.op.name, "key": m.key,
-                   "value": from_raw(m.value, value_type), "timestamp": m.timestamp, "robot": m.robot,
-                   "sender": heard.sender}
+            row: dict[str, Any] = {"t": round(heard.t, 6), "link": heard.link}
+            scheme = can_schemes.get(heard.link)
+            if scheme is not None and heard.sender is not None:
+                row["can_id"] = scheme.can_id(m.op, heard.sender)
+            row.update(op=m.op.name, key=m.key, value=from_raw(m.value, value_type), timestamp=m.timestamp,
+                       robot=m.robot, sender=heard.sender)
             out.write(json.dumps(row) + "\n")
             out.flush()
 
-        node.on_heard.append(emit)
+        listeners.append(emit)
         node.on_tick.append(lambda _node: _warn(firewall))
         with node:
             describe_links(node)
@@ -84,13 +123,18 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, duration: float 
         return
     from rich.live import Live
 
+    if not sys.stdout.isatty():
+        click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
+                   "(--jsonl streams every message instead)", err=True)
+
     with node, Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
-        def refresh() -> None:
+        def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
             _warn(firewall)  # on a terminal, Live prints stderr above the table
-            live.update(_table(view, value_type, node))
+            height = live.console.size.height if live.console.is_terminal else None
+            live.update(_table(view, value_type, node, height))
 
         describe_links(node)
-        run_until_stopped(node, refresh, duration)
+        run_until_stopped(node, redraw, duration)
     _warn(firewall)
     print_counters(node)
 

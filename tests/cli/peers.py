@@ -111,3 +111,24 @@ def stop(process: subprocess.Popen[str], timeout: float = 10) -> tuple[str, str]
     process.terminate()
     out, err = process.communicate(timeout=timeout)
     return out, err
+
+
+def run_vstig_on_a_terminal_stderr(*args: str, stdout: Any = subprocess.DEVNULL,
+                                   timeout: float = 120) -> tuple[int, bytes]:
+    """Run vstig with stderr on a pty (a terminal, as a user sees it); returns (exit code, what the pty showed)."""
+    import pty
+
+    primary, secondary = pty.openpty()
+    done = subprocess.run([VSTIG, *args], stdout=stdout, stderr=secondary, timeout=timeout, check=False)
+    os.close(secondary)
+    shown = b""
+    while True:
+        try:
+            chunk = os.read(primary, 65536)
+        except OSError:  # EIO: every writer has closed the pty
+            break
+        if not chunk:
+            break
+        shown += chunk
+    os.close(primary)
+    return done.returncode, shown

@@ -9,6 +9,7 @@ a real python-can driver, needs no privileges, and loses nothing.
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 
 import can
@@ -27,14 +28,26 @@ def _frame(msg: Message) -> can.Message:
     return can.Message(arbitration_id=0x600 | int(msg.op) << 8 | sender, data=encode(msg), is_extended_id=False)
 
 
-def test_record_decode_replay_round_trip(tmp_path: Path) -> None:
-    capture = tmp_path / "swarm.log"
-    adapter = SlcanAdapter()
+def _record_messages(adapter: SlcanAdapter, capture: Path) -> subprocess.Popen[str]:
+    """`vstig record` on the adapter's bus, once it has opened it and been sent MESSAGES."""
     recorder = start_vstig("record", f"can:slcan:{adapter.path}", "-o", str(capture))
     try:
         wait_for(lambda: "O" in adapter.commands or "L" in adapter.commands, 30)
-        for msg in MESSAGES:
-            adapter.inject(_frame(msg))
+    except AssertionError:
+        recorder.kill()
+        recorder.communicate()
+        adapter.close()
+        raise
+    for msg in MESSAGES:
+        adapter.inject(_frame(msg))
+    return recorder
+
+
+def test_record_decode_replay_round_trip(tmp_path: Path) -> None:
+    capture = tmp_path / "swarm.log"
+    adapter = SlcanAdapter()
+    recorder = _record_messages(adapter, capture)
+    try:
         adapter.inject(can.Message(arbitration_id=0x123, data=b"\x01", is_extended_id=False))  # not ours
         wait_for(lambda: capture.exists() and capture.read_text().count("\n") >= len(MESSAGES), 20)
     finally:
@@ -62,3 +75,32 @@ def test_record_decode_replay_round_trip(tmp_path: Path) -> None:
         target.close()
     assert [bytes(f.data) for f in target.sent] == [encode(m) for m in MESSAGES]
     assert [f.arbitration_id for f in target.sent] == [_frame(m).arbitration_id for m in MESSAGES]
+
+
+def test_a_blf_recording_killed_outright_keeps_what_it_recorded(tmp_path: Path) -> None:
+    capture = tmp_path / "swarm.blf"
+    adapter = SlcanAdapter()
+    recorder = _record_messages(adapter, capture)
+    try:
+        wait_for(lambda: capture.exists() and capture.stat().st_size > 200, 20)  # a block reached the disk
+    finally:
+        recorder.kill()  # SIGKILL: no chance to close the file
+        recorder.communicate(timeout=10)
+        adapter.close()
+    decoded = run_vstig("decode", str(capture), "--format", "jsonl")
+    assert decoded.returncode == 0, decoded.stderr
+    assert len(decoded.stdout.splitlines()) == len(MESSAGES)
+
+
+def test_blf_rotation_keeps_each_file_near_the_limit(tmp_path: Path) -> None:
+    from vstig_hw.capture.files import RotatingCapture
+    from vstig_hw.capture.records import Record
+
+    capture = RotatingCapture(str(tmp_path / "r.blf"), "can", max_bytes=10_000)
+    for i in range(3000):
+        frame = can.Message(timestamp=1700000000 + i / 1000, arbitration_id=0x600 | i % 200,
+                            data=i.to_bytes(8, "big"), is_extended_id=False)
+        capture.write(Record(frame.timestamp, "can0", "can", frame))
+    capture.close()
+    sizes = [Path(name).stat().st_size for name in capture.files]
+    assert len(sizes) > 1 and max(sizes) <= 10_000 + 4096, sizes  # at most one size check's worth over

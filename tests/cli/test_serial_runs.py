@@ -139,3 +139,15 @@ def test_demo_converges() -> None:
     assert "converged: all 12 robots hold 12" in done.stdout
     for medium in ("can", "cobs8", "epuck4"):
         assert any(line.startswith(medium) for line in done.stdout.splitlines())
+
+
+@pytest.mark.slow
+def test_demo_stopped_by_ctrl_c_says_interrupted() -> None:
+    import signal
+    import time
+
+    demo = start_vstig("demo", "--robots", "12", "--drop", "0.95", "--step", "1.0", "--max-steps", "10000")
+    time.sleep(4)
+    demo.send_signal(signal.SIGINT)
+    _out, err = demo.communicate(timeout=60)
+    assert demo.returncode == 0 and "interrupted" in err and "Traceback" not in err, err

@@ -7,6 +7,8 @@ import gzip
 import io
 import json
 import sys
+import threading
+import time
 from pathlib import Path
 
 import can
@@ -170,7 +172,7 @@ def test_fast_candump_path_matches_the_line_parser() -> None:
         word0, value, ts, robot = (int.from_bytes(frame.data[i:i + 2], "big") for i in range(0, 8, 2))
         assert row == {"t": pytest.approx(frame.timestamp, abs=1e-6), "link": "can0", "can_id": frame.arbitration_id,
                        "op": "GET" if word0 >> 15 else "PUT", "key": word0 & 0x7FFF, "value": value,
-                       "timestamp": ts, "robot": robot}
+                       "timestamp": ts, "robot": robot, "sender": frame.arbitration_id & 0xFF}
 
 
 def test_fast_path_declines_mixed_or_bad_chunks() -> None:
@@ -190,6 +192,30 @@ def test_line_by_line_fallback_numbers_lines_as_the_file_does(tmp_path: Path) ->
         _, _, bad = decode_file(str(path), io.StringIO(), fmt, skip_bad=True)
         errors[fmt] = [error.line for error in bad]
     assert errors["jsonl"] == errors["text"] == [2, 4]
+
+
+def test_a_stop_during_a_long_gap_ends_the_replay_at_once_and_sends_nothing_more() -> None:
+    records = [Record(100.0, "r", "cobs8", b"a"), Record(120.0, "r", "cobs8", b"b")]
+    sent: list[bytes] = []
+    stop = threading.Event()
+    threading.Timer(0.3, stop.set).start()
+    began, cpu = time.monotonic(), time.process_time()
+    result = replay(records, lambda r: sent.append(r.unit), stop=stop)
+    assert sent == [b"a"] and result.stopped and result.frames == 1
+    assert time.monotonic() - began < 10.0  # not the 20 s gap
+    assert time.process_time() - cpu < 2.0  # slept: no core spun through the gap
+
+
+def test_skip_gaps_shortens_long_waits_and_ignore_timestamps_drops_them() -> None:
+    records = [Record(t, "r", "cobs8", b"") for t in (0.0, 0.01, 50.0, 50.01, 900.0)]
+    began = time.monotonic()
+    result = replay(records, lambda r: None, skip_gaps=0.05)
+    assert result.frames == 5 and time.monotonic() - began < 10.0
+    assert result.skipped == pytest.approx((50.0 - 0.01 - 0.05) + (900.0 - 50.01 - 0.05))
+    result = replay(records, lambda r: None, ignore_timestamps=True)
+    assert result.frames == 5 and result.skipped == pytest.approx(900.0) and result.took < 10.0
+    with pytest.raises(ValueError, match="skip_gaps"):
+        replay(records, lambda r: None, skip_gaps=-1)
 
 
 def test_fast_path_with_every_frame_dropped_renders_nothing() -> None:

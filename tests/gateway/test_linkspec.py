@@ -98,3 +98,23 @@ def test_spec_options_reach_the_link() -> None:
     assert serial.framing.reassembler.expiry_ticks == 5  # type: ignore[attr-defined]
     assert "can_filters" not in parse("can:virtual:x?filter=0").build().transport._bus_kwargs  # type: ignore[attr-defined]
     assert "can_filters" in parse("can:virtual:x").build().transport._bus_kwargs  # type: ignore[attr-defined]
+
+
+def test_bus_options_reach_python_can() -> None:
+    spec = parse("can:socketcand:can0?bus.host=192.168.1.5&bus.port=29536&bus.receive_own_messages=true")
+    assert isinstance(spec, CanSpec)
+    assert spec.bus_options == (("host", "192.168.1.5"), ("port", 29536), ("receive_own_messages", True))
+    with pytest.raises(ValueError, match=r"bus\.bitrate is not a bus option of its own: give bitrate= itself"):
+        parse("can:virtual:x?bus.bitrate=500000")
+    with pytest.raises(ValueError, match=r"unknown parameter 'bus\.=1'"):
+        parse("can:virtual:x?bus.=1")
+    # On a real python-can bus: receive_own_messages makes the link hear what it sends.
+    import can
+
+    link = parse("can:virtual:vstig-edges-own?bus.receive_own_messages=true").build("own", robot_id=3)
+    link.open()
+    try:
+        link.transport.write(can.Message(arbitration_id=0x603, data=bytes(8), is_extended_id=False))
+        assert any(f.arbitration_id == 0x603 for f in link.transport.read(2.0))
+    finally:
+        link.close()

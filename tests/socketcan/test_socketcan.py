@@ -11,6 +11,7 @@ import contextlib
 import logging
 import os
 import queue
+import re
 import shutil
 import signal
 import socket
@@ -248,6 +249,89 @@ def test_a_deleted_interface_is_reported_and_reconnected_when_it_returns() -> No
     finally:
         link.close()
         subprocess.run(["ip", "link", "delete", "vcan2"], check=False, capture_output=True)
+
+
+def test_frames_the_kernel_drops_are_counted_not_lost_silently() -> None:
+    from vstig_hw.transports.can import CanTransport
+
+    burst = 500
+    transport = CanTransport("socketcan", CLASSIC)
+    transport.open()
+    try:
+        assert transport.bus is not None
+        # The smallest receive queue the kernel allows: a burst we do not read overflows it.
+        transport.bus.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1)
+        got: list[can.Message] = []
+        with can.Bus(interface="socketcan", channel=CLASSIC, receive_own_messages=False) as sender:
+            for i in range(burst):
+                sender.send(can.Message(arbitration_id=0x123, data=i.to_bytes(2, "big"), is_extended_id=False),
+                            timeout=5)
+            while frames := transport.read(0.5):
+                got += frames
+            # The count rides on the next frame received: send one more and read it.
+            sender.send(can.Message(arbitration_id=0x124, data=b"end", is_extended_id=False), timeout=5)
+            deadline = time.monotonic() + 10
+            while not (got and got[-1].arbitration_id == 0x124) and time.monotonic() < deadline:
+                got += transport.read(0.5)
+    finally:
+        transport.close()
+    assert got[-1].arbitration_id == 0x124 and got[-1].timestamp > 1e9  # python-can's own stamps still
+    dropped = transport.counters["kernel_dropped"]
+    assert dropped > 0 and len(got) - 1 + dropped == burst, (len(got), dropped)
+    assert transport.counters["rx"] == len(got)
+
+
+def test_record_on_a_bursting_bus_loses_nothing_silently(tmp_path: Path) -> None:
+    vstig = str(Path(sys.executable).with_name("vstig"))
+    out = tmp_path / "burst.log"
+    record = subprocess.Popen([vstig, "record", f"can:socketcan:{CLASSIC}", "-o", str(out)],
+                              stderr=subprocess.PIPE, text=True)
+    try:
+        assert record.stderr is not None and record.stderr.readline().startswith("recording")
+        subprocess.run(["cangen", CLASSIC, "-g", "0", "-n", "5000", "-I", "601", "-L", "8", "-D", "i", "-p", "100"],
+                       check=True, timeout=120)
+        # Stop only once the recorder has read its queue dry: frames still queued at a stop are not a drop.
+        sizes = [-1]
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and (len(sizes) < 3 or sizes[-1] != sizes[-3]):
+            time.sleep(0.5)
+            sizes.append(out.stat().st_size if out.exists() else 0)
+    finally:
+        record.send_signal(signal.SIGINT)
+        _, summary = record.communicate(timeout=300)  # a guest on a loaded machine writes slowly
+    assert record.returncode == 0, summary
+    recorded = sum(1 for line in out.read_text().splitlines() if line.strip())
+    dropped = sum(int(n) for n in re.findall(r"(?:kernel_dropped|interface_dropped|unread_at_close)=(\d+)", summary))
+    assert recorded + dropped == 5000, summary  # every frame is in the file or counted as dropped
+
+
+def test_frames_still_queued_at_close_are_counted_not_lost_silently() -> None:
+    from vstig_hw.transports.can import CanTransport
+
+    transport = CanTransport("socketcan", CLASSIC)
+    transport.open()
+    assert transport.read(0.1) == []  # a reader (a send-only link's unread frames are not a loss)
+    with can.Bus(interface="socketcan", channel=CLASSIC) as sender:
+        for i in range(50):
+            sender.send(can.Message(arbitration_id=0x125, data=bytes([i]), is_extended_id=False), timeout=5)
+        time.sleep(0.5)
+    transport.close()  # not read since: all 50 are still queued, and go with the socket
+    assert transport.counters["unread_at_close"] == 50, transport.counters
+
+
+def test_a_classic_link_on_an_fd_bus_hears_fd_frames() -> None:
+    link = can_link("socketcan", FD, robot_id=1)  # classic: no fd=1
+    link.open()
+    try:
+        # Two PUTs in one 16-byte CAN FD frame from node 7 (cansend's ## marks FD).
+        _cansend(FD, "607##0" + "0003000a00020007" + "0004000b00020007")
+        heard = []
+        deadline = time.monotonic() + DEADLINE_S
+        while len(heard) < 2 and time.monotonic() < deadline:
+            heard += link.receive(0.2)
+    finally:
+        link.close()
+    assert [(h.message.key, h.message.value) for h in heard] == [(3, 10), (4, 11)]
 
 
 def _read_for(link: Link[can.Message], seconds: float) -> None:

@@ -129,10 +129,11 @@ def _env_script() -> str:
 
 
 def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: str = "1G",
-        binary: str | None = None) -> UmlRun:
+        program: list[str] | None = None, binary: str | None = None) -> UmlRun:
     """Boot UML, run `python -m pytest ARGS` in the repo inside it, and collect the result from `workdir`.
 
-    `binary` is the kernel to boot (default: the installed linux.uml).
+    `program` runs that command instead of pytest (benchmarks do): its output is `pytest_log`, its
+    exit code `exit_code`. `binary` is the kernel to boot (default: the installed linux.uml).
     """
     uml = binary or uml_binary()
     if uml is None:
@@ -142,7 +143,8 @@ def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: s
     (moddir / "lib").mkdir(parents=True, exist_ok=True)
     (moddir / "lib" / "modules").symlink_to(UML_MODULES)
     junit = workdir / "junit.xml"
-    pytest = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", f"--junitxml={junit}", *pytest_args]
+    pytest = program or [sys.executable, "-m", "pytest", "-p", "no:cacheprovider", f"--junitxml={junit}",
+                         *pytest_args]
     (workdir / "env.sh").write_text(_env_script())
     init = workdir / "init.sh"
     init.write_text(_INIT.format(moddir=moddir, out=workdir, repo=shlex.quote(str(REPO)),

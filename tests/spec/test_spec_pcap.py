@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import os
 import random
 import struct
 from pathlib import Path
@@ -105,3 +106,57 @@ def test_fuzzed_files_give_frames_or_a_clear_error(tail: bytes) -> None:
             assert isinstance(msg, can.Message)
     except PcapError:
         pass
+
+
+def test_pcapng_from_wiresharks_own_editcap_reads_the_same_frames(tmp_path: Path) -> None:
+    import shutil
+    import subprocess
+
+    from vstig_hw.capture.files import read_capture
+
+    editcap = shutil.which("editcap")
+    if editcap is None:
+        if os.environ.get("VSTIG_REQUIRE_PEERS") == "1":
+            pytest.fail("VSTIG_REQUIRE_PEERS=1 but editcap (wireshark-common, with tshark) is missing")
+        pytest.skip("editcap (wireshark-common, installed with tshark) is missing")
+    frames = random_frames(random.Random(9), 300)
+    pcap, pcapng = tmp_path / "x.pcap", tmp_path / "x.pcapng"
+    with PcapWriter(pcap) as writer:
+        for frame in frames:
+            writer.on_message_received(frame)
+    done = subprocess.run([editcap, "-F", "pcapng", str(pcap), str(pcapng)], capture_output=True, text=True,
+                          check=False)
+    assert done.returncode == 0, done.stderr
+    assert pcapng.read_bytes()[:4] == bytes.fromhex("0a0d0d0a")
+    back = [record.unit for record in read_capture(str(pcapng))]
+    assert len(back) == len(frames)
+    for sent, got in zip(frames, back, strict=True):
+        assert sent.equals(got, timestamp_delta=1e-6, check_channel=False, check_direction=False), (sent, got)
+
+
+def _block(kind: int, body: bytes) -> bytes:
+    body += b"\0" * (-len(body) % 4)
+    return struct.pack("<II", kind, len(body) + 12) + body + struct.pack("<I", len(body) + 12)
+
+
+def test_pcapng_by_hand_nanoseconds_and_a_foreign_interface(tmp_path: Path) -> None:
+    from vstig_hw.capture.pcap import PcapngReader
+
+    frame = bytes.fromhex("000006a5" "08" "00" "0000" "8102abcd800000ff")
+    ns = struct.pack("<HHB3x", 9, 1, 9) + struct.pack("<HH", 0, 0)  # if_tsresol = 10^-9, end of options
+    stamp = 1_700_000_000_123_456_789
+    packets = [_block(6, struct.pack("<IIIII", interface, stamp >> 32, stamp & 0xFFFFFFFF, len(frame), len(frame))
+                      + frame) for interface in (1, 0)]
+    path = tmp_path / "x.pcapng"
+    path.write_bytes(_block(0x0A0D0D0A, struct.pack("<IHHq", 0x1A2B3C4D, 1, 0, -1))
+                     + _block(1, struct.pack("<HHI", LINKTYPE_CAN_SOCKETCAN, 0, 0) + ns)
+                     + _block(1, struct.pack("<HHI", 1, 0, 0))  # an Ethernet interface: its packets are skipped
+                     + b"".join(packets))
+    with PcapngReader(path) as reader:
+        (got,) = list(reader)
+        assert reader.skipped == 1
+    assert got.arbitration_id == 0x6A5 and got.data == bytes.fromhex("8102abcd800000ff")
+    assert got.timestamp == pytest.approx(1_700_000_000.123456789, abs=1e-6)
+    path.write_bytes(path.read_bytes()[:-10])
+    with pytest.raises(PcapError, match="cut short"), PcapngReader(path) as reader:
+        list(reader)

@@ -10,8 +10,8 @@ This per-line parser is the reference and the one that reports file:line errors;
 from __future__ import annotations
 
 import zlib
-from collections.abc import Iterable, Iterator
-from typing import IO
+from collections.abc import Callable, Iterable, Iterator
+from typing import IO, Any
 
 import can
 
@@ -69,9 +69,15 @@ def parse_line(path: str, number: int, line: str) -> can.Message | None:
     )
 
 
-def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
-    """Records in file order (.log or .log.gz); bad lines raise CaptureError, or with `skip_bad` go to `bad`."""
+def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+                 opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
+    """Records in file order (.log or .log.gz); bad lines raise CaptureError, or with `skip_bad` go to `bad`.
+
+    `opened` is handed the file once it is open (decode's progress bar asks it how far it got).
+    """
     with _open_text(path) as file:
+        if opened:
+            opened(file)
         try:
             yield from candump_records(path, file, skip_bad, bad)
         except (OSError, EOFError, zlib.error) as error:  # gzip reports a corrupt or cut-short .gz this way

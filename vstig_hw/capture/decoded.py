@@ -27,6 +27,7 @@ class Decoded:
     link: str
     can_id: int | None
     message: Message
+    sender: int | None = None  # the node that sent it, where the medium names one (a CAN ID's sender field)
 
 
 FramingFactory = Callable[[Record], Any]
@@ -90,7 +91,10 @@ class Decoder:
         framing = self._framing(record)
         is_can = record.framing == CAN_FRAMING
         can_id = int(record.unit.arbitration_id) if is_can else None
-        return [Decoded(record.t, record.link, can_id, msg) for msg in framing.feed(record.unit)]
+        messages = framing.feed(record.unit)
+        sender_of = getattr(framing, "sender_of", None) if messages else None
+        sender = None if sender_of is None else sender_of(record.unit)
+        return [Decoded(record.t, record.link, can_id, msg, sender) for msg in messages]
 
     def decode_all(self, records: Iterable[Record]) -> Iterator[Decoded]:
         for record in records:
@@ -102,7 +106,8 @@ def as_json(d: Decoded, value_type: ValueType = "uint16") -> str:
     row: dict[str, Any] = {"t": round(d.t, 6), "link": d.link}
     if d.can_id is not None:
         row["can_id"] = d.can_id
-    row.update(op=m.op.name, key=m.key, value=from_raw(m.value, value_type), timestamp=m.timestamp, robot=m.robot)
+    row.update(op=m.op.name, key=m.key, value=from_raw(m.value, value_type), timestamp=m.timestamp, robot=m.robot,
+               sender=d.sender)
     return json.dumps(row)
 
 

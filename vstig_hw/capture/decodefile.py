@@ -8,15 +8,16 @@ Every other capture type goes record by record through the framings.
 from __future__ import annotations
 
 import heapq
+import os
 from collections.abc import Callable, Sequence
 from typing import IO, Any
 
 from ..counters import Counters
 from ..values import ValueType
 from . import candump
-from .decoded import CSV_HEADER, Decoder, as_csv, as_json, as_text, default_framings
+from .decoded import CSV_HEADER, Decoded, Decoder, as_csv, as_json, as_text, default_framings
 from .fastlog import chunk_to_jsonl
-from .files import read_capture
+from .files import file_position, read_capture
 from .filters import Filter, RecordFilter
 from .records import CaptureError
 from .serial_log import is_serial_capture
@@ -25,32 +26,52 @@ from .zenoh_log import is_zenoh_capture
 __all__ = ["FORMATS", "decode_file", "decode_to_mcap"]
 
 FORMATS = {"text": as_text, "jsonl": as_json, "csv": as_csv}
+_PROGRESS_EVERY = 4096  # records between progress reports on the record-by-record path
 CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small enough for a smooth progress bar
 
 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
                 skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
-                progress: Callable[[int], None] | None = None,
-                keep: Filter | None = None,
+                progress: Callable[[int], None] | None = None, keep: Filter | None = None,
+                csv_header: bool = True, file_column: bool = False,
                 deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
-    """Write every message in `path` that `keep` passes to `out`; returns (messages, drops, bad lines skipped)."""
-    formatter = FORMATS[fmt]
+    """Write every message in `path` that `keep` passes to `out`; returns (messages, drops, bad lines skipped).
+
+    `progress` is told, now and then, how many bytes of the file were read so far (every format).
+    CSV: `csv_header=False` leaves the header out (a later file of several); `file_column` adds a
+    first column naming the file.
+    """
+    formatter = _with_file(path) if fmt == "csv" and file_column else FORMATS[fmt]
     decoder = Decoder(default_framings(id_base, extended, deployment))
     bad: list[CaptureError] = []
-    if fmt == "csv":
-        out.write(CSV_HEADER)
+    if fmt == "csv" and csv_header:
+        out.write(("file," if file_column else "") + CSV_HEADER)
     if (path.endswith(".log") and fmt == "jsonl" and value_type == "uint16" and not extended and not keep
             and not is_serial_capture(path) and not is_zenoh_capture(path)):
         count, drops = _candump_chunks(path, out, decoder, value_type, skip_bad, bad, id_base, progress)
         drops.update(decoder.drops())
         return count, drops, bad
     count = 0
+    reading: list[IO[Any]] = []
     passing = RecordFilter(keep or Filter(), decoder)
-    for record in read_capture(path, skip_bad, bad):
+    for number, record in enumerate(read_capture(path, skip_bad, bad, reading.append)):
         for decoded in passing.messages(record)[1]:
             out.write(formatter(decoded, value_type) + "\n")
             count += 1
+        if progress and number % _PROGRESS_EVERY == 0 and reading:
+            progress(file_position(reading[0]) or 0)
+    if progress:  # the end, also for a reader that does not show its file (MCAP)
+        progress(os.path.getsize(path))
     return count, decoder.drops(), bad
+
+
+def _with_file(path: str) -> Callable[[Decoded, ValueType], str]:
+    quoted = '"' + path.replace('"', '""') + '"'
+
+    def row(decoded: Decoded, value_type: ValueType) -> str:
+        return f"{quoted},{as_csv(decoded, value_type)}"
+
+    return row
 
 
 def decode_to_mcap(paths: Sequence[str], output: str, *, skip_bad: bool = False, id_base: int | None = None,
@@ -86,6 +107,7 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
 
     fast_drops: dict[str, int] = {}
     count = 0
+    done = 0
     raw_out: Any = getattr(out, "buffer", None)
     for line_no, chunk in candump.chunks(path, CHUNK):
         lines = chunk.count(b"\n") + (0 if chunk.endswith(b"\n") else 1)
@@ -100,8 +122,9 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
                 out.write(fast.decode())
         else:
             count += _slow(path, chunk, line_no, out, decoder, value_type, skip_bad, bad)
+        done += len(chunk)
         if progress:
-            progress(len(chunk))
+            progress(done)
     return count, Counters(fast_drops)
 
 

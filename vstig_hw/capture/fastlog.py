@@ -53,6 +53,9 @@ def _decimal_table() -> U8:
 _DECIMAL: U8 | None = None
 
 
+_SENDER_MASK_11BIT = 0xFF  # the fast path reads 11-bit IDs only: their low byte names the sender
+
+
 def _digits(out: U8, col: int, values: npt.NDArray[np.int64], width: int) -> None:
     """Right-aligned decimal digits of `values` (< 10**width, <= 65535) into out[:, col:col+width]."""
     global _DECIMAL
@@ -150,8 +153,8 @@ def _render(stamp: U8, link: bytes, can_id: npt.NDArray[np.int64], op: npt.NDArr
             *fields: npt.NDArray[np.int64]) -> bytes:
     parts = [b'{"t":', b"STAMP", b',"link":"' + link.replace(b'"', b"") + b'","can_id":', b"CAN_ID",
              b',"op":"', b"OPS", b'","key":', b"F0", b',"value":', b"F1", b',"timestamp":', b"F2",
-             b',"robot":', b"F3", b"}\n"]
-    widths = {b"STAMP": stamp.shape[1], b"CAN_ID": 4, b"OPS": 3, b"F0": 5, b"F1": 5, b"F2": 5, b"F3": 5}
+             b',"robot":', b"F3", b',"sender":', b"SENDER", b"}\n"]
+    widths = {b"STAMP": stamp.shape[1], b"CAN_ID": 4, b"OPS": 3, b"F0": 5, b"F1": 5, b"F2": 5, b"F3": 5, b"SENDER": 3}
     # One template row (constants in place, blanks for the fields), copied to every row in one go;
     # then only the variable columns are written.
     template = b"".join(b" " * widths[p] if p in widths else p for p in parts)
@@ -175,5 +178,7 @@ def _render(stamp: U8, link: bytes, can_id: npt.NDArray[np.int64], op: npt.NDArr
                 out[~get, col:col + 3] = np.frombuffer(b"PUT", np.uint8)
         elif part in (b"F0", b"F1", b"F2", b"F3"):
             _digits(out, col, fields[int(part[1:])], 5)
+        elif part == b"SENDER":
+            _digits(out, col, can_id & _SENDER_MASK_11BIT, 3)
         col += widths.get(part, len(part))
     return out.tobytes()

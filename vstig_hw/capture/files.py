@@ -9,9 +9,11 @@ serial header, then by extension.
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Protocol
+from typing import IO, Any, Protocol
 
 import can
 
@@ -20,10 +22,15 @@ from .records import CAN_FRAMING, CaptureError, Record
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
 from .zenoh_log import ZenohCaptureWriter, is_zenoh_capture, read_zenoh_capture
 
-__all__ = ["CAN_EXTENSIONS", "MCAP_EXTENSION", "CaptureWriter", "RotatingCapture", "read_capture", "rotated_name"]
+__all__ = ["APPENDABLE", "CAN_EXTENSIONS", "MCAP_EXTENSION", "READABLE_EXTENSIONS", "CaptureWriter",
+           "RotatingCapture", "file_position", "read_capture", "rotated_name", "sniff_suffix"]
 
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
 MCAP_EXTENSION = ".mcap"  # rosbag2 MCAP (capture.rosbag): decoded messages of any links
+READ_ONLY_EXTENSIONS = (".pcapng",)  # formats we read but do not write (Wireshark's default)
+READABLE_EXTENSIONS = (*CAN_EXTENSIONS, *READ_ONLY_EXTENSIONS, MCAP_EXTENSION)
+APPENDABLE = (".log", ".blf", ".csv", ".log.gz")  # the CAN formats python-can's writers can add to
+_BLF_CONTAINER_EVERY = 2.0  # seconds between BLF blocks written while recording
 _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
 
 
@@ -42,11 +49,17 @@ def _suffix(path: str) -> str:
 class CanCaptureWriter:
     """python-can's writer for the extension; frames keep their own timestamps, channel = link name."""
 
-    def __init__(self, path: str) -> None:
-        if _suffix(path) not in CAN_EXTENSIONS:
+    def __init__(self, path: str, append: bool = False) -> None:
+        suffix = _suffix(path)
+        append = append and os.path.isfile(path) and os.path.getsize(path) > 0  # nothing there: a new file
+        if suffix not in CAN_EXTENSIONS:
             raise ValueError(f"{path}: CAN captures are {', '.join(CAN_EXTENSIONS)} (chosen by extension)")
+        if append and suffix not in APPENDABLE:
+            raise ValueError(f"{path}: cannot append to a {suffix} capture (python-can can add to "
+                             f"{', '.join(APPENDABLE)})")
         self.path = path
-        self.writer: Any = can.Logger(path)
+        self.writer: Any = can.Logger(path, append=True) if append else can.Logger(path)
+        self._next_container = time.monotonic() + _BLF_CONTAINER_EVERY
 
     def write(self, record: Record) -> None:
         frame: can.Message = record.unit
@@ -56,24 +69,93 @@ class CanCaptureWriter:
         self.writer.on_message_received(frame)
 
     def size(self) -> int:
+        """Bytes written so far, counting what the writer still holds (BLF: its uncompressed block)."""
         file = getattr(self.writer, "file", None)
         try:
+            if hasattr(self.writer, "file_size"):
+                return int(self.writer.file_size())
             return int(file.tell()) if file is not None else os.path.getsize(self.path)
         except (OSError, ValueError):
             return 0
 
     def flush(self) -> None:
         file = getattr(self.writer, "file", None)
-        if file is not None and hasattr(file, "flush") and not isinstance(self.writer, can.BLFWriter):
-            file.flush()  # BLF compresses whole blocks: flushing mid-block would write a short one
+        if isinstance(self.writer, can.BLFWriter):
+            # BLF compresses blocks: one per tick would compress poorly, none until close would lose
+            # everything to a SIGKILL. Close a block every few seconds (python-can has no public call).
+            if time.monotonic() < self._next_container:
+                return
+            self._next_container = time.monotonic() + _BLF_CONTAINER_EVERY
+            self.writer._flush()
+        if file is not None and hasattr(file, "flush"):
+            file.flush()
 
     def close(self) -> None:
         self.writer.stop()
 
 
-_WRITERS: dict[str, Callable[[str], CaptureWriter]] = {
+_WRITERS: dict[str, Callable[[str, bool], CaptureWriter]] = {
     "can": CanCaptureWriter, "serial": SerialCaptureWriter, "zenoh": ZenohCaptureWriter,
 }
+
+_PCAP_MAGICS = tuple(m.to_bytes(4, order) for m in (0xA1B2C3D4, 0xA1B23C4D) for order in ("big", "little"))
+
+
+_ASC_KEYWORDS = ("date ", "base ", "internal events", "no internal events", "begin triggerblock",
+                 "end triggerblock", "//")
+
+
+def _check_asc_lines(path: str, skip_bad: bool, bad: list[CaptureError] | None) -> None:
+    """Lines python-can's ASC reader would pass over in silence: neither a header keyword nor a timestamped event."""
+    with open(path, encoding="utf-8", errors="replace") as file:
+        for number, line in enumerate(file, 1):
+            text = line.strip()
+            first = text.split(maxsplit=1)[0] if text else ""
+            if not text or text.lower().startswith(_ASC_KEYWORDS) or first.replace(".", "", 1).isdigit():
+                continue
+            error = CaptureError(path, number, f"not an ASC line: {text[:60]!r}")
+            if not skip_bad:
+                raise error
+            if bad is not None:
+                bad.append(error)
+
+
+def _check_complete(path: str, reader: Any, frames: int) -> None:
+    """A BLF names its own size in its header: a file shorter than that was cut short (python-can stops quietly)."""
+    expected = getattr(reader, "file_size", 0) if isinstance(reader, can.BLFReader) else 0
+    actual = os.path.getsize(path)
+    if expected > actual:
+        raise ValueError(f"cut short: {actual} of the {expected} bytes its header announces ({frames} records read)")
+
+
+def sniff_suffix(head: bytes) -> str | None:
+    """The capture type a file's first bytes show, as its extension (for a stream with no name to go by)."""
+    if head.startswith((b"# vstig serial capture", b"# vstig zenoh capture")):  # found by header, any name
+        return ".cap"
+    if head.startswith(b"LOGG"):
+        return ".blf"
+    if head[:4] in _PCAP_MAGICS:
+        return ".pcap"
+    if head.startswith(b"\x0a\x0d\x0d\x0a"):
+        return ".pcapng"
+    if head.startswith(b"\x89MCAP"):
+        return MCAP_EXTENSION
+    if head.startswith(b"\x1f\x8b"):
+        return ".log.gz"
+    text = head.lstrip()
+    for start, suffix in ((b"(", ".log"), (b"date ", ".asc"), (b"base ", ".asc"), (b"timestamp,", ".csv"),
+                          (b";$FILEVERSION", ".trc")):
+        if text.startswith(start):
+            return suffix
+    return None
+
+
+def file_position(file: IO[Any]) -> int | None:
+    """How many bytes of the file on disk were read so far (compressed bytes for .gz); None for a pipe."""
+    try:
+        return os.lseek(file.fileno(), 0, os.SEEK_CUR)
+    except (OSError, ValueError, AttributeError):
+        return None
 
 
 def rotated_name(path: str, index: int) -> str:
@@ -85,52 +167,78 @@ def rotated_name(path: str, index: int) -> str:
 
 
 class RotatingCapture:
-    """Writes records to `path`, starting a new numbered file whenever one exceeds `max_bytes`."""
+    """Writes records to `path`, starting a new numbered file whenever one exceeds `max_bytes`.
 
-    def __init__(self, path: str, medium: str, max_bytes: int | None = None, decoder: Any = None) -> None:
-        """`decoder` (a capture.decoded.Decoder) turns units into messages for an mcap capture."""
+    `append` adds to an existing `path` instead of replacing it. Rotation never replaces a file: it
+    moves on to the next numbered name that does not exist yet. A failed write names the file.
+    `decoder` (a capture.decoded.Decoder) turns units into messages for an mcap capture.
+    """
+
+    def __init__(self, path: str, medium: str, max_bytes: int | None = None, decoder: Any = None,
+                 append: bool = False) -> None:
         if medium not in (*_WRITERS, "mcap"):
             raise ValueError(f"medium must be {', '.join(_WRITERS)} or mcap, got {medium!r}")
         self.base, self.medium, self.max_bytes, self.decoder = path, medium, max_bytes, decoder
         self.index = 0
         self.files = [path]
         self.records = 0
-        self._writer = self._open(path)
+        self._writer = self._open(path, append)
 
-    def _open(self, path: str) -> CaptureWriter:
-        if self.medium == "mcap":
-            from .rosbag import McapCaptureWriter
+    def _open(self, path: str, append: bool = False) -> CaptureWriter:
+        with self._naming(path):
+            if self.medium == "mcap":
+                if append:
+                    raise ValueError(f"{path}: cannot append to an MCAP capture")
+                from .rosbag import McapCaptureWriter
 
-            return McapCaptureWriter(path, self.decoder)
-        return _WRITERS[self.medium](path)
+                return McapCaptureWriter(path, self.decoder)
+            return _WRITERS[self.medium](path, append)
+
+    @contextmanager
+    def _naming(self, path: str | None = None) -> Iterator[None]:
+        try:
+            yield
+        except OSError as error:
+            raise CaptureError(path or self.files[-1], None, error.strerror or str(error)) from None
 
     def write(self, record: Record) -> None:
-        self._writer.write(record)
+        with self._naming():
+            self._writer.write(record)
         self.records += 1
         if self.max_bytes and self.records % _SIZE_CHECK_EVERY == 0 and self._writer.size() >= self.max_bytes:
-            self._writer.close()
+            with self._naming():
+                self._writer.close()
             self.index += 1
+            while os.path.lexists(rotated_name(self.base, self.index)):
+                self.index += 1
             path = rotated_name(self.base, self.index)
             self.files.append(path)
             self._writer = self._open(path)
 
     def flush(self) -> None:
         """Push what is written to the file (the recorder does this every tick, so `tail -f` works)."""
-        self._writer.flush()
+        with self._naming():
+            self._writer.flush()
 
     def close(self) -> None:
-        self._writer.close()
+        with self._naming():
+            self._writer.close()
 
 
-def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
-    """Every record of a capture: ours (serial, zenoh), candump logs, or any python-can format."""
+def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+                 opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
+    """Every record of a capture: ours (serial, zenoh), candump logs, or any python-can format.
+
+    `opened` is handed the file being read once it is open, so a caller can tell how far reading got
+    (`file_position`).
+    """
     if not os.path.isfile(path):
         raise CaptureError(path, None, "no such file")
     if is_serial_capture(path):
-        yield from read_serial_capture(path, skip_bad, bad)
+        yield from read_serial_capture(path, skip_bad, bad, opened)
         return
     if is_zenoh_capture(path):
-        yield from read_zenoh_capture(path, skip_bad, bad)
+        yield from read_zenoh_capture(path, skip_bad, bad, opened)
         return
     suffix = _suffix(path)
     if suffix == MCAP_EXTENSION:
@@ -139,16 +247,29 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
         yield from read_mcap(path)
         return
     if suffix in (".log", ".log.gz"):
-        yield from read_candump(path, skip_bad, bad)
+        yield from read_candump(path, skip_bad, bad, opened)
         return
-    if suffix not in CAN_EXTENSIONS:
+    if suffix not in READABLE_EXTENSIONS:
         raise CaptureError(path, None, f"unknown capture type {suffix or '(no extension)'!r}: expected a "
-                           f"serial capture, {MCAP_EXTENSION} or one of {', '.join(CAN_EXTENSIONS)}")
+                           f"serial capture or one of {', '.join(READABLE_EXTENSIONS)}")
+    if os.path.getsize(path) == 0:
+        raise CaptureError(path, None, f"empty file: not a {suffix} capture")
     options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}
+    if suffix == ".asc":
+        _check_asc_lines(path, skip_bad, bad)
+    frames = 0
     try:
-        for frame in can.LogReader(path, **options):
+        reader = can.LogReader(path, **options)
+        file = getattr(reader, "file", None)  # python-can's readers keep the open file there
+        if opened and file is not None:
+            opened(file)
+        for frame in reader:
+            frames += 1
             yield Record(frame.timestamp, str(frame.channel or "can"), CAN_FRAMING, frame)
-    except CaptureError:
-        raise
+        _check_complete(path, reader, frames)
     except Exception as error:  # python-can's readers raise many kinds; all mean the file is bad
-        raise CaptureError(path, None, f"cannot read as {suffix}: {error}") from None
+        damage = CaptureError(path, None, f"record {frames + 1}: cannot read as {suffix}: {error}")
+        if not skip_bad:
+            raise damage from None
+        if bad is not None:  # python-can cannot resume past damage: the rest of this file is lost, and said so
+            bad.append(damage)

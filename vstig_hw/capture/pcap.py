@@ -22,7 +22,7 @@ from typing import Any, BinaryIO
 import can
 from can.io.generic import BinaryIOMessageWriter, FileIOMessageReader
 
-__all__ = ["LINKTYPE_CAN_SOCKETCAN", "PcapError", "PcapReader", "PcapWriter"]
+__all__ = ["LINKTYPE_CAN_SOCKETCAN", "PcapError", "PcapReader", "PcapWriter", "PcapngReader"]
 
 LINKTYPE_CAN_SOCKETCAN = 227
 _MAGIC_US = 0xA1B2C3D4
@@ -78,16 +78,18 @@ class PcapWriter(BinaryIOMessageWriter):
         self.file.write(struct.pack("<" + _RECORD, seconds, micros, len(body), len(body)) + body)
 
 
+def _opened(file: str | os.PathLike[str] | BinaryIO, unnamed: str) -> tuple[str, BinaryIO]:
+    """(name for messages, binary file) of a path, opened here, or of a file the caller opened."""
+    if isinstance(file, str | os.PathLike):
+        return str(file), open(file, "rb")  # closed by stop(), as python-can readers do
+    return getattr(file, "name", unnamed), file
+
+
 class PcapReader(FileIOMessageReader[BinaryIO]):
     """Iterates the `can.Message`s of a SocketCAN pcap file (either byte order, us or ns timestamps)."""
 
     def __init__(self, file: str | os.PathLike[str] | BinaryIO, **kwargs: Any) -> None:
-        if isinstance(file, str | os.PathLike):
-            self.name = str(file)
-            self.file = open(file, "rb")  # noqa: SIM115 (closed by stop(), as python-can readers do)
-        else:
-            self.name = getattr(file, "name", "<pcap>")
-            self.file = file
+        self.name, self.file = _opened(file, "<pcap>")
         header = self.file.read(_GLOBAL.size)
         if len(header) < _GLOBAL.size:
             raise PcapError(f"{self.name}: not a pcap file (only {len(header)} bytes)")
@@ -117,24 +119,96 @@ class PcapReader(FileIOMessageReader[BinaryIO]):
             yield self._message(seconds + fraction * self._scale, body, index)
 
     def _message(self, timestamp: float, body: bytes, index: int) -> can.Message:
-        can_id, length, flags = _FRAME.unpack_from(body)
-        is_fd = bool(flags & _CANFD_FDF) or len(body) == _FRAME.size + _FD_DATA
-        if length > (_FD_DATA if is_fd else _CLASSIC_DATA):
-            raise PcapError(f"{self.name}: record {index} claims {length} data bytes")
-        remote = bool(can_id & _RTR_FLAG)
-        data = b"" if remote else body[_FRAME.size:_FRAME.size + length]
-        if len(data) < length and not remote:
-            raise PcapError(f"{self.name}: record {index} holds fewer data bytes than it claims")
-        extended = bool(can_id & _EFF_FLAG)
-        return can.Message(
-            timestamp=timestamp,
-            arbitration_id=can_id & (_EFF_MASK if extended else _SFF_MASK),
-            is_extended_id=extended,
-            is_remote_frame=remote,
-            is_error_frame=bool(can_id & _ERR_FLAG),
-            is_fd=is_fd,
-            bitrate_switch=bool(flags & _CANFD_BRS),
-            error_state_indicator=bool(flags & _CANFD_ESI),
-            dlc=length,
-            data=data,
-        )
+        return _socketcan_message(self.name, timestamp, body, index)
+
+
+def _socketcan_message(name: str, timestamp: float, body: bytes, index: int) -> can.Message:
+    """One LINKTYPE_CAN_SOCKETCAN packet (pcap record or pcapng block body) as a python-can message."""
+    if len(body) < _FRAME.size:
+        raise PcapError(f"{name}: record {index} is cut short")
+    can_id, length, flags = _FRAME.unpack_from(body)
+    is_fd = bool(flags & _CANFD_FDF) or len(body) == _FRAME.size + _FD_DATA
+    if length > (_FD_DATA if is_fd else _CLASSIC_DATA):
+        raise PcapError(f"{name}: record {index} claims {length} data bytes")
+    remote = bool(can_id & _RTR_FLAG)
+    data = b"" if remote else body[_FRAME.size:_FRAME.size + length]
+    if len(data) < length and not remote:
+        raise PcapError(f"{name}: record {index} holds fewer data bytes than it claims")
+    extended = bool(can_id & _EFF_FLAG)
+    return can.Message(
+        timestamp=timestamp,
+        arbitration_id=can_id & (_EFF_MASK if extended else _SFF_MASK),
+        is_extended_id=extended,
+        is_remote_frame=remote,
+        is_error_frame=bool(can_id & _ERR_FLAG),
+        is_fd=is_fd,
+        bitrate_switch=bool(flags & _CANFD_BRS),
+        error_state_indicator=bool(flags & _CANFD_ESI),
+        dlc=length,
+        data=data,
+    )
+
+
+_PCAPNG_SHB = 0x0A0D0D0A  # section header block (its byte-order magic says how to read the section)
+_PCAPNG_IDB = 1  # interface description: link type, timestamp resolution
+_PCAPNG_EPB = 6  # enhanced packet: interface, timestamp, data
+_PCAPNG_BYTE_ORDER = 0x1A2B3C4D
+_PCAPNG_IF_TSRESOL = 9
+
+
+class PcapngReader(FileIOMessageReader[BinaryIO]):
+    """Iterates the `can.Message`s of a pcapng file (what Wireshark and `tshark -w` write by default).
+
+    Packets of SocketCAN interfaces are read; packets of other link types are skipped and counted
+    in `skipped` (a capture of several interfaces). Read-only: vstig-hw writes .pcap.
+    """
+
+    def __init__(self, file: str | os.PathLike[str] | BinaryIO, **kwargs: Any) -> None:
+        self.name, self.file = _opened(file, "<pcapng>")
+        self.skipped = 0
+
+    def __iter__(self) -> Iterator[can.Message]:
+        order = "<"
+        interfaces: list[tuple[int, float]] = []  # (link type, seconds per timestamp unit), by interface id
+        index = 0
+        while head := self.file.read(8):
+            if len(head) < 8:
+                raise PcapError(f"{self.name}: block {index + 1} is cut short")
+            if index == 0 and struct.unpack("<I", head[:4])[0] != _PCAPNG_SHB:
+                raise PcapError(f"{self.name}: not a pcapng file (first block {head[:4].hex()})")
+            if struct.unpack("<I", head[:4])[0] == _PCAPNG_SHB:
+                magic = self.file.read(4)
+                order = "<" if struct.unpack("<I", magic)[0] == _PCAPNG_BYTE_ORDER else ">"
+                interfaces = []
+                head += magic
+            kind, length = struct.unpack(order + "II", head[:8])
+            rest = self.file.read(length - len(head))
+            index += 1
+            if length < 12 or len(rest) < length - len(head):
+                raise PcapError(f"{self.name}: block {index} is cut short")
+            body = (head + rest)[8:length - 4]
+            if kind == _PCAPNG_IDB:
+                interfaces.append((struct.unpack_from(order + "H", body)[0], _resolution(body[8:], order)))
+            elif kind == _PCAPNG_EPB:
+                interface, high, low, captured = struct.unpack_from(order + "IIII", body)
+                if interface >= len(interfaces):
+                    raise PcapError(f"{self.name}: block {index} names interface {interface}, never described")
+                linktype, unit = interfaces[interface]
+                if linktype != LINKTYPE_CAN_SOCKETCAN:
+                    self.skipped += 1
+                    continue
+                yield _socketcan_message(self.name, (high << 32 | low) * unit, body[20:20 + captured], index)
+
+
+def _resolution(options: bytes, order: str) -> float:
+    """Seconds per timestamp unit from an interface's if_tsresol option (microseconds when absent)."""
+    at = 0
+    while at + 4 <= len(options):
+        code, size = struct.unpack_from(order + "HH", options, at)
+        if code == 0:
+            break
+        if code == _PCAPNG_IF_TSRESOL and size >= 1:
+            value = options[at + 4]
+            return float(2 ** -(value & 0x7F)) if value & 0x80 else float(10 ** -value)
+        at += 4 + (size + 3) // 4 * 4
+    return 1e-6

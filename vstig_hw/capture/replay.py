@@ -14,6 +14,11 @@ thread that burns its time slice is the one the scheduler preempts, for
 milliseconds, on a loaded machine. On Linux the replaying thread also asks for
 a 1 us timer slack while it replays (prctl PR_SET_TIMERSLACK; restored after),
 which brings the median overshoot from ~65 us to ~15 us.
+
+A stop (Ctrl-C, SIGTERM) wakes the sleep at once and nothing is sent after it,
+however long the gap: no spinning to the deadline. `skip_gaps` shortens any
+wait longer than that many seconds to it (python-can's player `--skip`);
+`ignore_timestamps` sends back to back (canplayer -t).
 """
 
 from __future__ import annotations
@@ -58,6 +63,8 @@ class ReplayResult:
     frames: int = 0
     logged: float = 0.0  # logged duration, first to last record, divided by speed
     took: float = 0.0  # first send to last send
+    skipped: float = 0.0  # waiting left out by skip_gaps / ignore_timestamps, in replay seconds
+    stopped: bool = False  # a stop ended the replay before the last record
     lateness: list[float] = field(default_factory=list)  # per frame, send time minus deadline (if asked)
     sleep_overshoot: float = SLEEP_OVERSHOOT  # the running median of how late our sleeps woke
 
@@ -65,46 +72,61 @@ class ReplayResult:
 class _Waiter:
     """Waits for a deadline: sleeps short of it by the median overshoot seen so far, spins the rest."""
 
-    def __init__(self, clock: Callable[[], float], sleep: Callable[[float], object]) -> None:
-        self.clock, self.sleep = clock, sleep
+    def __init__(self, clock: Callable[[], float], sleep: Callable[[float], object], stop: threading.Event) -> None:
+        self.clock, self.sleep, self.stop = clock, sleep, stop
         self.overshoot = SLEEP_OVERSHOOT
 
-    def until(self, deadline: float) -> None:
+    def until(self, deadline: float) -> bool:
+        """Wait for `deadline`; False at once if a stop came first (then nothing should be sent)."""
         clock = self.clock
         asked = deadline - clock() - self.overshoot
         if asked > 0:
             slept_from = clock()
             self.sleep(asked)
+            if self.stop.is_set():
+                return False
             late = clock() - slept_from - asked
             self.overshoot = max(0.0, self.overshoot + (_MEDIAN_STEP if late > self.overshoot else -_MEDIAN_STEP))
         while clock() < deadline:
             pass
+        return not self.stop.is_set()
 
 
 def replay(records: Iterable[Record], send: Callable[[Record], None], *, speed: float = 1.0,
-           stop: threading.Event | None = None, keep_lateness: bool = False,
-           clock: Callable[[], float] = time.perf_counter,
+           stop: threading.Event | None = None, skip_gaps: float | None = None, ignore_timestamps: bool = False,
+           keep_lateness: bool = False, clock: Callable[[], float] = time.perf_counter,
            sleep: Callable[[float], object] | None = None) -> ReplayResult:
     """Call `send` for each record at its deadline; `clock` and `sleep` are for tests (default: the real ones)."""
-    with fine_timer_slack():
-        return _replay(records, send, speed, stop, keep_lateness, clock, sleep)
-
-
-def _replay(records: Iterable[Record], send: Callable[[Record], None], speed: float, stop: threading.Event | None,
-            keep_lateness: bool, clock: Callable[[], float], sleep: Callable[[float], object] | None) -> ReplayResult:
     if speed <= 0:
         raise ValueError(f"speed must be positive, got {speed}")
+    if skip_gaps is not None and skip_gaps < 0:
+        raise ValueError(f"skip_gaps must not be negative, got {skip_gaps}")
+    with fine_timer_slack():
+        return _replay(records, send, speed, stop or threading.Event(), 0.0 if ignore_timestamps else skip_gaps,
+                       keep_lateness, clock, sleep)
+
+
+def _replay(records: Iterable[Record], send: Callable[[Record], None], speed: float, stop: threading.Event,
+            skip_gaps: float | None, keep_lateness: bool, clock: Callable[[], float],
+            sleep: Callable[[float], object] | None) -> ReplayResult:
     result = ReplayResult()
-    waiter = _Waiter(clock, sleep or (stop.wait if stop is not None else time.sleep))
-    start = t0 = None
+    waiter = _Waiter(clock, sleep or stop.wait, stop)  # stop.wait: a stop wakes the sleep at once
+    start = t0 = previous = None
     first_sent = last_sent = 0.0
     for record in records:
-        if stop is not None and stop.is_set():
+        if stop.is_set():
+            result.stopped = True
             break
-        if t0 is None or start is None:
-            t0, start = record.t, clock()
-        deadline = start + (record.t - t0) / speed
-        waiter.until(deadline)
+        if t0 is None or start is None or previous is None:
+            t0, start, previous = record.t, clock(), record.t
+        gap = (record.t - previous) / speed
+        if skip_gaps is not None and gap > skip_gaps:
+            result.skipped += gap - skip_gaps
+        previous = record.t
+        deadline = start + (record.t - t0) / speed - result.skipped
+        if not waiter.until(deadline):
+            result.stopped = True
+            break
         send(record)
         last_sent = clock()
         if result.frames == 0:

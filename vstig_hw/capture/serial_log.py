@@ -10,10 +10,13 @@ byte for byte.
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Callable, Iterator
-from typing import IO
+from typing import IO, Any
 
+from ..dialects.framing import DIALECT_FRAMINGS
+from ..framing import SERIAL_FRAMINGS
 from .records import CaptureError, Record, parse_lines
 
 __all__ = ["HEADER", "SerialCaptureWriter", "format_line", "read_serial_capture"]
@@ -33,10 +36,14 @@ class SerialCaptureWriter:
     header = HEADER
     format_line = staticmethod(format_line)
 
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str, append: bool = False) -> None:
         self.path = path
-        self.file: IO[str] = open(path, "w", encoding="utf-8")  # noqa: SIM115 (closed by close())
-        self.file.write(self.header + "\n")
+        if append and os.path.isfile(path) and os.path.getsize(path) and not is_serial_capture(path, self.header):
+            raise CaptureError(path, None, f"cannot append: not a {_kind(self.header)} (its first line is not "
+                               f"{self.header!r})")
+        self.file: IO[str] = open(path, "a" if append else "w", encoding="utf-8")  # noqa: SIM115 (closed by close())
+        if self.file.tell() == 0:
+            self.file.write(self.header + "\n")
 
     def write(self, record: Record) -> None:
         self.file.write(self.format_line(record))
@@ -69,20 +76,48 @@ def parse_line(path: str, number: int, line: str) -> Record | None:
     if match is None:
         return None
     stamp, link, framing, direction, data = match.groups()
+    if framing not in SERIAL_FRAMINGS and framing not in DIALECT_FRAMINGS:
+        known = ", ".join([*SERIAL_FRAMINGS, *DIALECT_FRAMINGS])
+        raise CaptureError(path, number, f"unknown serial framing {framing!r} (known: {known})")
     return Record(float(stamp), link, framing, bytes.fromhex(data), direction)
 
 
 def read_line_capture(path: str, parse: Callable[[str, int, str], Record | None], skip_bad: bool = False,
-                      bad: list[CaptureError] | None = None) -> Iterator[Record]:
-    """Records in file order; a malformed line raises CaptureError, or with `skip_bad` is collected in `bad`."""
+                      bad: list[CaptureError] | None = None, opened: Callable[[IO[Any]], None] | None = None,
+                      header: str = HEADER) -> Iterator[Record]:
+    """Records in file order; a malformed line raises CaptureError, or with `skip_bad` is collected in `bad`.
+
+    `opened` is handed the file once it is open, so a caller can tell how far reading got.
+    A first line other than `header` (another version) is refused, naming the version.
+    """
     with open(path, encoding="utf-8", errors="replace") as file:
-        yield from parse_lines(path, file, parse, skip_bad, bad)
+        if opened:
+            opened(file)
+        first = file.readline()
+        if first.rstrip("\r\n") != header:
+            stem = _stem(header)
+            raise CaptureError(path, 1, f"{_kind(header)} {first.strip()[len(stem):].strip()!r} is not a version "
+                               f"this vstig-hw reads (it reads {header.rsplit(' ', 1)[1]})")
+        yield from parse_lines(path, file, parse, skip_bad, bad, first_line=2)
 
 
-def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
-    return read_line_capture(path, parse_line, skip_bad, bad)
+def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+                        opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
+    return read_line_capture(path, parse_line, skip_bad, bad, opened, HEADER)
+
+
+def _stem(header: str) -> str:
+    """'# vstig serial capture', the header before its version."""
+    return header.rsplit(" ", 1)[0]
+
+
+def _kind(header: str) -> str:
+    """'serial capture', for messages."""
+    return _stem(header).removeprefix("# vstig ")
 
 
 def is_serial_capture(path: str, header: str = HEADER) -> bool:
+    """The file starts like a capture of `header`'s kind, any version (reading names a version it cannot read)."""
+    stem = _stem(header)
     with open(path, "rb") as file:
-        return file.read(len(header)).decode("utf-8", "replace") == header
+        return file.read(len(stem)).decode("utf-8", "replace") == stem

@@ -13,7 +13,8 @@ sample for sample.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import IO, Any
 
 from ..framing.zenoh import ZenohSample
 from .records import CaptureError, Record
@@ -45,8 +46,9 @@ def parse_line(path: str, number: int, line: str) -> Record | None:
     return Record(float(stamp), link, framing, ZenohSample(key, bytes.fromhex(data)), direction)
 
 
-def read_zenoh_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
-    return read_line_capture(path, parse_line, skip_bad, bad)
+def read_zenoh_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+                       opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
+    return read_line_capture(path, parse_line, skip_bad, bad, opened, HEADER)
 
 
 def is_zenoh_capture(path: str) -> bool:

@@ -4,12 +4,18 @@ Pure bookkeeping fed `Heard` messages; the `sniff` command draws it. A sender
 holds a stale view of a key when the last message it sent for that key carried
 an older timestamp than the newest one seen (only where the link names senders,
 as CAN IDs do).
+
+Two writes with the same timestamp from different robots are a conflict: the
+view settles it with the engine's rule (`higher_robot_wins` unless told
+otherwise), so it shows what every robot's engine will hold, and counts it once,
+however often either side is relayed afterwards.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ..engine import ConflictResolver, Entry, higher_robot_wins
 from ..links.link import Heard
 from ..timestamps import is_newer
 from ..wire import Op
@@ -27,15 +33,17 @@ class KeyView:
     gets: int = 0
     conflicts: int = 0
     sender_ts: dict[int, int] = field(default_factory=dict)  # sender -> timestamp of its last message
+    contenders: set[int] = field(default_factory=set)  # robots that wrote the shown timestamp
 
     def stale_senders(self) -> list[int]:
         return sorted(s for s, ts in self.sender_ts.items() if is_newer(self.timestamp, ts))
 
 
 class SwarmView:
-    def __init__(self) -> None:
+    def __init__(self, onconflict: ConflictResolver = higher_robot_wins) -> None:
         self.keys: dict[int, KeyView] = {}
         self.messages = 0
+        self.onconflict = onconflict
 
     def add(self, heard: Heard) -> None:
         msg = heard.message
@@ -54,5 +62,11 @@ class SwarmView:
             return  # an empty GET: says nothing about the entry
         if is_newer(msg.timestamp, view.timestamp):
             view.value, view.timestamp, view.robot = msg.value, msg.timestamp, msg.robot
+            view.contenders = {msg.robot}
         elif msg.timestamp == view.timestamp and msg.robot != view.robot:
-            view.conflicts += 1
+            if msg.robot not in view.contenders:  # a new write, not a relay of one already seen
+                view.contenders.add(msg.robot)
+                view.conflicts += 1
+            local = Entry(view.value, view.timestamp, view.robot)
+            winner = self.onconflict(msg.key, local, Entry(msg.value, msg.timestamp, msg.robot))
+            view.value, view.robot = winner[0], winner[2]  # the winner keeps the timestamp, as in the engine

@@ -52,7 +52,8 @@ def can_link_from_spec(spec: CanSpec, name: str, *, robot_id: int = LISTENER_ID,
                        listen_only: bool = False) -> Link[Any]:
     return can_link(spec.interface, spec.channel, robot_id=LISTENER_ID if listen_only else robot_id,
                     bitrate=spec.bitrate, fd=spec.fd, id_base=spec.id_base, extended=spec.extended,
-                    stigmergy=spec.stigmergy, kernel_filter=spec.kernel_filter, name=name)
+                    stigmergy=spec.stigmergy, kernel_filter=spec.kernel_filter, name=name,
+                    **dict(spec.bus_options))
 
 
 def can_framing_for(robot_id: int, id_base: int | None = None, extended: bool = False,

@@ -2,7 +2,7 @@
 
 Grammar (one parser for every command)::
 
-    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1&stigmergy=N&filter=0]
+    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1&stigmergy=N&filter=0&bus.KEY=V]
     serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]
     kilobot-ohc:<port or pyserial URL>
     serial:<port>?framing=kilobot&dialect=bittybuzz&deployment=<file.toml>   (and kilobot-ohc:<port>?dialect=...)
@@ -38,7 +38,8 @@ OHC_BAUD = 38400  # the Kilobot overhead controller's fixed rate
 KH4_PORT = 24580  # the port bzzkh4 listens on (BuzzKH4 buzz_utility.c)
 
 GRAMMAR = (
-    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1&stigmergy=N&filter=0]",
+    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1&stigmergy=N&filter=0"
+    "&bus.KEY=VALUE]",
     "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]",
     "kilobot-ohc:<port or pyserial URL>",
     "serial:<port>?framing=kilobot&dialect=bittybuzz&deployment=<file.toml>, kilobot-ohc:<port>?dialect=bittybuzz&"
@@ -50,7 +51,8 @@ GRAMMAR = (
 EXAMPLES = {
     "can": ("can:socketcan:vcan0", "can:virtual:lab", "can:slcan:/dev/ttyACM0?bitrate=500000",
             "can:socketcan:can0?fd=1&id_base=0x18000000&extended=1",
-            "can:socketcan:can0?extended=1&stigmergy=2", "can:socketcan:can0?filter=0"),
+            "can:socketcan:can0?extended=1&stigmergy=2", "can:socketcan:can0?filter=0",
+            "can:socketcand:can0?bus.host=192.168.1.5&bus.port=29536"),
     "serial": ("serial:/dev/ttyUSB0?baud=115200", "serial:socket://localhost:7000?framing=epuck4",
                "serial:/dev/rfcomm0?framing=kilobot",
                "serial:/dev/ttyUSB1?framing=epuck4&expiry_ticks=5"),
@@ -68,7 +70,9 @@ NOTES = {
     "can": "can: 11-bit IDs (default base 0x600) keep stigmergies apart by id_base (0x000, 0x200, 0x400, "
            "0x600); 29-bit IDs (extended=1) carry stigmergy=0..255 in the ID. Each link hears only its own. "
            "filter=0 turns the kernel/adapter acceptance filter off, so foreign IDs reach vstig-hw and are "
-           "counted as drop_unknown_id (a conformance check; costs CPU on a busy bus).",
+           "counted as drop_unknown_id (a conformance check; costs CPU on a busy bus). bus.KEY=VALUE passes "
+           "KEY to python-can's can.Bus (as its tools' --bus-kwargs): bus.host, bus.port for socketcand, "
+           "bus.receive_own_messages=true...",
     "serial": "serial: the query after the last '?' is ours; keys we do not know stay with a pyserial URL "
               "(socket://, rfc2217://). Defaults: baud=115200, framing=cobs8. A serial link carries one "
               "stigmergy: its framings have no stigmergy field. epuck4's expiry_ticks (default 3) is how many "
@@ -99,6 +103,7 @@ class CanSpec:
     extended: bool = False
     stigmergy: int = 0
     kernel_filter: bool = True  # False: every frame reaches us, and foreign IDs count as drop_unknown_id
+    bus_options: tuple[tuple[str, Any], ...] = ()  # bus.KEY=VALUE: more keywords for can.Bus (host, port...)
 
     @property
     def kind(self) -> str:
@@ -206,8 +211,12 @@ def _bad(spec: str, problem: str, scheme: str = "") -> ValueError:
     return ValueError(f"bad link spec {spec!r}: {problem} (e.g. {example})")
 
 
-def _query(spec: str, body: str, scheme: str, ours: tuple[str, ...], is_url: bool) -> tuple[str, dict[str, str]]:
-    """Split `body` at its last '?' into (rest, our params); foreign keys stay on a URL."""
+def _query(spec: str, body: str, scheme: str, ours: tuple[str, ...], is_url: bool,
+           open_prefix: str | None = None) -> tuple[str, dict[str, str]]:
+    """Split `body` at its last '?' into (rest, our params); foreign keys stay on a URL.
+
+    Keys starting with `open_prefix` are ours too, whatever follows it (passed on as they are).
+    """
     if "?" not in body:
         return body, {}
     rest, query = body.rsplit("?", 1)
@@ -215,7 +224,7 @@ def _query(spec: str, body: str, scheme: str, ours: tuple[str, ...], is_url: boo
     foreign: list[str] = []
     for item in query.split("&"):
         key, sep, value = item.partition("=")
-        if key in ours:
+        if key in ours or (open_prefix and key.startswith(open_prefix) and len(key) > len(open_prefix)):
             if not sep or not value:
                 raise _bad(spec, f"parameter {key!r} needs a value ({key}=...)", scheme)
             if key in params:
@@ -262,7 +271,7 @@ def _parse_can(spec: str, body: str) -> CanSpec:
     if not _IFACE.match(interface):
         raise _bad(spec, f"interface {interface!r} is not a python-can interface name", "can")
     channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended", "stigmergy", "filter"),
-                             False)
+                             False, open_prefix=_BUS_PREFIX)
     if not channel or any(ch in channel for ch in "\0\n\r "):
         raise _bad(spec, f"channel {channel!r} is missing or has spaces", "can")
     extended = _flag(spec, "can", "extended", params["extended"]) if "extended" in params else False
@@ -282,12 +291,43 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         extended=extended,
         stigmergy=stigmergy,
         kernel_filter=_flag(spec, "can", "filter", params["filter"]) if "filter" in params else True,
+        bus_options=_bus_options(spec, params),
     )
     try:
         parsed.scheme()  # an id_base the ID scheme has no room for (0x601) is the spec's fault
     except ValueError as error:
         raise _bad(spec, str(error), "can") from None
     return parsed
+
+
+_BUS_PREFIX = "bus."
+# Keywords the spec itself sets on the way to can.Bus (and can_link's own parameters).
+_OURS_ON_THE_BUS = ("interface", "channel", "bitrate", "fd", "can_filters", "robot_id", "id_base", "extended",
+                    "stigmergy", "kernel_filter", "name")
+
+
+def _bus_options(spec: str, params: dict[str, str]) -> tuple[tuple[str, Any], ...]:
+    """bus.KEY=VALUE pairs as can.Bus keywords; a value reads as python-can's `--bus-kwargs` do (int, float,
+    true/false, else text)."""
+    options: list[tuple[str, Any]] = []
+    for key, text in params.items():
+        if not key.startswith(_BUS_PREFIX):
+            continue
+        name = key[len(_BUS_PREFIX):]
+        if name in _OURS_ON_THE_BUS:
+            hint = f"give {name}= itself" if name in ("bitrate", "fd") else "it is set from the spec"
+            raise _bad(spec, f"{key} is not a bus option of its own: {hint}", "can")
+        options.append((name, _bus_value(text)))
+    return tuple(options)
+
+
+def _bus_value(text: str) -> Any:
+    for convert in (lambda t: int(t, 0), float):
+        try:
+            return convert(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text.lower(), text)
 
 
 _DIALECT_KEYS = ("dialect", "deployment")

@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import signal
 import statistics
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
@@ -241,6 +242,10 @@ def estimated_cost(config: Config) -> float:
     return config.robots * hops / (1.0 - config.drop)
 
 
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def run_tasks(
     tasks: Iterable[Task], workers: int | None = None, on_done: Callable[[Task, RunResult], None] | None = None
 ) -> dict[Task, RunResult]:
@@ -255,7 +260,9 @@ def run_tasks(
             if on_done:
                 on_done(task, result)
         return results
-    with multiprocessing.get_context("fork").Pool(workers) as pool:
+    # Workers ignore Ctrl-C: the parent alone stops (the pool's exit terminates them), so a
+    # terminal's SIGINT to the whole group ends the run once, without a traceback per worker.
+    with multiprocessing.get_context("fork").Pool(workers, initializer=_ignore_sigint) as pool:
         for task, result in pool.imap_unordered(_run_task, ordered, chunksize=1):
             results[task] = result
             if on_done:

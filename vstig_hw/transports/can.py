@@ -7,11 +7,14 @@ received (error frames too, so captures keep them; the framing counts them).
 
 Counters: `rx`, `tx`, `tx_dropped` (device gone or TX queue full), `bus_errors`
 (error frames and failed bus calls), `bus_off`, `lost` (outages) and `reconnects`
-(recoveries). An outage is logged once and its end once; meanwhile the bus is
-reopened with exponential backoff (0.1 s doubling to 2 s) from `read`/`write`,
-which never raise into the caller's loop. A bus that opens but fails at its first
-call (SocketCAN binds to an interface that is down, then reports ENETDOWN) has
-not come back: the outage goes on and the backoff keeps growing.
+(recoveries), and on SocketCAN `kernel_dropped` (frames the kernel dropped because
+our receive queue was full, as candump -d reports), `interface_dropped` (frames the
+interface dropped before any socket got them) and `unread_at_close`. An outage is
+logged once and its end once; meanwhile the bus is reopened with exponential
+backoff (0.1 s doubling to 2 s) from `read`/`write`, which never raise into the
+caller's loop. A bus that opens but fails at its first call (SocketCAN binds to an
+interface that is down, then reports ENETDOWN) has not come back: the outage goes
+on and the backoff keeps growing.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import can
 
 from ..counters import Counters
 from .base import TransportError, errno_of, one_line
+from .socketcan_drops import count_kernel_drops
 
 __all__ = ["CanTransport"]
 
@@ -97,9 +101,15 @@ class CanTransport:
 
     def _make_bus(self) -> can.BusABC:
         try:
-            return can.Bus(**self._bus_kwargs)
+            return count_kernel_drops(can.Bus(**self._bus_kwargs), self.counters)
         except can.CanInterfaceNotImplementedError as exc:
-            raise TransportError(f"CAN interface {self.interface!r} cannot be used here: {one_line(exc)}") from None
+            known = "" if self.interface in can.VALID_INTERFACES else f" (python-can knows: " \
+                f"{', '.join(sorted(can.VALID_INTERFACES))})"
+            raise TransportError(f"CAN interface {self.interface!r} cannot be used here: {one_line(exc)}{known}") \
+                from None
+        except (NameError, ImportError, AttributeError) as exc:  # a vendor driver whose library is not installed
+            raise TransportError(f"CAN interface {self.interface!r} cannot be used here: its vendor library is "
+                                 f"missing or incomplete ({one_line(exc)})") from None
         except (can.CanError, OSError, ValueError, TypeError) as exc:
             raise TransportError(self._explain(exc)) from None
 
