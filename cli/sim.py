@@ -119,9 +119,10 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
     """Simulate the paper's task (agree on the highest id) on real engines over a lossy radio."""
     if ctx.invoked_subcommand is not None:
         return
-    if topology != "cluster" and ctx.get_parameter_source("density") is click.core.ParameterSource.COMMANDLINE:
-        raise click.UsageError(f"--density sets the cluster's arena; a {topology} layout is built by distance "
-                               "and does not use it")
+    if topology not in ("cluster", "motion") \
+            and ctx.get_parameter_source("density") is click.core.ParameterSource.COMMANDLINE:
+        raise click.UsageError(f"--density sets the arena of cluster and motion runs; a {topology} layout is built "
+                               "by distance and does not use it")
     config = _config(topology, robots, drop, **model)
     if snapshot is not None:
         _draw_snapshot(config, seed, snapshot_step, snapshot)
