@@ -10,7 +10,7 @@ import pytest
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.engine import larger_value_wins
-from vstig_hw.links import Link, parse
+from vstig_hw.links import Heard, Link, parse
 from vstig_hw.links.can import can_link
 from vstig_hw.transports.base import TransportError
 
@@ -55,23 +55,29 @@ def test_five_engines_agree_on_the_highest_id_over_virtual_can(fd: bool, extende
             link.close()
 
 
-def test_heard_names_the_sender_and_foreign_frames_are_filtered_out() -> None:
+def _hear_a_foreign_frame_then_ours(spec: str) -> tuple[list[Heard], dict[str, int]]:
+    """A stranger sends 0x123 (no scheme's ID) then a GET from node 0x2A; what a link built from `spec` heard."""
     channel = _fresh_channel()
-    ours = can_link("virtual", channel, robot_id=1)
+    ours = parse(spec.format(channel=channel)).build(robot_id=1)
     stranger = can.Bus(interface="virtual", channel=channel)
     ours.open()
     try:
         stranger.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=bytes(8)))  # not our scheme
         stranger.send(can.Message(arbitration_id=0x72A, is_extended_id=False, data=bytes.fromhex("8001000200030004")))
-        heard = []
+        heard: list[Heard] = []
         deadline = time.monotonic() + 10
         while not heard and time.monotonic() < deadline:
             heard = ours.receive(0.05)
-        assert [(h.message, h.sender) for h in heard] == [(Message(Op.GET, 1, 2, 3, 4), 0x2A)]
-        assert ours.stats()["rx"] == 1  # the can_filters kept 0x123 away from us
+        return heard, dict(ours.stats())
     finally:
         ours.close()
         stranger.shutdown()
+
+
+def test_heard_names_the_sender_and_foreign_frames_are_filtered_out() -> None:
+    heard, stats = _hear_a_foreign_frame_then_ours("can:virtual:{channel}")
+    assert [(h.message, h.sender) for h in heard] == [(Message(Op.GET, 1, 2, 3, 4), 0x2A)]
+    assert stats["rx"] == 1 and "drop_unknown_id" not in stats  # the can_filters kept 0x123 away from us
 
 
 def test_unknown_interface_is_one_clear_line() -> None:
@@ -137,19 +143,6 @@ def test_two_stigmergies_share_one_bus_without_crosstalk(first: str, second: str
 
 def test_filter_off_lets_foreign_ids_in_and_counts_them() -> None:
     """filter=0: the acceptance filter is off, so a foreign ID reaches the framing as drop_unknown_id."""
-    channel = _fresh_channel()
-    ours = parse(f"can:virtual:{channel}?filter=0").build(robot_id=1)
-    stranger = can.Bus(interface="virtual", channel=channel)
-    ours.open()
-    try:
-        stranger.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=bytes(8)))  # not our scheme
-        stranger.send(can.Message(arbitration_id=0x72A, is_extended_id=False, data=bytes.fromhex("8001000200030004")))
-        heard = []
-        deadline = time.monotonic() + 10
-        while not heard and time.monotonic() < deadline:
-            heard = ours.receive(0.05)
-        assert [h.message for h in heard] == [Message(Op.GET, 1, 2, 3, 4)]
-        assert ours.stats()["rx"] == 2 and ours.stats()["drop_unknown_id"] == 1
-    finally:
-        ours.close()
-        stranger.shutdown()
+    heard, stats = _hear_a_foreign_frame_then_ours("can:virtual:{channel}?filter=0")
+    assert [h.message for h in heard] == [Message(Op.GET, 1, 2, 3, 4)]
+    assert stats["rx"] == 2 and stats["drop_unknown_id"] == 1
