@@ -21,6 +21,28 @@ def parse_id_base(text: str | None) -> int | None:
         raise click.BadParameter(f"{text!r} is not an integer (e.g. 0x600)", param_hint="--id-base") from None
 
 
+def reading_options(fn: F) -> F:
+    """Add how to read captures: --skip-bad, --value-type, --id-base, --extended, --deployment."""
+    from vstig_hw.values import VALUE_TYPES
+
+    from ._common import VALUE_TYPE_HELP
+
+    options = [
+        click.option("--skip-bad", is_flag=True,
+                     help="Count malformed lines and go on instead of stopping at the first."),
+        click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
+                     help=VALUE_TYPE_HELP),
+        click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 for 29-bit IDs)."),
+        click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs."),
+        click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
+                     help="For Buzz/BittyBuzz captures (blabbermouth, bittybuzz-kilobot): the TOML file mapping "
+                          "their keys."),
+    ]
+    for option in reversed(options):
+        fn = option(fn)
+    return fn
+
+
 def filter_options(fn: F) -> F:
     """Add the capture filter options; the command receives them as one `keep: Filter` argument."""
     from vstig_hw.wire import KEY_MAX, U16_MAX

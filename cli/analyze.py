@@ -14,9 +14,9 @@ from vstig_hw.analysis import CONFLICT_RULES, DEFAULT_WINDOW, Analyzer, Conflict
 from vstig_hw.capture.analyzefile import analyze_captures
 from vstig_hw.capture.filters import Filter
 from vstig_hw.counters import Counters
-from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
+from vstig_hw.values import ValueType, from_raw
 
-from ._capture_options import filter_options, parse_id_base
+from ._capture_options import filter_options, parse_id_base, reading_options
 from .errors import reports_errors
 
 _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a terminal)
@@ -32,12 +32,7 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @click.option("--conflict", type=click.Choice(CONFLICT_RULES), default="robot", show_default=True,
               help="Which of two writes with one timestamp is newer: the higher robot id (Buzz's default) "
                    "or the larger value (the paper's Figure 1).")
-@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
-@click.option("--skip-bad", is_flag=True, help="Count malformed lines and go on instead of stopping at the first.")
-@click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 for 29-bit IDs).")
-@click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs (default: read from the frames).")
-@click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
-              help="For Buzz/BittyBuzz captures: the TOML file mapping their keys.")
+@reading_options
 @filter_options
 @reports_errors
 def command(files: tuple[str, ...], as_json: bool, plot: Path | None, window: float, conflict: Conflict,

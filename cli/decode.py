@@ -16,10 +16,9 @@ from vstig_hw.capture.files import MCAP_EXTENSION, READABLE_EXTENSIONS, sniff_su
 from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError
 from vstig_hw.capture.serial_log import is_serial_capture
-from vstig_hw.values import VALUE_TYPES, ValueType
+from vstig_hw.values import ValueType
 
-from ._capture_options import filter_options, parse_id_base
-from ._common import VALUE_TYPE_HELP
+from ._capture_options import filter_options, parse_id_base, reading_options
 from .errors import reports_errors
 
 INPUT_FORMATS = [*(suffix[1:] for suffix in READABLE_EXTENSIONS), "cap"]  # cap: our serial capture
@@ -47,13 +46,7 @@ def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | No
               help="text: one readable line per message; jsonl: one JSON object per line; csv: a header, then rows; "
                    "mcap: a rosbag2 MCAP file (-o), one topic per link, for Foxglove and ros2 bag.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True), help="The file --format mcap writes.")
-@click.option("--skip-bad", is_flag=True, help="Count malformed lines and go on instead of stopping at the first.")
-@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
-              help=VALUE_TYPE_HELP)
-@click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 with --extended).")
-@click.option("--extended", is_flag=True, help="The CAN capture uses 29-bit IDs.")
-@click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
-              help="For Buzz/BittyBuzz captures (blabbermouth, bittybuzz-kilobot): the TOML file mapping their keys.")
+@reading_options
 @filter_options
 @reports_errors
 def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: str | None, skip_bad: bool,
