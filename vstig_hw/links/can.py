@@ -45,7 +45,8 @@ def can_link(
     framing = CanFraming(scheme, sender=robot_id, fd=fd)
     filters = scheme.can_filters() if kernel_filter else None
     transport = CanTransport(interface, channel, bitrate=bitrate, fd=fd, can_filters=filters, **bus_options)
-    return Link(name or f"{interface}:{channel}", transport, framing)
+    # a bus: every node hears every frame, so an engine gateway does not echo a PUT back onto it
+    return Link(name or f"{interface}:{channel}", transport, framing, one_domain=True)
 
 
 def can_link_from_spec(spec: CanSpec, name: str, *, robot_id: int = LISTENER_ID,
