@@ -12,8 +12,8 @@ import can
 import pytest
 
 from vstig_hw import Message, Op, Stigmergy
-from vstig_hw.engine import Outcome
 from vstig_hw.counters import Counters
+from vstig_hw.engine import Outcome
 from vstig_hw.gateway import Mode, Node, Outlet, SendWindow, favour_latency
 from vstig_hw.links import Heard, Link
 from vstig_hw.links.can import can_framing_for
