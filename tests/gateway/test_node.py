@@ -22,8 +22,8 @@ from vstig_hw.links.spec import parse
 _ids = itertools.count()
 
 
-def bus_link(channel: str, name: str | None = None, robot_id: int = 100) -> Link[can.Message]:
-    return parse(f"can:virtual:{channel}").build(name or channel, robot_id=robot_id)
+def bus_link(channel: str, name: str | None = None, robot_id: int = 100, *, echo: bool = False) -> Link[can.Message]:
+    return parse(f"can:virtual:{channel}{'?echo=1' if echo else ''}").build(name or channel, robot_id=robot_id)
 
 
 class BusRobot:
@@ -105,10 +105,8 @@ def test_news_crosses_to_the_other_link_before_the_echo_goes_back(channels: tupl
     a, b = channels
     buses = {a: can.Bus(interface="virtual", channel=a), b: can.Bus(interface="virtual", channel=b)}
     framing = can_framing_for(7)
-    links = [bus_link(a), bus_link(b)]
-    for link in links:  # as radios whose robots may not all hear each other: the re-broadcast goes back too
-        link.one_domain = False
-    with Node(links, robot_id=100) as node:
+    # echo=1: as radios whose robots may not all hear each other, the re-broadcast goes back too
+    with Node([bus_link(a, echo=True), bus_link(b, echo=True)], robot_id=100) as node:
         for key, (source, other) in enumerate([(a, b), (b, a)]):  # from the first link, then from the second
             buses[source].send(framing.encode(Message(Op.PUT, key, 5, 1, 7))[0])
             heard: dict[str, can.Message] = {}
