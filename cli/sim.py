@@ -22,6 +22,8 @@ from vstig_hw.sim.grid import Cell
 from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
 
+from ._files import overwrite_option, refuse_to_replace
+
 
 def _model_options(fn: Any) -> Any:
     """Radio and program options shared by a single condition and the paper grid."""
@@ -112,10 +114,11 @@ def _progress(transient: bool = False) -> Any:
               help="instead of running, draw run 0 at --snapshot-step to this PNG (motion; as Figure 4)")
 @click.option("--snapshot-step", default=1, show_default=True, type=click.IntRange(1),
               help="the control step --snapshot draws")
+@overwrite_option("the --capture or --snapshot FILE")
 @click.pass_context
 def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: int, as_json: bool,
             capture: str | None, seed: int, workers: int | None, snapshot: Path | None, snapshot_step: int,
-            **model: Any) -> None:
+            overwrite: bool, **model: Any) -> None:
     """Simulate the paper's task (agree on the highest id) on real engines over a lossy radio."""
     if ctx.invoked_subcommand is not None:
         return
@@ -125,8 +128,11 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
                                "by distance and does not use it")
     config = _config(topology, robots, drop, **model)
     if snapshot is not None:
+        refuse_to_replace(snapshot, overwrite)
         _draw_snapshot(config, seed, snapshot_step, snapshot)
         return
+    if capture:
+        refuse_to_replace(capture, overwrite)  # before the runs, which may take minutes
     try:
         with _progress(transient=True) as progress:
             bar = progress.add_task(_label(config), total=runs)
