@@ -141,6 +141,17 @@ def _until(condition: object, deadline: float = 20.0) -> None:
         time.sleep(0.05)
 
 
+def _one_message_crosses(sender: Link[ZenohSample], receiver: Link[ZenohSample]) -> bool:
+    """Send one message until the receiver hears it (a sample before the sessions meet reaches nobody)."""
+    end = time.monotonic() + 20
+    while time.monotonic() < end:
+        sender.send(MESSAGES[0])
+        heard = receiver.receive(0.3)
+        if heard:
+            return [h.message for h in heard] == [MESSAGES[0]]
+    return False
+
+
 def test_two_links_exchange_a_batch_as_one_sample_named_by_its_sender() -> None:
     first, second = _pair()
     try:
@@ -261,17 +272,30 @@ def test_a_default_port_taken_before_the_session_binds_it_is_replaced_by_a_fresh
             f"zenoh-lab: another program took {picked} before Zenoh bound it; listening on a fresh port"]
         second = parse(f"zenoh:lab?connect={bound}").build(robot_id=202)
         second.open()
-        heard = []
-        end = time.monotonic() + 20
-        while not heard and time.monotonic() < end:
-            first.send(MESSAGES[0])
-            heard = second.receive(0.3)
-        assert [h.message for h in heard] == [MESSAGES[0]]
+        assert _one_message_crosses(first, second)
     finally:
         thief.close()
         first.close()
         if second is not None:
             second.close()
+
+
+def test_when_every_fresh_port_is_taken_too_opening_fails_in_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    import socket
+
+    import vstig_hw.links.zenoh as zenoh_links
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        monkeypatch.setattr(zenoh_links, "_free_loopback_port", lambda: port)  # every pick lands on a taken port
+        link = parse("zenoh:lab").build(robot_id=1)
+        with pytest.raises(TransportError) as caught:
+            link.open()
+    message = str(caught.value)
+    assert message.startswith("zenoh-lab: cannot open a Zenoh session: ") and "Address already in use" in message
+    assert "\n" not in message
 
 
 def test_a_listen_port_the_user_named_is_never_swapped_for_another() -> None:
@@ -317,12 +341,7 @@ def test_clients_survive_their_router_going_away_and_coming_back(caplog: pytest.
             _until(lambda: sender.receive(0.2) == [] and sender.transport.counters["lost"] == 1)
             router = _router(port)
             _until(lambda: sender.receive(0.2) == [] and sender.transport.counters["reconnects"] == 1)
-        heard = []
-        end = time.monotonic() + 20
-        while not heard and time.monotonic() < end:
-            sender.send(MESSAGES[0])
-            heard = receiver.receive(0.3)
-        assert [h.message for h in heard] == [MESSAGES[0]]
+        assert _one_message_crosses(sender, receiver)
         mine = [r.getMessage() for r in caplog.records if r.name.endswith("zenoh")]
         assert mine.count("zenoh-lab: lost every Zenoh peer; Zenoh reconnects with backoff") >= 1
         assert sender.transport.counters["lost"] == 1 and sender.transport.counters["unreachable"] == 0
