@@ -17,6 +17,7 @@ from vstig_hw.counters import Counters
 from vstig_hw.values import ValueType, from_raw
 
 from ._capture_options import filter_options, parse_id_base, reading_options
+from ._files import overwrite_option, refuse_to_replace
 from .errors import reports_errors
 
 _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a terminal)
@@ -27,6 +28,7 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (writes, summary, bandwidth).")
 @click.option("--plot", type=click.Path(dir_okay=False, writable=True, path_type=Path),
               help="Write a PNG: (a) a key's writes spreading through the senders, (b) convergence times.")
+@overwrite_option("the --plot FILE")
 @click.option("--window", default=DEFAULT_WINDOW, show_default=True, type=click.FloatRange(0, min_open=True),
               help="Seconds either side of a write in which a sender must be heard to count as active.")
 @click.option("--conflict", type=click.Choice(CONFLICT_RULES), default="robot", show_default=True,
@@ -35,9 +37,9 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @reading_options
 @filter_options
 @reports_errors
-def command(files: tuple[str, ...], as_json: bool, plot: Path | None, window: float, conflict: Conflict,
-            value_type: ValueType, skip_bad: bool, id_base: str | None, extended: bool, deployment: str | None,
-            keep: Filter) -> None:
+def command(files: tuple[str, ...], as_json: bool, plot: Path | None, overwrite: bool, window: float,
+            conflict: Conflict, value_type: ValueType, skip_bad: bool, id_base: str | None, extended: bool,
+            deployment: str | None, keep: Filter) -> None:
     """Measure convergence per write and bandwidth from captures.
 
     Convergence is how long each write took to reach every robot, the paper's measure.
@@ -54,6 +56,8 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, window: fl
     Example: vstig analyze swarm.log --key 3 --plot key3.png
     """
     base = parse_id_base(id_base)
+    if plot is not None:
+        refuse_to_replace(plot, overwrite)  # before reading: a capture typed as --plot is refused at once
     analyzer = Analyzer(window, conflict)
     # 11-bit unless told (--extended) or implied (--id-base names one width's base); else read from frames.
     width = True if extended else (False if base is not None else None)

@@ -19,6 +19,7 @@ from vstig_hw.capture.serial_log import is_serial_capture
 from vstig_hw.values import ValueType
 
 from ._capture_options import filter_options, parse_id_base, reading_options
+from ._files import overwrite_option, refuse_to_replace
 from .errors import reports_errors
 
 INPUT_FORMATS = [*(suffix[1:] for suffix in READABLE_EXTENSIONS), "cap"]  # cap: our serial capture
@@ -27,8 +28,6 @@ _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth
 
 def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | None, extended: bool,
              deployment: str | None, keep: Filter) -> None:
-    if not output.lower().endswith(MCAP_EXTENSION):
-        raise click.UsageError(f"an MCAP capture is named *{MCAP_EXTENSION} (got {output})")
     count, drops, bad = decode_to_mcap(files, output, skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
                                        deployment=deployment)
     for error in bad[:5]:
@@ -46,11 +45,13 @@ def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | No
               help="text: one readable line per message; jsonl: one JSON object per line; csv: a header, then rows; "
                    "mcap: a rosbag2 MCAP file (-o), one topic per link, for Foxglove and ros2 bag.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True), help="The file --format mcap writes.")
+@overwrite_option("-o FILE")
 @reading_options
 @filter_options
 @reports_errors
-def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: str | None, skip_bad: bool,
-            value_type: ValueType, id_base: str | None, extended: bool, deployment: str | None, keep: Filter) -> None:
+def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: str | None, overwrite: bool,
+            skip_bad: bool, value_type: ValueType, id_base: str | None, extended: bool, deployment: str | None,
+            keep: Filter) -> None:
     """Print every message in FILES (or write them as rosbag2 MCAP); - reads stdin, pipes and <(...) work too.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
@@ -62,6 +63,7 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: 
     if (fmt == "mcap") != (output is not None):
         raise click.UsageError("--format mcap writes to -o FILE.mcap; the other formats print to stdout")
     if output is not None:
+        _check_output(output, files, overwrite)
         with contextlib.ExitStack() as spooled:  # stdin and pipes too
             readable = tuple(spooled.enter_context(_readable(path, "<stdin>" if path == "-" else path, input_format))
                              for path in files)
@@ -84,6 +86,16 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: 
         if drops:
             summary += f", dropped {drops.summary()}"
         click.echo(summary, err=True)
+
+
+def _check_output(output: str, files: tuple[str, ...], overwrite: bool) -> None:
+    """Before any reading: -o names an .mcap file, an existing one needs --overwrite, and no input is the output
+    (writing would empty it before it was read)."""
+    if not output.lower().endswith(MCAP_EXTENSION):
+        raise click.UsageError(f"an MCAP capture is named *{MCAP_EXTENSION} (got {output})")
+    if os.path.exists(output) and any(path != "-" and os.path.samefile(path, output) for path in files):
+        raise click.UsageError(f"{output} is also an input: decode into another file")
+    refuse_to_replace(output, overwrite)
 
 
 def _renamed(error: CaptureError, read: str, name: str) -> CaptureError:

@@ -20,6 +20,7 @@ from vstig_hw.links.spec import CanSpec, LinkSpec, ZenohSpec
 
 from ._capture_options import filter_options
 from ._common import StatusLine, build_links, describe_links, must_hear, print_counters, run_until_stopped
+from ._files import overwrite_option, refuse_to_replace
 from .errors import LINK, reports_errors
 
 
@@ -54,8 +55,8 @@ def _target(output: str | None, link: LinkSpec, extension: str) -> str:
 def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
     if overwrite and append:
         raise click.UsageError("give --overwrite or --append, not both")
-    if os.path.isfile(path) and os.path.getsize(path) > 0 and not (overwrite or append):
-        raise click.UsageError(f"{path} exists: --overwrite replaces it, --append adds to it")
+    if not append:
+        refuse_to_replace(path, overwrite, ", --append adds to it")
 
 
 @click.command()
@@ -64,7 +65,7 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
               help="FILE, or a folder for a timestamped name (the default: one here, as candump -l). "
                    f"CAN by extension: {' '.join(CAN_EXTENSIONS)} (.log is candump's); serial and zenoh: any name "
                    f"(our line formats); any links: {MCAP_EXTENSION} (rosbag2, decoded messages, one topic per link).")
-@click.option("--overwrite", is_flag=True, help="Replace FILE if it exists (never done without this).")
+@overwrite_option("FILE")
 @click.option("--append", is_flag=True, help=f"Add to FILE if it exists (CAN: {' '.join(APPENDABLE)}; serial).")
 @click.option("--max-bytes", help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
                                   "an existing numbered file is skipped, never replaced.")

@@ -22,7 +22,7 @@ from vstig_hw.sim.grid import Cell
 from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
 
-_STEP_SECONDS = 0.1  # the paper's control step
+from ._files import overwrite_option, refuse_to_replace
 
 
 def _model_options(fn: Any) -> Any:
@@ -56,7 +56,9 @@ def _motion_options(fn: Any) -> Any:
     """How robots move in the motion arena (section 4.2); the speed cap is set per command."""
     options = [
         click.option("--control-step", default=Config.control_step, show_default=True,
-                     type=click.FloatRange(0, min_open=True), help="seconds of motion per control step (motion)"),
+                     type=click.FloatRange(0, min_open=True),
+                     help="seconds per control step: how long robots move in one (motion), and what turns steps "
+                          "into seconds (B/s, --capture's times)"),
         click.option("--repulsion", default=Config.repulsion, show_default=True, type=click.FloatRange(0),
                      help="gap in metres at which a neighbour's or obstacle's push equals the forward drive (motion)"),
         click.option("--turn-noise", default=Config.turn_noise, show_default=True, type=click.FloatRange(0),
@@ -103,7 +105,7 @@ def _progress(transient: bool = False) -> Any:
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--capture", type=click.Path(dir_okay=False, writable=True),
               help="also write run 0's radio traffic as a CAN capture (.log candump, .asc, .blf...): robot i is "
-                   "CAN node i, time = step x 0.1 s; for checking `vstig analyze`")
+                   "CAN node i, time = step x --control-step; for checking `vstig analyze`")
 @_model_options
 @click.option("--speed", default=Config.speed, show_default=True, type=click.FloatRange(0),
               help="forward speed cap S in m/s (motion)")
@@ -112,10 +114,11 @@ def _progress(transient: bool = False) -> Any:
               help="instead of running, draw run 0 at --snapshot-step to this PNG (motion; as Figure 4)")
 @click.option("--snapshot-step", default=1, show_default=True, type=click.IntRange(1),
               help="the control step --snapshot draws")
+@overwrite_option("the --capture or --snapshot FILE")
 @click.pass_context
 def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: int, as_json: bool,
             capture: str | None, seed: int, workers: int | None, snapshot: Path | None, snapshot_step: int,
-            **model: Any) -> None:
+            overwrite: bool, **model: Any) -> None:
     """Simulate the paper's task (agree on the highest id) on real engines over a lossy radio."""
     if ctx.invoked_subcommand is not None:
         return
@@ -125,8 +128,11 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
                                "by distance and does not use it")
     config = _config(topology, robots, drop, **model)
     if snapshot is not None:
+        refuse_to_replace(snapshot, overwrite)
         _draw_snapshot(config, seed, snapshot_step, snapshot)
         return
+    if capture:
+        refuse_to_replace(capture, overwrite)  # before the runs, which may take minutes
     try:
         with _progress(transient=True) as progress:
             bar = progress.add_task(_label(config), total=runs)
@@ -141,7 +147,7 @@ def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: i
         return
     click.echo(f"{_label(config)}: {runs} runs, seed {seed}")
     click.echo(_steps_line(summary))
-    click.echo(_bandwidth_line(summary))
+    click.echo(_bandwidth_line(summary, config.control_step))
     click.echo(f"graph: mean degree {summary.mean_degree:.2f}" + _split_note(summary, config.topology == MOTION))
     _unconverged_note(summary, config.max_steps)
 
@@ -171,9 +177,9 @@ def _steps_line(s: Summary) -> str:
             f"  ({s.converged}/{s.runs} converged)")
 
 
-def _bandwidth_line(s: Summary) -> str:
+def _bandwidth_line(s: Summary, step_seconds: float) -> str:
     return (f"bandwidth: {s.msgs_per_robot_step:.3f} msg = {s.bytes_per_robot_step:.1f} B per robot per step "
-            f"({s.bytes_per_robot_step / _STEP_SECONDS:.0f} B/s at {_STEP_SECONDS} s steps); "
+            f"({s.bytes_per_robot_step / step_seconds:.0f} B/s at {step_seconds:g} s steps); "
             f"{s.deliveries_per_robot_step:.2f} messages received per robot per step")
 
 

@@ -24,7 +24,7 @@ import select
 import threading
 import time
 import tty
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -192,21 +192,22 @@ def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] 
               PtyRadio(media[2], "epuck4", lambda: make_serial_framing("epuck4"), config.drop, rng)]
     links: list[Link[Any]] = [CanSpec("virtual", channel).build("can", robot_id=GATEWAY_ID)]
     links += [SerialSpec(radio.path, framing=radio.framing).build(radio.framing) for radio in radios]
-    nodes = [Node(arena, GATEWAY_ID + n, period=config.step, onconflict=larger_value_wins)
-             for n, arena in enumerate(_arenas(links, config.gateways, f"demo-{channel}"))]
+    nodes: list[Node] = []
     highest = config.robots
     everyone = [robot for medium in media for robot in medium.robots]
     for robot in everyone:
         robot.put(KEY, robot.robot_id)
     stopped = stop or threading.Event()
-    threads = [threading.Thread(target=node.run, kwargs={"stop": stopped}, name=f"gateway-{node_id(node)}",
-                                daemon=True) for node in nodes]
+    threads: list[threading.Thread] = []
     converged_at = None
     start = time.monotonic()
     step = 0
     try:
-        for node in nodes:
-            node.open()
+        for n, arena in enumerate(_arenas(links, config.gateways, f"demo-{channel}")):
+            nodes.append(Node(arena, GATEWAY_ID + n, period=config.step, onconflict=larger_value_wins))
+            nodes[-1].open()  # before the next arena is built: it connects to the port this one bound
+        threads = [threading.Thread(target=node.run, kwargs={"stop": stopped}, name=f"gateway-{node_id(node)}",
+                                    daemon=True) for node in nodes]
         for thread in threads:
             thread.start()
         for step in range(1, config.max_steps + 1):
@@ -246,12 +247,14 @@ def node_id(node: Node) -> int:
     return node.engine.robot_id if node.engine else 0
 
 
-def _arenas(links: list[Link[Any]], gateways: int, swarm: str) -> list[list[Link[Any]]]:
+def _arenas(links: list[Link[Any]], gateways: int, swarm: str) -> Iterator[list[Link[Any]]]:
     """One gateway with every link, or two: CAN and cobs8 on the first, the e-puck radio on the second,
-    each with a zenoh link (the first listens on a free loopback port, the second connects to it)."""
+    each with a zenoh link (the first listens on a free loopback port, the second connects to it).
+    The second arena is built when asked for, once the first gateway is open and its port bound."""
     if gateways == 1:
-        return [links]
+        yield links
+        return
     first = ZenohSpec(swarm).build("zenoh", robot_id=GATEWAY_ID)
+    yield [*links[:2], first]
     endpoints = first.transport.listening  # type: ignore[attr-defined]  # a ZenohTransport
-    second = ZenohSpec(swarm, connect=endpoints).build("zenoh", robot_id=GATEWAY_ID + 1)
-    return [[*links[:2], first], [links[2], second]]
+    yield [links[2], ZenohSpec(swarm, connect=endpoints).build("zenoh", robot_id=GATEWAY_ID + 1)]

@@ -17,18 +17,23 @@ from vstig_hw.wire import Message, Op
 BATCH = [Message(Op.PUT, 9, 100 + i, i + 1, 201) for i in range(4)]
 
 
-def _listener() -> tuple[Link[object], str]:
-    """A zenoh link (not yet open) publishing as gateway 201, and the spec of a link that connects to it."""
-    link = parse("zenoh:lab?stigmergy=3").build(robot_id=201)
+def _listener() -> Link[object]:
+    """A zenoh link (not yet open) publishing as gateway 201."""
+    return parse("zenoh:lab?stigmergy=3").build(robot_id=201)
+
+
+def _connecting_to(link: Link[object]) -> str:
+    """The spec of a link that connects to `link`, once open (its port is the one really bound)."""
     [endpoint] = link.transport.listening  # type: ignore[attr-defined]
-    return link, f"zenoh:lab?stigmergy=3&connect={endpoint}"
+    return f"zenoh:lab?stigmergy=3&connect={endpoint}"
 
 
 @pytest.mark.slow
 def test_record_decode_and_replay_a_zenoh_link(tmp_path: Path) -> None:
     capture = tmp_path / "lab.zcap"
-    gateway, spec = _listener()
+    gateway = _listener()
     gateway.open()
+    spec = _connecting_to(gateway)
     try:
         recorder = start_vstig("record", spec, "-o", str(capture))
         try:
@@ -68,11 +73,12 @@ def test_record_decode_and_replay_a_zenoh_link(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_put_and_get_through_a_zenoh_link() -> None:
-    gateway, spec = _listener()
+    gateway = _listener()
     node = Node([gateway], 201)  # a gateway in this process is the neighbour that answers
     engine = node.engine
     assert isinstance(engine, Stigmergy)
     with node:
+        spec = _connecting_to(gateway)
         put = start_vstig("put", "5", "1234", "--on", spec, "--robot-id", "77")
         node.run(until=lambda: engine.has(5), duration=30)
         out, err = put.communicate(timeout=30)

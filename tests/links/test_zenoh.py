@@ -127,9 +127,9 @@ def test_a_bad_config_file_is_one_line_naming_it(tmp_path: Path) -> None:
 # -- real sessions on loopback --------------------------------------------------------
 def _pair() -> tuple[Link[ZenohSample], Link[ZenohSample]]:
     first = parse("zenoh:lab").build(robot_id=201)
-    [endpoint] = first.transport.listening  # type: ignore[attr-defined]
-    second = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
     first.open()
+    [endpoint] = first.transport.listening  # type: ignore[attr-defined]  # read once open: the port bound
+    second = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
     second.open()
     return first, second
 
@@ -139,6 +139,17 @@ def _until(condition: object, deadline: float = 20.0) -> None:
     while not condition():  # type: ignore[operator]
         assert time.monotonic() < end, "timed out"
         time.sleep(0.05)
+
+
+def _one_message_crosses(sender: Link[ZenohSample], receiver: Link[ZenohSample]) -> bool:
+    """Send one message until the receiver hears it (a sample before the sessions meet reaches nobody)."""
+    end = time.monotonic() + 20
+    while time.monotonic() < end:
+        sender.send(MESSAGES[0])
+        heard = receiver.receive(0.3)
+        if heard:
+            return [h.message for h in heard] == [MESSAGES[0]]
+    return False
 
 
 def test_two_links_exchange_a_batch_as_one_sample_named_by_its_sender() -> None:
@@ -227,15 +238,80 @@ def _sockets(table: str) -> list[tuple[str, int, str]]:
 
 def test_an_open_link_really_listens_on_loopback_only_and_joins_no_multicast_group() -> None:
     link = parse("zenoh:lab").build(robot_id=1)
+    link.open()
     [endpoint] = link.transport.listening  # type: ignore[attr-defined]
     port = int(endpoint.rsplit(":", 1)[1])
-    link.open()
     try:
         listening = [(a, s) for a, p, s in _sockets("tcp") + _sockets("tcp6") if p == port and s == "0A"]
         assert listening == [("0100007F", "0A")]  # 127.0.0.1, LISTEN: nothing on 0.0.0.0 or ::
         assert all(p != 7446 for _, p, _ in _sockets("udp") + _sockets("udp6"))  # Zenoh's scouting port unused
     finally:
         link.close()
+
+
+def test_a_default_port_taken_before_the_session_binds_it_is_replaced_by_a_fresh_one(
+        caplog: pytest.LogCaptureFixture) -> None:
+    import socket
+
+    first = parse("zenoh:lab").build(robot_id=201)
+    [picked] = first.transport.listening  # type: ignore[attr-defined]
+    assert picked.startswith("tcp/127.0.0.1:")
+    thief = socket.socket(socket.AF_INET, socket.SOCK_STREAM)  # another program takes the port meanwhile
+    thief.bind(("127.0.0.1", int(picked.rsplit(":", 1)[1])))
+    thief.listen()
+    second = None
+    try:
+        with caplog.at_level(logging.WARNING):
+            first.open()  # today's code stopped here: "Address already in use"
+        [bound] = first.transport.listening  # type: ignore[attr-defined]
+        assert bound != picked and bound.startswith("tcp/127.0.0.1:")
+        assert f"listening on {bound}" in first.transport.about  # type: ignore[attr-defined]
+        port = int(bound.rsplit(":", 1)[1])
+        assert [(a, s) for a, p, s in _sockets("tcp") if p == port and s == "0A"] == [("0100007F", "0A")]
+        assert [r.getMessage() for r in caplog.records] == [
+            f"zenoh-lab: another program took {picked} before Zenoh bound it; listening on a fresh port"]
+        second = parse(f"zenoh:lab?connect={bound}").build(robot_id=202)
+        second.open()
+        assert _one_message_crosses(first, second)
+    finally:
+        thief.close()
+        first.close()
+        if second is not None:
+            second.close()
+
+
+def test_when_every_fresh_port_is_taken_too_opening_fails_in_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    import socket
+
+    import vstig_hw.links.zenoh as zenoh_links
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        monkeypatch.setattr(zenoh_links, "_free_loopback_port", lambda: port)  # every pick lands on a taken port
+        link = parse("zenoh:lab").build(robot_id=1)
+        with pytest.raises(TransportError) as caught:
+            link.open()
+    message = str(caught.value)
+    assert message.startswith("zenoh-lab: cannot open a Zenoh session: ") and "Address already in use" in message
+    assert "\n" not in message
+
+
+def test_a_listen_port_the_user_named_is_never_swapped_for_another() -> None:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        endpoint = f"tcp/127.0.0.1:{taken.getsockname()[1]}"
+        link = parse(f"zenoh:lab?listen={endpoint}").build(robot_id=1)
+        with pytest.raises(TransportError) as caught:
+            link.open()
+    message = str(caught.value)
+    assert message.startswith(f"zenoh-lab: cannot open a Zenoh session: Can not create a new TCP listener "
+                              f"bound to {endpoint}") and "Address already in use" in message
+    assert "\n" not in message and link.transport.listening == (endpoint,)  # type: ignore[attr-defined]
 
 
 def _router(port: int) -> object:
@@ -265,12 +341,7 @@ def test_clients_survive_their_router_going_away_and_coming_back(caplog: pytest.
             _until(lambda: sender.receive(0.2) == [] and sender.transport.counters["lost"] == 1)
             router = _router(port)
             _until(lambda: sender.receive(0.2) == [] and sender.transport.counters["reconnects"] == 1)
-        heard = []
-        end = time.monotonic() + 20
-        while not heard and time.monotonic() < end:
-            sender.send(MESSAGES[0])
-            heard = receiver.receive(0.3)
-        assert [h.message for h in heard] == [MESSAGES[0]]
+        assert _one_message_crosses(sender, receiver)
         mine = [r.getMessage() for r in caplog.records if r.name.endswith("zenoh")]
         assert mine.count("zenoh-lab: lost every Zenoh peer; Zenoh reconnects with backoff") >= 1
         assert sender.transport.counters["lost"] == 1 and sender.transport.counters["unreachable"] == 0

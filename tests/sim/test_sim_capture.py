@@ -10,7 +10,9 @@ from click.testing import CliRunner
 
 from vstig_cli.main import cli
 from vstig_hw.capture.files import read_capture
-from vstig_hw.sim.capture import STEP_SECONDS
+from vstig_hw.sim import Config
+
+STEP_SECONDS = Config.control_step  # the paper's 0.1 s, which --control-step changes
 
 
 @pytest.mark.parametrize(("topology", "robots", "drop"), [
@@ -58,3 +60,29 @@ def test_capture_to_an_unknown_format_is_a_usage_error(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["sim", "--robots", "5", "--runs", "1", "--workers", "1",
                                       "--capture", str(tmp_path / "sim.txt")])
     assert result.exit_code == 2 and "chosen by extension" in result.output
+
+
+def test_a_capture_is_stamped_at_the_runs_control_step(tmp_path: Path) -> None:
+    capture = tmp_path / "slow.log"
+    sim = CliRunner().invoke(cli, ["sim", "--topology", "line", "--robots", "5", "--runs", "1", "--workers", "1",
+                                   "--control-step", "0.25", "--json", "--capture", str(capture)])
+    assert sim.exit_code == 0, sim.output
+    (steps,) = json.loads(sim.stdout)["steps"]
+    assert steps == 5  # a lossless line of 5 robots: one hop per step
+    records = list(read_capture(str(capture)))
+    assert sorted({r.t for r in records}) == pytest.approx([0.25, 0.5, 0.75, 1.0, 1.25])  # t = step x 0.25 s
+    analyzed = CliRunner().invoke(cli, ["analyze", str(capture), "--json", "--conflict", "value"])
+    assert analyzed.exit_code == 0, analyzed.output
+    report = json.loads(analyzed.stdout)
+    highest = next(w for w in report["writes"] if w["robot"] == 4)
+    assert highest["t"] == pytest.approx(0.25)
+    assert highest["converged_after_s"] == pytest.approx((steps - 1) * 0.25, abs=1e-6)
+    assert report["capture"]["duration_s"] == pytest.approx((steps - 1) * 0.25, abs=1e-6)
+
+
+def test_bandwidth_per_second_follows_the_control_step() -> None:
+    result = CliRunner().invoke(cli, ["sim", "--topology", "line", "--robots", "5", "--runs", "1", "--workers", "1",
+                                      "--control-step", "0.25"])
+    assert result.exit_code == 0, result.output
+    # A lossless line sends one 8-byte message per robot per step: 8 B / 0.25 s.
+    assert "8.0 B per robot per step (32 B/s at 0.25 s steps)" in result.stdout

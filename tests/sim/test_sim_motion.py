@@ -152,3 +152,30 @@ def test_motion_options_are_checked_by_name() -> None:
             Config("motion", 10, 0.0, **fields)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="cannot hold"):
         moving_swarm(Config("motion", 1, 0.0, radio_range=0.01, body_radius=1.0), np.random.default_rng(0))
+
+
+def test_a_lone_robot_drives_straight_at_the_speed_cap_until_a_push() -> None:
+    # From the centre of a 60 m arena, heading east: 8 m from every column, 30 m from the walls, so
+    # nothing pushes it (no push beyond twice `repulsion`), and without noise it keeps heading and speed.
+    swarm = MovingSwarm(Arena(60.0), 1, np.random.default_rng(4), RANGE, BODY_RADIUS, True,
+                        Dispersion(0.2, turn_noise=0.0))
+    swarm._z[:] = [0j]
+    swarm._heading[:] = [1 + 0j]
+    for _ in range(10):
+        swarm.step()
+    assert swarm.positions[0].tolist() == pytest.approx([10 * 0.2 * 0.1, 0.0], abs=1e-12)
+    assert float(swarm.headings[0]) == 0.0
+
+
+def test_two_robots_side_by_side_push_each_other_apart() -> None:
+    arena = Arena(60.0)
+    swarm = MovingSwarm(arena, 2, np.random.default_rng(1), RANGE, BODY_RADIUS, True, Dispersion(0.1, turn_noise=0.0))
+    swarm._z[:] = [-0.2 + 5j, 0.2 + 5j]  # 0.4 m apart, far from the columns (at ±10 m) and the walls
+    swarm._heading[:] = [1j, 1j]  # both facing the same way, along the gap between them
+    swarm._list_pairs()
+    swarm._sense()
+    swarm.step()
+    left, right = swarm.positions
+    assert left[0] < -0.2 and right[0] > 0.2  # each moved away from the other
+    assert left[1] > 5 and right[1] > 5  # while still driving forward
+    assert right[0] - left[0] > 0.4

@@ -6,8 +6,11 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from vstig_hw.sim import BODY_RADIUS, DENSITY, RANGE, arena_side, links
+from vstig_hw.sim.radio import Discs
 from vstig_hw.sim.topology import cluster, line, scale_free
 
 
@@ -80,3 +83,46 @@ def test_layouts_depend_only_on_the_seed() -> None:
         first = generate(100, np.random.default_rng(11))
         assert np.array_equal(first, generate(100, np.random.default_rng(11)))
         assert not np.array_equal(first, generate(100, np.random.default_rng(12)))
+
+
+def _hears_by_definition(positions: list[tuple[float, float]], radio_range: float, blocker: float,
+                         columns: list[tuple[float, float]], column_radius: float) -> set[tuple[int, int]]:
+    """Who hears whom, straight from the model: every pair, every third body, every column."""
+
+    def gap(p: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
+        (px, py), (ax, ay), (bx, by) = p, a, b
+        dx, dy = bx - ax, by - ay
+        length_sq = dx * dx + dy * dy
+        t = 0.0 if length_sq == 0 else min(1.0, max(0.0, ((px - ax) * dx + (py - ay) * dy) / length_sq))
+        return math.hypot(px - ax - t * dx, py - ay - t * dy)
+
+    heard = set()
+    for a, pa in enumerate(positions):
+        for b, pb in enumerate(positions):
+            if a == b or math.dist(pa, pb) > radio_range:
+                continue
+            if any(gap(pc, pa, pb) < blocker for c, pc in enumerate(positions) if c not in (a, b)):
+                continue
+            if any(gap(centre, pa, pb) < column_radius for centre in columns):
+                continue
+            heard.add((a, b))
+    return heard
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), robots=st.integers(1, 40), occlusion=st.booleans(),
+       with_columns=st.booleans())
+def test_the_hearing_graph_is_the_models_definition(seed: int, robots: int, occlusion: bool,
+                                                     with_columns: bool) -> None:
+    rng = np.random.default_rng(seed)
+    side = rng.uniform(2.0, 12.0)
+    positions = rng.uniform(-side / 2, side / 2, size=(robots, 2))
+    columns = Discs(rng.uniform(-side / 2, side / 2, size=(3, 2)), side / 10) if with_columns else None
+    heard = links(positions, RANGE, BODY_RADIUS, occlusion, columns)
+    pairs = list(zip(heard.src.tolist(), heard.dst.tolist(), strict=True))
+    assert pairs == sorted(pairs), "links are listed by sender, then receiver"
+    expected = _hears_by_definition(
+        [tuple(p) for p in positions.tolist()], RANGE, BODY_RADIUS if occlusion else 0.0,
+        [tuple(c) for c in columns.centres.tolist()] if columns is not None and occlusion else [],
+        columns.radius if columns is not None else 0.0)
+    assert set(pairs) == expected

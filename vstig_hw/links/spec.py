@@ -89,8 +89,8 @@ NOTES = {
                     "robot's frame to all the others, and sends our own under --robot-id. size= must be the "
                     "robots' msg_size; deployment= maps their Buzz keys and values to ours.",
     "zenoh": "zenoh: gateways on many PCs as one swarm (key vstig/<swarm>/<stigmergy>/<gateway id>). Closed by "
-             "default: listens on a free loopback port, no multicast scouting; listen=, connect= or scout=1 open "
-             "it, config= passes a Zenoh config file (TLS, user/password, routers) through.",
+             "default: listens on a free loopback port (printed once open), no multicast scouting; listen=, connect= "
+             "or scout=1 open it, config= passes a Zenoh config file (TLS, user/password, routers) through.",
 }
 _IFACE = re.compile(r"[A-Za-z0-9_]+\Z")
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9._:-]+")

@@ -3,7 +3,10 @@
 Closed by default. Zenoh's own defaults listen on every interface and scout the
 LAN by multicast; a gateway built here listens on a free loopback port and does
 no multicast scouting unless the spec (`listen=`, `scout=1`) or the Zenoh config
-file says otherwise. A config file passes through unchanged: only the keys the
+file says otherwise. The port is picked when the link is built and bound when its
+session opens; should another program take it in between, the session opens on a
+fresh one (Zenoh's Python API cannot report a port it picked itself from port 0,
+short of opening its admin space to every peer). A config file passes through unchanged: only the keys the
 spec names override it, and our closed defaults fill only what it leaves unset.
 
 Opening a link that listens beyond loopback, or scouts, with no authentication
@@ -46,8 +49,17 @@ def _json(config: zenoh.Config, key: str) -> Any:
     return json.loads(config.get_json(key))
 
 
+def _loopback_listener(protocol: str) -> list[str]:
+    return [f"{protocol}/127.0.0.1:{_free_loopback_port()}"]
+
+
 def zenoh_config(spec: ZenohSpec) -> zenoh.Config:
     """The Zenoh configuration for `spec`: its file (if any), then the spec's keys, then our closed defaults."""
+    return _config_and_listener(spec)[0]
+
+
+def _config_and_listener(spec: ZenohSpec) -> tuple[zenoh.Config, str | None]:
+    """zenoh_config(spec), and the protocol of the loopback listener we chose for it (None if we chose none)."""
     if spec.config:
         try:
             config = zenoh.Config.from_file(spec.config)
@@ -63,17 +75,17 @@ def zenoh_config(spec: ZenohSpec) -> zenoh.Config:
         config.insert_json5("mode", '"peer"')
     if spec.connect:
         config.insert_json5("connect/endpoints", json.dumps(list(spec.connect)))
+    ours = None
     if spec.listen:
         config.insert_json5("listen/endpoints", json.dumps(list(spec.listen)))
     elif _json(config, "listen/endpoints") == _json(zenoh_default, "listen/endpoints"):
-        protocol = _loopback_protocol(config)
-        loopback = [f"{protocol}/127.0.0.1:{_free_loopback_port()}"] if protocol else []
-        config.insert_json5("listen/endpoints", json.dumps(loopback))
+        ours = _loopback_protocol(config)
+        config.insert_json5("listen/endpoints", json.dumps(_loopback_listener(ours) if ours else []))
     if spec.scout is not None:
         config.insert_json5("scouting/multicast/enabled", json.dumps(spec.scout))
     elif _json(config, "scouting/multicast/enabled") is None:
         config.insert_json5("scouting/multicast/enabled", "false")
-    return config
+    return config, ours
 
 
 def _loopback_protocol(config: zenoh.Config) -> str | None:
@@ -130,28 +142,32 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
     """A Zenoh link (not yet open) publishing as gateway `robot_id` (0 when it never transmits)."""
     space = ZenohKeySpace(spec.swarm, spec.stigmergy)
     framing = ZenohFraming(space, 0 if listen_only else robot_id)
-    first = zenoh_config(spec)  # read once now, so a bad file or value fails before anything opens
-    listening = _endpoints(first, "listen/endpoints")
+    first, ours = _config_and_listener(spec)  # read once now, so a bad file or value fails before anything opens
     connecting = _endpoints(first, "connect/endpoints")
     made = [first]
 
-    def make_config() -> zenoh.Config:  # a reopened session listens where the first one did
+    def make_config() -> zenoh.Config:  # a reopened session listens where the last one did
         if made:
             return made.pop()
         config = zenoh_config(spec)
-        config.insert_json5("listen/endpoints", json.dumps(listening))
+        config.insert_json5("listen/endpoints", json.dumps(list(transport.listening)))
         return config
+
+    def fresh_listener() -> tuple[str, ...]:  # our loopback port was taken before the session bound it
+        assert ours is not None
+        made.clear()
+        return tuple(_loopback_listener(ours))
 
     open_to = exposure(first)
     if open_to:
         log.warning("%s: WARNING: this gateway %s with no authentication: anyone on the network can read "
                     "and write the swarm (configure TLS and user/password with config=, see README 'Many PCs')",
                     name, open_to)
-    about = "; ".join(filter(None, (
-        f"listening on {', '.join(listening)}" if listening else "",
+    reaches = "; ".join(filter(None, (
         f"connecting to {', '.join(connecting)}" if connecting else "",
         "scouting by multicast" if _json(first, "scouting/multicast/enabled") is not False else "")))
     transport = ZenohTransport(make_config, space.subscription, name=name, block=spec.block,
                                expects_peer=bool(connecting) or _mode(first) == "client",
-                               listening=tuple(listening), about=about)
+                               listening=tuple(_endpoints(first, "listen/endpoints")), reaches=reaches,
+                               rebind=fresh_listener if ours else None)
     return Link(name, transport, framing)

@@ -2,8 +2,9 @@
 
 Robot i transmits under CAN node id i (11-bit IDs up to 256 robots, 29-bit
 beyond), and what it broadcasts at the end of control step k is stamped
-k x STEP_SECONDS. The capture format follows the file's extension, as
-`vstig record` chooses it (.log is a candump log).
+k x the run's control step (Config.control_step, `--control-step`), so the
+times analyze reports are the run's. The capture format follows the file's
+extension, as `vstig record` chooses it (.log is a candump log).
 """
 
 from __future__ import annotations
@@ -17,9 +18,8 @@ from ..framing.can import CanIdScheme
 from ..wire import Message, encode
 from .experiment import Config, RunResult, run_once
 
-__all__ = ["CHANNEL", "STEP_SECONDS", "capture_run", "id_scheme"]
+__all__ = ["CHANNEL", "capture_run", "id_scheme"]
 
-STEP_SECONDS = 0.1  # the paper's control step
 CHANNEL = "sim"  # the link name the capture gives the simulated radio
 
 
@@ -34,7 +34,7 @@ def capture_run(config: Config, seed: np.random.SeedSequence, path: str, run: in
     writer = CanCaptureWriter(path)
 
     def record(step: int, outgoing: list[list[Message]]) -> None:
-        t = step * STEP_SECONDS
+        t = step * config.control_step
         for robot, messages in enumerate(outgoing):
             for message in messages:
                 frame = can.Message(timestamp=t, arbitration_id=scheme.can_id(message.op, robot),

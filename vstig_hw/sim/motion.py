@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .arena import Arena
+from .jit import compiled
 from .radio import Index, Links, links, near_pairs
 from .topology import Positions
 
@@ -60,8 +61,7 @@ class MovingSwarm:
     """Positions and headings of N robots in an arena; `hearing` is who hears whom right now.
 
     Inside, a position is a complex number x + iy and a heading a unit complex
-    number: one numpy call per operation instead of one per axis, which is most
-    of the cost of a step for a hundred robots.
+    number, so the compiled step (`_move`) reads as the vector algebra it does.
     """
 
     def __init__(self, arena: Arena, robots: int, rng: np.random.Generator, radio_range: float, body_radius: float,
@@ -73,11 +73,11 @@ class MovingSwarm:
         self.dispersion = dispersion
         self._rng = rng
         self._columns = arena.columns
-        self._column_centres = _complex(self._columns.centres)
         # Line of sight needs pairs within R + body radius, a bump check pairs that one stride each can join.
         self._reach = max(radio_range + body_radius, 2 * body_radius + 2 * dispersion.stride) + _SKIN
         self._z = _complex(arena.place(robots, rng, body_radius))
         self._heading = np.exp(1j * rng.uniform(0.0, 2 * math.pi, robots))
+        self._drift = 0.0  # how far the farthest robot is from where the pairs were listed
         self._list_pairs()
         self._sense()
 
@@ -95,82 +95,115 @@ class MovingSwarm:
         return angles
 
     def _list_pairs(self) -> None:
-        self._listed_at = self._z
+        self._listed_at, self._drift = self._z, 0.0
         self._near = near_pairs(self.positions, self._reach)
         a, b = self._near
         ordered = a < b
         self._pairs = (a[ordered], b[ordered])
 
     def _sense(self) -> None:
-        if np.max(np.abs(self._z - self._listed_at), initial=0.0) > _SKIN / 2:
+        if self._drift > _SKIN / 2:
             self._list_pairs()
         self.hearing: Links = links(self.positions, self.radio_range, self.body_radius, self.occlusion,
                                     self._columns, self._near)
 
     def step(self) -> None:
         """One control step of motion for every robot, then the new hearing graph."""
-        z, rng = self._z, self._rng
-        drive = self._heading + self._push()
-        size = np.abs(drive)
-        heading = np.divide(drive, size, out=self._heading.copy(), where=size > 0)
-        heading *= np.exp(1j * rng.normal(0.0, self.dispersion.turn_noise, len(z)))
-        wanted = z + (self.dispersion.stride * np.minimum(1.0, size)) * heading
-        moved = self._allowed(wanted)
-        bumped = np.flatnonzero(~moved)
-        if len(bumped):
-            heading[bumped] = np.exp(1j * rng.uniform(0.0, 2 * math.pi, len(bumped)))
-        self._heading = heading
-        self._z = np.where(moved, wanted, z)
+        robots, rng, columns = len(self._z), self._rng, self._columns
+        turns = rng.normal(0.0, self.dispersion.turn_noise, robots)
+        bumps = rng.uniform(0.0, 2 * math.pi, robots)  # a new heading, for the robots whose move is refused
+        self._z, self._heading, self._drift = _move(
+            self._z, self._heading, self.hearing.src, self.hearing.dst, self._pairs[0], self._pairs[1], turns, bumps,
+            self._listed_at, self.arena.side / 2 - self.body_radius, columns.x, columns.y, columns.radius,
+            self.body_radius, self.dispersion.repulsion, self.dispersion.stride)
         self._sense()
 
-    def _push(self) -> NDArray[np.complex128]:
-        """The repulsive field on every robot, from the robots it senses, the walls and the columns."""
-        z, rho = self._z, self.body_radius
-        scale = self.dispersion.repulsion**2
-        reach = 2 * self.dispersion.repulsion  # the largest gap that pushes
-        src, dst = self.hearing.src, self.hearing.dst
-        away = z[src] - z[dst]
-        dist = np.abs(away)
-        gap = np.maximum(dist - 2 * rho, _MIN_GAP)
-        close = np.flatnonzero(gap <= reach)
-        if len(close):
-            along = away[close] * (scale / (gap[close] ** 2 * dist[close]))
-            push = np.bincount(src[close], along.real, len(z)) + 1j * np.bincount(src[close], along.imag, len(z))
-        else:
-            push = np.zeros(len(z), dtype=np.complex128)
-        # Walls: the one behind pushes forward, the one ahead pushes back, on each axis.
-        half = self.arena.side / 2 - rho
-        xy = self.positions
-        behind = np.maximum(half + xy, _MIN_GAP)
-        ahead = np.maximum(half - xy, _MIN_GAP)
-        walls = np.where(behind <= reach, scale / behind**2, 0.0) - np.where(ahead <= reach, scale / ahead**2, 0.0)
-        push += _complex(walls)
-        away = z[:, None] - self._column_centres[None, :]
-        dist = np.abs(away)
-        gap = np.maximum(dist - self._columns.radius - rho, _MIN_GAP)
-        push += np.sum(away * np.where(gap <= reach, scale / (gap * gap * dist), 0.0), axis=1)
-        return push
 
-    def _allowed(self, wanted: NDArray[np.complex128]) -> NDArray[np.bool_]:
-        """Which robots may make their move: into free space, and not into another body, moved or not.
+@compiled
+def _move(z: NDArray[np.complex128], heading: NDArray[np.complex128], src: Index, dst: Index, pair_a: Index,
+          pair_b: Index, turns: NDArray[np.float64], bumps: NDArray[np.float64], listed_at: NDArray[np.complex128],
+          half: float, column_x: NDArray[np.float64], column_y: NDArray[np.float64], column_radius: float, rho: float,
+          repulsion: float, stride: float) -> tuple[NDArray[np.complex128], NDArray[np.complex128], float]:
+    """Every robot's move: (new positions, new headings, the farthest any robot now is from `listed_at`).
 
-        A refused move leaves its robot where it was, which may refuse a move
-        beside it in turn; the loop ends because refusing every move gives back
-        the current, overlap-free layout.
-        """
-        moved = self.arena.fits(wanted.view(np.float64).reshape(-1, 2), self.body_radius)
-        a, b = self._pairs
-        contact = 2 * self.body_radius
-        while len(a):
-            where = np.where(moved, wanted, self._z)
-            clash = np.flatnonzero(np.abs(where[a] - where[b]) < contact)
-            if not len(clash):
-                break
-            stop: Index = np.concatenate([a[clash], b[clash]])
-            if not moved[stop].any():  # two bodies that did not move overlap: the layout was broken before
-                raise RuntimeError("bodies overlap in the current layout")
-            moved[stop] = False
-        return moved
+    `half` bounds a body's centre on each axis (the walls), `src`/`dst` are the
+    links sensed now, `pair_a`/`pair_b` every pair that one stride each can bring
+    into contact, `turns` each robot's random turn and `bumps` the heading it
+    takes if its move is refused.
+    """
+    robots = len(z)
+    scale, reach = repulsion * repulsion, 2 * repulsion  # no push beyond a gap of twice `repulsion`
+    push = np.zeros(robots, np.complex128)
+    for link in range(len(src)):
+        robot = src[link]
+        away = z[robot] - z[dst[link]]
+        dist = abs(away)
+        gap = max(dist - 2 * rho, _MIN_GAP)
+        if gap <= reach:
+            push[robot] += away * (scale / (gap * gap * dist))
+    columns = column_x + 1j * column_y
+    wanted = np.empty(robots, np.complex128)
+    new_heading = np.empty(robots, np.complex128)
+    moved = np.empty(robots, np.bool_)
+    for robot in range(robots):
+        here = z[robot]
+        field = push[robot] + _wall_push(here.real, half, scale, reach) + 1j * _wall_push(here.imag, half, scale, reach)
+        for column in columns:
+            away = here - column
+            dist = abs(away)
+            gap = max(dist - column_radius - rho, _MIN_GAP)
+            if gap <= reach:
+                field += away * (scale / (gap * gap * dist))
+        drive = heading[robot] + field
+        size = abs(drive)
+        towards = (drive / size if size > 0 else heading[robot]) * np.exp(1j * turns[robot])
+        new_heading[robot] = towards
+        wanted[robot] = step_to = here + stride * min(1.0, size) * towards
+        fits = abs(step_to.real) <= half and abs(step_to.imag) <= half
+        for column in columns:
+            fits = fits and abs(step_to - column) >= column_radius + rho
+        moved[robot] = fits
+    _refuse_clashes(z, wanted, moved, pair_a, pair_b, 2 * rho)
+    drift = 0.0
+    for robot in range(robots):
+        if not moved[robot]:  # a bump: stay, and turn to a random heading
+            wanted[robot] = z[robot]
+            new_heading[robot] = np.exp(1j * bumps[robot])
+        drift = max(drift, abs(wanted[robot] - listed_at[robot]))
+    return wanted, new_heading, drift
+
+
+@compiled
+def _wall_push(coordinate: float, half: float, scale: float, reach: float) -> float:
+    """On one axis: the wall behind pushes forward, the wall ahead pushes back."""
+    behind, ahead = max(half + coordinate, _MIN_GAP), max(half - coordinate, _MIN_GAP)
+    return (scale / behind**2 if behind <= reach else 0.0) - (scale / ahead**2 if ahead <= reach else 0.0)
+
+
+@compiled
+def _refuse_clashes(z: NDArray[np.complex128], wanted: NDArray[np.complex128], moved: NDArray[np.bool_],
+                    pair_a: Index, pair_b: Index, contact: float) -> None:
+    """Refuse (in `moved`) every move that would bring two bodies closer than `contact`, moved or not.
+
+    A refused move leaves its robot where it was, which may refuse a move beside
+    it in turn; the loop ends because refusing every move gives back the
+    current, overlap-free layout.
+    """
+    clashing = np.zeros(len(z), np.bool_)
+    while True:
+        for pair in range(len(pair_a)):
+            a, b = pair_a[pair], pair_b[pair]
+            at_a = wanted[a] if moved[a] else z[a]
+            at_b = wanted[b] if moved[b] else z[b]
+            if abs(at_a - at_b) < contact:
+                if not (moved[a] or moved[b]):  # two bodies that did not move overlap: the layout was broken before
+                    raise RuntimeError("bodies overlap in the current layout")
+                clashing[a] = clashing[b] = True
+        if not clashing.any():
+            return
+        for robot in range(len(z)):
+            if clashing[robot]:
+                moved[robot] = clashing[robot] = False
 
 
 def _complex(xy: NDArray[np.float64]) -> NDArray[np.complex128]:

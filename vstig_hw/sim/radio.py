@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..wire import Message
+from .jit import compiled
 from .topology import BODY_RADIUS, RANGE, Positions
 
 __all__ = ["Discs", "Links", "Radio", "links", "near_pairs"]
@@ -60,49 +61,70 @@ def _pairs_within(positions: Positions, reach: float) -> tuple[Index, Index]:
     return np.concatenate(rows).astype(np.intp), np.concatenate(cols).astype(np.intp)
 
 
-def _clear_pairs(positions: Positions, near_a: Index, near_c: Index, radio_range: float,
-                 body_radius: float) -> tuple[Index, Index]:
-    """Pairs a < b in range whose segment passes no closer than `body_radius` to a third robot.
+@compiled
+def _gap_sq(dx: float, dy: float, length_sq: float, px: float, py: float) -> float:
+    """Squared distance from point p to the segment from the origin to d (all relative to one end)."""
+    t = (px * dx + py * dy) / length_sq if length_sq > 0.0 else 0.0
+    t = min(max(t, 0.0), 1.0)  # where p projects on the segment
+    ex, ey = px - t * dx, py - t * dy
+    return ex * ex + ey * ey
 
-    Any blocker of a->b lies within |ab| + body_radius of a, so the candidates
-    for pair (a, b) are a's near robots: one flat array of (pair, candidate)
-    rows, built in chunks of pairs so memory stays bounded in dense swarms.
+
+@compiled
+def _hearing(x: NDArray[np.float64], y: NDArray[np.float64], near_a: Index, near_c: Index, radio_range: float,
+             block_radius: float, column_x: NDArray[np.float64], column_y: NDArray[np.float64],
+             column_radius: float) -> tuple[Index, Index]:
+    """Directed hearing links (src, dst), sorted by sender then receiver.
+
+    A pair a < b of `near` hears each other when |ab| <= radio_range and the
+    segment ab passes no closer than `block_radius` (0: no blocking) to a third
+    robot, nor closer than `column_radius` to a column's centre. Any robot that
+    blocks a->b lies within |ab| + block_radius of a, so a's near robots are the
+    only candidates (`near` is a-major).
     """
-    rel = positions[near_c] - positions[near_a]
-    rel_x, rel_y = rel[:, 0].copy(), rel[:, 1].copy()
-    rel_sq = rel_x * rel_x + rel_y * rel_y
-    pair_rows = np.flatnonzero((near_a < near_c) & (rel_sq <= radio_range**2))  # the pairs a < b in range
-    starts = np.searchsorted(near_a, np.arange(len(positions) + 1))
-    fan_out = np.diff(starts)[near_a[pair_rows]]  # candidates of each pair: a's near robots
-    ends = np.cumsum(fan_out)
-    body_sq = body_radius**2
-    blocked = np.zeros(len(pair_rows), dtype=bool)
-    first = 0
-    while first < len(pair_rows):
-        done = ends[first - 1] if first else 0
-        last = max(first + 1, int(np.searchsorted(ends, done + _CHUNK * _CHUNK, side="right")))
-        rows, counts = pair_rows[first:last], fan_out[first:last]
-        pair = np.repeat(np.arange(len(rows)), counts)
-        cand = np.arange(len(pair)) + np.repeat(starts[near_a[rows]] - (ends[first:last] - counts - done), counts)
-        bx, by, b_sq = rel_x[rows][pair], rel_y[rows][pair], rel_sq[rows][pair]
-        dot = bx * rel_x[cand] + by * rel_y[cand]
-        t = np.clip(dot / b_sq, 0.0, 1.0)  # where c projects on a->b
-        gap_sq = rel_sq[cand] - 2 * t * dot + t * t * b_sq
-        hit = (gap_sq < body_sq) & (cand != rows[pair])  # b does not block itself
-        blocked[first:last] = np.bincount(pair[hit], minlength=len(rows)) > 0
-        first = last
-    clear = pair_rows[~blocked]
-    return near_a[clear], near_c[clear]
-
-
-def _segments_clear_of_discs(start: Positions, end: Positions, centres: Positions, radius: float) -> NDArray[np.bool_]:
-    """For each segment start->end, True when it keeps at least `radius` from every centre."""
-    s, e, c = (np.ascontiguousarray(xy).view(np.complex128) for xy in (start, end, centres))  # x + iy: (P, 1), (K, 1)
-    seg = e - s
-    rel = c.T - s  # (P, K): each centre seen from each segment's start
-    t = np.clip((rel * seg.conj()).real / np.maximum((seg * seg.conj()).real, 1e-300), 0.0, 1.0)
-    clear: NDArray[np.bool_] = np.all(np.abs(rel - t * seg) >= radius, axis=1)
-    return clear
+    robots = len(x)
+    starts = np.searchsorted(near_a, np.arange(robots + 1))
+    range_sq, block_sq, column_sq = radio_range * radio_range, block_radius * block_radius, column_radius**2
+    pair_a = np.empty(len(near_a), np.intp)
+    pair_b = np.empty(len(near_a), np.intp)
+    degree = np.zeros(robots, np.intp)
+    pairs = 0
+    for row in range(len(near_a)):
+        a, b = near_a[row], near_c[row]
+        if b <= a:
+            continue
+        dx, dy = x[b] - x[a], y[b] - y[a]
+        length_sq = dx * dx + dy * dy
+        if length_sq > range_sq:
+            continue
+        clear = True
+        if block_sq > 0.0:
+            for candidate in range(starts[a], starts[a + 1]):
+                c = near_c[candidate]
+                if c != b and _gap_sq(dx, dy, length_sq, x[c] - x[a], y[c] - y[a]) < block_sq:
+                    clear = False
+                    break
+        for column in range(len(column_x)):
+            if clear and _gap_sq(dx, dy, length_sq, column_x[column] - x[a], column_y[column] - y[a]) < column_sq:
+                clear = False
+        if clear:
+            pair_a[pairs], pair_b[pairs] = a, b
+            degree[a] += 1
+            degree[b] += 1
+            pairs += 1
+    # Both directions of each pair, as rows per sender. The pairs come sorted by a, then b,
+    # so a row fills with its lower receivers (as b) before its higher ones (as a): sorted.
+    fill = np.zeros(robots + 1, np.intp)
+    fill[1:] = np.cumsum(degree)
+    src = np.empty(2 * pairs, np.intp)
+    dst = np.empty(2 * pairs, np.intp)
+    for pair in range(pairs):
+        a, b = pair_a[pair], pair_b[pair]
+        src[fill[a]], dst[fill[a]] = a, b
+        fill[a] += 1
+        src[fill[b]], dst[fill[b]] = b, a
+        fill[b] += 1
+    return src, dst
 
 
 @dataclass(frozen=True)
@@ -111,6 +133,17 @@ class Discs:
 
     centres: Positions
     radius: float
+
+    @property
+    def x(self) -> NDArray[np.float64]:
+        return np.ascontiguousarray(self.centres[:, 0])
+
+    @property
+    def y(self) -> NDArray[np.float64]:
+        return np.ascontiguousarray(self.centres[:, 1])
+
+
+_NO_DISCS = Discs(np.zeros((0, 2)), 0.0)
 
 
 def near_pairs(positions: Positions, reach: float) -> tuple[Index, Index]:
@@ -128,17 +161,11 @@ def links(
     when the caller needs those pairs too.
     """
     near_a, near_c = near if near is not None else _pairs_within(positions, radio_range + body_radius)
-    if occlusion and body_radius > 0:
-        a, b = _clear_pairs(positions, near_a, near_c, radio_range, body_radius)
-    else:
-        keep = (near_a < near_c) & (np.sum((positions[near_a] - positions[near_c]) ** 2, axis=1) <= radio_range**2)
-        a, b = near_a[keep], near_c[keep]
-    if occlusion and obstacles is not None and len(a):
-        sight = _segments_clear_of_discs(positions[a], positions[b], obstacles.centres, obstacles.radius)
-        a, b = a[sight], b[sight]
-    a, b = np.concatenate([a, b]), np.concatenate([b, a])  # hearing is symmetric
-    order = np.argsort(a * len(positions) + b)  # by sender, then receiver
-    return Links(len(positions), a[order], b[order])
+    x, y = (np.ascontiguousarray(positions[:, axis]) for axis in (0, 1))
+    block_radius = body_radius if occlusion else 0.0
+    columns = obstacles if occlusion and obstacles is not None else _NO_DISCS
+    src, dst = _hearing(x, y, near_a, near_c, radio_range, block_radius, columns.x, columns.y, columns.radius)
+    return Links(len(positions), src, dst)
 
 
 Receive = Callable[[Message], object]

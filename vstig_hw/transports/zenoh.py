@@ -11,6 +11,10 @@ counted (`lost`, `unreachable`), and its return too (`reconnects`). A client
 whose router is down at start cannot even open a session: then the session is
 reopened here with exponential backoff from `read`, as the CAN transport does.
 
+A listener port the caller picked for us (`rebind`) may be taken by another
+program before the session binds it: then the session opens on a fresh port,
+logged once, and `listening` names the port really bound.
+
 Congestion control is chosen by the caller: BLOCK where losing a sample loses
 data (replay, put), DROP for the gateway, whose protocol repairs losses and whose
 other links must not stall behind a slow network (README, "Many PCs").
@@ -43,6 +47,8 @@ _PEER_POLL_S = 1.0  # how often to ask the session whether any peer or router is
 _UNREACHABLE_AFTER_S = 3.0  # a session told to connect that has found nobody by then is reported
 _FIRST_PEER_WAIT_S = 3.0  # open() waits this long for a peer it was told to connect to, so a first put is heard
 _UNREACHABLE_MARK = "Unable to connect"  # Zenoh's words when a client finds no router at all
+_IN_USE_MARKS = ("Address already in use", "os error 10048")  # a listener's port taken (POSIX, Windows)
+_REBIND_TRIES = 5  # fresh ports tried after the picked one was taken, before giving up
 
 
 class ZenohTransport:
@@ -57,12 +63,14 @@ class ZenohTransport:
         block: bool = False,
         expects_peer: bool = False,
         listening: tuple[str, ...] = (),
-        about: str = "",
+        reaches: str = "",
+        rebind: Callable[[], tuple[str, ...]] | None = None,
         backoff: tuple[float, float] = (0.5, 10.0),
     ) -> None:
         self.name = name
         self.listening = listening  # the endpoints it listens on (a free loopback port by default)
-        self.about = about  # where it listens and connects, for the start line
+        self._reaches = reaches  # where else it reaches (connects, scouts), for the start line
+        self._rebind = rebind  # new endpoints to listen on, when those picked for us were taken
         self.counters = Counters()
         self.last_error: str | None = None
         self.subscription = subscription
@@ -82,6 +90,7 @@ class ZenohTransport:
         self._next_poll = 0.0
         self._had_peer = False
         self._reported_alone = False
+        self._rebound = False  # the fresh-port line is logged once
 
     # -- lifecycle -----------------------------------------------------------
     def open(self) -> None:
@@ -115,6 +124,12 @@ class ZenohTransport:
             self._stop()
 
     @property
+    def about(self) -> str:
+        """Where it listens and connects, for the start line (print it after open: the port may change then)."""
+        listening = f"listening on {', '.join(self.listening)}" if self.listening else ""
+        return "; ".join(filter(None, (listening, self._reaches)))
+
+    @property
     def connected(self) -> bool:
         return self._session is not None
 
@@ -124,15 +139,13 @@ class ZenohTransport:
         return self._session
 
     def _start(self) -> None:
-        try:
-            config = self._make_config()
-            session = zenoh.open(config)
-        except zenoh.ZError as exc:
-            reason = one_line(exc).split(" at /", 1)[0]  # Zenoh appends its source location
-            if _UNREACHABLE_MARK in reason:
-                raise _Unreachable(f"no Zenoh router reachable ({reason}): is it up, and does it accept our "
-                                   "certificates and credentials?") from None
-            raise TransportError(f"{self.name}: cannot open a Zenoh session: {reason}") from None
+        tries = 1 + (_REBIND_TRIES if self._rebind else 0)
+        session = None
+        for attempt in range(tries):
+            session = self._open_session(may_rebind=attempt < tries - 1)
+            if session is not None:
+                break
+        assert session is not None  # the last try raises rather than return None
         try:
             subscriber = session.declare_subscriber(self.subscription, self._heard,
                                                     allowed_origin=zenoh.Locality.REMOTE)
@@ -142,6 +155,24 @@ class ZenohTransport:
         with self._lock:
             self._session, self._subscriber = session, subscriber
         self.last_error = None
+
+    def _open_session(self, *, may_rebind: bool) -> zenoh.Session | None:
+        """A new session; None if the listener port picked for us was taken (`listening` is then a fresh one)."""
+        try:
+            return zenoh.open(self._make_config())
+        except zenoh.ZError as exc:
+            reason = one_line(exc).split(" at /", 1)[0]  # Zenoh appends its source location
+            if _UNREACHABLE_MARK in reason:
+                raise _Unreachable(f"no Zenoh router reachable ({reason}): is it up, and does it accept our "
+                                   "certificates and credentials?") from None
+            if may_rebind and self._rebind is not None and any(mark in reason for mark in _IN_USE_MARKS):
+                taken, self.listening = self.listening, self._rebind()
+                if not self._rebound:
+                    self._rebound = True
+                    log.warning("%s: another program took %s before Zenoh bound it; listening on a fresh port",
+                                self.name, ", ".join(taken))
+                return None
+            raise TransportError(f"{self.name}: cannot open a Zenoh session: {reason}") from None
 
     def _stop(self) -> None:
         session, self._session = self._session, None

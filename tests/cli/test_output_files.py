@@ -1,0 +1,107 @@
+"""No command replaces a file the user names (decode -o, sim --capture/--snapshot, analyze --plot) unless
+--overwrite says so: one line naming the file, exit 2, the file as it was. `record` is in test_record_files.py."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from vstig_cli.main import cli
+from vstig_hw.capture.files import read_capture
+
+LOG = "".join(f"(1700000000.{i}00000) can0 60{i}#000300{i:02X}00010001\n" for i in range(1, 4))
+PRECIOUS = b"an earlier capture"
+
+
+def _vstig(*args: str) -> tuple[int, str]:
+    result = CliRunner().invoke(cli, list(args))
+    return result.exit_code, result.output
+
+
+def _refused(code: int, output: str, path: Path) -> bool:
+    return (code == 2 and f"{path} exists: --overwrite replaces it" in output and "Traceback" not in output
+            and path.read_bytes() == PRECIOUS)
+
+
+@pytest.fixture
+def log(tmp_path: Path) -> Path:
+    path = tmp_path / "swarm.log"
+    path.write_text(LOG)
+    return path
+
+
+def test_decode_refuses_an_existing_mcap_unless_overwrite(tmp_path: Path, log: Path) -> None:
+    bag = tmp_path / "run.mcap"
+    bag.write_bytes(PRECIOUS)
+    assert _refused(*_vstig("decode", str(log), "--format", "mcap", "-o", str(bag)), bag)
+    code, output = _vstig("decode", str(log), "--format", "mcap", "-o", str(bag), "--overwrite")
+    assert code == 0, output
+    assert len(list(read_capture(str(bag)))) == 3
+
+
+def test_decode_into_an_empty_file_is_no_loss(tmp_path: Path, log: Path) -> None:
+    bag = tmp_path / "made-by-mktemp.mcap"
+    bag.touch()
+    code, output = _vstig("decode", str(log), "--format", "mcap", "-o", str(bag))
+    assert code == 0, output
+    assert len(list(read_capture(str(bag)))) == 3
+
+
+def test_decode_never_writes_over_one_of_its_inputs(tmp_path: Path, log: Path) -> None:
+    bag = tmp_path / "run.mcap"
+    assert _vstig("decode", str(log), "--format", "mcap", "-o", str(bag))[0] == 0
+    before = bag.read_bytes()
+    code, output = _vstig("decode", str(bag), str(log), "--format", "mcap", "-o", str(bag), "--overwrite")
+    assert code == 2 and f"{bag} is also an input" in output
+    assert bag.read_bytes() == before
+
+
+def test_decode_names_a_wrong_extension_before_the_existing_file(tmp_path: Path, log: Path) -> None:
+    out = tmp_path / "run.txt"
+    out.write_bytes(PRECIOUS)
+    code, output = _vstig("decode", str(log), "--format", "mcap", "-o", str(out))
+    assert code == 2 and "an MCAP capture is named *.mcap" in output and out.read_bytes() == PRECIOUS
+
+
+def test_sim_refuses_an_existing_capture_before_running(tmp_path: Path) -> None:
+    capture = tmp_path / "sim.log"
+    capture.write_bytes(PRECIOUS)
+    sim = ["sim", "--topology", "line", "--robots", "5", "--runs", "1", "--workers", "1", "--capture", str(capture)]
+    code, output = _vstig(*sim)
+    assert _refused(code, output, capture) and "convergence steps" not in output  # refused before any run
+    code, output = _vstig(*sim, "--overwrite")
+    assert code == 0, output
+    assert len(list(read_capture(str(capture)))) == 25  # 5 robots x 5 steps
+
+
+def test_sim_refuses_an_existing_snapshot_unless_overwrite(tmp_path: Path) -> None:
+    png = tmp_path / "d1.png"
+    png.write_bytes(PRECIOUS)
+    sim = ["sim", "--topology", "motion", "--robots", "10", "--density", "1", "--snapshot", str(png)]
+    assert _refused(*_vstig(*sim), png)
+    code, output = _vstig(*sim, "--overwrite")
+    assert code == 0, output
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_analyze_refuses_an_existing_plot_file_unless_overwrite(tmp_path: Path, log: Path) -> None:
+    other = tmp_path / "other.log"
+    other.write_bytes(PRECIOUS)
+    assert _refused(*_vstig("analyze", str(log), "--plot", str(other)), other)  # a capture typed as --plot
+    png = tmp_path / "key3.png"
+    png.write_bytes(PRECIOUS)
+    assert _refused(*_vstig("analyze", str(log), "--plot", str(png)), png)
+    code, output = _vstig("analyze", str(log), "--plot", str(png), "--overwrite")
+    assert code == 0, output
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_sim_paper_regenerates_its_reports_in_the_folder(tmp_path: Path) -> None:
+    out = tmp_path / "paper"
+    out.mkdir()
+    (out / "comparison.md").write_text("from an older run")
+    code, output = _vstig("sim", "paper", "--runs", "1", "--robots", "10", "--workers", "1", "-o", str(out))
+    assert code == 0, output
+    assert "| cluster N=10 P=0.75 |" in (out / "comparison.md").read_text()
