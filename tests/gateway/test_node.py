@@ -149,6 +149,33 @@ def test_a_put_heard_on_a_bus_crosses_but_is_not_echoed_onto_that_bus(channels: 
         bus.shutdown()
 
 
+def test_the_gateways_own_get_of_another_key_in_that_poll_does_not_undo_it(channels: tuple[str, str]) -> None:
+    """A program reading key 9 every tick (as `RoundRobinGet` does) while the PUT of key 4 arrives."""
+    a, b = channels
+    robot, on_a, on_b = (can.Bus(interface="virtual", channel=c) for c in (a, a, b))
+    put = Message(Op.PUT, 4, 77, 1, 7)
+    with Node([bus_link(a), bus_link(b)], robot_id=100, period=1e-6) as node:  # every poll ticks
+        node.put(9, 1)
+        node.on_tick.append(lambda n: n.get(9) and None)
+        robot.send(can_framing_for(7).encode(put)[0])
+        time.sleep(0.2)  # the PUT waits in the arrival queue: the next poll hears it, then ticks
+        crossed: list[can.Message] = []
+        end = time.monotonic() + 10
+        while put not in [m for f in crossed for m in ours(f)]:
+            assert time.monotonic() < end, "timed out"
+            node.poll(0.01)
+            crossed.extend(_drain(on_b))
+        for _ in range(10):
+            node.poll(0.01)
+    assert put not in [m for f in _drain(on_a) if can_framing_for(100).sender_of(f) == 100 for m in ours(f)]
+    for bus in (robot, on_a, on_b):
+        bus.shutdown()
+
+
+def ours(frame: can.Message) -> list[Message]:
+    return can_framing_for(100).feed(frame)
+
+
 def test_a_stale_get_on_the_bus_a_put_came_from_is_answered_there(channels: tuple[str, str]) -> None:
     """Robot 8 missed robot 7's PUT: its GET with the older entry, heard in the same poll, still gets the answer."""
     a, b = channels

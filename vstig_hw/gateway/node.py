@@ -167,7 +167,7 @@ class Node:
 
     def get(self, key: int) -> int | None:
         value = self._engine().get(key)
-        self._heard_from.clear()  # the GET may have merged into a pending PUT (OutQueue): send it everywhere
+        self._heard_from.pop(key, None)  # the GET may have merged into the key's pending PUT: send that everywhere
         self._spread(time.monotonic())
         return value
 
