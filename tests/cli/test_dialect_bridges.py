@@ -228,8 +228,8 @@ def test_an_engine_bridge_does_not_echo_a_kheperas_put_back_to_the_kheperas(tmp_
     """
     lab = KheperaLab(tmp_path, {5: (), 6: ("--silent",), 7: ("--silent",)})
     try:
-        wait_for(lambda: lab.far_robot.entry(1) == (5, 1, 5) and all(lab.holds(rid, "5 1 5") for rid in (6, 7)),
-                 60, step=lab.radio_step)
+        wait_for(lambda: lab.far_robot.entry(1) == (5, 1, 5) and all(lab.holds(rid, "5 1 5") for rid in (6, 7))
+                 and all(lab.heard(6, rid, "put", "leader") for rid in (5, 7)), 60, step=lab.radio_step)
         # A marker from the radio crosses after anything the bridge queued for the Kheperas before it.
         lab.far_robot.put(2, 1)
         wait_for(lambda: all(lab.heard(rid, GATEWAY, "put", "marker") for rid in (5, 6, 7)), 60, step=lab.radio_step)
