@@ -112,7 +112,8 @@ def test_decode_writes_mcap_from_several_captures_merged_and_filtered(tmp_path: 
     assert result.exit_code == 0, result.output
     assert [(r.link, r.unit) for r in read_capture(str(out))] == [(link, (m, s)) for _, link, s, m in TRAFFIC]
     result = CliRunner().invoke(cli, ["decode", str(log), str(radio), "--format", "mcap", "-o", str(out),
-                                      "--key", "8"])
+                                      "--key", "8", "--overwrite"])
+    assert result.exit_code == 0, result.output
     assert [r.unit[0].key for r in read_capture(str(out))] == [8]
     result = CliRunner().invoke(cli, ["decode", str(log), "--format", "mcap"])
     assert result.exit_code == 2 and "-o FILE.mcap" in result.output
