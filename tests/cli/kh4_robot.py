@@ -12,7 +12,13 @@ higher timestamp; PUTs before QUERYs).
 It prints `leader VALUE TS ROBOT` each time its entry changes, and `bad HEX` for any
 vstig message that does not parse to its exact end in the current dialect.
 
-Usage: python kh4_robot.py ROBOT_ID SIZE
+Options, for tests that look at the medium: `--ts N` puts at timestamp N instead of 1;
+`--silent` never puts (it only stores, re-broadcasts and answers what it hears);
+`--deaf S` drops every frame of its first S seconds (a robot that missed them);
+`--trace` also prints `heard SENDER put|query KEY VALUE TS WRITER` for every vstig
+message it hears (any key), with the frame's sender.
+
+Usage: python kh4_robot.py ROBOT_ID SIZE [--ts N] [--silent] [--deaf S] [--trace]
 """
 
 from __future__ import annotations
@@ -113,6 +119,10 @@ class Robot:
 
 def main() -> int:
     rid, size = int(sys.argv[1]), int(sys.argv[2])
+    options = sys.argv[3:]
+    first_ts = int(options[options.index("--ts") + 1]) if "--ts" in options else 1
+    deaf = float(options[options.index("--deaf") + 1]) if "--deaf" in options else 0.0
+    silent, trace = "--silent" in options, "--trace" in options
     server = socket.socket()
     server.bind(("127.0.0.1", 0))
     server.listen(1)
@@ -120,8 +130,10 @@ def main() -> int:
     conn, _ = server.accept()
     server.close()
     robot = Robot(rid)
-    robot.store((rid, 1, rid))  # put("leader", id)
-    robot.queue(PUT, robot.entry)  # type: ignore[arg-type]
+    if not silent:
+        robot.store((rid, first_ts, rid))  # put("leader", id)
+        robot.queue(PUT, robot.entry)  # type: ignore[arg-type]
+    hearing_from = time.monotonic() + deaf
     inbox = b""
     while True:
         end = time.monotonic() + 0.05
@@ -133,6 +145,9 @@ def main() -> int:
                 inbox += chunk
         while len(inbox) >= size:
             frame, inbox = inbox[:size], inbox[size:]
+            if time.monotonic() < hearing_from:
+                continue
+            (sender,) = struct.unpack_from("<H", frame)
             pos = 2
             while size - pos > 2:
                 (length,) = struct.unpack_from("<H", frame, pos)
@@ -147,6 +162,10 @@ def main() -> int:
                     except (ValueError, struct.error, IndexError):
                         print(f"bad {data.hex()}", flush=True)
                         continue
+                    if trace:
+                        name = key.decode() if isinstance(key, bytes) else key
+                        print(f"heard {sender} {'put' if kind == PUT else 'query'} {name} {value} {ts} {writer}",
+                              flush=True)
                     if stig == STIG and key == KEY:
                         robot.receive(kind, value, ts, writer)
         if robot.entry is not None:

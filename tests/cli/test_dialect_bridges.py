@@ -68,9 +68,10 @@ KH4_ROBOT = Path(__file__).with_name("kh4_robot.py")
 FRAME = 64
 
 
-def _start_khepera(robot_id: int) -> tuple[subprocess.Popen[str], int]:
-    robot = subprocess.Popen([sys.executable, str(KH4_ROBOT), str(robot_id), str(FRAME)], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True)
+def _start_khepera(robot_id: int, *options: str) -> tuple[subprocess.Popen[str], int]:
+    """A stand-in Khepera (kh4_robot.py: its options) and the port it listens on."""
+    robot = subprocess.Popen([sys.executable, str(KH4_ROBOT), str(robot_id), str(FRAME), *options],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert robot.stdout is not None
     first = robot.stdout.readline().split()
     assert first[:1] == ["port"], first
@@ -169,3 +170,86 @@ def test_record_and_decode_a_khepera_swarm(tmp_path: Path) -> None:
     undeployed = run_vstig("decode", str(capture))
     assert undeployed.returncode == 1 and "--deployment" in undeployed.stderr
     assert len(undeployed.stderr.strip().splitlines()) == 1 and "Traceback" not in undeployed.stderr
+
+
+GATEWAY = 200
+TWO_KEYS = '[buzz]\nstigmergy = 1\n[keys]\nleader = { key = 1, type = "int16" }\nmarker = { key = 2, type = "int16" }\n'
+
+
+class KheperaLab:
+    """Stand-in Kheperas, each printing what it hears (`--trace`), beside a cobs8 radio robot, both bridged."""
+
+    def __init__(self, tmp_path: Path, robots: dict[int, tuple[str, ...]]) -> None:
+        deployment = tmp_path / "kheperas.toml"
+        deployment.write_text(TWO_KEYS, encoding="utf-8")
+        self.kheperas = {rid: _start_khepera(rid, "--trace", *options) for rid, options in robots.items()}
+        self.lines: dict[int, list[str]] = {rid: [] for rid in robots}
+        for rid, (robot, _) in self.kheperas.items():
+            threading.Thread(target=_collect, args=(robot.stdout, self.lines[rid]), daemon=True).start()
+        self.radio = PtyPeer()
+        self.far_robot = Stigmergy(300)
+        self.framing = make_serial_framing("cobs8")
+        addresses = ",".join(f"127.0.0.1:{port}" for _, port in self.kheperas.values())
+        self.bridge = start_vstig("bridge", f"blabbermouth:{addresses}?size={FRAME}&deployment={deployment}",
+                                  f"serial:{self.radio.path}?framing=cobs8", "--robot-id", str(GATEWAY))
+
+    def radio_step(self) -> None:
+        """The radio robot's control step: hear, ask for `leader`, send."""
+        for msg in self.framing.feed(self.radio.read(0.05)):
+            self.far_robot.receive(msg)
+        self.far_robot.get(1)
+        for msg in self.far_robot.drain():
+            self.radio.write(b"".join(self.framing.encode(msg)))
+
+    def heard(self, rid: int, sender: int, kind: str, key: str) -> list[tuple[str, ...]]:
+        """(value, ts, writer) of every `kind` message for `key` that Khepera `rid` heard from `sender`."""
+        prefix = f"heard {sender} {kind} {key} "
+        return [tuple(line[len(prefix):].split()) for line in list(self.lines[rid]) if line.startswith(prefix)]
+
+    def holds(self, rid: int, entry: str) -> bool:
+        return f"leader {entry}" in self.lines[rid]
+
+    def close(self) -> str:
+        _out, err = stop(self.bridge)
+        for robot, _ in self.kheperas.values():
+            robot.terminate()
+            robot.wait(timeout=10)
+        self.radio.close()
+        assert self.bridge.returncode == 0, err
+        assert not [line for lines in self.lines.values() for line in lines if line.startswith("bad")]
+        return err
+
+
+def test_an_engine_bridge_does_not_echo_a_kheperas_put_back_to_the_kheperas(tmp_path: Path) -> None:
+    """Every Khepera heard robot 5's PUT through the relay: the bridge re-broadcasts it to the radio only.
+
+    The Kheperas' own re-broadcasts (Buzz stores and re-broadcasts) stay; the bridge's
+    copy under its own id would be a fourth PUT of the same entry on their medium.
+    """
+    lab = KheperaLab(tmp_path, {5: (), 6: ("--silent",), 7: ("--silent",)})
+    try:
+        wait_for(lambda: lab.far_robot.entry(1) == (5, 1, 5) and all(lab.holds(rid, "5 1 5") for rid in (6, 7))
+                 and all(lab.heard(6, rid, "put", "leader") for rid in (5, 7)), 60, step=lab.radio_step)
+        # A marker from the radio crosses after anything the bridge queued for the Kheperas before it.
+        lab.far_robot.put(2, 1)
+        wait_for(lambda: all(lab.heard(rid, GATEWAY, "put", "marker") for rid in (5, 6, 7)), 60, step=lab.radio_step)
+    finally:
+        err = lab.close()
+    medium = {sender: len(lab.heard(6, sender, "put", "leader")) for sender in (5, 7, GATEWAY)}
+    print("leader PUTs Khepera 6 heard, by sender:", medium)
+    assert medium[5] >= 1 and medium[7] >= 1  # the original and robot 7's own re-broadcast
+    assert medium[GATEWAY] == 0, medium  # no echo on the medium the PUT came from
+    assert not lab.heard(5, GATEWAY, "put", "leader") and not lab.heard(7, GATEWAY, "put", "leader")
+    assert "not_echoed=" in err
+
+
+def test_an_engine_bridge_still_repairs_a_khepera_that_missed_the_put(tmp_path: Path) -> None:
+    """Khepera 6 missed robot 5's newer PUT: its GET carries its older entry, and the bridge answers it."""
+    lab = KheperaLab(tmp_path, {5: ("--ts", "2"), 6: ("--deaf", "1.5"), 7: ("--silent",)})
+    try:
+        wait_for(lambda: lab.far_robot.entry(1) == (5, 2, 5), 60, step=lab.radio_step)
+        wait_for(lambda: ("5", "2", "5") in lab.heard(6, GATEWAY, "put", "leader"), 60, step=lab.radio_step)
+        wait_for(lambda: lab.holds(6, "5 2 5"), 60, step=lab.radio_step)
+    finally:
+        lab.close()
+    assert lab.heard(5, 6, "query", "leader")[0] == ("6", "1", "6")  # what 6 asked with: its own, older entry

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+from pathlib import Path
 
 import pytest
 from hypothesis import given
@@ -21,6 +22,7 @@ def test_can_specs() -> None:
     spec = parse("can:socketcan:can0?extended=1&stigmergy=0x2a")
     assert spec == CanSpec("socketcan", "can0", extended=True, stigmergy=42)
     assert parse("can:virtual:lab?filter=0") == CanSpec("virtual", "lab", kernel_filter=False)
+    assert parse("can:virtual:lab?echo=1") == CanSpec("virtual", "lab", echo=True)
 
 
 def test_serial_specs() -> None:
@@ -98,6 +100,17 @@ def test_spec_options_reach_the_link() -> None:
     assert serial.framing.reassembler.expiry_ticks == 5  # type: ignore[attr-defined]
     assert "can_filters" not in parse("can:virtual:x?filter=0").build().transport._bus_kwargs  # type: ignore[attr-defined]
     assert "can_filters" in parse("can:virtual:x").build().transport._bus_kwargs  # type: ignore[attr-defined]
+
+
+def test_which_links_are_one_broadcast_domain(tmp_path: Path) -> None:
+    """A bus and a blabbermouth relay are (no echo of a PUT back onto them); radios, and a bus with echo=1, are not."""
+    deployment = tmp_path / "kheperas.toml"
+    deployment.write_text('[keys]\nleader = { key = 1, type = "int16" }\n', encoding="utf-8")
+    assert parse(f"blabbermouth:127.0.0.1?size=64&deployment={deployment}").build().one_domain
+    assert parse("can:virtual:x").build().one_domain
+    assert not parse("can:virtual:x?echo=1").build().one_domain
+    assert not parse("serial:/dev/ttyUSB1?framing=epuck4").build().one_domain
+    assert not parse("serial:/dev/ttyUSB1").build().one_domain
 
 
 def test_bus_options_reach_python_can() -> None:

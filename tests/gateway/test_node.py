@@ -13,6 +13,7 @@ import pytest
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.counters import Counters
+from vstig_hw.engine import Outcome
 from vstig_hw.gateway import Mode, Node, Outlet, SendWindow, favour_latency
 from vstig_hw.links import Heard, Link
 from vstig_hw.links.can import can_framing_for
@@ -21,8 +22,8 @@ from vstig_hw.links.spec import parse
 _ids = itertools.count()
 
 
-def bus_link(channel: str, name: str | None = None, robot_id: int = 100) -> Link[can.Message]:
-    return parse(f"can:virtual:{channel}").build(name or channel, robot_id=robot_id)
+def bus_link(channel: str, name: str | None = None, robot_id: int = 100, *, echo: bool = False) -> Link[can.Message]:
+    return parse(f"can:virtual:{channel}{'?echo=1' if echo else ''}").build(name or channel, robot_id=robot_id)
 
 
 class BusRobot:
@@ -104,7 +105,8 @@ def test_news_crosses_to_the_other_link_before_the_echo_goes_back(channels: tupl
     a, b = channels
     buses = {a: can.Bus(interface="virtual", channel=a), b: can.Bus(interface="virtual", channel=b)}
     framing = can_framing_for(7)
-    with Node([bus_link(a), bus_link(b)], robot_id=100) as node:
+    # echo=1: as radios whose robots may not all hear each other, the re-broadcast goes back too
+    with Node([bus_link(a, echo=True), bus_link(b, echo=True)], robot_id=100) as node:
         for key, (source, other) in enumerate([(a, b), (b, a)]):  # from the first link, then from the second
             buses[source].send(framing.encode(Message(Op.PUT, key, 5, 1, 7))[0])
             heard: dict[str, can.Message] = {}
@@ -119,6 +121,81 @@ def test_news_crosses_to_the_other_link_before_the_echo_goes_back(channels: tupl
             # the virtual bus stamps each frame when it is sent: the crossing went first
             assert heard[other].timestamp < heard[source].timestamp, f"PUT from {source}"
     for bus in buses.values():
+        bus.shutdown()
+
+
+def _drain(bus: can.BusABC) -> list[can.Message]:
+    frames = []
+    while (frame := bus.recv(0)) is not None:
+        frames.append(frame)
+    return frames
+
+
+def test_a_put_heard_on_a_bus_crosses_but_is_not_echoed_onto_that_bus(channels: tuple[str, str]) -> None:
+    a, b = channels
+    robot, on_a, on_b = (can.Bus(interface="virtual", channel=c) for c in (a, a, b))
+    put = Message(Op.PUT, 4, 77, 1, 7)
+    with Node([bus_link(a), bus_link(b)], robot_id=100) as node:
+        robot.send(can_framing_for(7).encode(put)[0])
+        crossed: list[can.Message] = []
+        run_until(node, lambda: bool(crossed.extend(_drain(on_b)) or crossed))
+        node.run(duration=0.3)  # ticks in which an echo would have gone out
+        stats = node.stats()
+    decode = can_framing_for(100).feed
+    assert [m for f in crossed for m in decode(f)] == [put]
+    assert [m for f in _drain(on_a) for m in decode(f)] == [put]  # the robot's own frame, and no copy of ours
+    assert stats[a]["not_echoed"] == 1 and stats[a]["out"] == 0
+    for bus in (robot, on_a, on_b):
+        bus.shutdown()
+
+
+def test_the_gateways_own_get_of_another_key_in_that_poll_does_not_undo_it(channels: tuple[str, str]) -> None:
+    """A program reading key 9 every tick (as `RoundRobinGet` does) while the PUT of key 4 arrives."""
+    a, b = channels
+    robot, on_a, on_b = (can.Bus(interface="virtual", channel=c) for c in (a, a, b))
+    put = Message(Op.PUT, 4, 77, 1, 7)
+    with Node([bus_link(a), bus_link(b)], robot_id=100, period=1e-6) as node:  # every poll ticks
+        node.put(9, 1)
+        node.on_tick.append(lambda n: n.get(9) and None)
+        robot.send(can_framing_for(7).encode(put)[0])
+        time.sleep(0.2)  # the PUT waits in the arrival queue: the next poll hears it, then ticks
+        crossed: list[can.Message] = []
+        end = time.monotonic() + 10
+        while put not in [m for f in crossed for m in ours(f)]:
+            assert time.monotonic() < end, "timed out"
+            node.poll(0.01)
+            crossed.extend(_drain(on_b))
+        for _ in range(10):
+            node.poll(0.01)
+    assert put not in [m for f in _drain(on_a) if can_framing_for(100).sender_of(f) == 100 for m in ours(f)]
+    for bus in (robot, on_a, on_b):
+        bus.shutdown()
+
+
+def ours(frame: can.Message) -> list[Message]:
+    return can_framing_for(100).feed(frame)
+
+
+def test_a_stale_get_on_the_bus_a_put_came_from_is_answered_there(channels: tuple[str, str]) -> None:
+    """Robot 8 missed robot 7's PUT: its GET with the older entry, heard in the same poll, still gets the answer."""
+    a, b = channels
+    robot7, robot8, on_a = (can.Bus(interface="virtual", channel=a) for _ in range(3))
+    newer = Message(Op.PUT, 4, 77, 2, 7)
+    node = Node([bus_link(a), bus_link(b)], robot_id=100)
+    with node:
+        robot7.send(can_framing_for(7).encode(newer)[0])
+        robot8.send(can_framing_for(8).encode(Message(Op.GET, 4, 60, 1, 8))[0])
+        time.sleep(0.2)  # both wait in the arrival queue: one poll hears them (the PUT's echo note, then the GET)
+        answers: list[Message] = []
+        ours = can_framing_for(100)
+
+        def answered() -> bool:
+            answers.extend(m for f in _drain(on_a) if ours.sender_of(f) == 100 for m in ours.feed(f))
+            return newer in answers
+
+        run_until(node, answered)
+    assert node.engine is not None and node.engine.counts[Outcome.ANSWERED] >= 1
+    for bus in (robot7, robot8, on_a):
         bus.shutdown()
 
 

@@ -5,7 +5,9 @@ Modes:
 * ENGINE: the Node is a robot. What any link hears goes into its engine; what
   the engine queues goes out on every link (its own queue per link, see
   `outlet`). Data crosses media because the protocol re-broadcasts what is new
-  and answers stale GETs, not because the gateway relays.
+  and answers stale GETs, not because the gateway relays. A PUT it stores is not
+  echoed onto the link it came from when that link is one broadcast domain
+  (`Link.one_domain`): every robot there heard the original.
 * RAW: a transparent bridge. Every message heard on one link is re-encoded in
   each other link's framing and sent as is: no engine, no merging.
 * LISTEN: a sniffer or recorder. Nothing is ever written to any link. With
@@ -34,11 +36,11 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from ..counters import Counters
-from ..engine import ConflictResolver, Stigmergy
+from ..engine import ConflictResolver, Outcome, Stigmergy
 from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
 from ..timestamps import TS_NONE
-from ..wire import Message, Op
+from ..wire import GET_BIT, KEY_MAX, Message, Op
 from .guard import Guard
 from .outlet import Outlet
 from .readers import LinkReaders
@@ -120,6 +122,8 @@ class Node:
         self._next_tick = 0.0
         self._retry_at: float | None = None
         self._opened: list[Link[Any]] = []
+        # key -> (the PUT just stored, index of the one-domain link it came from), until the next drain
+        self._heard_from: dict[int, tuple[Message, int]] = {}
 
     # -- lifetime --------------------------------------------------------------
     def open(self) -> None:
@@ -163,6 +167,7 @@ class Node:
 
     def get(self, key: int) -> int | None:
         value = self._engine().get(key)
+        self._heard_from.pop(key, None)  # the GET may have merged into the key's pending PUT: send that everywhere
         self._spread(time.monotonic())
         return value
 
@@ -247,14 +252,34 @@ class Node:
                     for h_listener in self.on_heard:
                         h_listener(heard)
             if engine is not None:
-                for msg in messages:
-                    engine.receive(msg)
+                if link.one_domain and outlets:
+                    self._receive_from_domain(engine, index, messages)
+                else:
+                    for msg in messages:
+                        engine.receive(msg)
             elif self.mode is Mode.RAW and relays:
                 for outlet in outlets:
                     if outlet.link is not link:
                         for msg in messages:
                             outlet.push(msg)
         link.counters["in"] += heard_count
+
+    def _receive_from_domain(self, engine: Stigmergy, index: int, messages: list[Message]) -> None:
+        """Receive what link `index` (one broadcast domain) heard, noting each PUT stored from it.
+
+        Every robot on that link heard the PUT when we did, so `_spread` keeps its
+        re-broadcast off that link. An answer for the key to that link undoes the note:
+        the answer may be that very entry, merged into the pending re-broadcast.
+        """
+        heard_from = self._heard_from
+        for msg in messages:
+            outcome = engine.receive(msg)
+            if outcome is Outcome.STORED and not msg[0] & GET_BIT:  # stored as is: the outbox holds `msg`
+                heard_from[msg[0]] = (msg, index)
+            elif outcome is Outcome.ANSWERED:
+                noted = heard_from.get(msg[0] & KEY_MAX)
+                if noted is not None and noted[1] == index:
+                    del heard_from[msg[0] & KEY_MAX]
 
     def _tick(self, now: float) -> None:
         self.ticks += 1
@@ -274,10 +299,13 @@ class Node:
         if self.engine is not None and self.engine.pending():
             outgoing = self.engine.drain()
             confined_to = self.guard.confined_to if self.guard is not None and self.guard.confines else None
-            for outlet in self.outlets:
+            origins = self._origins(outgoing)
+            for i, outlet in enumerate(self.outlets):
                 name = outlet.link.name
-                for msg in outgoing:
-                    if confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay there
+                for msg, origin in zip(outgoing, origins, strict=True):
+                    if origin == i:  # every robot on that link heard it already
+                        outlet.link.counters["not_echoed"] += 1
+                    elif confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay
                         outlet.push(msg)
         outlets = self.outlets  # outlets[i] belongs to links[i]
         if heard_on:  # a stable sort: those links move to the end, the others keep their order
@@ -288,6 +316,18 @@ class Node:
             if again is not None and (retry is None or again < retry):
                 retry = again
         self._retry_at = retry
+
+    def _origins(self, outgoing: list[Message]) -> list[int]:
+        """Per message, the one-domain link it was heard on (-1: none), and forget the notes."""
+        heard_from = self._heard_from
+        if not heard_from:
+            return [-1] * len(outgoing)
+        origins = []
+        for msg in outgoing:
+            noted = heard_from.get(msg[0])  # a PUT's head is its key
+            origins.append(noted[1] if noted is not None and noted[0] is msg else -1)
+        heard_from.clear()
+        return origins
 
     # -- what happened ------------------------------------------------------------
     def stats(self) -> dict[str, Counters]:

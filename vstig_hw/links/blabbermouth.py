@@ -19,4 +19,5 @@ def blabbermouth_link_from_spec(spec: BlabbermouthSpec, name: str, robot_id: int
     """Connects to every robot when opened; our own frames go out under `robot_id`."""
     deployment = load_deployment(spec.deployment)
     transport = BlabbermouthTransport(list(spec.robots), spec.size, name=name)
-    return Link(name, transport, BuzzKh4Framing(deployment, robot_id, spec.size))
+    # the transport relays every robot's frame to every other robot: all of them heard what we heard
+    return Link(name, transport, BuzzKh4Framing(deployment, robot_id, spec.size), one_domain=True)

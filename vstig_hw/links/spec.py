@@ -2,7 +2,8 @@
 
 Grammar (one parser for every command)::
 
-    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1&stigmergy=N&filter=0&bus.KEY=V]
+    can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x600&extended=1&stigmergy=N&filter=0&echo=1
+                                         &bus.KEY=V]
     serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]
     kilobot-ohc:<port or pyserial URL>
     serial:<port>?framing=kilobot&dialect=bittybuzz&deployment=<file.toml>   (and kilobot-ohc:<port>?dialect=...)
@@ -38,7 +39,7 @@ OHC_BAUD = 38400  # the Kilobot overhead controller's fixed rate
 KH4_PORT = 24580  # the port bzzkh4 listens on (BuzzKH4 buzz_utility.c)
 
 GRAMMAR = (
-    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1&stigmergy=N&filter=0"
+    "can:<python-can interface>:<channel>[?bitrate=N&fd=1&id_base=0x...&extended=1&stigmergy=N&filter=0&echo=1"
     "&bus.KEY=VALUE]",
     "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]",
     "kilobot-ohc:<port or pyserial URL>",
@@ -70,7 +71,9 @@ NOTES = {
     "can": "can: 11-bit IDs (default base 0x600) keep stigmergies apart by id_base (0x000, 0x200, 0x400, "
            "0x600); 29-bit IDs (extended=1) carry stigmergy=0..255 in the ID. Each link hears only its own. "
            "filter=0 turns the kernel/adapter acceptance filter off, so foreign IDs reach vstig-hw and are "
-           "counted as drop_unknown_id (a conformance check; costs CPU on a busy bus). bus.KEY=VALUE passes "
+           "counted as drop_unknown_id (a conformance check; costs CPU on a busy bus). A bus is one broadcast "
+           "domain, so a bridge sends a PUT it heard there on to its other links only; echo=1 sends it back too "
+           "(for a bus whose robots do not all hear each other, e.g. behind radio adapters). bus.KEY=VALUE passes "
            "KEY to python-can's can.Bus (as its tools' --bus-kwargs): bus.host, bus.port for socketcand, "
            "bus.receive_own_messages=true...",
     "serial": "serial: the query after the last '?' is ours; keys we do not know stay with a pyserial URL "
@@ -103,6 +106,7 @@ class CanSpec:
     extended: bool = False
     stigmergy: int = 0
     kernel_filter: bool = True  # False: every frame reaches us, and foreign IDs count as drop_unknown_id
+    echo: bool = False  # True: a PUT heard on this bus is re-broadcast back onto it too (Link.one_domain off)
     bus_options: tuple[tuple[str, Any], ...] = ()  # bus.KEY=VALUE: more keywords for can.Bus (host, port...)
 
     @property
@@ -270,7 +274,8 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         raise _bad(spec, "expected can:<interface>:<channel>", "can")
     if not _IFACE.match(interface):
         raise _bad(spec, f"interface {interface!r} is not a python-can interface name", "can")
-    channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended", "stigmergy", "filter"),
+    channel, params = _query(spec, rest, "can", ("bitrate", "fd", "id_base", "extended", "stigmergy", "filter",
+                                                     "echo"),
                              False, open_prefix=_BUS_PREFIX)
     if not channel or any(ch in channel for ch in "\0\n\r "):
         raise _bad(spec, f"channel {channel!r} is missing or has spaces", "can")
@@ -291,6 +296,7 @@ def _parse_can(spec: str, body: str) -> CanSpec:
         extended=extended,
         stigmergy=stigmergy,
         kernel_filter=_flag(spec, "can", "filter", params["filter"]) if "filter" in params else True,
+        echo=_flag(spec, "can", "echo", params["echo"]) if "echo" in params else False,
         bus_options=_bus_options(spec, params),
     )
     try:
@@ -303,7 +309,7 @@ def _parse_can(spec: str, body: str) -> CanSpec:
 _BUS_PREFIX = "bus."
 # Keywords the spec itself sets on the way to can.Bus (and can_link's own parameters).
 _OURS_ON_THE_BUS = ("interface", "channel", "bitrate", "fd", "can_filters", "robot_id", "id_base", "extended",
-                    "stigmergy", "kernel_filter", "name")
+                    "stigmergy", "kernel_filter", "echo", "name")
 
 
 def _bus_options(spec: str, params: dict[str, str]) -> tuple[tuple[str, Any], ...]:
