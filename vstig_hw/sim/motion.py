@@ -73,6 +73,7 @@ class MovingSwarm:
         self.dispersion = dispersion
         self._rng = rng
         self._columns = arena.columns
+        self._column_x, self._column_y = self._columns.x, self._columns.y  # once: every step reads them
         # Line of sight needs pairs within R + body radius, a bump check pairs that one stride each can join.
         self._reach = max(radio_range + body_radius, 2 * body_radius + 2 * dispersion.stride) + _SKIN
         self._z = _complex(arena.place(robots, rng, body_radius))
@@ -109,13 +110,13 @@ class MovingSwarm:
 
     def step(self) -> None:
         """One control step of motion for every robot, then the new hearing graph."""
-        robots, rng, columns = len(self._z), self._rng, self._columns
+        robots, rng = len(self._z), self._rng
         turns = rng.normal(0.0, self.dispersion.turn_noise, robots)
         bumps = rng.uniform(0.0, 2 * math.pi, robots)  # a new heading, for the robots whose move is refused
         self._z, self._heading, self._drift = _move(
             self._z, self._heading, self.hearing.src, self.hearing.dst, self._pairs[0], self._pairs[1], turns, bumps,
-            self._listed_at, self.arena.side / 2 - self.body_radius, columns.x, columns.y, columns.radius,
-            self.body_radius, self.dispersion.repulsion, self.dispersion.stride)
+            self._listed_at, self.arena.side / 2 - self.body_radius, self._column_x, self._column_y,
+            self._columns.radius, self.body_radius, self.dispersion.repulsion, self.dispersion.stride)
         self._sense()
 
 
