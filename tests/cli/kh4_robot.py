@@ -9,20 +9,23 @@ Buzz's vstig rules (buzzvm.c:276-420), its default conflict rule (higher robot i
 non-nil first) and its out-queue (one pending message per key, replaced only by a
 higher timestamp; PUTs before QUERYs).
 
-It prints `leader VALUE TS ROBOT` each time its entry changes, and `bad HEX` for any
-vstig message that does not parse to its exact end in the current dialect.
+It prints `leader VALUE TS ROBOT` each time its entry changes (a float as `float:` and
+its float32 bits in hex, so a rounded copy shows), and `bad HEX` for any vstig message
+that does not parse to its exact end in the current dialect.
 
 Options, for tests that look at the medium: `--ts N` puts at timestamp N instead of 1;
+`--float V` puts the C float V instead of its id (Buzz's float: buzzmsg.c:87-163);
 `--silent` never puts (it only stores, re-broadcasts and answers what it hears);
 `--deaf S` drops every frame of its first S seconds (a robot that missed them);
 `--trace` also prints `heard SENDER put|query KEY VALUE TS WRITER` for every vstig
 message it hears (any key), with the frame's sender.
 
-Usage: python kh4_robot.py ROBOT_ID SIZE [--ts N] [--silent] [--deaf S] [--trace]
+Usage: python kh4_robot.py ROBOT_ID SIZE [--ts N] [--float V] [--silent] [--deaf S] [--trace]
 """
 
 from __future__ import annotations
 
+import math
 import select
 import socket
 import struct
@@ -33,11 +36,46 @@ PUT, QUERY = 2, 3
 STIG, KEY = 1, b"leader"
 
 
-def obj(value: int | None) -> bytes:
-    return b"\x00" if value is None else b"\x01" + struct.pack(">i", value)
+Value = int | float | None
+Entry = tuple[Value, int, int]
 
 
-def message(kind: int, entry: tuple[int | None, int, int]) -> bytes:
+def f32(x: float) -> float:
+    """`x` as a C float holds it."""
+    return float(struct.unpack("<f", struct.pack("<f", x))[0])
+
+
+def float_pair(value: float) -> tuple[int, int]:
+    """buzzmsg_serialize_float: frexpf, then (int32)((|f| - 0.5) * 2 * 2147483648.0f) + 1, signed; zero is (0, 0)."""
+    if value == 0:
+        return 0, 0
+    fraction, exponent = math.frexp(value)
+    mantissa = int((abs(fraction) - 0.5) * 2 * 2147483648.0) + 1
+    return (-mantissa if value < 0 else mantissa), exponent
+
+
+def float_from_pair(mantissa: int, exponent: int) -> float:
+    """buzzmsg_deserialize_float, in single precision: (float)(|m| - 1) / 2^32 + 0.5f, then ldexpf."""
+    if mantissa == 0:
+        return 0.0
+    magnitude = math.ldexp(f32(f32(float(abs(mantissa) - 1)) / 2**32 + 0.5), exponent)
+    return -magnitude if mantissa < 0 else magnitude
+
+
+def show(value: object) -> str:
+    """How the robot prints a value: a float by its float32 bits."""
+    return f"float:{struct.pack('>f', value).hex()}" if isinstance(value, float) else str(value)
+
+
+def obj(value: Value) -> bytes:
+    if value is None:
+        return b"\x00"
+    if isinstance(value, float):
+        return b"\x02" + struct.pack(">ii", *float_pair(value))
+    return b"\x01" + struct.pack(">i", value)
+
+
+def message(kind: int, entry: Entry) -> bytes:
     value, ts, robot = entry
     return bytes((kind,)) + struct.pack(">HBH", STIG, 3, len(KEY)) + KEY + obj(value) + struct.pack(">HH", ts, robot)
 
@@ -48,6 +86,8 @@ def parse_obj(data: bytes, pos: int) -> tuple[object, int]:
         return None, pos + 1
     if tag == 1:
         return struct.unpack_from(">i", data, pos + 1)[0], pos + 5
+    if tag == 2:
+        return float_from_pair(*struct.unpack_from(">ii", data, pos + 1)), pos + 9
     if tag == 3:
         (size,) = struct.unpack_from(">H", data, pos + 1)
         if pos + 3 + size > len(data):
@@ -69,20 +109,20 @@ def parse(data: bytes) -> tuple[int, int, object, object, int, int]:
 class Robot:
     def __init__(self, rid: int) -> None:
         self.rid = rid
-        self.entry: tuple[int | None, int, int] | None = None
-        self.pending: tuple[int, tuple[int | None, int, int]] | None = None
+        self.entry: Entry | None = None
+        self.pending: tuple[int, Entry] | None = None
 
-    def queue(self, kind: int, entry: tuple[int | None, int, int]) -> None:
+    def queue(self, kind: int, entry: Entry) -> None:
         if self.pending is not None and self.pending[1][1] >= entry[1]:
             return
         self.pending = (kind, entry)
 
-    def store(self, entry: tuple[int | None, int, int]) -> None:
+    def store(self, entry: Entry) -> None:
         if entry != self.entry:
-            print(f"leader {entry[0]} {entry[1]} {entry[2]}", flush=True)
+            print(f"leader {show(entry[0])} {entry[1]} {entry[2]}", flush=True)
         self.entry = entry
 
-    def conflict(self, remote: tuple[int | None, int, int]) -> tuple[int | None, int, int]:
+    def conflict(self, remote: Entry) -> Entry:
         local = self.entry
         assert local is not None
         if (local[0] is None) == (remote[0] is None):
@@ -92,7 +132,7 @@ class Robot:
         return (winner[0], local[1], winner[2])
 
     def receive(self, kind: int, value: object, ts: int, robot: int) -> None:
-        remote = (value if isinstance(value, int) else None, ts, robot)
+        remote = (value if isinstance(value, int | float) else None, ts, robot)
         local = self.entry
         if kind == PUT:
             if local is None or local[1] < ts:
@@ -121,6 +161,7 @@ def main() -> int:
     rid, size = int(sys.argv[1]), int(sys.argv[2])
     options = sys.argv[3:]
     first_ts = int(options[options.index("--ts") + 1]) if "--ts" in options else 1
+    written: Value = f32(float(options[options.index("--float") + 1])) if "--float" in options else rid
     deaf = float(options[options.index("--deaf") + 1]) if "--deaf" in options else 0.0
     silent, trace = "--silent" in options, "--trace" in options
     server = socket.socket()
@@ -131,7 +172,7 @@ def main() -> int:
     server.close()
     robot = Robot(rid)
     if not silent:
-        robot.store((rid, first_ts, rid))  # put("leader", id)
+        robot.store((written, first_ts, rid))  # put("leader", id)
         robot.queue(PUT, robot.entry)  # type: ignore[arg-type]
     hearing_from = time.monotonic() + deaf
     inbox = b""
@@ -164,7 +205,7 @@ def main() -> int:
                         continue
                     if trace:
                         name = key.decode() if isinstance(key, bytes) else key
-                        print(f"heard {sender} {'put' if kind == PUT else 'query'} {name} {value} {ts} {writer}",
+                        print(f"heard {sender} {'put' if kind == PUT else 'query'} {name} {show(value)} {ts} {writer}",
                               flush=True)
                     if stig == STIG and key == KEY:
                         robot.receive(kind, value, ts, writer)

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import can
+import pytest
 from bbz_swarm import KilobotSwarm
 from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, stop, wait_for
 
@@ -179,9 +180,9 @@ TWO_KEYS = '[buzz]\nstigmergy = 1\n[keys]\nleader = { key = 1, type = "int16" }\
 class KheperaLab:
     """Stand-in Kheperas, each printing what it hears (`--trace`), beside a cobs8 radio robot, both bridged."""
 
-    def __init__(self, tmp_path: Path, robots: dict[int, tuple[str, ...]]) -> None:
+    def __init__(self, tmp_path: Path, robots: dict[int, tuple[str, ...]], keys: str = TWO_KEYS) -> None:
         deployment = tmp_path / "kheperas.toml"
-        deployment.write_text(TWO_KEYS, encoding="utf-8")
+        deployment.write_text(keys, encoding="utf-8")
         self.kheperas = {rid: _start_khepera(rid, "--trace", *options) for rid, options in robots.items()}
         self.lines: dict[int, list[str]] = {rid: [] for rid in robots}
         for rid, (robot, _) in self.kheperas.items():
@@ -208,6 +209,13 @@ class KheperaLab:
 
     def holds(self, rid: int, entry: str) -> bool:
         return f"leader {entry}" in self.lines[rid]
+
+    def versions(self, rid: int, ts: str, writer: str) -> set[str]:
+        """Every value Khepera `rid` held, or heard in any message, at (ts, writer) of `leader`."""
+        held = {line.split()[1] for line in list(self.lines[rid])
+                if line.startswith("leader ") and line.split()[2:] == [ts, writer]}
+        return held | {value for sender in (*self.kheperas, GATEWAY) for kind in ("put", "query")
+                       for value, *version in self.heard(rid, sender, kind, "leader") if version == [ts, writer]}
 
     def close(self) -> str:
         _out, err = stop(self.bridge)
@@ -253,3 +261,34 @@ def test_an_engine_bridge_still_repairs_a_khepera_that_missed_the_put(tmp_path: 
     finally:
         lab.close()
     assert lab.heard(5, 6, "query", "leader")[0] == ("6", "1", "6")  # what 6 asked with: its own, older entry
+
+
+FLOAT16_KEYS = ('[buzz]\nstigmergy = 1\n[keys]\nleader = { key = 1, type = "float16" }\n'
+                'marker = { key = 2, type = "int16" }\n')
+
+
+@pytest.mark.parametrize(("written", "bits"), [("0.1", "float:3dcccccd"), ("0.3", "float:3e99999a")])
+def test_a_float_that_float16_cannot_carry_stays_the_writers_on_every_khepera(tmp_path: Path, written: str,
+                                                                              bits: str) -> None:
+    """Khepera 9 writes 0.1 (or 0.3) under a float16 key: no robot may hold another value at its version.
+
+    Khepera 6 wrote 0.5 (a float16 exactly) and is deaf for 1.5 s, asking all the while
+    with its older entry: the bridge answers it, and any answer carrying 9's version
+    reaches every Khepera. The bridge refuses 9's write (`drop_unmapped`), so the radio
+    robot never holds that version and the Kheperas hold only what 9 wrote.
+    """
+    lab = KheperaLab(tmp_path, {9: ("--float", written, "--ts", "2"), 6: ("--float", "0.5", "--deaf", "1.5"),
+                                7: ("--silent",)}, FLOAT16_KEYS)
+    try:
+        wait_for(lambda: all(lab.versions(rid, "2", "9") for rid in (6, 7, 9)) and lab.far_robot.entry(1), 60,
+                 step=lab.radio_step)
+        # Steady: Khepera 6 has asked twice with 9's version since it started hearing.
+        wait_for(lambda: sum(version[1:] == ("2", "9") for version in lab.heard(7, 6, "query", "leader")) >= 2, 30,
+                 step=lab.radio_step)
+    finally:
+        err = lab.close()
+    assert {rid: lab.versions(rid, "2", "9") for rid in (6, 7, 9)} == {6: {bits}, 7: {bits}, 9: {bits}}
+    assert all([line for line in lab.lines[rid] if line.startswith("leader ")][-1] == f"leader {bits} 2 9"
+               for rid in (6, 7, 9))
+    assert lab.far_robot.entry(1) == (0x3800, 1, 6)  # the radio robot holds 6's exact write, never 9's
+    assert "drop_unmapped=" in err

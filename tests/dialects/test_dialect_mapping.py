@@ -125,12 +125,8 @@ def test_every_mappable_value_crosses_to_buzz_and_back_unchanged(raw: int, value
     deployment = parse_deployment(f'[keys]\nk = {{ key = 5, type = "{value_type}" }}')
     buzz = BuzzTranslator(deployment)
     out = buzz.from_ours(Message(Op.PUT, 5, raw, 1, 1))
-    if out is not None:
-        back = buzz.to_ours(out)
-        if value_type == "float16" and raw & 0x7FFF == 0:
-            assert back is not None and back.value & 0x7FFF == 0  # -0.0 and 0.0: Buzz's float has one zero
-        else:
-            assert back == Message(Op.PUT, 5, raw, 1, 1)
+    if out is not None:  # -0.0 never is: Buzz's float has one zero
+        assert buzz.to_ours(out) == Message(Op.PUT, 5, raw, 1, 1)
 
 
 def test_bittybuzz_values_and_guards() -> None:

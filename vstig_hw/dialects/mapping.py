@@ -20,8 +20,10 @@ id. A lab declares once which names it bridges, to which of our keys, and how ou
 
 Value types: `int16`, `uint16`, `float16` (IEEE half) and `bbzfloat` (BittyBuzz's
 16-bit float, so Kilobot floats cross bit for bit). A value of another kind than
-its key's type, or out of its range, is not converted: it is unmappable, and the
-translators count it as `drop_unmapped`.
+its key's type, out of its range, or one the conversion would round (Buzz's 0.1
+under a float16 key, a float16 with 10 fraction bits toward a bbzfloat, -0.0 toward
+Buzz) is not converted: it is unmappable, and the translators count it as
+`drop_unmapped` (firmware_spec/dialects.md section 5, "Values").
 
 BittyBuzz string ids: ids 0-45 are the same in every build (BittyBuzz
 src/bittybuzz/util/BittyBuzzStrings.bst, prepended to every script's strings); the
@@ -33,6 +35,7 @@ count, little-endian, then NUL-terminated strings in id order) and the `.basm` (
 from __future__ import annotations
 
 import math
+import struct
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,7 +44,7 @@ from typing import Any, Literal, get_args
 from ..values import from_raw, to_raw
 from ..wire import KEY_MAX
 from .bittybuzz import BbzType, bbzfloat_from_float, bbzfloat_to_float
-from .buzz import BUZZ_DIALECTS, BuzzDialect, BuzzObject
+from .buzz import BUZZ_DIALECTS, BuzzDialect, BuzzObject, buzz_float_from_wire, buzz_float_to_wire
 
 __all__ = [
     "BBZ_BASE_STRINGS",
@@ -94,61 +97,97 @@ class Deployment:
         self.by_key = {entry.key: entry for entry in self.keys.values()}
         self.by_bbz_id = {entry.bbz_id: entry for entry in self.keys.values() if entry.bbz_id is not None}
 
-    # ---- values: each returns None when the value cannot be carried faithfully ----
+    # ---- values: each returns None unless the value crosses exactly ----
+    # A robot stores what it hears under the writer's (timestamp, robot), and a copy with other
+    # bits at that version is never replaced (same version, same writer). So a value crosses
+    # only if converting it back gives the writer's bits; a rounded one is not sent at all.
 
     @staticmethod
     def raw_from_buzz(obj: BuzzObject, value_type: DialectValueType) -> int | None:
         """Our 16 raw bits for a Buzz object under a key of `value_type`."""
-        try:
-            if isinstance(obj, bool):
-                return None
-            if isinstance(obj, int) and value_type in ("int16", "uint16"):
-                return to_raw(obj, value_type)
-            if isinstance(obj, float) and value_type == "float16":
-                return to_raw(obj, "float16")
-            if isinstance(obj, float) and value_type == "bbzfloat":
-                return bbzfloat_from_float(obj)
-        except ValueError:
-            return None
-        return None
+        raw = _raw_from_buzz(obj, value_type)
+        return raw if raw is not None and _same_object(_buzz_from_raw(raw, value_type), obj) else None
 
     @staticmethod
     def buzz_from_raw(raw: int, value_type: DialectValueType) -> BuzzObject:
-        """The Buzz object for our 16 raw bits; None where Buzz has no finite equivalent."""
-        number = bbzfloat_to_float(raw) if value_type == "bbzfloat" else from_raw(raw, value_type)
-        if isinstance(number, float) and not math.isfinite(number):
-            return None
-        return number
+        """The Buzz object for our 16 raw bits; None where Buzz robots could not hold exactly it."""
+        obj = _buzz_from_raw(raw, value_type)
+        return obj if obj is not None and _raw_from_buzz(obj, value_type) == raw else None
 
     @staticmethod
     def raw_from_bbz(tag: int, value: int, value_type: DialectValueType) -> int | None:
         """Our 16 raw bits for a BittyBuzz value (type tag, 16 bits) under a key of `value_type`."""
-        if tag == BbzType.INT and value_type == "int16":
-            return value
-        if tag == BbzType.INT and value_type == "uint16":
-            return value if value < 0x8000 else None  # a negative int16 is no uint16
-        if tag == BbzType.FLOAT and value_type == "bbzfloat":
-            return value
-        if tag == BbzType.FLOAT and value_type == "float16":
-            try:
-                return to_raw(bbzfloat_to_float(value), "float16")
-            except ValueError:
-                return None
-        return None
+        raw = _raw_from_bbz(tag, value, value_type)
+        return raw if raw is not None and _bbz_from_raw(raw, value_type) == (tag, value) else None
 
     @staticmethod
     def bbz_from_raw(raw: int, value_type: DialectValueType) -> tuple[int, int] | None:
-        """(type tag, 16 bits) a Kilobot reads as our value, or None."""
-        if value_type == "int16":
-            return BbzType.INT, raw
-        if value_type == "uint16":
-            return (BbzType.INT, raw) if raw < 0x8000 else None
-        if value_type == "bbzfloat":
-            return BbzType.FLOAT, raw
+        """(type tag, 16 bits) a Kilobot reads as exactly our value, or None."""
+        tagged = _bbz_from_raw(raw, value_type)
+        return tagged if tagged is not None and _raw_from_bbz(*tagged, value_type) == raw else None
+
+
+# The plain conversions, each rounding as its target type does; the methods above keep only
+# the values that come back unchanged.
+
+def _raw_from_buzz(obj: BuzzObject, value_type: DialectValueType) -> int | None:
+    try:
+        if isinstance(obj, bool):
+            return None
+        if isinstance(obj, int) and value_type in ("int16", "uint16"):
+            return to_raw(obj, value_type)
+        if isinstance(obj, float) and value_type == "float16":
+            return to_raw(obj, "float16")
+        if isinstance(obj, float) and value_type == "bbzfloat":
+            return bbzfloat_from_float(obj)
+    except ValueError:
+        return None
+    return None
+
+
+def _buzz_from_raw(raw: int, value_type: DialectValueType) -> BuzzObject:
+    """What a Buzz robot holds once it hears our value: Buzz's float has one zero and no infinity."""
+    number = bbzfloat_to_float(raw) if value_type == "bbzfloat" else from_raw(raw, value_type)
+    if isinstance(number, int):
+        return number
+    if not math.isfinite(number):
+        return None
+    return buzz_float_from_wire(*buzz_float_to_wire(number))
+
+
+def _same_object(held: BuzzObject, wrote: BuzzObject) -> bool:
+    """The same Buzz object bit for bit: an int is no float, and -0.0 is not 0.0."""
+    if isinstance(held, float) and isinstance(wrote, float):
+        return struct.pack(">d", held) == struct.pack(">d", wrote)
+    return type(held) is type(wrote) and held == wrote
+
+
+def _raw_from_bbz(tag: int, value: int, value_type: DialectValueType) -> int | None:
+    if tag == BbzType.INT and value_type == "int16":
+        return value
+    if tag == BbzType.INT and value_type == "uint16":
+        return value if value < 0x8000 else None  # a negative int16 is no uint16
+    if tag == BbzType.FLOAT and value_type == "bbzfloat":
+        return value
+    if tag == BbzType.FLOAT and value_type == "float16":
         try:
-            return BbzType.FLOAT, bbzfloat_from_float(from_raw(raw, "float16"))
+            return to_raw(bbzfloat_to_float(value), "float16")
         except ValueError:
             return None
+    return None
+
+
+def _bbz_from_raw(raw: int, value_type: DialectValueType) -> tuple[int, int] | None:
+    if value_type == "int16":
+        return BbzType.INT, raw
+    if value_type == "uint16":
+        return (BbzType.INT, raw) if raw < 0x8000 else None
+    if value_type == "bbzfloat":
+        return BbzType.FLOAT, raw
+    try:
+        return BbzType.FLOAT, bbzfloat_from_float(from_raw(raw, "float16"))
+    except ValueError:
+        return None
 
 
 # --------------------------------------------------------------------------

@@ -1,8 +1,8 @@
 """Translators between each dialect's vstig messages and our Message, for one deployment.
 
 Each translator is pure and counts what it cannot carry in `drops`:
-`drop_unmapped` (a name, stigmergy or value the deployment does not map) and the
-guards below. Timestamps, writers and the PUT/GET distinction cross unchanged
+`drop_unmapped` (a name, stigmergy or value the deployment does not map exactly) and
+the guards below. Timestamps, writers and the PUT/GET distinction cross unchanged
 where the widths allow.
 
 Buzz: a QUERY for a key its sender does not hold (nil, timestamp 0) is our empty
