@@ -76,10 +76,43 @@ def test_text_table_is_sorted_by_convergence_with_median_min_max(tmp_path: Path)
 
 def test_key_filter_and_window(tmp_path: Path) -> None:
     log = _swarm_log(tmp_path / "swarm.log")
-    code, _, err = invoke(str(log), "--json", "--key", "4")
-    assert code == 1 and "no stigmergy messages" in err
+    code, _, err = invoke(str(log), "--json", "--key", "4", "--op", "put", "--since", "0.5")
+    assert code == 1 and err.strip().endswith(
+        f"{log}: the filters (--key 4 --op PUT --since 0.5) left out all 7 stigmergy messages in the capture")
+    (tmp_path / "empty.log").write_text("")  # two files: read record by record, not in bulk
+    code, _, err = invoke(str(log), str(tmp_path / "empty.log"), "--key", "3", "--since", "5")
+    assert code == 1 and "(--key 3 --since 5) left out all 7 stigmergy messages" in err
     code, out, _ = invoke(str(log), "--json", "--window", "0.25")  # robot 3 (1.3 s) is not heard near 1.0 s
     assert json.loads(out)["writes"][1]["converged_after_s"] == pytest.approx(0.2)
+
+
+def _shell(command: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(["bash", "-c", command], capture_output=True, text=True, timeout=120, check=False)
+
+
+@pytest.mark.parametrize("reading", ["cat {log} | {vstig} analyze - --json",
+                                     "{vstig} analyze /dev/stdin --json < {log}",
+                                     "{vstig} analyze <(cat {log}) --json", "{vstig} analyze {bare} --json",
+                                     "cat {bare} | {vstig} analyze - --json --input-format log"])
+def test_reads_stdin_pipes_and_unnamed_files_as_decode_does(tmp_path: Path, reading: str) -> None:
+    log = _swarm_log(tmp_path / "swarm.log")
+    bare = tmp_path / "swarm"  # no extension: told by its first bytes
+    bare.write_bytes(log.read_bytes())
+    done = _shell(reading.format(vstig=VSTIG, log=log, bare=bare))
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["summary"]["converged"] == 1
+
+
+def test_a_bad_stream_is_named_as_the_user_gave_it(tmp_path: Path) -> None:
+    done = _shell(f"echo garbage | {VSTIG} analyze -")
+    assert done.returncode == 2 and "<stdin>: cannot tell the capture type from its first bytes" in done.stderr
+    log = _swarm_log(tmp_path / "swarm.log")
+    log.write_text(log.read_text() + "not a frame\n")
+    done = _shell(f"cat {log} | {VSTIG} analyze -")
+    assert done.returncode == 1 and "Error: <stdin>:8: not a candump line" in done.stderr, done.stderr
+    done = _shell(f"cat {log} | {VSTIG} analyze - --skip-bad --json")
+    assert done.returncode == 0 and "skipped <stdin>:8: not a candump line" in done.stderr
+    assert json.loads(done.stdout)["capture"]["files"] == ["<stdin>"]
 
 
 def test_plot_is_a_png_at_column_width(tmp_path: Path) -> None:
