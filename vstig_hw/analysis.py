@@ -201,6 +201,7 @@ class Analyzer:
             pending.append(row)
             if len(pending) >= _BATCH:
                 self._flush()
+                pending = self._pending  # _flush starts a new list: appending to the old one would lose rows
 
     def _flush(self) -> None:
         rows, self._pending = self._pending, []

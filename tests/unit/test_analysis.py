@@ -147,3 +147,10 @@ def test_key_filter_keeps_one_key(tmp_path: Path) -> None:
     analyze_captures([str(log)], analyzer, keep=Filter(keys=frozenset({4})))
     report = analyzer.report()
     assert [w.key for w in report.writes] == [4] and report.messages == 2
+
+
+def test_messages_beyond_one_batch_all_count() -> None:
+    rows = [(i * 0.001, "can0", i % 8, get(3, 7, 1 + i // 1000, 1)) for i in range(150_000)]  # over two batches
+    report = _report(rows)
+    assert report.messages == 150_000
+    assert len(report.writes) == 150 and report.links["can0"].gets == 150_000
