@@ -31,7 +31,8 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @input_format_option
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (writes, summary, bandwidth).")
 @click.option("--plot", type=click.Path(dir_okay=False, writable=True, path_type=Path),
-              help="Write a PNG: (a) a key's writes spreading through the senders, (b) convergence times.")
+              help="Write a PNG: (a) a key's writes spreading through the senders, (b) convergence times, "
+                   "(c) traffic per link (alone where no link names senders).")
 @overwrite_option("the --plot FILE")
 @click.option("--window", default=DEFAULT_WINDOW, show_default=True, type=click.FloatRange(0, min_open=True),
               help="Seconds either side of a write in which a sender must be heard to count as active.")
