@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
@@ -11,11 +12,13 @@ from typing import Any
 import click
 
 from vstig_hw.analysis import CONFLICT_RULES, DEFAULT_WINDOW, Analyzer, Conflict, Report, Traffic, WriteReport
-from vstig_hw.capture.analyzefile import analyze_captures
+from vstig_hw.capture.analyzefile import Fed, analyze_captures
 from vstig_hw.capture.filters import Filter
+from vstig_hw.capture.records import CaptureError
 from vstig_hw.counters import Counters
 from vstig_hw.values import ValueType, from_raw
 
+from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
 from ._capture_options import filter_options, parse_id_base, reading_options
 from ._files import overwrite_option, refuse_to_replace
 from .errors import reports_errors
@@ -24,10 +27,12 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 
 
 @click.command()
-@click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False))
+@click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, allow_dash=True))
+@input_format_option
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (writes, summary, bandwidth).")
 @click.option("--plot", type=click.Path(dir_okay=False, writable=True, path_type=Path),
-              help="Write a PNG: (a) a key's writes spreading through the senders, (b) convergence times.")
+              help="Write a PNG: (a) a key's writes spreading through the senders, (b) convergence times, "
+                   "(c) traffic per link (alone where no link names senders).")
 @overwrite_option("the --plot FILE")
 @click.option("--window", default=DEFAULT_WINDOW, show_default=True, type=click.FloatRange(0, min_open=True),
               help="Seconds either side of a write in which a sender must be heard to count as active.")
@@ -37,9 +42,9 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @reading_options
 @filter_options
 @reports_errors
-def command(files: tuple[str, ...], as_json: bool, plot: Path | None, overwrite: bool, window: float,
-            conflict: Conflict, value_type: ValueType, skip_bad: bool, id_base: str | None, extended: bool,
-            deployment: str | None, keep: Filter) -> None:
+def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plot: Path | None, overwrite: bool,
+            window: float, conflict: Conflict, value_type: ValueType, skip_bad: bool, id_base: str | None,
+            extended: bool, deployment: str | None, keep: Filter) -> None:
     """Measure convergence per write and bandwidth from captures.
 
     Convergence is how long each write took to reach every robot, the paper's measure.
@@ -51,7 +56,8 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, overwrite:
     Serial links name no sender: for them, the first and last time each write was
     heard per link is reported instead. Several FILES are merged by time. The
     filters (--key, --robot, --sender, --op, --link, --since, --until) choose
-    which messages count; --plot draws the first --key given.
+    which messages count; --plot draws the first --key given. - reads stdin;
+    pipes and <(...) work too, their type told by their first bytes.
 
     Example: vstig analyze swarm.log --key 3 --plot key3.png
     """
@@ -61,19 +67,28 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, overwrite:
     analyzer = Analyzer(window, conflict)
     # 11-bit unless told (--extended) or implied (--id-base names one width's base); else read from frames.
     width = True if extended else (False if base is not None else None)
-    drops, bad = _read(files, analyzer, skip_bad, base, width, keep, deployment)
+    names = ", ".join(map(input_name, files))
+    with contextlib.ExitStack() as spooled:  # stdin and pipes are copied to a file first
+        readable = {spooled.enter_context(readable_capture(path, input_format)): input_name(path) for path in files}
+        try:
+            drops, bad, filtered_out = _read(readable, analyzer, skip_bad, base, width, keep, deployment)
+        except CaptureError as error:
+            raise renamed(error, error.path, readable.get(error.path, error.path)) from None
     for error in bad[:5]:
-        click.echo(f"skipped {error}", err=True)
+        click.echo(f"skipped {renamed(error, error.path, readable.get(error.path, error.path))}", err=True)
     report = analyzer.report()
     if not report.messages:
+        if filtered_out:
+            raise click.ClickException(f"{names}: the filters ({_described(keep)}) left out all {filtered_out} "
+                                       "stigmergy messages in the capture")
         reason = f" ({drops.summary()} dropped)" if drops else ""
-        raise click.ClickException(f"{', '.join(files)}: no stigmergy messages in the capture{reason}")
+        raise click.ClickException(f"{names}: no stigmergy messages in the capture{reason}")
     if plot is not None:
         from vstig_hw.analysis_plot import plot_report
 
         plot_report(report, plot, min(keep.keys) if keep.keys else None)
     if as_json:
-        click.echo(json.dumps(_as_json(report, files, drops, len(bad), value_type)))
+        click.echo(json.dumps(_as_json(report, tuple(readable.values()), drops, len(bad), value_type)))
     else:
         _print_text(report, value_type)
     summary = f"{report.messages} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
@@ -82,8 +97,10 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, overwrite:
     click.echo(summary + (f"; wrote {plot}" if plot else ""), err=True)
 
 
-def _read(files: tuple[str, ...], analyzer: Analyzer, skip_bad: bool, base: int | None, width: bool | None,
-          keep: Filter, deployment: str | None) -> tuple[Counters, list[Any]]:
+def _read(names: dict[str, str], analyzer: Analyzer, skip_bad: bool, base: int | None, width: bool | None,
+          keep: Filter, deployment: str | None) -> Fed:
+    """`names`: the files to read, each with the name the user gave it."""
+    files = tuple(names)
     size = sum(os.path.getsize(path) for path in files)
     if not (sys.stderr.isatty() and size > _PROGRESS_BYTES):
         return analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep,
@@ -92,10 +109,21 @@ def _read(files: tuple[str, ...], analyzer: Analyzer, skip_bad: bool, base: int 
     from rich.progress import Progress
 
     with Progress(console=Console(stderr=True), transient=True) as bar:
-        task = bar.add_task(f"analyzing {os.path.basename(files[0])}", total=size)
+        task = bar.add_task(f"analyzing {os.path.basename(names[files[0]])}", total=size)
         result = analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep,
                                   deployment=deployment, progress=lambda n: bar.advance(task, n))
     return result
+
+
+def _described(keep: Filter) -> str:
+    """The filter as the options that made it (--key 3 --op PUT)."""
+    words = [f"--{name} {value}" for name, values in (("key", keep.keys), ("robot", keep.robots),
+                                                      ("sender", keep.senders), ("link", keep.links))
+             for value in sorted(values or ())]
+    words += [f"--op {op.name}" for op in sorted(keep.ops or ())]
+    words += [f"--{name} {value:g}" for name, value in (("since", keep.since), ("until", keep.until))
+              if value is not None]
+    return " ".join(words)
 
 
 # -- JSON ---------------------------------------------------------------------------------------------------------

@@ -4,25 +4,22 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import sys
-import tempfile
 from collections.abc import Callable, Iterator
 
 import click
 
 from vstig_hw.capture.decodefile import FORMATS, decode_file, decode_to_mcap
-from vstig_hw.capture.files import MCAP_EXTENSION, READABLE_EXTENSIONS, sniff_suffix
+from vstig_hw.capture.files import MCAP_EXTENSION
 from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError
-from vstig_hw.capture.serial_log import is_serial_capture
 from vstig_hw.values import ValueType
 
+from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
 from ._capture_options import filter_options, parse_id_base, reading_options
 from ._files import overwrite_option, refuse_to_replace
 from .errors import reports_errors
 
-INPUT_FORMATS = [*(suffix[1:] for suffix in READABLE_EXTENSIONS), "cap"]  # cap: our serial capture
 _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 
 
@@ -38,9 +35,7 @@ def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | No
 
 @click.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, allow_dash=True))
-@click.option("--input-format", type=click.Choice(INPUT_FORMATS),
-              help="The capture type, for a name that does not show it (default: by extension, and for - "
-                   "or a pipe by content).")
+@input_format_option
 @click.option("--format", "fmt", type=click.Choice([*FORMATS, "mcap"]), default="text", show_default=True,
               help="text: one readable line per message; jsonl: one JSON object per line; csv: a header, then rows; "
                    "mcap: a rosbag2 MCAP file (-o), one topic per link, for Foxglove and ros2 bag.")
@@ -65,23 +60,23 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: 
     if output is not None:
         _check_output(output, files, overwrite)
         with contextlib.ExitStack() as spooled:  # stdin and pipes too
-            readable = tuple(spooled.enter_context(_readable(path, "<stdin>" if path == "-" else path, input_format))
+            readable = tuple(spooled.enter_context(readable_capture(path, input_format))
                              for path in files)
             _to_mcap(readable, output, skip_bad, base, extended, deployment, keep)
         return
     for number, path in enumerate(files):
-        name = "<stdin>" if path == "-" else path
-        with _readable(path, name, input_format) as readable, _progress_bar(readable) as progress:
+        name = input_name(path)
+        with readable_capture(path, input_format) as readable, _progress_bar(readable) as progress:
             try:
                 count, drops, bad = decode_file(readable, sys.stdout, fmt, value_type=value_type,
                                                 skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
                                                 deployment=deployment, progress=progress, csv_header=number == 0,
                                                 file_column=len(files) > 1)
             except CaptureError as error:
-                raise _renamed(error, readable, name) from None
+                raise renamed(error, readable, name) from None
         sys.stdout.flush()
         for error in bad[:5]:
-            click.echo(f"skipped {_renamed(error, readable, name)}", err=True)
+            click.echo(f"skipped {renamed(error, readable, name)}", err=True)
         summary = f"{name}: {count} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
         if drops:
             summary += f", dropped {drops.summary()}"
@@ -96,38 +91,6 @@ def _check_output(output: str, files: tuple[str, ...], overwrite: bool) -> None:
     if os.path.exists(output) and any(path != "-" and os.path.samefile(path, output) for path in files):
         raise click.UsageError(f"{output} is also an input: decode into another file")
     refuse_to_replace(output, overwrite)
-
-
-def _renamed(error: CaptureError, read: str, name: str) -> CaptureError:
-    return error if read == name else CaptureError(name, error.line, error.problem)
-
-
-@contextlib.contextmanager
-def _readable(path: str, name: str, input_format: str | None) -> Iterator[str]:
-    """A regular file to read `path` from whose name shows its type; a stream (-, a pipe) is copied first."""
-    regular = path != "-" and os.path.isfile(path)
-    if regular and input_format is None and (path.lower().endswith(READABLE_EXTENSIONS) or is_serial_capture(path)):
-        yield path
-        return
-    with tempfile.TemporaryDirectory(prefix="vstig-decode-") as folder:
-        spooled = os.path.join(folder, "input")
-        if regular:  # a file whose name does not tell (/dev/stdin redirected from a file): look inside
-            os.symlink(os.path.abspath(path), spooled)
-            with open(path, "rb") as file:
-                head = file.read(1 << 16)
-        else:
-            with contextlib.ExitStack() as stack:
-                source = sys.stdin.buffer if path == "-" else stack.enter_context(open(path, "rb"))
-                with open(spooled, "wb") as copy:
-                    head = source.read(1 << 16)
-                    copy.write(head)
-                    shutil.copyfileobj(source, copy, 1 << 20)
-        suffix = f".{input_format}" if input_format else sniff_suffix(head)
-        if suffix is None:
-            raise click.UsageError(f"{name}: cannot tell the capture type from its first bytes: give --input-format "
-                                   f"({', '.join(INPUT_FORMATS)})")
-        os.rename(spooled, spooled + suffix)
-        yield spooled + suffix
 
 
 @contextlib.contextmanager

@@ -38,8 +38,8 @@ import numpy.typing as npt
 from .timestamps import TS_NONE, is_newer
 from .wire import KEY_MAX, MESSAGE_SIZE, Message
 
-__all__ = ["CONFLICT_RULES", "DEFAULT_WINDOW", "NO_SENDER", "Analyzer", "Batch", "LinkHeard", "Report",
-           "Traffic", "WriteReport"]
+__all__ = ["CONFLICT_RULES", "DEFAULT_WINDOW", "NO_SENDER", "TIMELINE_STEP", "Analyzer", "Batch", "LinkHeard",
+           "Report", "Timeline", "Traffic", "WriteReport"]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -53,6 +53,9 @@ _SLOT_ZERO = 1 << 39  # activity slots are stored offset by this, so slots befor
 _BATCH = 1 << 16  # messages buffered by add_messages before they are aggregated as one batch
 _NEVER = (np.empty(0), np.empty(0, dtype=np.int64))  # the frontier of a sender that never showed the key
 _BLOCK = 4096  # writes per block of writes x senders in report()
+TIMELINE_STEP = 0.1  # seconds per slot of a link's timeline: the paper's control step
+_TIMELINE_PARTS = 64  # batches' slot counts kept apart before they are summed into one
+_ON_EDGE = 1e-3  # of a slot: a time stamped k steps in (k x 0.1, rounded in an epoch float) counts in slot k
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,13 @@ def _first_last(code: I64, t: F64) -> tuple[list[int], list[int], list[int], lis
     return ordered[starts].tolist(), order[starts].tolist(), order[ends].tolist(), (ends - starts + 1).tolist()
 
 
+def _summed(parts: list[tuple[I64, I64]]) -> tuple[I64, I64]:
+    """(slots, counts) parts as one: each slot once, ascending, its counts added."""
+    slots, inverse = np.unique(np.concatenate([p[0] for p in parts]), return_inverse=True)
+    counts = np.bincount(inverse, weights=np.concatenate([p[1] for p in parts]), minlength=len(slots))
+    return slots, counts.astype(np.int64)
+
+
 @dataclass
 class Traffic:
     """What one sender or one link put on the air."""
@@ -98,6 +108,18 @@ class Traffic:
     @property
     def bytes(self) -> int:
         return self.messages * MESSAGE_SIZE
+
+
+@dataclass(frozen=True)
+class Timeline:
+    """The messages one link carried per TIMELINE_STEP-wide slot: slot k starts k steps after `start`.
+
+    Sparse (only slots that carried something), so files whose clocks lie years apart cost no memory.
+    """
+
+    start: float
+    slots: I64  # ascending; may be negative for a file earlier than the first one read
+    counts: I64
 
 
 @dataclass(frozen=True)
@@ -146,6 +168,7 @@ class Report:
     rebroadcasts: int  # PUTs repeating an entry already heard in a PUT
     conflicts: int  # writes sharing a key and timestamp with another robot's write
     links_without_sender: list[str] = field(default_factory=list)
+    timelines: dict[str, Timeline] = field(default_factory=dict)  # per link, over the whole capture
 
     @property
     def duration(self) -> float:
@@ -185,6 +208,8 @@ class Analyzer:
         self._origin: float | None = None  # activity slots count from here
         self._sender_links: set[int] = set()
         self._pending: list[tuple[float, int, int, Message]] = []
+        self._timelines: dict[int, list[tuple[I64, I64]]] = defaultdict(list)  # link -> (slots, counts) parts
+        self._timeline_start: float | None = None
 
     def link(self, name: str) -> int:
         """The index of link `name` in `Batch.link` (registered on first use)."""
@@ -201,6 +226,7 @@ class Analyzer:
             pending.append(row)
             if len(pending) >= _BATCH:
                 self._flush()
+                pending = self._pending  # _flush starts a new list: appending to the old one would lose rows
 
     def _flush(self) -> None:
         rows, self._pending = self._pending, []
@@ -259,9 +285,21 @@ class Analyzer:
             if when < shown.get(slot, math.inf):
                 shown[slot] = when
 
+        self._count_over_time(batch.t, batch.link)
         named = batch.sender >= 0
         self._sender_links.update(np.unique(batch.link[named]).tolist())
         self._active.update(np.unique(self._activity_code(batch.sender[named], batch.t[named])).tolist())
+
+    def _count_over_time(self, t: F64, link: I64) -> None:
+        """Add the batch to each link's messages per slot (slots count from the first message read)."""
+        if self._timeline_start is None:
+            self._timeline_start = float(t.min())
+        slot = np.floor((t - self._timeline_start) / TIMELINE_STEP + _ON_EDGE).astype(np.int64)
+        for index in np.unique(link).tolist():
+            parts = self._timelines[index]
+            parts.append(np.unique(slot[link == index], return_counts=True))
+            if len(parts) >= _TIMELINE_PARTS:
+                parts[:] = [_summed(parts)]
 
     def _activity_code(self, sender: I64, t: F64) -> I64:
         """sender << 40 | the window/8-wide time slot it was heard in (slots count from the first message)."""
@@ -338,7 +376,12 @@ class Analyzer:
             first_copies=len(self._put_entries), rebroadcasts=self._puts - len(self._put_entries),
             conflicts=sum(n for n in same_slot.values() if n > 1),
             links_without_sender=[name for i, name in enumerate(self.links)
-                                  if i not in self._sender_links and links[name].messages])
+                                  if i not in self._sender_links and links[name].messages],
+            timelines=self._timeline_report())
+
+    def _timeline_report(self) -> dict[str, Timeline]:
+        start = self._timeline_start or 0.0
+        return {self.links[index]: Timeline(start, *_summed(parts)) for index, parts in sorted(self._timelines.items())}
 
     def _entry(self, code: int) -> tuple[int, int, int]:
         """(timestamp, robot, value) of a write code (the value it first appeared with)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import select
+import statistics
 import struct
 import subprocess
 import time
@@ -16,6 +17,9 @@ from peers import VSTIG, PtyPeer
 
 from vstig_cli.main import cli
 from vstig_hw import Message, Op, encode
+from vstig_hw.analysis import Analyzer
+from vstig_hw.analysis_plot import draw
+from vstig_hw.capture.analyzefile import analyze_captures
 from vstig_hw.framing import make_serial_framing
 
 T0 = 1_700_000_000.0
@@ -76,20 +80,105 @@ def test_text_table_is_sorted_by_convergence_with_median_min_max(tmp_path: Path)
 
 def test_key_filter_and_window(tmp_path: Path) -> None:
     log = _swarm_log(tmp_path / "swarm.log")
-    code, _, err = invoke(str(log), "--json", "--key", "4")
-    assert code == 1 and "no stigmergy messages" in err
+    code, _, err = invoke(str(log), "--json", "--key", "4", "--op", "put", "--since", "0.5")
+    assert code == 1 and err.strip().endswith(
+        f"{log}: the filters (--key 4 --op PUT --since 0.5) left out all 7 stigmergy messages in the capture")
+    (tmp_path / "empty.log").write_text("")  # two files: read record by record, not in bulk
+    code, _, err = invoke(str(log), str(tmp_path / "empty.log"), "--key", "3", "--since", "5")
+    assert code == 1 and "(--key 3 --since 5) left out all 7 stigmergy messages" in err
     code, out, _ = invoke(str(log), "--json", "--window", "0.25")  # robot 3 (1.3 s) is not heard near 1.0 s
     assert json.loads(out)["writes"][1]["converged_after_s"] == pytest.approx(0.2)
+
+
+def _shell(command: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(["bash", "-c", command], capture_output=True, text=True, timeout=120, check=False)
+
+
+@pytest.mark.parametrize("reading", ["cat {log} | {vstig} analyze - --json",
+                                     "{vstig} analyze /dev/stdin --json < {log}",
+                                     "{vstig} analyze <(cat {log}) --json", "{vstig} analyze {bare} --json",
+                                     "cat {bare} | {vstig} analyze - --json --input-format log"])
+def test_reads_stdin_pipes_and_unnamed_files_as_decode_does(tmp_path: Path, reading: str) -> None:
+    log = _swarm_log(tmp_path / "swarm.log")
+    bare = tmp_path / "swarm"  # no extension: told by its first bytes
+    bare.write_bytes(log.read_bytes())
+    done = _shell(reading.format(vstig=VSTIG, log=log, bare=bare))
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["summary"]["converged"] == 1
+
+
+def test_a_bad_stream_is_named_as_the_user_gave_it(tmp_path: Path) -> None:
+    done = _shell(f"echo garbage | {VSTIG} analyze -")
+    assert done.returncode == 2 and "<stdin>: cannot tell the capture type from its first bytes" in done.stderr
+    log = _swarm_log(tmp_path / "swarm.log")
+    log.write_text(log.read_text() + "not a frame\n")
+    done = _shell(f"cat {log} | {VSTIG} analyze -")
+    assert done.returncode == 1 and "Error: <stdin>:8: not a candump line" in done.stderr, done.stderr
+    done = _shell(f"cat {log} | {VSTIG} analyze - --skip-bad --json")
+    assert done.returncode == 0 and "skipped <stdin>:8: not a candump line" in done.stderr
+    assert json.loads(done.stdout)["capture"]["files"] == ["<stdin>"]
+
+
+def _png_size(png: Path) -> tuple[int, int]:
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = struct.unpack(">II", data[16:24])
+    return width, height
 
 
 def test_plot_is_a_png_at_column_width(tmp_path: Path) -> None:
     png = tmp_path / "swarm.png"
     code, _, err = invoke(str(_swarm_log(tmp_path / "swarm.log")), "--plot", str(png))
     assert code == 0, err
-    data = png.read_bytes()
-    assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    width, height = struct.unpack(">II", data[16:24])
-    assert (width, height) == (1020, 1380)  # 3.4 x 4.6 in at 300 dpi
+    assert _png_size(png) == (1020, 1860)  # 3.4 x 6.2 in at 300 dpi: panels (a), (b), (c)
+    analyzer = Analyzer()
+    analyze_captures([str(tmp_path / "swarm.log")], analyzer)
+    legend = draw(analyzer.report()).axes[0].get_legend()  # a few writes: each named
+    assert [text.get_text() for text in legend.get_texts()] == ["ts 1, robot 1", "ts 2, robot 1 (1 behind)"]
+
+
+def test_plot_of_a_serial_capture_draws_its_traffic(tmp_path: Path) -> None:
+    """No link names a sender, so convergence cannot be measured; the traffic can, and is the figure."""
+    from matplotlib.image import imread
+
+    framing = make_serial_framing("cobs8")
+    capture = tmp_path / "radio.cap"
+    lines = ["# vstig serial capture v1\n"]
+    for step in range(50):
+        msg = Message(Op.PUT, 3, 7, 1 + step // 10, 4)
+        lines += [f"({T0 + step * 0.1:.6f}) radio0 cobs8 rx {unit.hex()}\n" for unit in framing.encode(msg)]
+    capture.write_text("".join(lines))
+    png = tmp_path / "radio.png"
+    code, _, err = invoke(str(capture), "--plot", str(png))
+    assert code == 0, err
+    assert _png_size(png) == (1020, 660)  # 3.4 x 2.2 in: the traffic panel alone
+    pixels = (imread(png)[:, :, :3] * 255).round()
+    line = (abs(pixels - (0x00, 0x72, 0xB2)).max(axis=2) < 8).sum()  # the link's line, in the first colour
+    assert line > 500, line
+
+
+def test_plot_panels_tell_their_writes_apart_and_keep_exact_times(tmp_path: Path) -> None:
+    """A simulated swarm (12 robots, one message each per 0.1 s step): (a) says what its curves are, (b) steps
+    at the convergence times themselves, (c) shows 12 messages per 0.1 s."""
+    log = tmp_path / "sim.log"
+    done = subprocess.run([VSTIG, "sim", "--topology", "line", "--robots", "12", "--drop", "0.5", "--runs", "1",
+                           "--capture", str(log)], capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr
+    analyzer = Analyzer()
+    analyze_captures([str(log)], analyzer)
+    report = analyzer.report()
+    assert len(report.writes) == 12
+    spread, convergence, traffic = draw(report).axes[:3]
+    legend = spread.get_legend()
+    assert legend is not None
+    assert {text.get_text() for text in legend.get_texts()} == {"one write", "interquartile range", "median"}
+    times = sorted(t for w in report.writes if (t := w.converged_after) is not None)
+    ecdf = convergence.get_lines()[0]
+    assert list(ecdf.get_xdata())[1:-1] == times  # no bins: each write's own time
+    labels = [text.get_text() for text in convergence.get_legend().get_texts()]
+    assert labels == ["converged by then", f"median of those: {statistics.median(times):.3g} s"]
+    edges_and_rates = traffic.patches[0].get_data()  # the stairs: messages/s per bin
+    assert edges_and_rates.values == pytest.approx(120.0)  # 12 robots x 1 message per 0.1 s
 
 
 def test_empty_capture_says_so_and_exits_1(tmp_path: Path) -> None:

@@ -147,3 +147,31 @@ def test_key_filter_keeps_one_key(tmp_path: Path) -> None:
     analyze_captures([str(log)], analyzer, keep=Filter(keys=frozenset({4})))
     report = analyzer.report()
     assert [w.key for w in report.writes] == [4] and report.messages == 2
+
+
+def test_timeline_counts_each_links_messages_per_control_step() -> None:
+    analyzer = Analyzer()
+    can0, radio = analyzer.link("can0"), analyzer.link("radio0")
+    later = [(T0 + 1.0, can0, 1, put(3, 7, 1, 1)), (T0 + 1.3, can0, 2, get(3, 7, 1, 1)),
+             (T0 + 1.3, radio, NO_SENDER, put(3, 7, 1, 1)), (T0 + 1.35, can0, 2, put(3, 7, 1, 1))]
+    analyzer.add_messages(later)
+    analyzer.report()  # aggregates what came so far: the next batch starts earlier than every slot
+    analyzer.add_messages([(T0 + 0.8, radio, NO_SENDER, get(3, 7, 1, 1))])
+    analyzer.add_messages([(T0 + 1e9, can0, 3, get(3, 7, 1, 1))])  # a clock decades off: one more slot, not 10^10
+    analyzer.report()
+    analyzer.add_messages([(T0 + 1.31, can0, 2, get(3, 7, 1, 1))])
+    report = analyzer.report()
+    assert set(report.timelines) == {"can0", "radio0"}
+    can_line, radio_line = report.timelines["can0"], report.timelines["radio0"]
+    assert can_line.start == radio_line.start == pytest.approx(T0 + 1.0)  # slots count from the first message read
+    far = round((1e9 - 1.0) / 0.1)
+    assert (can_line.slots.tolist(), can_line.counts.tolist()) == ([0, 3, far], [1, 3, 1])  # 1.3, 1.31, 1.35: one slot
+    assert (radio_line.slots.tolist(), radio_line.counts.tolist()) == ([-2, 3], [1, 1])
+    assert sum(int(t.counts.sum()) for t in report.timelines.values()) == report.messages == 7
+
+
+def test_messages_beyond_one_batch_all_count() -> None:
+    rows = [(i * 0.001, "can0", i % 8, get(3, 7, 1 + i // 1000, 1)) for i in range(150_000)]  # over two batches
+    report = _report(rows)
+    assert report.messages == 150_000
+    assert len(report.writes) == 150 and report.links["can0"].gets == 150_000

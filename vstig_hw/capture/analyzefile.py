@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import heapq
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -24,16 +25,24 @@ from .filters import Filter, RecordFilter
 from .records import CaptureError, Record
 from .serial_log import is_serial_capture
 
-__all__ = ["analyze_captures"]
+__all__ = ["Fed", "analyze_captures"]
 
 CHUNK = 1 << 22  # bytes per candump chunk, as decode reads them
+
+
+class Fed(NamedTuple):
+    """What reading the captures came to, beside the messages the analyzer was given."""
+
+    drops: Counters  # units that held no stigmergy message, by reason
+    bad: list[CaptureError]  # bad lines skipped (--skip-bad)
+    filtered_out: int  # stigmergy messages the filter did not keep
 
 
 def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, skip_bad: bool = False,
                      id_base: int | None = None, extended: bool | None = None, keep: Filter | None = None,
                      progress: Callable[[int], None] | None = None,
-                     deployment: str | None = None) -> tuple[Counters, list[CaptureError]]:
-    """Feed every message of `paths` that `keep` passes; returns (drops by reason, bad lines skipped).
+                     deployment: str | None = None) -> Fed:
+    """Feed every message of `paths` that `keep` passes.
 
     `extended=None` reads each CAN link's ID width from its frames. `progress(n)`
     hears of each n bytes read, on the bulk path.
@@ -44,9 +53,9 @@ def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, skip_bad: bool
     if len(paths) == 1 and _bulk_readable(paths[0]) and not extended:
         drops = _candump_chunks(paths[0], sink, skip_bad, bad, id_base, progress)
         drops.update(decoder.drops())
-        return drops, bad
+        return Fed(drops, bad, sink.filtered_out)
     sink.add_records(heapq.merge(*(read_capture(path, skip_bad, bad) for path in paths), key=lambda r: r.t))
-    return decoder.drops(), bad
+    return Fed(decoder.drops(), bad, sink.filtered_out)
 
 
 def _bulk_readable(path: str) -> bool:
@@ -59,6 +68,11 @@ class _Sink:
     def __init__(self, analyzer: Analyzer, decoder: Decoder, keep: Filter) -> None:
         self.analyzer = analyzer
         self.passing = RecordFilter(keep, decoder)
+        self.batched_out = 0  # messages of bulk batches the filter left out (records count in `passing`)
+
+    @property
+    def filtered_out(self) -> int:
+        return self.batched_out + self.passing.filtered_out
 
     def add_records(self, records: Iterable[Record]) -> None:
         def rows() -> Iterator[tuple[float, int, int, Message]]:
@@ -82,8 +96,10 @@ class _Sink:
         if keep:
             first = float(batch.t[0])
             t0 = first - self.passing.since_start(first)
-            batch = batch.where(keep.mask(batch.t - t0, batch.link, self.analyzer.links, batch.sender, batch.op,
-                                          batch.key, batch.robot))
+            kept = keep.mask(batch.t - t0, batch.link, self.analyzer.links, batch.sender, batch.op, batch.key,
+                             batch.robot)
+            self.batched_out += len(batch) - int(kept.sum())
+            batch = batch.where(kept)
         self.analyzer.add(batch)
 
 

@@ -89,6 +89,7 @@ class RecordFilter:
         self.keep = keep
         self.decoder = decoder or Decoder()
         self.t0: float | None = None
+        self.filtered_out = 0  # messages `messages` decoded but did not pass
         self._encoders: dict[str, Framing[bytes]] = {}
 
     def since_start(self, t: float) -> float:
@@ -102,7 +103,9 @@ class RecordFilter:
         decoded = self.decoder.decode(record)
         sender = self.decoder.sender_of(record) if decoded else None
         if self.keep:
-            decoded = [d for d in decoded if self.keep.accepts(t, record.link, sender, d.message)]
+            passed = [d for d in decoded if self.keep.accepts(t, record.link, sender, d.message)]
+            self.filtered_out += len(decoded) - len(passed)
+            decoded = passed
         return sender, decoded
 
     def units(self, record: Record) -> list[Record]:
