@@ -186,7 +186,10 @@ def _encode_object(obj: BuzzObject, dialect: BuzzDialect, out: bytearray) -> Non
         mantissa, exponent = buzz_float_to_wire(obj)
         out += _FLOAT.to_bytes(tag_size, "big") + struct.pack(">ii", mantissa, exponent)
     elif isinstance(obj, str):
-        text = obj.encode("utf-8", "surrogateescape")
+        try:  # surrogateescape gives back the bytes a decoded Buzz string carried, valid UTF-8 or not
+            text = obj.encode("utf-8", "surrogateescape")
+        except UnicodeEncodeError:
+            raise ValueError(f"a Buzz string holds UTF-8 or escaped bytes, not the lone surrogate in {obj!r}") from None
         if len(text) > 0xFFFF or 0 in text:
             raise ValueError("a Buzz string is at most 65535 bytes and holds no NUL")
         out += _STRING.to_bytes(tag_size, "big") + len(text).to_bytes(2, "big") + text
