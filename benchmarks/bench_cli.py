@@ -204,8 +204,8 @@ def gateway_latency() -> Iterator[Result]:
     the driver, not the gateway.)"""
     import multiprocessing
 
+    from vstig_hw.framing.can import can_framing_for
     from vstig_hw.gateway import Node, favour_latency
-    from vstig_hw.links.can import can_framing_for
     from vstig_hw.links.spec import parse
 
     rate_hz, count = 5000, 10_000

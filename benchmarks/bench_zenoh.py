@@ -37,8 +37,8 @@ def _gateway_hop(rate_hz: int, count: int) -> list[float]:
     forked process that timestamps what arrives, forked before this process opens any Zenoh
     session or gateway thread.
     """
+    from vstig_hw.framing.can import can_framing_for
     from vstig_hw.gateway import Node, favour_latency
-    from vstig_hw.links.can import can_framing_for
     from vstig_hw.links.spec import parse
 
     master, slave, path = _raw_pty()

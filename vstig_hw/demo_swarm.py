@@ -135,7 +135,7 @@ class CanRobots:
     def __init__(self, medium: Medium, channel: str, drop: float, rng: random.Random) -> None:
         import can
 
-        from .links.can import can_framing_for
+        from .framing.can import can_framing_for
 
         self.medium, self.drop, self.rng = medium, drop, rng
         self.buses = [can.Bus(interface="virtual", channel=channel) for _ in medium.robots]

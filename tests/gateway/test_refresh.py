@@ -7,8 +7,8 @@ import os
 import can
 
 from vstig_hw import Op
+from vstig_hw.framing.can import can_framing
 from vstig_hw.gateway import Node, RoundRobinGet
-from vstig_hw.links.can import can_framing
 from vstig_hw.links.spec import parse
 
 

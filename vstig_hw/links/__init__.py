@@ -28,16 +28,13 @@ __all__ = [
     "LinkSpec",
     "SerialSpec",
     "ZenohSpec",
-    "can_framing",
-    "can_framing_for",
     "can_link",
     "parse",
     "serial_link",
     "zenoh_link_from_spec",
 ]
 
-_LAZY = {"can_link": "can", "can_framing": "can", "can_framing_for": "can", "serial_link": "serial",
-         "zenoh_link_from_spec": "zenoh"}
+_LAZY = {"can_link": "can", "serial_link": "serial", "zenoh_link_from_spec": "zenoh"}
 
 
 def __getattr__(name: str) -> Any:

@@ -6,16 +6,14 @@ from typing import TYPE_CHECKING, Any
 
 import can
 
-from ..framing.can import CanFraming, CanIdScheme
+from ..framing.can import LISTENER_ID, CanFraming, CanIdScheme
 from ..transports.can import CanTransport
 from .link import Link
 
 if TYPE_CHECKING:
     from .spec import CanSpec
 
-__all__ = ["LISTENER_ID", "can_framing", "can_framing_for", "can_link", "can_link_from_spec"]
-
-LISTENER_ID = 0  # the CAN sender field of a link that never transmits (sniff, record)
+__all__ = ["can_link", "can_link_from_spec"]
 
 
 def can_link(
@@ -57,14 +55,3 @@ def can_link_from_spec(spec: CanSpec, name: str, *, robot_id: int = LISTENER_ID,
                     bitrate=spec.bitrate, fd=spec.fd, id_base=spec.id_base, extended=spec.extended,
                     stigmergy=spec.stigmergy, kernel_filter=spec.kernel_filter, echo=spec.echo, name=name,
                     **dict(spec.bus_options))
-
-
-def can_framing_for(robot_id: int, id_base: int | None = None, extended: bool = False,
-                    stigmergy: int = 0) -> CanFraming:
-    """The CAN framing a node with this id transmits under (and decodes every sender with)."""
-    return CanFraming(CanIdScheme(extended=extended, base=id_base, stigmergy=stigmergy), sender=robot_id)
-
-
-def can_framing(id_base: int | None = None, extended: bool = False, stigmergy: int = 0) -> CanFraming:
-    """A CAN framing that decodes what any sender put on a bus with this ID scheme."""
-    return can_framing_for(LISTENER_ID, id_base, extended, stigmergy)
