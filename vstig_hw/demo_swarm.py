@@ -32,8 +32,10 @@ from .counters import Counters
 from .engine import Stigmergy, larger_value_wins
 from .framing import make_serial_framing
 from .gateway import Node
+from .links.can import CanSpec
 from .links.link import Link
-from .links.spec import CanSpec, SerialSpec, ZenohSpec
+from .links.serial import SerialSpec
+from .links.zenoh import ZenohSpec
 
 __all__ = ["DemoConfig", "DemoReport", "run_demo"]
 
