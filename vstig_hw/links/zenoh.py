@@ -12,7 +12,7 @@ spec names override it, and our closed defaults fill only what it leaves unset.
 Opening a link that listens beyond loopback, or scouts, with no authentication
 configured (user/password, public keys or mutual TLS) logs one warning line.
 
-zenoh (an optional extra) is imported when a link is built, not when a spec is parsed.
+The zenoh library is imported when a link is built, not when a spec is parsed.
 """
 
 from __future__ import annotations
