@@ -204,9 +204,9 @@ def gateway_latency() -> Iterator[Result]:
     the driver, not the gateway.)"""
     import multiprocessing
 
+    from vstig_hw.framing.can import can_framing_for
     from vstig_hw.gateway import Node, favour_latency
-    from vstig_hw.links.can import can_framing_for
-    from vstig_hw.links.spec import parse
+    from vstig_hw.links import parse
 
     rate_hz, count = 5000, 10_000
     fork = multiprocessing.get_context("fork")

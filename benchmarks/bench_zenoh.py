@@ -37,9 +37,9 @@ def _gateway_hop(rate_hz: int, count: int) -> list[float]:
     forked process that timestamps what arrives, forked before this process opens any Zenoh
     session or gateway thread.
     """
+    from vstig_hw.framing.can import can_framing_for
     from vstig_hw.gateway import Node, favour_latency
-    from vstig_hw.links.can import can_framing_for
-    from vstig_hw.links.spec import parse
+    from vstig_hw.links import parse
 
     master, slave, path = _raw_pty()
     fork = multiprocessing.get_context("fork")

@@ -10,8 +10,9 @@ from typing import Any
 import click
 
 from vstig_hw.gateway import ENGINE_STATS, Node, stop_on_signals
-from vstig_hw.links import Link
-from vstig_hw.links.spec import CanSpec, LinkSpec, ZenohSpec
+from vstig_hw.links import Link, LinkSpec
+from vstig_hw.links.can import CanSpec
+from vstig_hw.links.zenoh import ZenohSpec
 
 VALUE_TYPE_HELP = "How to show the 16-bit value field: unsigned, signed (two's complement) or half-precision float."
 

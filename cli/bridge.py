@@ -8,7 +8,7 @@ import click
 
 from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency
-from vstig_hw.links.spec import LinkSpec
+from vstig_hw.links import LinkSpec
 
 from ._common import build_links, describe_links, print_counters, run_until_stopped
 from ._guard import GuardChoice, guard_options, take_warnings

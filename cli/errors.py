@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 import click
 
 from vstig_hw.capture.records import CaptureError
-from vstig_hw.links import spec as linkspec
+from vstig_hw.links import LinkSpec, parse
 from vstig_hw.transports.base import TransportError, one_line
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -67,11 +67,11 @@ class LinkSpecType(click.ParamType):
 
     name = "LINK"
 
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> linkspec.LinkSpec:
-        if isinstance(value, linkspec.LinkSpec):
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> LinkSpec:
+        if isinstance(value, LinkSpec):
             return value
         try:
-            return linkspec.parse(value)
+            return parse(value)
         except ValueError as error:
             self.fail(str(error), param, ctx)
 

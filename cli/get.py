@@ -6,7 +6,7 @@ import click
 
 from vstig_hw.gateway import Node
 from vstig_hw.gateway.oneshot import get_newest
-from vstig_hw.links.spec import LinkSpec
+from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType
 
 from ._common import build_links, lossless

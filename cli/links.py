@@ -4,19 +4,19 @@ from __future__ import annotations
 
 import click
 
-from vstig_hw.links.spec import EXAMPLES, GRAMMAR, NOTES
+from vstig_hw.links import examples, grammar, notes
 
 
 @click.command()
 def command() -> None:
     """List the link-spec grammar every command accepts, with examples."""
     click.echo("A LINK names a transport, a device and a framing in one string:\n")
-    for rule in GRAMMAR:
+    for rule in grammar():
         click.echo(f"  {rule}")
     click.echo("\nExamples:")
-    for examples in EXAMPLES.values():
-        for example in examples:
+    for specs in examples().values():
+        for example in specs:
             click.echo(f"  {example}")
     click.echo("\nNotes:")
-    for note in NOTES.values():
+    for note in notes().values():
         click.echo(f"  {note}")

@@ -7,7 +7,7 @@ import click
 from vstig_hw.engine import Entry
 from vstig_hw.gateway import Node
 from vstig_hw.gateway.oneshot import HearsItself, put_confirmed
-from vstig_hw.links.spec import LinkSpec
+from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
 from ._common import build_links, lossless

@@ -15,8 +15,9 @@ from vstig_hw.capture.filters import Filter, RecordFilter
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
-from vstig_hw.links import Link
-from vstig_hw.links.spec import CanSpec, LinkSpec, ZenohSpec
+from vstig_hw.links import Link, LinkSpec
+from vstig_hw.links.can import CanSpec
+from vstig_hw.links.zenoh import ZenohSpec
 
 from ._capture_options import filter_options
 from ._common import StatusLine, build_links, describe_links, must_hear, print_counters, run_until_stopped

@@ -17,8 +17,8 @@ from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.capture.replay import replay
 from vstig_hw.engine import Stigmergy
 from vstig_hw.gateway import stop_on_signals
-from vstig_hw.links import Link
-from vstig_hw.links.spec import CanSpec, LinkSpec
+from vstig_hw.links import Link, LinkSpec
+from vstig_hw.links.can import CanSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ._capture_options import filter_options

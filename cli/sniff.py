@@ -15,8 +15,7 @@ from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.swarmview import SwarmView
-from vstig_hw.links import Heard
-from vstig_hw.links.spec import LinkSpec
+from vstig_hw.links import Heard, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ._capture_options import filter_options

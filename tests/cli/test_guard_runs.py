@@ -21,8 +21,8 @@ from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, stop, wait_for
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.engine import larger_value_wins
 from vstig_hw.framing import make_serial_framing
+from vstig_hw.framing.can import can_framing_for
 from vstig_hw.links import parse
-from vstig_hw.links.can import can_framing_for
 
 TASK_KEY = 1
 JUMP_KEY = 7  # written honestly by radio robot 21, then forged 30,000 ahead

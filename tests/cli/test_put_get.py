@@ -17,7 +17,7 @@ from peers import PtyPeer, SlcanAdapter, run_vstig
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.framing import make_serial_framing
-from vstig_hw.links import can_framing_for
+from vstig_hw.framing.can import can_framing_for
 
 Program = Callable[["RadioRobot", Message], None]
 

@@ -38,8 +38,8 @@ from vstig_hw.dialects.mapping import DeploymentError, parse_deployment
 from vstig_hw.framing import TransmitOnlyError, make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
 from vstig_hw.gateway.guard import Guard, IdSet, LinkPolicy
-from vstig_hw.links.spec import EXAMPLES
-from vstig_hw.links.spec import parse as parse_spec
+from vstig_hw.links import examples
+from vstig_hw.links import parse as parse_spec
 from vstig_hw.wire import DecodeError, Message, decode, decode_many, encode
 
 Target = Callable[[bytes], None]
@@ -335,7 +335,7 @@ def seeds() -> dict[str, list[bytes]]:
         **serial,
         "kilobot-ohc": [b"\x55" + bytes(131)],
         "can": [b"".join(frames)],
-        "link-spec": [spec.encode() for group in EXAMPLES.values() for spec in group],
+        "link-spec": [spec.encode() for group in examples().values() for spec in group],
         "candump": [line.encode() for line in candump_lines],
         "candump-chunk": [uniform.encode()],
         "serial-capture": [capture.encode()],

@@ -9,7 +9,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vstig_hw.links.spec import EXAMPLES, CanSpec, SerialSpec, parse
+from vstig_hw.links import examples, parse
+from vstig_hw.links.can import CanSpec
+from vstig_hw.links.serial import SerialSpec
 
 
 def test_can_specs() -> None:
@@ -46,8 +48,8 @@ def test_kilobot_ohc() -> None:
 
 
 def test_every_documented_example_parses() -> None:
-    for examples in EXAMPLES.values():
-        for example in examples:
+    for specs in examples().values():
+        for example in specs:
             parse(example)
 
 

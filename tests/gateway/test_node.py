@@ -14,10 +14,9 @@ import pytest
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.counters import Counters
 from vstig_hw.engine import Outcome
+from vstig_hw.framing.can import can_framing_for
 from vstig_hw.gateway import Mode, Node, Outlet, SendWindow, favour_latency
-from vstig_hw.links import Heard, Link
-from vstig_hw.links.can import can_framing_for
-from vstig_hw.links.spec import parse
+from vstig_hw.links import Heard, Link, parse
 
 _ids = itertools.count()
 

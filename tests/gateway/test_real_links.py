@@ -16,9 +16,9 @@ import can
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.framing import make_serial_framing
+from vstig_hw.framing.can import can_framing_for
 from vstig_hw.gateway import Node
-from vstig_hw.links.can import can_framing_for
-from vstig_hw.links.spec import parse
+from vstig_hw.links import parse
 
 _ids = itertools.count()
 

@@ -7,9 +7,9 @@ import os
 import can
 
 from vstig_hw import Op
+from vstig_hw.framing.can import can_framing
 from vstig_hw.gateway import Node, RoundRobinGet
-from vstig_hw.links.can import can_framing
-from vstig_hw.links.spec import parse
+from vstig_hw.links import parse
 
 
 def test_each_tick_gets_the_next_key_carrying_the_nodes_view() -> None:

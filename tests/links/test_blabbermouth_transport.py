@@ -8,7 +8,8 @@ from collections.abc import Callable
 
 import pytest
 
-from vstig_hw.links.spec import BlabbermouthSpec, parse
+from vstig_hw.links import parse
+from vstig_hw.links.blabbermouth import BlabbermouthSpec
 from vstig_hw.transports.base import TransportError
 from vstig_hw.transports.blabbermouth import BlabbermouthTransport
 

@@ -10,8 +10,7 @@ import pytest
 
 from vstig_hw.framing.zenoh import ZenohFraming, ZenohKeySpace, ZenohSample
 from vstig_hw.links import Link, parse
-from vstig_hw.links.spec import EXAMPLES, ZenohSpec
-from vstig_hw.links.zenoh import exposure, zenoh_config
+from vstig_hw.links.zenoh import EXAMPLES, ZenohSpec, exposure, zenoh_config
 from vstig_hw.transports.base import TransportError
 from vstig_hw.wire import Message, Op, encode
 

@@ -44,10 +44,10 @@ import can
 
 from vstig_hw import Message, Op
 from vstig_hw.framing import make_serial_framing
+from vstig_hw.framing.can import can_framing, can_framing_for
 from vstig_hw.gateway import Node, favour_latency
 from vstig_hw.gateway.guard import Guard
 from vstig_hw.links import parse
-from vstig_hw.links.can import can_framing, can_framing_for
 from vstig_hw.timestamps import is_newer, next_timestamp
 
 STEP = 0.01  # seconds between bursts of each writer

@@ -105,7 +105,7 @@ class _Sink:
 
 def _candump_chunks(path: str, sink: _Sink, skip_bad: bool, bad: list[CaptureError], id_base: int | None,
                     progress: Callable[[int], None] | None) -> Counters:
-    from ..links.can import can_framing
+    from ..framing.can import can_framing
 
     scheme = can_framing(id_base, False).scheme
 

@@ -38,8 +38,8 @@ def default_framings(id_base: int | None = None, extended: bool | None = False,
     """Framings by the name a record carries: `extended=None` takes each CAN link's ID width from its first
     frame; robot dialects (Buzz, BittyBuzz) need their `deployment` file."""
     from ..framing import make_serial_framing
+    from ..framing.can import can_framing
     from ..framing.zenoh import ZenohFraming, ZenohKeySpace
-    from ..links.can import can_framing
 
     def make(record: Record) -> Any:
         if record.framing == CAN_FRAMING:

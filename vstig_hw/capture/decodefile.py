@@ -97,7 +97,7 @@ def decode_to_mcap(paths: Sequence[str], output: str, *, skip_bad: bool = False,
 def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: ValueType, skip_bad: bool,
                     bad: list[CaptureError], id_base: int | None,
                     progress: Callable[[int], None] | None) -> tuple[int, Counters]:
-    from ..links.can import can_framing
+    from ..framing.can import can_framing
 
     scheme = can_framing(id_base, False).scheme
 

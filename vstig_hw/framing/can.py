@@ -34,8 +34,11 @@ __all__ = [
     "DEFAULT_BASE_11BIT",
     "DEFAULT_BASE_29BIT",
     "FD_BATCH_SIZES",
+    "LISTENER_ID",
     "CanFraming",
     "CanIdScheme",
+    "can_framing",
+    "can_framing_for",
 ]
 
 BASES_11BIT = (0x000, 0x200, 0x400, 0x600)
@@ -44,6 +47,7 @@ DEFAULT_BASE_29BIT = 0x18000000
 BASE_MASK_29BIT = 0x1E000000  # bits 28..25
 FD_BATCH_SIZES = (1, 2, 3, 4, 6, 8)  # messages per CAN FD frame: the FD lengths 8..64 that are multiples of 8
 _FD_LENGTHS = frozenset(n * MESSAGE_SIZE for n in FD_BATCH_SIZES)
+LISTENER_ID = 0  # the sender field of a node that never transmits (sniff, record)
 
 
 @dataclass(frozen=True)
@@ -197,3 +201,13 @@ class CanFraming:
     def tick(self) -> None:
         """Nothing to expire: every CAN frame is complete in itself."""
 
+
+def can_framing_for(robot_id: int, id_base: int | None = None, extended: bool = False,
+                    stigmergy: int = 0) -> CanFraming:
+    """The CAN framing a node with this id transmits under (and decodes every sender with)."""
+    return CanFraming(CanIdScheme(extended=extended, base=id_base, stigmergy=stigmergy), sender=robot_id)
+
+
+def can_framing(id_base: int | None = None, extended: bool = False, stigmergy: int = 0) -> CanFraming:
+    """A CAN framing that decodes what any sender put on a bus with this ID scheme."""
+    return can_framing_for(LISTENER_ID, id_base, extended, stigmergy)

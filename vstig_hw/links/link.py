@@ -1,10 +1,10 @@
-"""A link: one transport plus one framing, the unit the gateway wires together."""
+"""A link: one transport plus one framing, the unit the gateway wires together; and the spec that names one."""
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, Protocol, TypeVar, runtime_checkable
 
 from ..counters import Counters
 from ..framing.base import Framing
@@ -94,3 +94,22 @@ class Link(Generic[Unit]):
         merged.update({f"drop_{reason}": n for reason, n in self.framing.drops.items()})
         merged.update(self.transport.counters)
         return merged
+
+
+@runtime_checkable
+class LinkSpec(Protocol):
+    """A parsed link spec (`links.parse`): every medium's spec dataclass has these."""
+
+    @property
+    def kind(self) -> str:
+        """The scheme it was written with (can, serial, kilobot-ohc...)."""
+        ...
+
+    @property
+    def name(self) -> str:
+        """A short, space-free name for status lines and captures."""
+        ...
+
+    def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
+        """The Link (not yet open); `robot_id` is the sender a link transmits under where the medium names one."""
+        ...

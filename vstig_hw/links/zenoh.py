@@ -1,4 +1,4 @@
-"""Zenoh links: an embedded Zenoh session + the vstig Zenoh framing (firmware_spec/SPEC.md, "Zenoh").
+"""Zenoh links (`zenoh:` specs): an embedded Zenoh session + the vstig Zenoh framing (firmware_spec/SPEC.md, "Zenoh").
 
 Closed by default. Zenoh's own defaults listen on every interface and scout the
 LAN by multicast; a gateway built here listens on a free loopback port and does
@@ -11,6 +11,8 @@ spec names override it, and our closed defaults fill only what it leaves unset.
 
 Opening a link that listens beyond loopback, or scouts, with no authentication
 configured (user/password, public keys or mutual TLS) logs one warning line.
+
+The zenoh library is imported when a link is built, not when a spec is parsed.
 """
 
 from __future__ import annotations
@@ -18,19 +20,110 @@ from __future__ import annotations
 import json
 import logging
 import socket
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-import zenoh
-
-from ..framing.zenoh import ZenohFraming, ZenohKeySpace
+from ..framing.zenoh import MAX_STIGMERGY, ZenohFraming, ZenohKeySpace, check_swarm
 from ..transports.base import TransportError, one_line
-from ..transports.zenoh import ZenohTransport
+from .grammar import bad, flag, integer, safe_name, split_query
 from .link import Link
 
 if TYPE_CHECKING:
-    from .spec import ZenohSpec
+    import zenoh
 
-__all__ = ["exposure", "zenoh_config", "zenoh_link_from_spec"]
+__all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "ZenohSpec", "exposure", "parse_zenoh", "zenoh_config",
+           "zenoh_link_from_spec"]
+
+GRAMMAR = (
+    "zenoh:<swarm>[?mode=peer|client&connect=<endpoint>[,...]&listen=<endpoint>[,...]&config=<zenoh json5 file>"
+    "&stigmergy=N&scout=0|1]",
+)
+EXAMPLES = {
+    "zenoh": ("zenoh:lab", "zenoh:lab?listen=tcp/0.0.0.0:7447&config=lab.json5",
+              "zenoh:lab?connect=tcp/10.0.0.5:7447",
+              "zenoh:lab?mode=client&connect=tls/router.lab:7447&config=lab.json5",
+              "zenoh:lab?scout=1&stigmergy=2"),
+}
+# For `vstig links`: what the options mean beyond the grammar.
+NOTES = {
+    "zenoh": "zenoh: gateways on many PCs as one swarm (key vstig/<swarm>/<stigmergy>/<gateway id>). Closed by "
+             "default: listens on a free loopback port (printed once open), no multicast scouting; listen=, connect= "
+             "or scout=1 open it, config= passes a Zenoh config file (TLS, user/password, routers) through.",
+}
+_EXAMPLE = EXAMPLES["zenoh"][0]
+
+
+@dataclass(frozen=True, slots=True)
+class ZenohSpec:
+    swarm: str
+    mode: str | None = None  # None: the config file's, else peer
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    config: str | None = None
+    stigmergy: int = 0
+    scout: bool | None = None  # None: the config file's, else off
+    block: bool = False  # Zenoh congestion control BLOCK instead of DROP: set by commands that must not lose a sample
+
+    @property
+    def kind(self) -> str:
+        return "zenoh"
+
+    @property
+    def name(self) -> str:
+        return safe_name(f"zenoh-{self.swarm}")
+
+    def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
+        """The Link (not yet open); `robot_id` names this gateway in the key space (vstig/<swarm>/<stig>/<id>)."""
+        return zenoh_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
+
+
+_ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream", "unixpipe", "vsock", "serial")
+
+
+def _spec_endpoints(spec: str, key: str, text: str) -> tuple[str, ...]:
+    endpoints = tuple(text.split(","))
+    for endpoint in endpoints:
+        protocol, sep, address = endpoint.partition("/")
+        if not sep or not address or any(ch.isspace() for ch in endpoint):
+            raise bad(spec, f"{key}={endpoint!r} is not a Zenoh endpoint <protocol>/<address> "
+                            "(e.g. tcp/10.0.0.5:7447)", _EXAMPLE)
+        if protocol not in _ZENOH_PROTOCOLS:
+            raise bad(spec, f"{key}={endpoint!r}: unknown protocol {protocol!r} "
+                            f"(known: {', '.join(_ZENOH_PROTOCOLS)})", _EXAMPLE)
+    return endpoints
+
+
+def parse_zenoh(spec: str, body: str) -> ZenohSpec:
+    """`body` is the spec after `zenoh:`; the key space (framing.zenoh) judges the swarm name."""
+    swarm, params = split_query(spec, body, _EXAMPLE, ("mode", "connect", "listen", "config", "stigmergy", "scout"),
+                                False)
+    try:
+        check_swarm(swarm)
+    except ValueError as error:
+        raise bad(spec, str(error), _EXAMPLE) from None
+    mode = params.get("mode")
+    if mode is not None and mode not in ("peer", "client"):
+        raise bad(spec, f"mode={mode!r} must be peer or client", _EXAMPLE)
+    connect = _spec_endpoints(spec, "connect", params["connect"]) if "connect" in params else ()
+    listen = _spec_endpoints(spec, "listen", params["listen"]) if "listen" in params else ()
+    if mode == "client" and listen:
+        raise bad(spec, "a client does not listen: drop listen= or use mode=peer", _EXAMPLE)
+    if mode == "client" and not connect and "config" not in params:
+        raise bad(spec, "a client needs connect=<router endpoint> (or a config= file naming one)", _EXAMPLE)
+    config = params.get("config")
+    if config is not None and any(ch in config for ch in "\0\n\r"):
+        raise bad(spec, "the config path contains a control character", _EXAMPLE)
+    return ZenohSpec(
+        swarm=swarm,
+        mode=mode,
+        connect=connect,
+        listen=listen,
+        config=config,
+        stigmergy=integer(spec, _EXAMPLE, "stigmergy", params["stigmergy"], 0, MAX_STIGMERGY)
+        if "stigmergy" in params else 0,
+        scout=flag(spec, _EXAMPLE, "scout", params["scout"]) if "scout" in params else None,
+    )
+
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +153,8 @@ def zenoh_config(spec: ZenohSpec) -> zenoh.Config:
 
 def _config_and_listener(spec: ZenohSpec) -> tuple[zenoh.Config, str | None]:
     """zenoh_config(spec), and the protocol of the loopback listener we chose for it (None if we chose none)."""
+    import zenoh
+
     if spec.config:
         try:
             config = zenoh.Config.from_file(spec.config)
@@ -140,6 +235,8 @@ def exposure(config: zenoh.Config) -> str | None:
 def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
                          listen_only: bool = False) -> Link[Any]:
     """A Zenoh link (not yet open) publishing as gateway `robot_id` (0 when it never transmits)."""
+    from ..transports.zenoh import ZenohTransport
+
     space = ZenohKeySpace(spec.swarm, spec.stigmergy)
     framing = ZenohFraming(space, 0 if listen_only else robot_id)
     first, ours = _config_and_listener(spec)  # read once now, so a bad file or value fails before anything opens
