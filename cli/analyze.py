@@ -16,7 +16,7 @@ from vstig_hw.capture.filters import Filter
 from vstig_hw.counters import Counters
 from vstig_hw.values import ValueType, from_raw
 
-from ._capture_options import filter_options, parse_id_base, reading_options
+from ._capture_options import echo_skipped, filter_options, parse_id_base, reading_options
 from ._files import overwrite_option, refuse_to_replace
 from .errors import reports_errors
 
@@ -62,8 +62,7 @@ def command(files: tuple[str, ...], as_json: bool, plot: Path | None, overwrite:
     # 11-bit unless told (--extended) or implied (--id-base names one width's base); else read from frames.
     width = True if extended else (False if base is not None else None)
     drops, bad = _read(files, analyzer, skip_bad, base, width, keep, deployment)
-    for error in bad[:5]:
-        click.echo(f"skipped {error}", err=True)
+    echo_skipped(bad)
     report = analyzer.report()
     if not report.messages:
         reason = f" ({drops.summary()} dropped)" if drops else ""
