@@ -103,6 +103,21 @@ def test_sighup_closes_an_mcap_recording_like_sigterm(tmp_path: Path) -> None:
     assert whole.returncode == 0, whole.stderr  # closed: summary and footer written, nothing cut
     assert _values(whole.stdout) == [m.value for m in MESSAGES]
 
+    radio = PtyPeer()  # under nohup, SIGHUP stays ignored: the recorder outlives its terminal
+    try:
+        nohup = start_vstig("record", f"serial:{radio.path}", "-o", str(tmp_path / "kept.mcap"),
+                            preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))
+        wait_for(lambda: "recording" in (nohup.stderr.readline() if nohup.stderr else ""), 30)
+        time.sleep(1.0)  # well into its run, where SIGHUP would stop it were it not ignored
+        nohup.send_signal(signal.SIGHUP)
+        time.sleep(1.0)
+        still_running = nohup.poll() is None
+        nohup.terminate()
+        nohup.communicate(timeout=20)
+    finally:
+        radio.close()
+    assert still_running and nohup.returncode == 0
+
 
 # -- 1,000 frames/s on a CAN link, killed after ~2 s: every format against python-can's own logger -------------
 FORMATS = [".log", ".asc", ".blf", ".csv", ".trc", ".log.gz", ".asc.gz", ".pcap", ".mcap"]
