@@ -3,12 +3,26 @@
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+import itertools
+from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
 import click
 
+from vstig_hw.capture.records import CaptureError
+
 F = TypeVar("F", bound=Callable[..., Any])
+
+SHOWN_SKIPPED = 5  # damage lines shown; the summary counts them all
+skip_bad_option = click.option(
+    "--skip-bad", is_flag=True,
+    help="Count malformed lines, and a file cut short (a killed recorder's), and go on instead of stopping there.")
+
+
+def echo_skipped(bad: Iterable[CaptureError]) -> None:
+    """The damage a reader skipped, one line each (the first few), on stderr: every command says it alike."""
+    for error in itertools.islice(bad, SHOWN_SKIPPED):
+        click.echo(f"skipped {error}", err=True)
 
 
 def parse_id_base(text: str | None) -> int | None:
@@ -28,8 +42,7 @@ def reading_options(fn: F) -> F:
     from ._common import VALUE_TYPE_HELP
 
     options = [
-        click.option("--skip-bad", is_flag=True,
-                     help="Count malformed lines and go on instead of stopping at the first."),
+        skip_bad_option,
         click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
                      help=VALUE_TYPE_HELP),
         click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 for 29-bit IDs)."),

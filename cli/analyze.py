@@ -19,7 +19,7 @@ from vstig_hw.counters import Counters
 from vstig_hw.values import ValueType, from_raw
 
 from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
-from ._capture_options import filter_options, parse_id_base, reading_options
+from ._capture_options import echo_skipped, filter_options, parse_id_base, reading_options
 from ._files import overwrite_option, refuse_to_replace
 from .errors import reports_errors
 
@@ -74,8 +74,7 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
             drops, bad, filtered_out = _read(readable, analyzer, skip_bad, base, width, keep, deployment)
         except CaptureError as error:
             raise renamed(error, error.path, readable.get(error.path, error.path)) from None
-    for error in bad[:5]:
-        click.echo(f"skipped {renamed(error, error.path, readable.get(error.path, error.path))}", err=True)
+    echo_skipped(renamed(error, error.path, readable.get(error.path, error.path)) for error in bad)
     report = analyzer.report()
     if not report.messages:
         if filtered_out:

@@ -16,7 +16,7 @@ from vstig_hw.capture.records import CaptureError
 from vstig_hw.values import ValueType
 
 from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
-from ._capture_options import filter_options, parse_id_base, reading_options
+from ._capture_options import echo_skipped, filter_options, parse_id_base, reading_options
 from ._files import overwrite_option, refuse_to_replace
 from .errors import reports_errors
 
@@ -75,8 +75,7 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: 
             except CaptureError as error:
                 raise renamed(error, readable, name) from None
         sys.stdout.flush()
-        for error in bad[:5]:
-            click.echo(f"skipped {renamed(error, readable, name)}", err=True)
+        echo_skipped(renamed(error, readable, name) for error in bad)
         summary = f"{name}: {count} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
         if drops:
             summary += f", dropped {drops.summary()}"

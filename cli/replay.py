@@ -13,7 +13,7 @@ import click
 from vstig_hw.capture.decoded import Decoder, default_framings
 from vstig_hw.capture.files import read_capture
 from vstig_hw.capture.filters import Filter, filter_records
-from vstig_hw.capture.records import CAN_FRAMING, Record
+from vstig_hw.capture.records import CAN_FRAMING, CaptureError, Record
 from vstig_hw.capture.replay import replay
 from vstig_hw.engine import Stigmergy
 from vstig_hw.gateway import stop_on_signals
@@ -21,7 +21,7 @@ from vstig_hw.links import Link, LinkSpec
 from vstig_hw.links.can import CanSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._capture_options import filter_options
+from ._capture_options import echo_skipped, filter_options, skip_bad_option
 from ._common import VALUE_TYPE_HELP, StatusLine, build_links, lossless
 from .errors import LINK, reports_errors
 
@@ -107,11 +107,13 @@ def _targets(onto: tuple[tuple[str | None, LinkSpec], ...], robot_id: int) -> di
     return dict(zip(names, links, strict=True))
 
 
-def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, deployment: str | None) -> None:
+def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, deployment: str | None,
+           skip_bad: bool) -> None:
     engine = Stigmergy(_OBSERVER_ID)
     decoder, reader = (Decoder(default_framings(deployment=deployment)) for _ in range(2))  # framings keep state
     t0 = None
-    for decoded in decoder.decode_all(filter_records(read_capture(path), keep, reader)):
+    bad: list[CaptureError] = []
+    for decoded in decoder.decode_all(filter_records(read_capture(path, skip_bad, bad), keep, reader)):
         t0 = decoded.t if t0 is None else t0
         if at is not None and decoded.t - t0 > at:
             break
@@ -121,6 +123,7 @@ def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, dep
     click.echo(f"{'key':>6} {'value':>8} {'ts':>6} {'robot':>6}")
     for key, entry in sorted(engine.entries()):
         click.echo(f"{key:>6} {from_raw(entry.value, value_type)!s:>8} {entry.timestamp:>6} {entry.robot:>6}")
+    echo_skipped(bad)
 
 
 @click.command()
@@ -142,14 +145,17 @@ def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, dep
               help=VALUE_TYPE_HELP)
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
               help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
+@skip_bad_option
 @filter_options
 @reports_errors
 def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: float, loop: bool,
             skip_gaps: float | None, ignore_timestamps: bool, robot_id: int, table: bool, at: float | None,
-            value_type: ValueType, deployment: str | None, keep: Filter) -> None:
+            value_type: ValueType, deployment: str | None, skip_bad: bool, keep: Filter) -> None:
     """Replay FILE onto live links, or show what the swarm believed (--table).
 
-    Ctrl-C or SIGTERM stops at once, even in a long gap: nothing is sent after it.
+    Ctrl-C, SIGTERM or SIGHUP stops at once, even in a long gap: nothing is sent after it.
+    A file cut short (its recorder was killed) is sent up to the cut, which is then
+    reported: as an error, or with --skip-bad as a skipped line.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
     what is replayed; a serial chunk they cut is re-encoded in its framing.
@@ -165,7 +171,7 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
                                             ("--ignore-timestamps", ignore_timestamps)) if given]
         if ignored:
             raise click.UsageError(f"{', '.join(ignored)} go with --onto, not --table")
-        _table(file, at, value_type, keep, deployment)
+        _table(file, at, value_type, keep, deployment, skip_bad)
         return
     if at is not None:
         raise click.UsageError("--at goes with --table")
@@ -186,6 +192,7 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     send = _CountingSender(dispatch, list(targets.values()))
     opened: list[Link[Any]] = []
     passes_done = 0
+    bad: list[CaptureError] = []  # what the last pass skipped
     try:
         for link in targets.values():
             link.open()
@@ -193,8 +200,9 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
         with stop_on_signals() as stop:
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
-                done = replay(filter_records(read_capture(file), keep, reader), send, speed=speed, stop=stop,
-                              skip_gaps=skip_gaps, ignore_timestamps=ignore_timestamps)
+                bad = []
+                done = replay(filter_records(read_capture(file, skip_bad, bad), keep, reader), send, speed=speed,
+                              stop=stop, skip_gaps=skip_gaps, ignore_timestamps=ignore_timestamps)
                 passes_done += 1
                 if stop.is_set() or done.frames == 0:
                     break
@@ -213,3 +221,4 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     if unmapped:
         skipped = ", ".join(f"{name} ({count} units)" for name, count in sorted(unmapped.items()))
         click.echo(f"skipped links with no --onto: {skipped}", err=True)
+    echo_skipped(bad)

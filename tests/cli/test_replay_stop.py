@@ -1,4 +1,4 @@
-"""replay onto a real pty: Ctrl-C or SIGTERM in a long gap ends it at once and nothing more is sent."""
+"""replay onto a real pty: Ctrl-C, SIGTERM or SIGHUP in a long gap ends it at once and nothing more is sent."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ def _two_units(path: Path, gap: float) -> None:
                     f"({1700000000 + gap:.6f}) radio cobs8 rx 0d0e0f\n")
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["SIGINT", "SIGTERM", "SIGHUP"])
 def test_a_signal_in_a_long_gap_stops_at_once_and_sends_nothing_more(tmp_path: Path, sig: int) -> None:
     capture = tmp_path / "gap.cap"
     _two_units(capture, gap=3600.0)
@@ -36,12 +36,13 @@ def test_a_signal_in_a_long_gap_stops_at_once_and_sends_nothing_more(tmp_path: P
         replayer.send_signal(sig)
         began = time.monotonic()
         try:
-            replayer.communicate(timeout=20)
+            _out, err = replayer.communicate(timeout=20)
         except subprocess.TimeoutExpired:
             replayer.kill()
             replayer.communicate()
             pytest.fail(f"replay ignored signal {sig} in a one-hour gap")
         assert time.monotonic() - began < 20
+        assert replayer.returncode == 0 and "stopped by a signal" in err  # links closed, counters printed
         got += radio.read(0.5)
         assert bytes.fromhex("0d0e0f") not in got
     finally:

@@ -15,11 +15,12 @@ from typing import IO, Any
 
 import can
 
-from .records import CAN_FRAMING, CaptureError, Record, parse_lines
+from .records import CAN_FRAMING, CaptureError, Record, cut_short, parse_lines
 
-__all__ = ["candump_records", "chunk_records", "chunks", "parse_line", "read_candump"]
+__all__ = ["GZIP_CUT", "candump_records", "chunk_records", "chunks", "parse_line", "read_candump"]
 
 _ERROR_FLAG = 0x20000000
+GZIP_CUT = "the compressed stream has no end marker"  # what a .gz left by a killed writer lacks
 _FD_LENGTHS = frozenset((0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64))
 
 
@@ -78,9 +79,14 @@ def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
     with _open_text(path) as file:
         if opened:
             opened(file)
+        kept = 0
         try:
-            yield from candump_records(path, file, skip_bad, bad)
-        except (OSError, EOFError, zlib.error) as error:  # gzip reports a corrupt or cut-short .gz this way
+            for record in candump_records(path, file, skip_bad, bad):
+                kept += 1
+                yield record
+        except EOFError:  # a .gz whose writer was killed: every line it flushed was read
+            cut_short(path, kept, "frames", GZIP_CUT, skip_bad, bad)
+        except (OSError, zlib.error) as error:  # gzip reports a corrupt .gz this way
             raise CaptureError(path, None, f"cannot read: {error}") from None
 
 

@@ -17,8 +17,8 @@ from typing import IO, Any, Protocol
 
 import can
 
-from .candump import read_candump
-from .records import CAN_FRAMING, CaptureError, Record
+from .candump import GZIP_CUT, read_candump
+from .records import CAN_FRAMING, CaptureError, Record, cut_short
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
 from .zenoh_log import ZenohCaptureWriter, is_zenoh_capture, read_zenoh_capture
 
@@ -244,7 +244,7 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
     if suffix == MCAP_EXTENSION:
         from .rosbag import read_mcap
 
-        yield from read_mcap(path)
+        yield from read_mcap(path, skip_bad, bad)
         return
     if suffix in (".log", ".log.gz"):
         yield from read_candump(path, skip_bad, bad, opened)
@@ -267,6 +267,8 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
             frames += 1
             yield Record(frame.timestamp, str(frame.channel or "can"), CAN_FRAMING, frame)
         _check_complete(path, reader, frames)
+    except EOFError:  # an .asc.gz whose writer was killed: every line it flushed was read
+        cut_short(path, frames, "frames", GZIP_CUT, skip_bad, bad)
     except Exception as error:  # python-can's readers raise many kinds; all mean the file is bad
         damage = CaptureError(path, None, f"record {frames + 1}: cannot read as {suffix}: {error}")
         if not skip_bad:

@@ -20,7 +20,7 @@ from typing import IO, Any
 from ..counters import Counters
 from ..wire import Message, Op
 from .decoded import Decoder
-from .records import MESSAGE_FRAMING, CaptureError, Record
+from .records import MESSAGE_FRAMING, CaptureError, Record, cut_short
 
 __all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "CarriedMessages", "McapCaptureWriter",
            "read_mcap", "topic_for"]
@@ -39,6 +39,7 @@ int32 sender
 """
 TOPIC_PREFIX = "/vstig/"
 NO_SENDER = -1
+_MAGIC = b"\x89MCAP0\r\n"  # an MCAP file starts and, once closed, ends with it
 _TOPIC_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
 
 
@@ -119,7 +120,11 @@ class McapCaptureWriter:
         return self._file.tell()
 
     def flush(self) -> None:
-        """MCAP writes whole chunks: what is buffered is flushed at close."""
+        """End the chunk in progress and push it to the file: a killed recorder loses one tick at most.
+
+        The file then lacks only its summary and footer, which `read_mcap` does without.
+        """
+        self._writer.flush()  # type: ignore[no-untyped-call]
 
     def close(self) -> None:
         self._writer.finish()  # type: ignore[no-untyped-call]
@@ -147,8 +152,12 @@ class CarriedMessages:
         """Nothing to expire."""
 
 
-def read_mcap(path: str) -> Iterator[Record]:
-    """The messages of an MCAP capture in log-time order, as `MESSAGE_FRAMING` records named by link."""
+def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+    """The messages of an MCAP capture in log-time order, as `MESSAGE_FRAMING` records named by link.
+
+    A file with no footer (its recorder was killed) is read in file order up to its last complete
+    chunk, and the cut is reported by `cut_short`.
+    """
     try:
         from mcap.reader import make_reader
     except ImportError:
@@ -156,12 +165,65 @@ def read_mcap(path: str) -> Iterator[Record]:
     store = _typestore(path)
     try:
         with open(path, "rb") as file:
+            if not _has_footer(file):
+                yield from _recover(path, file, store, skip_bad, bad)
+                return
             for schema, channel, raw in make_reader(file).iter_messages(log_time_order=True):
                 if schema is None or schema.name != TYPE_NAME:
                     continue  # another type on another topic: not ours
-                m = store.deserialize_cdr(raw.data, TYPE_NAME)
-                link = channel.metadata.get("link") or channel.topic.removeprefix(TOPIC_PREFIX)
-                message = Message(Op(m.op), m.key, m.value, m.timestamp, m.robot)
-                yield Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, None if m.sender < 0 else m.sender))
+                yield _record(store, channel, raw)
+    except CaptureError:
+        raise
     except Exception as error:  # a damaged file surfaces as any of McapError, zstd, lz4, CDR, struct errors...
         raise CaptureError(path, None, f"cannot read as rosbag2 MCAP: {type(error).__name__}: {error}") from None
+
+
+def _record(store: Any, channel: Any, raw: Any) -> Record:
+    m = store.deserialize_cdr(raw.data, TYPE_NAME)
+    link = channel.metadata.get("link") or channel.topic.removeprefix(TOPIC_PREFIX)
+    message = Message(Op(m.op), m.key, m.value, m.timestamp, m.robot)
+    return Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, None if m.sender < 0 else m.sender))
+
+
+def _has_footer(file: IO[bytes]) -> bool:
+    """Whether the file ends in the magic a finished MCAP file ends in (a killed recorder's does not)."""
+    size = file.seek(0, 2)
+    file.seek(max(0, size - len(_MAGIC)))
+    ends_well = size > 2 * len(_MAGIC) and file.read() == _MAGIC
+    file.seek(0)
+    return ends_well
+
+
+def _recover(path: str, file: IO[bytes], store: Any, skip_bad: bool,
+             bad: list[CaptureError] | None) -> Iterator[Record]:
+    """Every message of the file's complete records (chunks), in file order; then the cut, in one line."""
+    from mcap.exceptions import EndOfFile
+    from mcap.records import Channel, Chunk, Schema
+    from mcap.records import Message as McapMessage
+    from mcap.stream_reader import StreamReader, breakup_chunk
+
+    schemas: dict[int, Any] = {}
+    channels: dict[int, Any] = {}
+    kept = chunks = end = 0  # end: where the last complete record ended
+    records = StreamReader(file, emit_chunks=True).records  # a chunk is decompressed only once it is whole
+    while True:
+        try:
+            record = next(records)
+        except (EndOfFile, StopIteration):  # the first incomplete record ends what can be read
+            break
+        end = file.tell()
+        chunks += isinstance(record, Chunk)
+        for item in breakup_chunk(record) if isinstance(record, Chunk) else [record]:
+            if isinstance(item, Schema):
+                schemas[item.id] = item
+            elif isinstance(item, Channel):
+                channels[item.id] = item
+            elif isinstance(item, McapMessage) and item.channel_id in channels:
+                channel = channels[item.channel_id]
+                schema = schemas.get(channel.schema_id)
+                if schema is not None and schema.name == TYPE_NAME:
+                    kept += 1
+                    yield _record(store, channel, item)
+    lost = file.seek(0, 2) - end
+    cut_short(path, kept, f"messages in {chunks} chunks",
+              f"the {lost} bytes after them are incomplete" if lost else "it has no summary or footer", skip_bad, bad)

@@ -1,4 +1,8 @@
-"""Ctrl-C and SIGTERM become one Event the loop checks, so shutdown is never mid-frame."""
+"""Ctrl-C, SIGTERM and SIGHUP become one Event the loop checks, so shutdown is never mid-frame.
+
+SIGHUP is what a closed terminal (or a dropped ssh session) sends: it ends a command the way
+Ctrl-C does, files closed and counters printed, instead of killing it with its capture unfinished.
+"""
 
 from __future__ import annotations
 
@@ -13,7 +17,7 @@ __all__ = ["stop_on_signals"]
 
 @contextmanager
 def stop_on_signals() -> Iterator[threading.Event]:
-    """An Event set by SIGINT or SIGTERM while the block runs (handlers restored after)."""
+    """An Event set by SIGINT, SIGTERM or SIGHUP while the block runs (handlers restored after)."""
     stop = threading.Event()
     if threading.current_thread() is not threading.main_thread():
         yield stop  # signals only reach the main thread; the caller stops us some other way
@@ -22,7 +26,11 @@ def stop_on_signals() -> Iterator[threading.Event]:
     def handler(signum: int, frame: FrameType | None) -> None:
         stop.set()
 
-    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    stopping = [signal.SIGINT, signal.SIGTERM]
+    hangup = getattr(signal, "SIGHUP", None)  # not on Windows
+    if hangup is not None and signal.getsignal(hangup) is not signal.SIG_IGN:  # nohup ignores it: keep running
+        stopping.append(hangup)
+    previous = {sig: signal.signal(sig, handler) for sig in stopping}
     try:
         yield stop
     finally:
