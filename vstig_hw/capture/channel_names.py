@@ -60,7 +60,7 @@ def blf_note(number: int, link: str) -> bytes:
 
 def _parse_note(text: str, names: dict[int, str]) -> None:
     number, _, link = text[len(_NOTE):].partition(" ")
-    if number.isdigit() and link:
+    if number.isascii() and number.isdigit() and link:
         names[int(number) - 1] = link  # python-can's readers number channels from 0
 
 

@@ -291,17 +291,17 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
                            f"serial capture or one of {', '.join(READABLE_EXTENSIONS)}")
     if os.path.getsize(path) == 0:
         raise CaptureError(path, None, f"empty file: not a {suffix} capture")
-    names: dict[int, str] = {}
-    start = 0.0  # ASC: our note's exact start, to which the reader's relative times are added
-    options: dict[str, Any] = {}
-    if suffix.startswith(".asc"):
-        notes = read_asc_notes(path)
-        names, start = notes.names, notes.start or 0.0
-        options["relative_timestamp"] = notes.start is not None
     if suffix == ".asc":
         _check_asc_lines(path, skip_bad, bad)
     frames = 0
     try:
+        names: dict[int, str] = {}
+        start = 0.0  # ASC: our note's exact start, to which the reader's relative times are added
+        options: dict[str, Any] = {}
+        if suffix.startswith(".asc"):
+            notes = read_asc_notes(path)
+            names, start = notes.names, notes.start or 0.0
+            options["relative_timestamp"] = notes.start is not None
         reader = NamedBlfReader(path) if suffix == ".blf" else can.LogReader(path, **options)
         names = getattr(reader, "names", names)
         file = getattr(reader, "file", None)  # python-can's readers keep the open file there
