@@ -103,11 +103,19 @@ def test_serial_captures_convert_filtered_and_never_into_a_can_log(tmp_path: Pat
 def test_a_conversion_never_replaces_a_file_unless_told(tmp_path: Path, log: Path) -> None:
     out = tmp_path / "kept.blf"
     out.write_bytes(b"precious")
+    out.chmod(0o640)
     done = run_vstig("decode", str(log), "-o", str(out))
     assert done.returncode == 2 and f"{out} exists: --overwrite replaces it" in done.stderr
     assert out.read_bytes() == b"precious"
     _convert(str(log), "-o", str(out), "--overwrite")
     assert len(_rows(out)) == len(_rows(log))
+    assert out.stat().st_mode & 0o777 == 0o640  # the replaced file's permissions, not a temporary file's
+
+    new = tmp_path / "new.asc"
+    _convert(str(log), "-o", str(new))
+    umask = os.umask(0)
+    os.umask(umask)
+    assert new.stat().st_mode & 0o777 == 0o666 & ~umask  # as record would create it
 
 
 def test_candump_time_styles_in_text_lines(tmp_path: Path, log: Path) -> None:

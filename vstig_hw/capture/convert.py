@@ -99,9 +99,19 @@ def _written_in_place_of(output: str) -> Iterator[str]:
     folder = os.path.dirname(os.path.abspath(output))
     descriptor, partial = tempfile.mkstemp(prefix=".vstig-convert-", suffix=capture_suffix(output), dir=folder)
     os.close(descriptor)
+    os.chmod(partial, _mode_for(output))  # mkstemp's 0600 would hide the capture from the rest of the lab
     try:
         yield partial
         os.replace(partial, output)
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.remove(partial)
+
+
+def _mode_for(output: str) -> int:
+    """The replaced file's permissions, or those a new file gets under the umask."""
+    if os.path.isfile(output):
+        return os.stat(output).st_mode & 0o7777
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
