@@ -38,7 +38,7 @@ def _convert(files: tuple[str, ...], output: str, skip_bad: bool, base: int | No
     summary = f"{output}: {count} records from {len(files)} files" + (f", {len(bad)} bad lines skipped" if bad else "")
     click.echo(summary + (f", dropped {drops.summary()}" if drops else ""), err=True)
     if link_names_lost(output):
-        click.echo(f"{output} names no link: decode reads it back as link 'can'", err=True)
+        click.echo(f"{output} names no link: decode reads its frames back as one unnamed link", err=True)
 
 
 @click.command()
