@@ -29,12 +29,20 @@ INPUT_FORMATS = [*(suffix[1:] for suffix in READABLE_EXTENSIONS), "cap"]  # cap:
 _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 
 
-def _convert(files: tuple[str, ...], output: str, skip_bad: bool, base: int | None, extended: bool,
+def _convert(files: dict[str, str], output: str, skip_bad: bool, base: int | None, extended: bool,
              deployment: str | None, keep: Filter) -> None:
-    count, drops, bad = convert(files, output, skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
-                                deployment=deployment)
+    """Convert `files` (the file read -> the name the user gave) into `output`; errors name the user's files."""
+
+    def named(error: CaptureError) -> CaptureError:
+        return _renamed(error, error.path, files.get(error.path, error.path))
+
+    try:
+        count, drops, bad = convert(tuple(files), output, skip_bad=skip_bad, id_base=base, extended=extended,
+                                    keep=keep, deployment=deployment)
+    except CaptureError as error:
+        raise named(error) from None
     for error in bad[:5]:
-        click.echo(f"skipped {error}", err=True)
+        click.echo(f"skipped {named(error)}", err=True)
     summary = f"{output}: {count} records from {len(files)} files" + (f", {len(bad)} bad lines skipped" if bad else "")
     click.echo(summary + (f", dropped {drops.summary()}" if drops else ""), err=True)
     if link_names_lost(output):
@@ -70,16 +78,19 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, time_sty
     which messages are printed or converted. A conversion merges FILES by time and
     keeps each record's time and link name.
 
-    Examples: vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
-              vstig decode swarm.log -o swarm.blf
+    \b
+    Examples:
+      vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
+      vstig decode swarm.log -o swarm.blf
     """
     base = parse_id_base(id_base)
     _check_choices(fmt, time_style, output)
     if output is not None:
         _check_output(output, files, fmt, overwrite)
         with contextlib.ExitStack() as spooled:  # stdin and pipes too
-            readable = tuple(spooled.enter_context(_readable(path, "<stdin>" if path == "-" else path, input_format))
-                             for path in files)
+            names = ["<stdin>" if path == "-" else path for path in files]
+            readable = {spooled.enter_context(_readable(path, name, input_format)): name
+                        for path, name in zip(files, names, strict=True)}
             _convert(readable, output, skip_bad, base, extended, deployment, keep)
         return
     clock = TimeColumn(time_style) if time_style else None

@@ -98,6 +98,8 @@ def test_serial_captures_convert_filtered_and_never_into_a_can_log(tmp_path: Pat
         f"Error: {radio}: link radio0 holds serial chunks: {wrong} can hold only CAN frames "
         "(write a .mcap file to join them)"]
     assert not wrong.exists()
+    piped = run_vstig("decode", "-", "-o", str(wrong), input=radio.read_text())  # spooled to a file first
+    assert piped.returncode == 1 and piped.stderr.startswith("Error: <stdin>: link radio0 holds serial chunks")
 
 
 def test_a_conversion_never_replaces_a_file_unless_told(tmp_path: Path, log: Path) -> None:
