@@ -1,4 +1,5 @@
-"""`vstig decode FILE...`: captures (ours, candump -l, python-can ASC/BLF/CSV) as text, JSON lines or CSV."""
+"""`vstig decode FILE...`: captures (ours, candump -l, python-can ASC/BLF/CSV) as text, JSON lines or CSV, or
+converted (-o FILE) into any format `record` writes."""
 
 from __future__ import annotations
 
@@ -9,10 +10,12 @@ from collections.abc import Callable, Iterator
 
 import click
 
-from vstig_hw.capture.decodefile import FORMATS, decode_file, decode_to_mcap
-from vstig_hw.capture.files import MCAP_EXTENSION
+from vstig_hw.capture.convert import convert
+from vstig_hw.capture.decodefile import FORMATS, decode_file
+from vstig_hw.capture.files import CAN_EXTENSIONS, MCAP_EXTENSION, link_names_lost
 from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError
+from vstig_hw.capture.time_columns import TIME_STYLES, TimeColumn
 from vstig_hw.values import ValueType
 
 from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
@@ -23,14 +26,23 @@ from .errors import reports_errors
 _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 
 
-def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | None, extended: bool,
+def _convert(files: dict[str, str], output: str, skip_bad: bool, base: int | None, extended: bool,
              deployment: str | None, keep: Filter) -> None:
-    count, drops, bad = decode_to_mcap(files, output, skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
-                                       deployment=deployment)
-    for error in bad[:5]:
-        click.echo(f"skipped {error}", err=True)
-    summary = f"{output}: {count} messages from {len(files)} files" + (f", {len(bad)} bad lines skipped" if bad else "")
+    """Convert `files` (the file read -> the name the user gave) into `output`; errors name the user's files."""
+
+    def named(error: CaptureError) -> CaptureError:
+        return renamed(error, error.path, files.get(error.path, error.path))
+
+    try:
+        count, drops, bad = convert(tuple(files), output, skip_bad=skip_bad, id_base=base, extended=extended,
+                                    keep=keep, deployment=deployment)
+    except CaptureError as error:
+        raise named(error) from None
+    echo_skipped(map(named, bad))
+    summary = f"{output}: {count} records from {len(files)} files" + (f", {len(bad)} bad lines skipped" if bad else "")
     click.echo(summary + (f", dropped {drops.summary()}" if drops else ""), err=True)
+    if link_names_lost(output):
+        click.echo(f"{output} names no link: decode reads its frames back as one unnamed link", err=True)
 
 
 @click.command()
@@ -39,31 +51,42 @@ def _to_mcap(files: tuple[str, ...], output: str, skip_bad: bool, base: int | No
 @click.option("--format", "fmt", type=click.Choice([*FORMATS, "mcap"]), default="text", show_default=True,
               help="text: one readable line per message; jsonl: one JSON object per line; csv: a header, then rows; "
                    "mcap: a rosbag2 MCAP file (-o), one topic per link, for Foxglove and ros2 bag.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True), help="The file --format mcap writes.")
+@click.option("-t", "--time", "time_style", type=click.Choice(TIME_STYLES),
+              help="The text lines' time, as candump -t: a absolute (the default), A local date and time, "
+                   "d since the line before, z since the first line.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, writable=True),
+              help="Convert into this file instead, in the format its extension names, as record writes it: "
+                   f"CAN {' '.join(CAN_EXTENSIONS)}; {MCAP_EXTENSION} (decoded messages of any links); "
+                   "any other name: our serial or zenoh capture.")
 @overwrite_option("-o FILE")
 @reading_options
 @filter_options
 @reports_errors
-def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: str | None, overwrite: bool,
-            skip_bad: bool, value_type: ValueType, id_base: str | None, extended: bool, deployment: str | None,
-            keep: Filter) -> None:
-    """Print every message in FILES (or write them as rosbag2 MCAP); - reads stdin, pipes and <(...) work too.
+def command(files: tuple[str, ...], input_format: str | None, fmt: str, time_style: str | None, output: str | None,
+            overwrite: bool, skip_bad: bool, value_type: ValueType, id_base: str | None, extended: bool,
+            deployment: str | None, keep: Filter) -> None:
+    """Print every message in FILES, or convert them (-o FILE) into any format record
+    writes; - reads stdin, pipes and <(...) work too.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
-    which messages are printed.
+    which messages are printed or converted. A conversion merges FILES by time and
+    keeps each record's time and link name.
 
-    Example: vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
+    \b
+    Examples:
+      vstig decode swarm.log --format jsonl | jq 'select(.key == 3)'
+      vstig decode swarm.log -o swarm.blf
     """
     base = parse_id_base(id_base)
-    if (fmt == "mcap") != (output is not None):
-        raise click.UsageError("--format mcap writes to -o FILE.mcap; the other formats print to stdout")
+    _check_choices(fmt, time_style, output)
     if output is not None:
-        _check_output(output, files, overwrite)
+        _check_output(output, files, fmt, overwrite)
         with contextlib.ExitStack() as spooled:  # stdin and pipes too
-            readable = tuple(spooled.enter_context(readable_capture(path, input_format))
-                             for path in files)
-            _to_mcap(readable, output, skip_bad, base, extended, deployment, keep)
+            readable = {spooled.enter_context(readable_capture(path, input_format)): input_name(path)
+                        for path in files}
+            _convert(readable, output, skip_bad, base, extended, deployment, keep)
         return
+    clock = TimeColumn(time_style) if time_style else None
     for number, path in enumerate(files):
         name = input_name(path)
         with readable_capture(path, input_format) as readable, _progress_bar(readable) as progress:
@@ -71,7 +94,7 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: 
                 count, drops, bad = decode_file(readable, sys.stdout, fmt, value_type=value_type,
                                                 skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
                                                 deployment=deployment, progress=progress, csv_header=number == 0,
-                                                file_column=len(files) > 1)
+                                                file_column=len(files) > 1, clock=clock)
             except CaptureError as error:
                 raise renamed(error, readable, name) from None
         sys.stdout.flush()
@@ -82,10 +105,20 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, output: 
         click.echo(summary, err=True)
 
 
-def _check_output(output: str, files: tuple[str, ...], overwrite: bool) -> None:
-    """Before any reading: -o names an .mcap file, an existing one needs --overwrite, and no input is the output
-    (writing would empty it before it was read)."""
-    if not output.lower().endswith(MCAP_EXTENSION):
+def _check_choices(fmt: str, time_style: str | None, output: str | None) -> None:
+    """--format and --time print; -o writes a capture in its own format, times as they were."""
+    if fmt == "mcap" and output is None:
+        raise click.UsageError("--format mcap writes to -o FILE.mcap; the other formats print to stdout")
+    if output is not None and fmt in ("jsonl", "csv"):
+        raise click.UsageError(f"-o writes the format its extension names; --format {fmt} prints to stdout")
+    if time_style is not None and (output is not None or fmt != "text"):
+        raise click.UsageError("--time styles the text lines' time column; -o, jsonl and csv keep absolute times")
+
+
+def _check_output(output: str, files: tuple[str, ...], fmt: str, overwrite: bool) -> None:
+    """Before any reading: -o has a name we can write (--format mcap: an .mcap one), an existing one needs
+    --overwrite, and no input is the output (writing would empty it before it was read)."""
+    if fmt == "mcap" and not output.lower().endswith(MCAP_EXTENSION):
         raise click.UsageError(f"an MCAP capture is named *{MCAP_EXTENSION} (got {output})")
     if os.path.exists(output) and any(path != "-" and os.path.samefile(path, output) for path in files):
         raise click.UsageError(f"{output} is also an input: decode into another file")

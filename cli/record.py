@@ -10,7 +10,14 @@ from typing import Any
 import click
 
 from vstig_hw.capture.decoded import Decoder, default_framings
-from vstig_hw.capture.files import APPENDABLE, CAN_EXTENSIONS, MCAP_EXTENSION, RotatingCapture
+from vstig_hw.capture.files import (
+    APPENDABLE,
+    CAN_EXTENSIONS,
+    MCAP_EXTENSION,
+    RotatingCapture,
+    capture_suffix,
+    link_names_lost,
+)
 from vstig_hw.capture.filters import Filter, RecordFilter
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.framing.can import CanFraming
@@ -99,6 +106,9 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
     if medium == "can" and not path.lower().endswith(CAN_EXTENSIONS):
         raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} or "
                                f"{MCAP_EXTENSION} (got {path})")
+    if medium == "can" and link_names_lost(path) and len(links) > 1:
+        raise click.UsageError(f"a {capture_suffix(path)} capture names no link, so {len(links)} links would become "
+                               "one: record them as .log, .asc, .blf or .mcap")
     limit = _size(max_bytes) if max_bytes else None
     _refuse_to_destroy(path, overwrite, append)
     node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
@@ -124,6 +134,8 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
                                             append=append))
             click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
                        err=True)
+            if medium == "can" and link_names_lost(path):
+                click.echo(f"{path} names no link: decode reads its frames back as one unnamed link", err=True)
             describe_links(node)
             line = StatusLine()
             status = (lambda: line.show(f"{captures[0].records} units  {node.summary()}")) if line.live else None

@@ -111,10 +111,11 @@ def as_json(d: Decoded, value_type: ValueType = "uint16") -> str:
     return json.dumps(row)
 
 
-def as_text(d: Decoded, value_type: ValueType = "uint16") -> str:
+def as_text(d: Decoded, value_type: ValueType = "uint16", stamp: str | None = None) -> str:
+    """One readable line; `stamp` replaces the time column (capture.time_columns)."""
     m = d.message
     can_id = f" id={d.can_id:03X}" if d.can_id is not None else ""
-    return (f"({d.t:.6f}) {d.link}{can_id} {m.op.name} key={m.key} value={from_raw(m.value, value_type)} "
+    return (f"{stamp or f'({d.t:.6f})'} {d.link}{can_id} {m.op.name} key={m.key} value={from_raw(m.value, value_type)} "
             f"ts={m.timestamp} robot={m.robot}")
 
 

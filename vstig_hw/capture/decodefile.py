@@ -7,9 +7,8 @@ Every other capture type goes record by record through the framings.
 
 from __future__ import annotations
 
-import heapq
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import IO, Any
 
 from ..counters import Counters
@@ -21,9 +20,10 @@ from .files import file_position, read_capture
 from .filters import Filter, RecordFilter
 from .records import CaptureError
 from .serial_log import is_serial_capture
+from .time_columns import TimeColumn
 from .zenoh_log import is_zenoh_capture
 
-__all__ = ["FORMATS", "decode_file", "decode_to_mcap"]
+__all__ = ["FORMATS", "decode_file"]
 
 FORMATS = {"text": as_text, "jsonl": as_json, "csv": as_csv}
 _PROGRESS_EVERY = 4096  # records between progress reports on the record-by-record path
@@ -33,15 +33,17 @@ CHUNK = 1 << 22  # bytes per candump chunk: big enough to amortise numpy, small 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
                 skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
                 progress: Callable[[int], None] | None = None, keep: Filter | None = None,
-                csv_header: bool = True, file_column: bool = False,
-                deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
+                csv_header: bool = True, file_column: bool = False, deployment: str | None = None,
+                clock: TimeColumn | None = None) -> tuple[int, Counters, list[CaptureError]]:
     """Write every message in `path` that `keep` passes to `out`; returns (messages, drops, bad lines skipped).
 
     `progress` is told, now and then, how many bytes of the file were read so far (every format).
     CSV: `csv_header=False` leaves the header out (a later file of several); `file_column` adds a
-    first column naming the file.
+    first column naming the file. Text: `clock` writes the time column (candump's -t styles).
     """
     formatter = _with_file(path) if fmt == "csv" and file_column else FORMATS[fmt]
+    if fmt == "text" and clock is not None:
+        formatter = _with_clock(clock)
     decoder = Decoder(default_framings(id_base, extended, deployment))
     bad: list[CaptureError] = []
     if fmt == "csv" and csv_header:
@@ -65,6 +67,13 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
     return count, decoder.drops(), bad
 
 
+def _with_clock(clock: TimeColumn) -> Callable[[Decoded, ValueType], str]:
+    def line(decoded: Decoded, value_type: ValueType) -> str:
+        return as_text(decoded, value_type, clock(decoded.t))
+
+    return line
+
+
 def _with_file(path: str) -> Callable[[Decoded, ValueType], str]:
     quoted = '"' + path.replace('"', '""') + '"'
 
@@ -72,26 +81,6 @@ def _with_file(path: str) -> Callable[[Decoded, ValueType], str]:
         return f"{quoted},{as_csv(decoded, value_type)}"
 
     return row
-
-
-def decode_to_mcap(paths: Sequence[str], output: str, *, skip_bad: bool = False, id_base: int | None = None,
-                   extended: bool = False, keep: Filter | None = None,
-                   deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
-    """Write the messages of `paths` (merged by time) that `keep` passes as a rosbag2 MCAP file."""
-    from .rosbag import McapCaptureWriter
-
-    decoder = Decoder(default_framings(id_base, extended, deployment))
-    passing = RecordFilter(keep or Filter(), decoder)
-    bad: list[CaptureError] = []
-    writer = McapCaptureWriter(output)
-    try:
-        for record in heapq.merge(*(read_capture(path, skip_bad, bad) for path in paths), key=lambda r: r.t):
-            sender, decoded = passing.messages(record)
-            for d in decoded:
-                writer.write_message(d.t, d.link, sender, d.message)
-    finally:
-        writer.close()
-    return writer.messages, decoder.drops(), bad
 
 
 def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: ValueType, skip_bad: bool,

@@ -18,18 +18,22 @@ from typing import IO, Any, Protocol
 import can
 
 from .candump import GZIP_CUT, read_candump
+from .channel_names import BLF_APP_TEXT, ChannelNumbers, NamedBlfReader, asc_note, asc_start, blf_note, read_asc_notes
 from .records import CAN_FRAMING, CaptureError, Record, cut_short
 from .serial_log import SerialCaptureWriter, is_serial_capture, read_serial_capture
 from .zenoh_log import ZenohCaptureWriter, is_zenoh_capture, read_zenoh_capture
 
-__all__ = ["APPENDABLE", "CAN_EXTENSIONS", "MCAP_EXTENSION", "READABLE_EXTENSIONS", "CaptureWriter",
-           "RotatingCapture", "file_position", "read_capture", "rotated_name", "sniff_suffix"]
+__all__ = ["APPENDABLE", "CAN_EXTENSIONS", "MCAP_EXTENSION", "NAMELESS_EXTENSIONS", "READABLE_EXTENSIONS",
+           "CaptureWriter", "RotatingCapture", "capture_suffix", "file_position", "link_names_lost", "read_capture",
+           "rotated_name", "sniff_suffix"]
 
 CAN_EXTENSIONS = (".log", ".asc", ".blf", ".csv", ".pcap", ".trc", ".log.gz", ".asc.gz")
 MCAP_EXTENSION = ".mcap"  # rosbag2 MCAP (capture.rosbag): decoded messages of any links
 READ_ONLY_EXTENSIONS = (".pcapng",)  # formats we read but do not write (Wireshark's default)
 READABLE_EXTENSIONS = (*CAN_EXTENSIONS, *READ_ONLY_EXTENSIONS, MCAP_EXTENSION)
 APPENDABLE = (".log", ".blf", ".csv", ".log.gz")  # the CAN formats python-can's writers can add to
+NAMELESS_EXTENSIONS = (".csv", ".pcap", ".trc")  # CAN formats with no channel or name: one link, unnamed
+_NUMBERED_EXTENSIONS = (".asc", ".asc.gz", ".blf")  # channel numbers, named by our notes (capture.channel_names)
 _BLF_CONTAINER_EVERY = 2.0  # seconds between BLF blocks written while recording
 _SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
 
@@ -46,8 +50,22 @@ def _suffix(path: str) -> str:
     return "".join(suffixes[-2:]).lower() if suffixes[-1:] == [".gz"] else "".join(suffixes[-1:]).lower()
 
 
+def capture_suffix(path: str) -> str:
+    """The extension that tells a capture's format: `.log`, `.log.gz`... (lower case)."""
+    return _suffix(path)
+
+
+def link_names_lost(path: str) -> bool:
+    """Whether a CAN capture at `path` names no link (CSV, pcap, TRC): it can hold only one, unnamed."""
+    return _suffix(path) in NAMELESS_EXTENSIONS
+
+
 class CanCaptureWriter:
-    """python-can's writer for the extension; frames keep their own timestamps, channel = link name."""
+    """python-can's writer for the extension; frames keep their own timestamps, channel = link name.
+
+    ASC and BLF number their channels: each link gets a number and a note naming it. CSV, pcap and TRC
+    name no channel: a second link is refused (its frames would become the first link's).
+    """
 
     def __init__(self, path: str, append: bool = False) -> None:
         suffix = _suffix(path)
@@ -60,13 +78,32 @@ class CanCaptureWriter:
         self.path = path
         self.writer: Any = can.Logger(path, append=True) if append else can.Logger(path)
         self._next_container = time.monotonic() + _BLF_CONTAINER_EVERY
+        self._suffix = suffix
+        self._numbers = ChannelNumbers()
+        self._link: str | None = None  # the one link of a format that names none
 
     def write(self, record: Record) -> None:
         frame: can.Message = record.unit
         if frame.timestamp < 1e9:  # an interface with a monotonic clock: use the wall time we stamped
             frame.timestamp = record.t
         frame.channel = record.link
+        if self._suffix in _NUMBERED_EXTENSIONS:
+            frame.channel = self._numbered(record.link, frame.timestamp) - 1  # python-can counts from 0
+        elif self._suffix in NAMELESS_EXTENSIONS and self._link != record.link:
+            if self._link is not None:
+                raise CaptureError(self.path, None, f"a {self._suffix} capture names no link: {record.link!r} "
+                                   f"cannot join {self._link!r} (use .log, .asc, .blf or .mcap, or keep one --link)")
+            self._link = record.link
         self.writer.on_message_received(frame)
+
+    def _numbered(self, link: str, t: float) -> int:
+        """The link's channel number, its note written before its first frame."""
+        number, new = self._numbers.number(link)
+        if new and isinstance(self.writer, can.BLFWriter):
+            self.writer._add_object(BLF_APP_TEXT, blf_note(number, link), t)  # python-can has no public call
+        elif new:
+            self.writer.file.write((asc_start(t) if number == 1 else "") + asc_note(number, link))
+        return number
 
     def size(self) -> int:
         """Bytes written so far, counting what the writer still holds (BLF: its uncompressed block)."""
@@ -254,18 +291,27 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
                            f"serial capture or one of {', '.join(READABLE_EXTENSIONS)}")
     if os.path.getsize(path) == 0:
         raise CaptureError(path, None, f"empty file: not a {suffix} capture")
-    options = {"relative_timestamp": False} if suffix.startswith(".asc") else {}
     if suffix == ".asc":
         _check_asc_lines(path, skip_bad, bad)
     frames = 0
     try:
-        reader = can.LogReader(path, **options)
+        names: dict[int, str] = {}
+        start = 0.0  # ASC: our note's exact start, to which the reader's relative times are added
+        options: dict[str, Any] = {}
+        if suffix.startswith(".asc"):
+            notes = read_asc_notes(path)
+            names, start = notes.names, notes.start or 0.0
+            options["relative_timestamp"] = notes.start is not None
+        reader = NamedBlfReader(path) if suffix == ".blf" else can.LogReader(path, **options)
+        names = getattr(reader, "names", names)
         file = getattr(reader, "file", None)  # python-can's readers keep the open file there
         if opened and file is not None:
             opened(file)
         for frame in reader:
             frames += 1
-            yield Record(frame.timestamp, str(frame.channel or "can"), CAN_FRAMING, frame)
+            frame.timestamp += start
+            link = names.get(frame.channel) if names and isinstance(frame.channel, int) else None
+            yield Record(frame.timestamp, link or str(frame.channel or "can"), CAN_FRAMING, frame)
         _check_complete(path, reader, frames)
     except EOFError:  # an .asc.gz whose writer was killed: every line it flushed was read
         cut_short(path, frames, "frames", GZIP_CUT, skip_bad, bad)
