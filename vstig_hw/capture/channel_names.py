@@ -76,7 +76,9 @@ def read_asc_notes(path: str) -> AscNotes:
     notes = AscNotes()
     opener: Any = gzip.open if path.lower().endswith(".gz") else open
     file: IO[str]
-    with opener(path, "rt", encoding="utf-8", errors="replace") as file:
+    # A killed recorder's .asc.gz ends without its gzip trailer: the notes before the cut still count,
+    # and the frame reader reports the cut.
+    with opener(path, "rt", encoding="utf-8", errors="replace") as file, contextlib.suppress(EOFError):
         for line in file:
             if not line.startswith("// vstig "):
                 continue
