@@ -13,6 +13,7 @@ from vstig_hw.capture.decoded import Decoder, default_framings
 from vstig_hw.capture.files import APPENDABLE, CAN_EXTENSIONS, MCAP_EXTENSION, RotatingCapture
 from vstig_hw.capture.filters import Filter, RecordFilter
 from vstig_hw.capture.records import CAN_FRAMING, Record
+from vstig_hw.extras import require
 from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.links import Link
@@ -100,6 +101,8 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
                                f"{MCAP_EXTENSION} (got {path})")
     limit = _size(max_bytes) if max_bytes else None
     _refuse_to_destroy(path, overwrite, append)
+    if medium == "mcap":
+        require("mcap", f"vstig record -o {path}")  # before the links open
     node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
     # Units become messages again for an .mcap file and for filters that look into messages: robot dialects'
     # links name the deployment file that maps their keys.
