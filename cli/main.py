@@ -5,6 +5,8 @@ and exposes it as `command`. The group finds them by module name and imports one
 only when it runs, so `vstig put` does not pay for numpy or matplotlib. The
 command list in `vstig --help` reads each command's docstring from its source
 for the same reason: importing them all would load numpy and python-can.
+A command beyond the core install (`_NEEDS_EXTRA`) whose extra is missing is refused
+with one line naming the extra, before its module is imported.
 
 Every command, loaded here, goes through `reports_errors`, and `main` is the
 one place a run ends: usage errors exit 2, runtime failures 1 (one line each),

@@ -52,6 +52,13 @@ def build_wheel(folder: Path) -> Path:
     return wheel
 
 
+def wheelhouse(folder: Path, *requirements: str) -> tuple[str, ...]:
+    """Every wheel `requirements` need, fetched or built into `folder` once; returns the pip options
+    that make an install read that folder alone (nothing downloaded while it is timed)."""
+    _pip("wheel", "--quiet", "--wheel-dir", str(folder), *requirements)
+    return ("--no-index", "--find-links", str(folder))
+
+
 def fresh_venv(path: Path) -> Path:
     """A new venv with nothing installed (not even pip); returns its python."""
     venv.create(path, with_pip=False, clear=True)
