@@ -22,6 +22,7 @@ from core_session import EXTRAS_LIBRARIES
 from installs import build_wheel, fresh_venv, install, installed_modules, site_packages
 
 from vstig_cli.main import cli
+from vstig_hw.capture.decodefile import FAST_PATH_BYTES
 
 pytestmark = pytest.mark.slow
 SESSION = Path(__file__).with_name("core_session.py")
@@ -103,15 +104,49 @@ def test_a_command_beyond_the_core_names_its_extra_in_one_line(core_python: Path
     assert not (tmp_path / "out.mcap").exists()
 
 
+# `vstig ARGS` with the modules named in argv[1] (comma-separated) unimportable, as if not installed: a module
+# set to None in sys.modules cannot be imported. The last line on stderr says whether numpy was loaded.
+_WITHOUT = """
+import sys
+for name in filter(None, sys.argv[1].split(",")):
+    sys.modules[name] = None
+from vstig_cli.main import run
+status = run(sys.argv[2:])
+print("numpy loaded:", sys.modules.get("numpy") is not None, file=sys.stderr)
+sys.exit(status)
+"""
+
+
+def _run_without(missing: list[str], args: list[str]) -> tuple[subprocess.CompletedProcess[str], bool]:
+    done = subprocess.run([sys.executable, "-c", _WITHOUT, ",".join(missing), *args], capture_output=True,
+                          text=True, timeout=120, check=False)
+    *said, loaded = done.stderr.splitlines(keepends=True)
+    done.stderr = "".join(said)
+    return done, loaded == "numpy loaded: True\n"
+
+
 def test_analyze_plot_without_matplotlib_names_the_analyze_extra(tmp_path: Path) -> None:
     """numpy alone runs `analyze`; `--plot` needs matplotlib too, and says so before reading anything."""
     capture = tmp_path / "bus.log"
     capture.write_text("(1700000000.000000) can0 615#0001000200030015\n")
     plot = tmp_path / "p.png"
-    # A module set to None in sys.modules cannot be imported: matplotlib as if not installed.
-    code = ("import sys; sys.modules['matplotlib'] = None; from vstig_cli.main import run; "
-            f"sys.exit(run(['analyze', {str(capture)!r}, '--plot', {str(plot)!r}]))")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=False)
+    done, _ = _run_without(["matplotlib"], ["analyze", str(capture), "--plot", str(plot)])
     assert (done.returncode, done.stdout) == (1, "")
     assert done.stderr == "Error: vstig analyze --plot needs the analyze extra: pip install 'vstig-hw[analyze]'\n"
     assert not plot.exists()
+
+
+def test_decode_of_a_big_candump_log_without_numpy_gives_the_same_messages(tmp_path: Path) -> None:
+    """A log past FAST_PATH_BYTES takes numpy's path where numpy is installed, the line-by-line one where not."""
+    log = tmp_path / "big.log"
+    lines = [f"({1700000000 + i // 1000}.{i % 1000 * 1000:06d}) can0 {0x600 | (i % 2) << 8 | i % 40:03X}#"
+             f"{(i % 2) << 15 | i % 300:04X}{i * 7 % 65536:04X}{i % 65535 + 1:04X}{i % 40:04X}\n"
+             for i in range(30_000)]
+    log.write_text("".join(lines))
+    assert log.stat().st_size > FAST_PATH_BYTES
+    with_numpy, loaded = _run_without([], ["decode", str(log), "--format", "jsonl"])
+    without, loaded_anyway = _run_without(["numpy"], ["decode", str(log), "--format", "jsonl"])
+    assert with_numpy.returncode == without.returncode == 0, without.stderr
+    assert (loaded, loaded_anyway) == (True, False)
+    rows = [json.loads(line) for line in without.stdout.splitlines()]
+    assert len(rows) == 30_000 and rows == [json.loads(line) for line in with_numpy.stdout.splitlines()]
