@@ -24,11 +24,10 @@ from installs import build_wheel, fresh_venv, install, installed_modules, site_p
 from vstig_cli.main import cli
 from vstig_hw.capture.decodefile import FAST_PATH_BYTES
 
-pytestmark = pytest.mark.slow
 SESSION = Path(__file__).with_name("core_session.py")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="module")  # a wheel built and installed once: the tests that use it are slow
 def core_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("core-install")
     python = fresh_venv(folder / "venv")
@@ -44,12 +43,14 @@ def _session(python: Path, folder: Path) -> dict[str, Any]:
     return result
 
 
+@pytest.mark.slow
 def test_the_core_install_brings_none_of_the_extras_libraries(core_python: Path) -> None:
     installed = installed_modules(core_python)
     assert {"vstig_hw", "vstig_cli", "can", "serial", "click"} <= installed
     assert not installed & set(EXTRAS_LIBRARIES)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("venv", ["core", "development"])
 def test_the_gateway_commands_run_and_load_no_extras_library(venv: str, request: pytest.FixtureRequest,
                                                              tmp_path: Path) -> None:
@@ -74,6 +75,7 @@ def test_the_gateway_commands_run_and_load_no_extras_library(venv: str, request:
     assert result["imported"] == []
 
 
+@pytest.mark.slow
 def test_vstig_help_in_the_core_install_lists_every_command(core_python: Path) -> None:
     shown = subprocess.run([str(core_python.with_name("vstig")), "--help"], capture_output=True, text=True,
                            timeout=60, check=False)
@@ -82,6 +84,7 @@ def test_vstig_help_in_the_core_install_lists_every_command(core_python: Path) -
     assert set(cli.list_commands(click.Context(cli))) <= set(listed)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("args", "line"), [
     (["sim", "--runs", "1"], "vstig sim needs the sim extra: pip install 'vstig-hw[sim]'"),
     (["analyze", "CAPTURE"], "vstig analyze needs the analyze extra: pip install 'vstig-hw[analyze]'"),
