@@ -36,13 +36,14 @@ def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool 
         seen[name] = seen.get(name, 0) + 1
         if seen[name] > 1:
             name = f"{name}-{seen[name]}"
-        if isinstance(spec, CanSpec) and spec.interface == "virtual":
-            click.echo(f"note: can:virtual:{spec.channel} is a bus inside this process only: no other program "
-                       "hears it (vcan or can:udp_multicast: reach other processes)", err=True)
         try:
             links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
         except ValueError as error:  # building opens nothing: what fails here is how the link was asked for
             raise click.UsageError(f"{spec.kind}:{spec.name}: {error}") from None
+    for spec in specs:  # once every link could be built: a link that cannot (a missing extra) is the one line said
+        if isinstance(spec, CanSpec) and spec.interface == "virtual":
+            click.echo(f"note: can:virtual:{spec.channel} is a bus inside this process only: no other program "
+                       "hears it (vcan or can:udp_multicast: reach other processes)", err=True)
     return links
 
 

@@ -16,6 +16,7 @@ from vstig_hw.capture.analyzefile import Fed, analyze_captures
 from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError
 from vstig_hw.counters import Counters
+from vstig_hw.extras import require
 from vstig_hw.values import ValueType, from_raw
 
 from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
@@ -64,6 +65,7 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     base = parse_id_base(id_base)
     if plot is not None:
         refuse_to_replace(plot, overwrite)  # before reading: a capture typed as --plot is refused at once
+        require("analyze", "vstig analyze --plot", ("matplotlib",))  # numpy alone was checked as the command loaded
     analyzer = Analyzer(window, conflict)
     # 11-bit unless told (--extended) or implied (--id-base names one width's base); else read from frames.
     width = True if extended else (False if base is not None else None)

@@ -16,6 +16,7 @@ from vstig_hw.capture.files import CAN_EXTENSIONS, MCAP_EXTENSION, link_names_lo
 from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError
 from vstig_hw.capture.time_columns import TIME_STYLES, TimeColumn
+from vstig_hw.extras import require
 from vstig_hw.values import ValueType
 
 from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
@@ -123,6 +124,8 @@ def _check_output(output: str, files: tuple[str, ...], fmt: str, overwrite: bool
     if os.path.exists(output) and any(path != "-" and os.path.samefile(path, output) for path in files):
         raise click.UsageError(f"{output} is also an input: decode into another file")
     refuse_to_replace(output, overwrite)
+    if output.lower().endswith(MCAP_EXTENSION):
+        require("mcap", f"vstig decode -o {output}")
 
 
 @contextlib.contextmanager

@@ -8,6 +8,7 @@ from typing import Any
 import click
 
 from vstig_hw.demo_swarm import DemoConfig, DemoReport, Medium, run_demo
+from vstig_hw.extras import require
 from vstig_hw.gateway import stop_on_signals
 
 from .errors import reports_errors
@@ -68,6 +69,8 @@ def command(robots: int, drop: float, seed: int, step: float, max_steps: int, ga
     the real framings, and the gateway bridging them. With --gateways 2, two gateways (two arenas)
     join over a real Zenoh session on loopback, and the summary shows each gateway's traffic.
     """
+    if gateways == 2:
+        require("zenoh", "vstig demo --gateways 2")  # the gateways meet over a zenoh link
     config = DemoConfig(robots=robots, drop=drop, seed=seed, step=step, max_steps=max_steps, gateways=gateways)
     with stop_on_signals() as stop:
         if sys.stdout.isatty():

@@ -5,6 +5,8 @@ and exposes it as `command`. The group finds them by module name and imports one
 only when it runs, so `vstig put` does not pay for numpy or matplotlib. The
 command list in `vstig --help` reads each command's docstring from its source
 for the same reason: importing them all would load numpy and python-can.
+A command beyond the core install (`_NEEDS_EXTRA`) whose extra is missing is refused
+with one line naming the extra, before its module is imported.
 
 Every command, loaded here, goes through `reports_errors`, and `main` is the
 one place a run ends: usage errors exit 2, runtime failures 1 (one line each),
@@ -23,6 +25,7 @@ from pathlib import Path
 import click
 
 from vstig_hw import __version__
+from vstig_hw.extras import MissingExtra, require
 
 from . import _streams
 from .errors import reports_errors
@@ -30,6 +33,9 @@ from .errors import reports_errors
 INTERRUPTED = 128 + 2  # the shell's status for a command ended by SIGINT
 
 _NOT_COMMANDS = {"main", "errors"}
+# Commands beyond the core install: the extra each needs, and which of its modules the command loads
+# as it starts (None: all of them). Checked before the command's module is imported.
+_NEEDS_EXTRA: dict[str, tuple[str, tuple[str, ...] | None]] = {"sim": ("sim", None), "analyze": ("analyze", ("numpy",))}
 _HERE = Path(__file__).parent
 
 
@@ -54,6 +60,12 @@ class CommandFolder(click.Group):
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         if cmd_name not in self.list_commands(ctx):
             return None
+        if cmd_name in _NEEDS_EXTRA:
+            extra, modules = _NEEDS_EXTRA[cmd_name]
+            try:
+                require(extra, f"vstig {cmd_name}", modules)
+            except MissingExtra as error:  # a runtime failure (exit 1), before any of the command runs
+                raise click.ClickException(str(error)) from None
         module = importlib.import_module(f"{__package__}.{_module(cmd_name)}")
         command: click.Command = module.command
         _report_errors(command)

@@ -20,6 +20,7 @@ from vstig_hw.capture.files import (
 )
 from vstig_hw.capture.filters import Filter, RecordFilter
 from vstig_hw.capture.records import CAN_FRAMING, Record
+from vstig_hw.extras import require
 from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.links import Link, LinkSpec
@@ -111,6 +112,8 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
                                "one: record them as .log, .asc, .blf or .mcap")
     limit = _size(max_bytes) if max_bytes else None
     _refuse_to_destroy(path, overwrite, append)
+    if medium == "mcap":
+        require("mcap", f"vstig record -o {path}")  # before the links open
     node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
     # Units become messages again for an .mcap file and for filters that look into messages: robot dialects'
     # links name the deployment file that maps their keys.

@@ -1,9 +1,15 @@
-"""A wheel must carry every subpackage: pyproject lists them, so check the list is whole."""
+"""A wheel must carry every subpackage and its extras must match the code: pyproject lists both by hand."""
 
 from __future__ import annotations
 
 import tomllib
+from importlib.metadata import packages_distributions
 from pathlib import Path
+
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
+
+from vstig_hw.extras import EXTRAS
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -17,3 +23,15 @@ def test_every_subpackage_is_listed_in_pyproject() -> None:
     }
     assert on_disk <= listed, f"add to [tool.setuptools] packages: {sorted(on_disk - listed)}"
     assert config["package-dir"]["vstig_cli"] == "cli"
+
+
+def test_each_extra_names_the_libraries_pyproject_installs_with_it() -> None:
+    """What a missing extra is told by (`vstig_hw.extras`) and what pip installs for it are the same libraries."""
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    distributions = packages_distributions()
+    for extra, modules in EXTRAS.items():
+        listed = {canonicalize_name(Requirement(line).name) for line in extras[extra]}
+        assert {canonicalize_name(d) for module in modules for d in distributions[module]} == listed, extra
+    (everything,) = extras["all"]
+    assert Requirement(everything).extras == set(EXTRAS)
+    assert "vstig-hw[all]" in extras["test"]  # `make test` runs every command and link kind

@@ -16,15 +16,17 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
-
-import numpy as np
-import numpy.typing as npt
+from typing import TYPE_CHECKING
 
 from ..framing.base import Framing
 from ..framing.zenoh import ZenohFraming, ZenohSample
 from ..wire import KEY_MAX, Message, Op, encode
 from .decoded import Decoded, Decoder
 from .records import CAN_FRAMING, MESSAGE_FRAMING, Record
+
+if TYPE_CHECKING:  # numpy comes with the analyze extra; record, replay and decode filter without it
+    import numpy as np
+    import numpy.typing as npt
 
 __all__ = ["Filter", "RecordFilter", "filter_records"]
 
@@ -66,6 +68,8 @@ class Filter:
              sender: npt.NDArray[np.int64], op: npt.NDArray[np.int64], key: npt.NDArray[np.int64],
              robot: npt.NDArray[np.int64]) -> npt.NDArray[np.bool_]:
         """`accepts` over columns (t after the first record; link as indices into `link_names`; sender -1: none)."""
+        import numpy as np
+
         keep = np.ones(len(t), dtype=bool)
         if self.links is not None:
             wanted = [i for i, name in enumerate(link_names) if name in self.links]

@@ -18,6 +18,7 @@ from collections.abc import Iterator
 from typing import IO, Any
 
 from ..counters import Counters
+from ..extras import install_hint
 from ..wire import Message, Op
 from .decoded import Decoder
 from .records import MESSAGE_FRAMING, CaptureError, Record, cut_short
@@ -44,7 +45,7 @@ _TOPIC_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
 
 
 def _needs_extra(path: str) -> CaptureError:
-    return CaptureError(path, None, "reading or writing .mcap needs the mcap extra: pip install 'vstig-hw[mcap]'")
+    return CaptureError(path, None, f"reading or writing .mcap needs the mcap extra: {install_hint('mcap')}")
 
 
 def _typestore(path: str) -> Any:

@@ -74,6 +74,9 @@ class ZenohSpec:
 
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` names this gateway in the key space (vstig/<swarm>/<stig>/<id>)."""
+        from ..extras import require
+
+        require("zenoh", "a zenoh: link")  # before any link of the command opens
         return zenoh_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
 
 
