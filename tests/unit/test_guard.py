@@ -133,13 +133,6 @@ def test_a_source_changing_its_claimed_sender_per_message_is_held_to_the_source_
     assert guard.check("can", 1, put(1, 1), 0.5, source="peer-a") is None  # buckets are per link
 
 
-def test_refusals_are_listed_with_their_reasons_when_asked() -> None:
-    guard = Guard(max_jump=10)
-    refused: list[tuple[Message, str]] = []
-    kept = guard.filter("can", 1, [put(1, 5), put(1, 500), put(1, 6)], 0.0, Counters(), refused=refused)
-    assert kept == [put(1, 5), put(1, 6)] and refused == [(put(1, 500), "drop_jump")]
-
-
 def test_a_rate_below_one_still_lets_one_message_through() -> None:
     guard = Guard(rate=0.5)
     assert guard.check("can", 1, put(1, 1), 0.0) is None

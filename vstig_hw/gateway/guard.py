@@ -183,10 +183,8 @@ class Guard:
 
     # -- the gateway's calls -------------------------------------------------------
     def filter(self, link: str, sender: int | None, messages: list[Message], now: float,
-               counters: Counters, source: str | None = None,
-               refused: list[tuple[Message, str]] | None = None) -> list[Message]:
-        """The messages that pass; each refused one is counted in `counters` as `drop_<reason>`
-        (and listed with its reason in `refused`, if given)."""
+               counters: Counters, source: str | None = None) -> list[Message]:
+        """The messages that pass; each refused one is counted in `counters` as `drop_<reason>`."""
         kept = []
         for msg in messages:
             reason = self.check(link, sender, msg, now, source)
@@ -194,8 +192,6 @@ class Guard:
                 kept.append(msg)
             else:
                 counters[reason] += 1
-                if refused is not None:
-                    refused.append((msg, reason))
         return kept
 
     def check(self, link: str, sender: int | None, msg: Message, now: float,
