@@ -376,3 +376,41 @@ def test_a_client_opened_before_its_router_joins_when_the_router_comes_up() -> N
     finally:
         link.close()
         router.close()  # type: ignore[attr-defined]
+
+
+def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_others_keep_theirs() -> None:
+    import json
+
+    import zenoh
+
+    from vstig_hw.gateway import Mode, Node
+    from vstig_hw.gateway.guard import Guard
+    from vstig_hw.links import Heard
+
+    gateway = parse("zenoh:lab").build(robot_id=201)
+    node = Node([gateway], mode=Mode.LISTEN, guard=Guard(source_rate=50))
+    heard: list[Heard] = []
+    node.on_heard.append(heard.append)
+    with node:
+        [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
+        honest = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
+        honest.open()
+        config = zenoh.Config()  # a stock session: it stamps nothing, and claims a new gateway id per sample
+        config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        config.insert_json5("scouting/multicast/enabled", "false")
+        attacker = zenoh.open(config)
+        try:
+            _until(lambda: attacker.info.peers_zid())
+            time.sleep(0.5)  # the gateway's subscription reaches the attacker just after the session opens
+            for i in range(1000):
+                attacker.put(f"vstig/lab/0/{1000 + i}", encode(Message(Op.PUT, 1, i, i + 1, 1000 + i)),
+                             congestion_control=zenoh.CongestionControl.BLOCK)
+            honest.send_many([Message(Op.PUT, 2, v, v + 1, 202) for v in range(20)])
+            node.run(duration=2.0)
+        finally:
+            attacker.close()  # type: ignore[no-untyped-call]
+            honest.close()
+    from_attacker = [h for h in heard if h.message.key == 1]
+    assert 50 <= len(from_attacker) <= 200, len(from_attacker)  # a burst of 50, then 50 a second
+    assert gateway.counters["drop_source_rate"] == 1000 - len(from_attacker)
+    assert [h.message.value for h in heard if h.message.key == 2] == list(range(20))  # another session: its own

@@ -85,6 +85,8 @@ def _config_and_listener(spec: ZenohSpec) -> tuple[zenoh.Config, str | None]:
         config.insert_json5("scouting/multicast/enabled", json.dumps(spec.scout))
     elif _json(config, "scouting/multicast/enabled") is None:
         config.insert_json5("scouting/multicast/enabled", "false")
+    if _json(config, "timestamping/enabled") is None:  # stamped samples name their session: --source-rate
+        config.insert_json5("timestamping/enabled", "true")
     return config, ours
 
 
