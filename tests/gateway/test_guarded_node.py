@@ -118,3 +118,25 @@ def test_listeners_see_only_what_passes_and_each_refusal_is_counted_on_its_link(
     assert (stats["drop_untrusted"], stats["drop_key"], stats["drop_rate"]) == (1, 1, 3)
     assert stats["in"] == len(heard) + stats["drop_untrusted"] + stats["drop_key"] + stats["drop_rate"]
     bus.shutdown()
+
+
+def test_a_can_node_cycling_its_id_is_held_to_the_bus_source_rate_while_rate_alone_lets_it_all_in(
+        channels: tuple[str, str]) -> None:
+    a, _ = channels
+    attacker = can.Bus(interface="virtual", channel=a)
+    passed: dict[str, int] = {}
+    try:
+        for name, guard in (("rate", Guard(rate=10)), ("source", Guard(rate=10, source_rate=100))):
+            heard: list[Heard] = []
+            node = Node([bus_link(a)], mode=Mode.LISTEN, guard=guard)
+            node.on_heard.append(heard.append)
+            with node:
+                for i in range(1000):  # a new node id (1..127) per frame: each one a fresh sender bucket
+                    inject(attacker, Message(Op.PUT, 1, i, i + 1, 1), sender=1 + i % 127)
+                run_until(node, lambda: node.stats()[a]["in"] >= 1000)
+            passed[name] = len(heard)
+            assert passed[name] + node.stats()[a]["drop_source_rate"] + node.stats()[a]["drop_rate"] == 1000
+    finally:
+        attacker.shutdown()
+    assert passed["rate"] == 1000  # ids are claims: 10 a second per id lets all 1,000 through
+    assert 100 <= passed["source"] <= 150  # the bus is one source: a burst of 100, then 100 a second
