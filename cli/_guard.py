@@ -39,8 +39,9 @@ _OPTIONS = [
                       "A climb in steps skips at most N timestamps a second per key. "
                       "A key we do not hold passes at any timestamp (see --learn)."),
     click.option("--learn", type=click.FloatRange(0.0), metavar="S",
-                 help="After S seconds of listening, a key we do not hold yet is new to the swarm: it must start "
-                      "within --max-jump of timestamp 0 (drop_jump). Default: it passes at any timestamp."),
+                 help="S seconds after the first message heard, a key we do not hold yet is new to the swarm: "
+                      "it must start within --max-jump of timestamp 0 (drop_jump). Default: it passes at any "
+                      "timestamp."),
     click.option("--rate", type=click.FloatRange(0.0, min_open=True), metavar="N",
                  help="At most N messages per second from each sender id the medium names (CAN node id, zenoh "
                       "gateway id; a serial link is one sender); excess counted drop_rate. Ids are claims: "

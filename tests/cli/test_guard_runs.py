@@ -271,3 +271,12 @@ def test_bridge_read_only_link_is_heard_but_never_relayed() -> None:
     assert bridge.returncode == 0, err
     assert {m.key for m in heard["classroom"]} == {3, 4}  # the lab's data reaches the classroom, its own echoes back
     assert {m.key for m in heard["lab"]} == {4}  # nothing the classroom wrote reaches the lab
+
+
+def test_sniff_learn_refuses_a_first_write_far_from_zero_and_a_climb_in_steps() -> None:
+    climb = [Message(Op.PUT, 6, 1, 1 + 255 * n, 9) for n in range(3)]  # 1, 256, 511: each within 255
+    out, _ = sniff_a_radio([Message(Op.PUT, 5, 1, 1, 4), Message(Op.PUT, 7, 1, 32767, 9), *climb],
+                           "--jsonl", "--learn", "0")
+    rows = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    assert [(r["key"], r["timestamp"], r["refused"]) for r in rows] == [
+        (5, 1, None), (7, 32767, "drop_jump"), (6, 1, None), (6, 256, None), (6, 511, "drop_jump")]
