@@ -36,10 +36,20 @@ def _pairs(limit: int, what: str) -> Callable[[click.Context, click.Parameter, t
 _OPTIONS = [
     click.option("--max-jump", type=click.IntRange(0, 0x7FFF), default=DEFAULT_MAX_JUMP, show_default=True,
                  help="Refuse a PUT/GET more than N timestamps newer than our entry (drop_jump); 0 turns it off. "
-                      "A key we do not hold passes at any timestamp."),
+                      "A climb in steps skips at most N timestamps a second per key. "
+                      "A key we do not hold passes at any timestamp (see --learn)."),
+    click.option("--learn", type=click.FloatRange(0.0), metavar="S",
+                 help="S seconds after the first message heard, a key we do not hold yet is new to the swarm: "
+                      "it must start within --max-jump of timestamp 0 (drop_jump). Default: it passes at any "
+                      "timestamp."),
     click.option("--rate", type=click.FloatRange(0.0, min_open=True), metavar="N",
-                 help="At most N messages per second from each sender (CAN node id; a serial link is one sender); "
-                      "excess counted drop_rate."),
+                 help="At most N messages per second from each sender id the medium names (CAN node id, zenoh "
+                      "gateway id; a serial link is one sender); excess counted drop_rate. Ids are claims: "
+                      "see --source-rate."),
+    click.option("--source-rate", type=click.FloatRange(0.0, min_open=True), metavar="N",
+                 help="At most N messages per second from each real source, whatever ids it claims: a serial or "
+                      "CAN link is one source, a zenoh peer's session (the id zenoh stamps on its samples) is one; "
+                      "excess counted drop_source_rate."),
     click.option("--trust", multiple=True, metavar="LINK=IDS", callback=_pairs(U16_MAX, "ids"),
                  help="Accept on LINK only these sender ids, e.g. can0=1-20,33 (drop_untrusted). Repeatable."),
     click.option("--deny", multiple=True, metavar="LINK=IDS", callback=_pairs(U16_MAX, "ids"),
@@ -60,7 +70,9 @@ class GuardChoice:
     """The guard options as given; `build` checks them against the links."""
 
     max_jump: int
+    learn: float | None
     rate: float | None
+    source_rate: float | None
     trust: Sequence[tuple[str, IdSet]]
     deny: Sequence[tuple[str, IdSet]]
     keys: Sequence[tuple[str, IdSet]]
@@ -86,7 +98,8 @@ class GuardChoice:
                 if option in fields:
                     raise click.UsageError(f"{flag} {name} given twice: join them with commas")
                 fields[option] = value
-        return Guard(max_jump=self.max_jump or None, rate=self.rate, flap=self.flap,
+        return Guard(max_jump=self.max_jump or None, learn=self.learn, rate=self.rate,
+                     source_rate=self.source_rate, flap=self.flap,
                      links={name: LinkPolicy(**fields) for name, fields in policies.items()})
 
 
@@ -99,10 +112,12 @@ def guard_options(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Add the guard's options to a command; it receives them as one `guard: GuardChoice` argument."""
 
     @functools.wraps(fn)
-    def wrapper(*args: Any, max_jump: int, rate: float | None, trust: Sequence[tuple[str, IdSet]],
+    def wrapper(*args: Any, max_jump: int, learn: float | None, rate: float | None, source_rate: float | None,
+                trust: Sequence[tuple[str, IdSet]],
                 deny: Sequence[tuple[str, IdSet]], keys: Sequence[tuple[str, IdSet]], read_only: Sequence[str],
                 flap: float | None, **kwargs: Any) -> Any:
-        return fn(*args, guard=GuardChoice(max_jump, rate, trust, deny, keys, read_only, flap), **kwargs)
+        return fn(*args, guard=GuardChoice(max_jump, learn, rate, source_rate, trust, deny, keys, read_only, flap),
+                  **kwargs)
 
     for option in reversed(_OPTIONS):
         wrapper = option(wrapper)

@@ -49,9 +49,9 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     Example: vstig bridge can:socketcan:can0 serial:/dev/ttyUSB0?framing=epuck4 --robot-id 200
 
     A guard checks what every link hears before the engine sees it: timestamp jumps are refused by
-    default; --rate, --trust, --deny, --keys, --read-only and --flap add policies. LINK names are
-    those printed at start (the device's name: can0, ttyUSB0...). Refusals are counted per link
-    (drop_jump, drop_rate, drop_untrusted, drop_key).
+    default; --learn, --rate, --source-rate, --trust, --deny, --keys, --read-only and --flap add
+    policies. LINK names are those printed at start (the device's name: can0, ttyUSB0...). Refusals
+    are counted per link (drop_jump, drop_rate, drop_source_rate, drop_untrusted, drop_key).
 
     \b
     Many PCs: add a zenoh link on each (vstig links lists its options), e.g.

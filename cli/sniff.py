@@ -36,15 +36,17 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
     if len(shown) < len(keys):
         title += f" (keys {shown[0]}..{shown[-1]} fit here; --key K shows chosen ones)"
     table = Table(title=title, caption=node.summary() if node else None)
-    for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders"):
-        table.add_column(column, justify="left" if column == "stale senders" else "right")
+    for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders",
+                   "refused (latest)"):
+        table.add_column(column, justify="left" if column in ("stale senders", "refused (latest)") else "right")
     now = time.time()
     for key in shown:
         k = view.keys[key]
         stale = k.stale_senders()
         table.add_row(str(key), str(from_raw(k.value, value_type)), str(k.timestamp), str(k.robot),
                       f"{now - k.last_seen:.1f}s ago", str(k.puts), str(k.gets), str(k.conflicts),
-                      ", ".join(map(str, stale[:12])) + (" ..." if len(stale) > 12 else ""))
+                      ", ".join(map(str, stale[:12])) + (" ..." if len(stale) > 12 else ""),
+                      f"{k.refused} ({k.last_refused})" if k.refused else "")
     return table
 
 
@@ -57,11 +59,13 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
               help="Settle conflicts as a swarm running the paper's Figure 1 rule does (larger value), "
                    "instead of the default higher robot id.")
 @click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@click.option("--hide-refused", is_flag=True,
+              help="Leave out what the guard options would refuse (it is still counted under the table).")
 @filter_options
 @guard_options
 @reports_errors
 def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
-            keep: Filter, guard: GuardChoice) -> None:
+            hide_refused: bool, keep: Filter, guard: GuardChoice) -> None:
     """Decode LINK's traffic live, per key; passive: never transmits.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
@@ -73,8 +77,10 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
 
     Example: vstig sniff can:socketcan:can0 --jsonl | jq .
 
-    The guard options are bridge's: what a bridge with them would refuse is left out of the
-    table and counted under the table (drop_jump, drop_rate...); --max-jump 0 shows everything.
+    The guard options are bridge's: what a bridge with them would refuse is shown too, marked
+    with the reason (the "refused" column; "refused" in --jsonl, null for what passes), never
+    changes a key's entry, and is counted under the table (drop_jump, drop_rate...).
+    --hide-refused leaves it out.
     """
     must_hear(link, "sniff")
     rule = larger_value_wins if larger else None
@@ -83,32 +89,36 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
     # The engine never transmits: it counts what each message would do to a robot that heard them all.
     node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule)
     view = SwarmView(rule) if rule else SwarmView()
-    listeners: list[Callable[[Heard], None]] = [view.add]
+    listeners: list[Callable[[Heard, str | None], None]] = [
+        lambda message, reason: view.add(message) if reason is None else view.refuse(message, reason)]
     first: list[float] = []
 
-    def heard(message: Heard) -> None:
+    def heard(message: Heard, reason: str | None = None) -> None:
         first[:] = first or [message.t]
         if not keep or keep.accepts(message.t - first[0], message.link, message.sender, message.message):
             for listener in listeners:
-                listener(message)
+                listener(message, reason)
 
     node.on_heard.append(heard)
+    if not hide_refused:
+        node.on_refused.append(heard)
     if jsonl:
         import json
 
         out = sys.stdout
 
-        # The same row as `decode --format jsonl`: can_id on CAN links only, sender where the medium names one.
+        # The same row as `decode --format jsonl` (can_id on CAN links only, sender where the medium names one),
+        # and `refused`: the drop counter a guarded bridge would count it under, or null.
         can_schemes = {link.name: link.framing.scheme for link in node.links if isinstance(link.framing, CanFraming)}
 
-        def emit(heard: Heard) -> None:
+        def emit(heard: Heard, reason: str | None) -> None:
             m = heard.message
             row: dict[str, Any] = {"t": round(heard.t, 6), "link": heard.link}
             scheme = can_schemes.get(heard.link)
             if scheme is not None and heard.sender is not None:
                 row["can_id"] = scheme.can_id(m.op, heard.sender)
             row.update(op=m.op.name, key=m.key, value=from_raw(m.value, value_type), timestamp=m.timestamp,
-                       robot=m.robot, sender=heard.sender)
+                       robot=m.robot, sender=heard.sender, refused=reason)
             out.write(json.dumps(row) + "\n")
             out.flush()
 

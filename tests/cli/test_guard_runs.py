@@ -11,6 +11,7 @@ run with the guard off shows the radio robots poisoned, so the test can fail.
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from pathlib import Path
@@ -202,16 +203,15 @@ def has_open(pid: int, path: str) -> bool:
         return False
 
 
-def test_sniff_counts_refusals_under_its_table_and_warns_once_of_a_flapping_key() -> None:
+def sniff_a_radio(heard: list[Message], *options: str) -> tuple[str, str]:
+    """What `vstig sniff` (run for 4 s, on a wide table) prints, having heard `heard` on a cobs8 radio."""
     radio = PtyPeer()
     framing = make_serial_framing("cobs8")
-    sniffer = start_vstig("sniff", f"serial:{radio.path}?framing=cobs8", "--flap", "3", "--for", "4")
+    sniffer = start_vstig("sniff", f"serial:{radio.path}?framing=cobs8", "--for", "4", *options,
+                          env={**os.environ, "COLUMNS": "250"})
     try:
         wait_for(lambda: has_open(sniffer.pid, radio.path), 30)  # the sniffer never transmits: look at its fds
         time.sleep(0.3)  # pyserial flushes the input right after opening
-        heard = [Message(Op.PUT, 5, 1, 1, 9), Message(Op.PUT, 5, 2, 30000, 9)]  # a key, then a jump
-        for ts in range(1, 30):  # robots 4 and 6 fight over key 12: a conflict at every timestamp
-            heard += [Message(Op.PUT, 12, 1, ts, 4), Message(Op.PUT, 12, 2, ts, 6)]
         radio.write(b"".join(unit for msg in heard for unit in framing.encode(msg)))
         out, err = sniffer.communicate(timeout=60)
     finally:
@@ -219,9 +219,31 @@ def test_sniff_counts_refusals_under_its_table_and_warns_once_of_a_flapping_key(
             stop(sniffer)
         radio.close()
     assert sniffer.returncode == 0, err
+    return out, err
+
+
+A_KEY_THEN_A_JUMP = [Message(Op.PUT, 5, 1, 1, 9), Message(Op.PUT, 5, 2, 30000, 9)]
+
+
+def test_sniff_shows_and_counts_refusals_and_warns_once_of_a_flapping_key() -> None:
+    heard = list(A_KEY_THEN_A_JUMP)
+    for ts in range(1, 30):  # robots 4 and 6 fight over key 12: a conflict at every timestamp
+        heard += [Message(Op.PUT, 12, 1, ts, 4), Message(Op.PUT, 12, 2, ts, 6)]
+    out, err = sniff_a_radio(heard, "--flap", "3")
     assert "drop_jump=1" in out  # the table's caption
+    rows = (line.split("│")[1:-1] for line in out.splitlines())
+    [row] = [cells for cells in rows if cells and cells[0].strip() == "5"]
+    assert [cell.strip() for cell in (row[2], row[-1])] == ["1", "1 (jump: PUT ts 30000 robot 9)"], out
     warnings = [line for line in err.splitlines() if line.startswith("warning:")]
     assert len(warnings) == 1 and "key 12" in warnings[0] and "robots 4 and 6" in warnings[0], err
+
+
+def test_sniff_jsonl_marks_what_a_guarded_bridge_would_refuse_and_hides_it_only_when_asked() -> None:
+    out, _ = sniff_a_radio(A_KEY_THEN_A_JUMP, "--jsonl")
+    rows = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    assert [(r["timestamp"], r["refused"]) for r in rows] == [(1, None), (30000, "drop_jump")]
+    out, _ = sniff_a_radio(A_KEY_THEN_A_JUMP, "--jsonl", "--hide-refused")
+    assert [json.loads(line)["timestamp"] for line in out.splitlines() if line.startswith("{")] == [1]
 
 
 def test_bridge_read_only_link_is_heard_but_never_relayed() -> None:
@@ -249,3 +271,12 @@ def test_bridge_read_only_link_is_heard_but_never_relayed() -> None:
     assert bridge.returncode == 0, err
     assert {m.key for m in heard["classroom"]} == {3, 4}  # the lab's data reaches the classroom, its own echoes back
     assert {m.key for m in heard["lab"]} == {4}  # nothing the classroom wrote reaches the lab
+
+
+def test_sniff_learn_refuses_a_first_write_far_from_zero_and_a_climb_in_steps() -> None:
+    climb = [Message(Op.PUT, 6, 1, 1 + 255 * n, 9) for n in range(3)]  # 1, 256, 511: each within 255
+    out, _ = sniff_a_radio([Message(Op.PUT, 5, 1, 1, 4), Message(Op.PUT, 7, 1, 32767, 9), *climb],
+                           "--jsonl", "--learn", "0")
+    rows = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    assert [(r["key"], r["timestamp"], r["refused"]) for r in rows] == [
+        (5, 1, None), (7, 32767, "drop_jump"), (6, 1, None), (6, 256, None), (6, 511, "drop_jump")]

@@ -170,9 +170,9 @@ def test_sniff_and_decode_print_one_json_schema(tmp_path: Path) -> None:
     threading.Thread(target=robot, daemon=True).start()
     result = CliRunner().invoke(cli, ["sniff", "can:virtual:vstig-edges-schema", "--jsonl", "--for", "1.5"])
     sniffed = json.loads(result.stdout.splitlines()[0])
-    assert list(sniffed) == list(decoded) == ["t", "link", "can_id", "op", "key", "value", "timestamp", "robot",
-                                              "sender"]
-    assert {k: sniffed[k] for k in list(sniffed)[2:]} == {k: decoded[k] for k in list(decoded)[2:]}
+    assert list(decoded) == ["t", "link", "can_id", "op", "key", "value", "timestamp", "robot", "sender"]
+    assert list(sniffed) == [*decoded, "refused"] and sniffed["refused"] is None  # sniff adds the guard's verdict
+    assert {k: sniffed[k] for k in list(decoded)[2:]} == {k: decoded[k] for k in list(decoded)[2:]}
     assert decoded["sender"] == 7 and decoded["can_id"] == 0x607
 
 

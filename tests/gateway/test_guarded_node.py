@@ -118,3 +118,28 @@ def test_listeners_see_only_what_passes_and_each_refusal_is_counted_on_its_link(
     assert (stats["drop_untrusted"], stats["drop_key"], stats["drop_rate"]) == (1, 1, 3)
     assert stats["in"] == len(heard) + stats["drop_untrusted"] + stats["drop_key"] + stats["drop_rate"]
     bus.shutdown()
+
+
+def cycling_ids_through(channel: str, guard: Guard) -> int:
+    """How many of 1,000 PUTs pass `guard` when their node claims a new CAN id (1..127) for each frame."""
+    attacker = can.Bus(interface="virtual", channel=channel)
+    heard: list[Heard] = []
+    node = Node([bus_link(channel)], mode=Mode.LISTEN, guard=guard)
+    node.on_heard.append(heard.append)
+    try:
+        with node:
+            for i in range(1000):
+                inject(attacker, Message(Op.PUT, 1, i, i + 1, 1), sender=1 + i % 127)
+            run_until(node, lambda: node.stats()[channel]["in"] >= 1000)
+    finally:
+        attacker.shutdown()
+    counters = node.stats()[channel]
+    assert len(heard) + sum(n for name, n in counters.items() if name.startswith("drop_")) == 1000
+    return len(heard)
+
+
+def test_a_can_node_cycling_its_id_is_held_to_the_bus_source_rate_while_rate_alone_lets_it_all_in(
+        channels: tuple[str, str]) -> None:
+    a, b = channels
+    assert cycling_ids_through(a, Guard(rate=10)) == 1000  # ids are claims: 10 a second per id lets all in
+    assert 100 <= cycling_ids_through(b, Guard(rate=10, source_rate=100)) <= 150  # one bus, one source

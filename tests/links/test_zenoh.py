@@ -101,6 +101,55 @@ def test_listening_beyond_loopback_or_scouting_without_auth_is_an_exposure() -> 
     assert exposure(zenoh_config(parse("zenoh:lab?listen=tcp/127.0.0.1:7447,unixsock-stream//tmp/z"))) is None
 
 
+OPEN_DESPITE_AUTH_SETTINGS = {  # each lets a plain session in: mutual TLS covers TLS links only; a key size is no key
+    "mtls-on-tcp": "{ transport: { link: { tls: { enable_mtls: true } } } }",
+    "key-size-only": "{ transport: { auth: { pubkey: { key_size: 512 } } } }",
+}
+
+
+@pytest.mark.parametrize("name", sorted(OPEN_DESPITE_AUTH_SETTINGS))
+def test_auth_settings_that_let_plain_sessions_in_are_an_exposure_and_they_do_let_one_in(
+        name: str, tmp_path: Path) -> None:
+    import json
+
+    import zenoh
+
+    from vstig_hw.links.zenoh import _free_loopback_port
+
+    file = tmp_path / f"{name}.json5"
+    file.write_text(OPEN_DESPITE_AUTH_SETTINGS[name])
+    assert exposure(zenoh_config(parse(f"zenoh:lab?config={file}&listen=tcp/0.0.0.0:7447"))) \
+        == "listens on tcp/0.0.0.0:7447"
+    endpoint = f"tcp/127.0.0.1:{_free_loopback_port()}"  # the same settings on loopback, to try them
+    gateway = parse(f"zenoh:lab?config={file}&listen={endpoint}").build(robot_id=201)
+    gateway.open()
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    intruder = zenoh.open(config)
+    try:
+        def injected() -> bool:
+            intruder.put("vstig/lab/0/66", encode(MESSAGES[0]))
+            return any(h.message == MESSAGES[0] for h in gateway.receive(0.2))
+
+        _until(injected)
+    finally:
+        intruder.close()  # type: ignore[no-untyped-call]
+        gateway.close()
+
+
+def test_auth_that_every_peer_must_pass_is_not_an_exposure(tmp_path: Path) -> None:
+    for name, text in (("known-keys", "{ transport: { auth: { pubkey: { known_keys_file: 'k.pem' } } } }"),
+                       ("mtls-on-tls", "{ transport: { link: { tls: { enable_mtls: true } } } }")):
+        file = tmp_path / f"{name}.json5"
+        file.write_text(text)
+        assert exposure(zenoh_config(parse(f"zenoh:lab?config={file}&listen=tls/0.0.0.0:7447"))) is None, name
+    file = tmp_path / "mtls-scouting.json5"
+    file.write_text("{ transport: { link: { tls: { enable_mtls: true } } } }")
+    assert exposure(zenoh_config(parse(f"zenoh:lab?config={file}&listen=tls/0.0.0.0:7447&scout=1"))) \
+        == "scouts the LAN by multicast"  # scouting may still reach peers over plain TCP
+
+
 def test_a_config_file_passes_through_and_the_spec_overrides_only_what_it_names(tmp_path: Path) -> None:
     file = tmp_path / "lab.json5"
     file.write_text('{ connect: { endpoints: ["tcp/10.0.0.9:7447"] }, listen: { endpoints: ["tcp/0.0.0.0:7447"] },'
@@ -375,3 +424,41 @@ def test_a_client_opened_before_its_router_joins_when_the_router_comes_up() -> N
     finally:
         link.close()
         router.close()  # type: ignore[attr-defined]
+
+
+def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_others_keep_theirs() -> None:
+    import json
+
+    import zenoh
+
+    from vstig_hw.gateway import Mode, Node
+    from vstig_hw.gateway.guard import Guard
+    from vstig_hw.links import Heard
+
+    gateway = parse("zenoh:lab").build(robot_id=201)
+    node = Node([gateway], mode=Mode.LISTEN, guard=Guard(source_rate=50))
+    heard: list[Heard] = []
+    node.on_heard.append(heard.append)
+    with node:
+        [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
+        honest = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
+        honest.open()
+        config = zenoh.Config()  # a stock session: it stamps nothing, and claims a new gateway id per sample
+        config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        config.insert_json5("scouting/multicast/enabled", "false")
+        attacker = zenoh.open(config)
+        try:
+            _until(lambda: attacker.info.peers_zid())
+            time.sleep(0.5)  # the gateway's subscription reaches the attacker just after the session opens
+            for i in range(1000):
+                attacker.put(f"vstig/lab/0/{1000 + i}", encode(Message(Op.PUT, 1, i, i + 1, 1000 + i)),
+                             congestion_control=zenoh.CongestionControl.BLOCK)
+            honest.send_many([Message(Op.PUT, 2, v, v + 1, 202) for v in range(20)])
+            node.run(duration=2.0)
+        finally:
+            attacker.close()  # type: ignore[no-untyped-call]
+            honest.close()
+    from_attacker = [h for h in heard if h.message.key == 1]
+    assert 50 <= len(from_attacker) <= 200, len(from_attacker)  # a burst of 50, then 50 a second
+    assert gateway.counters["drop_source_rate"] == 1000 - len(from_attacker)
+    assert [h.message.value for h in heard if h.message.key == 2] == list(range(20))  # another session: its own

@@ -35,7 +35,35 @@ def test_a_put_or_get_more_than_max_jump_ahead_is_refused_and_not_remembered() -
     assert guard.check("can", 1, put(5, 111), 0.1) == "drop_jump"
     assert guard.check("can", 1, get(5, 111), 0.2) == "drop_jump"
     assert guard.check("can", 1, put(5, 110), 0.3) is None  # exactly max_jump ahead of our 100 still passes
-    assert guard.check("can", 1, put(5, 120), 0.4) is None  # our entry is now 110: 120 is 10 ahead
+    assert guard.check("can", 1, put(5, 120), 1.3) is None  # our entry is now 110, and a second refilled the skips
+
+
+def test_a_climb_in_steps_of_max_jump_gains_at_most_max_jump_a_second() -> None:
+    guard = Guard()  # 5 -> 260 -> 515 ...: each step is within 255 of the last
+    assert guard.check("can", 1, put(5, 5), 0.0) is None
+    verdicts = [guard.check("can", 9, put(5, 5 + 255 * n, robot=9), 0.01 * n) for n in range(1, 20)]
+    assert verdicts[0] is None and set(verdicts[1:]) == {"drop_jump"}
+    assert guard.check("can", 9, put(5, 5 + 255 * 2, robot=9), 1.02) is None  # a second later: one more step
+    assert guard.check("can", 1, put(5, 516), 1.03) is None  # an honest robot stepping by one is never held back
+
+
+def test_honest_steps_of_one_pass_at_any_rate_and_missed_updates_within_the_budget_pass() -> None:
+    guard = Guard(max_jump=10)
+    assert all(guard.check("can", 1, put(5, ts), ts * 1e-4) is None for ts in range(1, 5000))
+    assert guard.check("can", 1, put(5, 5005), 1.0) is None  # 5 missed: within the budget
+    assert guard.check("can", 1, put(5, 5012), 1.0) == "drop_jump"  # 6 more would be 11 missed within a second
+    assert guard.check("can", 1, put(5, 5006), 1.0) is None
+
+
+def test_after_learning_a_key_we_do_not_hold_is_measured_from_zero() -> None:
+    guard = Guard(learn=10.0)
+    assert guard.check("can", 1, put(1, 40000), 0.0) is None  # still learning: the swarm's keys as they are
+    assert guard.check("can", 1, put(2, 32767), 9.9) is None
+    assert guard.check("can", 9, put(3, 32767, robot=9), 10.0) == "drop_jump"  # a first write at 32767
+    assert guard.check("can", 9, get(4, 256, robot=9), 10.0) == "drop_jump"
+    assert guard.check("can", 2, put(3, 1, robot=2), 10.0) is None  # an honest first write of the key
+    assert guard.check("can", 2, put(4, 255, robot=2), 12.0) is None  # at most max_jump from 0
+    assert guard.check("can", 1, put(1, 40001), 10.5) is None  # keys learnt in time go on as before
 
 
 def test_the_default_refuses_one_flipped_bit_in_the_high_byte() -> None:
@@ -94,6 +122,17 @@ def test_where_the_medium_names_nobody_the_link_is_the_sender() -> None:
     assert guard.check("radio-2", None, put(9, 1), 0.0) is None  # another link has its own bucket
 
 
+def test_a_source_changing_its_claimed_sender_per_message_is_held_to_the_source_rate() -> None:
+    guard = Guard(rate=10, source_rate=100)
+    counters = Counters()
+    passed = sum(len(guard.filter("zenoh", sender, [put(1, 1, robot=sender)], 0.5, counters, source="peer-a"))
+                 for sender in range(1000))
+    assert passed == 100 and counters["drop_source_rate"] == 900 and not counters["drop_rate"]
+    assert guard.check("zenoh", 5000, put(1, 1), 0.5, source="peer-b") is None  # another source: its own bucket
+    assert guard.check("zenoh", 5001, put(1, 1), 0.5) is None  # no source named: the link's bucket
+    assert guard.check("can", 1, put(1, 1), 0.5, source="peer-a") is None  # buckets are per link
+
+
 def test_a_rate_below_one_still_lets_one_message_through() -> None:
     guard = Guard(rate=0.5)
     assert guard.check("can", 1, put(1, 1), 0.0) is None
@@ -112,6 +151,10 @@ def test_token_buckets_stay_bounded_as_senders_come_and_go() -> None:
     for i in range(3 * MAX_SENDERS):
         guard.check("can", i, get(1, TS_NONE, value=0), i * 0.001)
     assert len(guard._buckets) <= MAX_SENDERS + 1
+    sources = Guard(source_rate=100)
+    for i in range(3 * MAX_SENDERS):
+        sources.check("zenoh", None, get(1, TS_NONE, value=0), i * 0.001, source=f"peer-{i}")
+    assert len(sources._source_buckets) <= MAX_SENDERS + 1
 
 
 # -- trust, deny, keys ----------------------------------------------------------------------
@@ -207,7 +250,8 @@ def test_two_robots_sharing_an_id_show_as_one_id_with_two_values() -> None:
 
 # -- arguments ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("kwargs", [{"max_jump": 0}, {"max_jump": 40000}, {"rate": 0}, {"rate": -1.0},
-                                    {"flap": 0}, {"rate": float("nan")}])
+                                    {"flap": 0}, {"rate": float("nan")},
+                                    {"source_rate": 0}, {"learn": -1.0}])
 def test_bad_arguments_are_value_errors_naming_them(kwargs: dict[str, float]) -> None:
     with pytest.raises(ValueError, match=next(iter(kwargs))):
         Guard(**kwargs)  # type: ignore[arg-type]

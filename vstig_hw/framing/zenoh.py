@@ -42,10 +42,12 @@ def check_swarm(swarm: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class ZenohSample:
-    """One Zenoh sample as the link sees it: the key it was published under, and its payload."""
+    """One Zenoh sample as the link sees it: the key it was published under, its payload, and the id of the
+    session that stamped it (its publisher's, where that session stamps samples; None if unstamped)."""
 
     key: str
     payload: bytes
+    source: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,6 +129,10 @@ class ZenohFraming:
 
     def sender_of(self, unit: ZenohSample) -> int | None:
         return self.space.gateway_of(unit.key)
+
+    def source_of(self, unit: ZenohSample) -> str | None:
+        """The publishing session: a peer may claim any gateway id in its keys, not another session's stamp."""
+        return unit.source
 
     def tick(self) -> None:
         """Samples arrive whole: nothing to expire."""

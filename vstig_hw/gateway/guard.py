@@ -14,16 +14,25 @@ Checks, in this order; a refused message is counted once, under the first reason
    deny-list that names the sender or the robot that wrote the entry: robots on
    a broadcast medium relay what a denied robot wrote under their own ids, and a
    medium that names nobody still carries the writer.
-2. `rate`: the sender's token bucket is empty (`rate` messages per second, a
+2. `source_rate`: the real source's token bucket is empty (`source_rate`
+   messages per second, same burst). A sender id is a claim anyone can change per
+   message; a source is what the gateway itself knows sent it: the link for serial
+   and CAN, the publishing session (the id zenoh stamps on a sample) for zenoh.
+3. `rate`: the sender's token bucket is empty (`rate` messages per second, a
    burst of one second's worth, at least one message). Senders are what the medium names (CAN node
    ids, zenoh gateway ids); where it names nobody the link is one sender.
-3. `key`: the message would write a key outside the link's `keys`. Reading is
+4. `key`: the message would write a key outside the link's `keys`. Reading is
    allowed: an empty GET, or a GET older than our entry, passes and is answered.
-4. `jump`: a PUT or GET newer than our entry for its key by more than
-   `max_jump` timestamps. A key we do not hold passes at any timestamp. The jump
-   is quarantined: not stored, not relayed, and our entry stays as it was, so
-   the robots that missed it see nothing, and a robot that stored it (one on the
-   attacker's own medium) is refused each time it repeats it.
+5. `jump`: a PUT or GET newer than our entry for its key by more than
+   `max_jump` timestamps, or one whose skipped timestamps (steps beyond the first)
+   exceed the key's skip budget: `max_jump` a second, a burst of `max_jump`, so
+   a climb of steps each within `max_jump` gains at most `max_jump` a second. A
+   key we do not hold passes at any timestamp, unless `learn` seconds have passed
+   since the guard's first message: then it is measured from timestamp 0 (a key
+   new to the swarm starts at 1). The jump is quarantined: not stored, not
+   relayed, and our entry stays as it was, so the robots that missed it see
+   nothing, and a robot that stored it (one on the attacker's own medium) is
+   refused each time it repeats it.
 
 Two policies refuse nothing:
 
@@ -35,8 +44,8 @@ Two policies refuse nothing:
 
 Our entry for a key is the newest one the guard has let through (timestamp,
 robot, value), kept here so the same guard serves an engine, a raw bridge and a
-sniffer. Every table is bounded: at most one entry per key (32,768) and
-`MAX_SENDERS` token buckets.
+sniffer. Every table is bounded: at most one entry and skip budget per key
+(32,768) and `MAX_SENDERS` token buckets per kind (senders, sources).
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ from __future__ import annotations
 import bisect
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from ..counters import Counters
 from ..timestamps import TS_NONE, is_newer, steps_ahead
@@ -130,8 +140,8 @@ _OPEN = LinkPolicy()
 class Guard:
     """The policies for every link (`links`, by link name) and the state they need; see the module's docstring.
 
-    `max_jump` (None: off), `rate` in messages per second per sender (None: off) and `flap`
-    in conflicts per second (None: off) apply to every link.
+    `max_jump` (None: off), `rate` in messages per second per sender, `source_rate` per real
+    source, `learn` in seconds and `flap` in conflicts per second (each None: off) apply to every link.
     """
 
     def __init__(
@@ -139,23 +149,33 @@ class Guard:
         *,
         max_jump: int | None = DEFAULT_MAX_JUMP,
         rate: float | None = None,
+        source_rate: float | None = None,
+        learn: float | None = None,
         flap: float | None = None,
         links: Mapping[str, LinkPolicy] | None = None,
     ) -> None:
         if max_jump is not None and not 1 <= max_jump <= 0x7FFF:
             raise ValueError(f"max_jump must be 1..32767 timestamps (or None: off), got {max_jump!r}")
-        if rate is not None and not rate > 0:
-            raise ValueError(f"rate must be a positive number of messages per second (or None: off), got {rate!r}")
+        for name, limit in (("rate", rate), ("source_rate", source_rate)):
+            if limit is not None and not limit > 0:
+                raise ValueError(f"{name} must be a positive number of messages per second (or None: off), "
+                                 f"got {limit!r}")
+        if learn is not None and not learn >= 0:
+            raise ValueError(f"learn must be a number of seconds >= 0 (or None: off), got {learn!r}")
         if flap is not None and not flap > 0:
             raise ValueError(f"flap must be a positive number of conflicts per second (or None: off), got {flap!r}")
         self.max_jump = max_jump
         self.rate = rate
-        self._burst = max(rate or 0.0, 1.0)
+        self.source_rate = source_rate
+        self.learn = learn
+        self._started: float | None = None  # when the first message was checked (the learning starts)
         self.flap = flap
         self.policies = dict(links or {})
         self.warnings: list[str] = []  # for the caller to print (and clear)
         self._view: dict[int, tuple[int, int, int]] = {}  # key -> (timestamp, robot, value) let through
         self._buckets: dict[tuple[str, int | None], list[float]] = {}  # (link, sender) -> [tokens, last time]
+        self._source_buckets: dict[tuple[str, str | None], list[float]] = {}  # (link, source) -> same
+        self._skips: dict[int, list[float]] = {}  # key -> [skip budget left, last time]
         self._confined: dict[int, tuple[int, int, str]] = {}  # key -> (timestamp, robot, read-only link)
         self._flaps: dict[int, list[float]] = {}  # key -> [window start, conflicts in it, timestamp of the last]
         self._warned: set[int] = set()
@@ -163,25 +183,32 @@ class Guard:
 
     # -- the gateway's calls -------------------------------------------------------
     def filter(self, link: str, sender: int | None, messages: list[Message], now: float,
-               counters: Counters) -> list[Message]:
+               counters: Counters, source: str | None = None) -> list[Message]:
         """The messages that pass; each refused one is counted in `counters` as `drop_<reason>`."""
         kept = []
         for msg in messages:
-            reason = self.check(link, sender, msg, now)
+            reason = self.check(link, sender, msg, now, source)
             if reason is None:
                 kept.append(msg)
             else:
                 counters[reason] += 1
         return kept
 
-    def check(self, link: str, sender: int | None, msg: Message, now: float) -> str | None:
-        """None if `msg` (heard on `link` from `sender` at `now` seconds) passes, else its drop counter name."""
+    def check(self, link: str, sender: int | None, msg: Message, now: float,
+              source: str | None = None) -> str | None:
+        """None if `msg` (heard on `link` from `sender`, sent by `source`, at `now` seconds) passes, else its
+        drop counter name. `source` None: the link is the source."""
         policy = self.policies.get(link, _OPEN)
         head, value, ts, robot = msg
+        if self._started is None:
+            self._started = now
         if (policy.trust is not None and sender not in policy.trust) or (
                 policy.deny is not None and (sender in policy.deny or robot in policy.deny)):
             return "drop_untrusted"
-        if self.rate is not None and not self._take_token(link, sender, now):
+        if self.source_rate is not None and not _take_token(self._source_buckets, (link, source),
+                                                            self.source_rate, now):
+            return "drop_source_rate"
+        if self.rate is not None and not _take_token(self._buckets, (link, sender), self.rate, now):
             return "drop_rate"
         key = head & KEY_MAX
         view = self._view.get(key)
@@ -189,8 +216,7 @@ class Guard:
             return "drop_key"
         if ts == TS_NONE:
             return None  # an empty GET: says nothing about the entry
-        if view is not None and self.max_jump is not None and is_newer(ts, view[0]) \
-                and steps_ahead(ts, view[0]) > self.max_jump:
+        if self.max_jump is not None and self._jumps(key, ts, view, now):
             return "drop_jump"
         self._let_through(link, policy, key, ts, robot, value, view, now)
         return None
@@ -205,29 +231,31 @@ class Guard:
         return origin[2] if origin is not None and origin[0] == msg[2] and origin[1] == msg[3] else None
 
     # -- the policies ----------------------------------------------------------------
-    def _take_token(self, link: str, sender: int | None, now: float) -> bool:
-        rate = self.rate
-        assert rate is not None
-        bucket = self._buckets.get((link, sender))
-        if bucket is None:
-            if len(self._buckets) >= MAX_SENDERS:
-                self._forget_idle_senders(now)
-            bucket = self._buckets[(link, sender)] = [self._burst, now]
-        tokens = min(self._burst, bucket[0] + max(0.0, now - bucket[1]) * rate)  # a clock stepping back adds none
-        bucket[1] = now
-        if tokens < 1.0:
-            bucket[0] = tokens
+    def _jumps(self, key: int, ts: int, view: tuple[int, int, int] | None, now: float) -> bool:
+        """Whether `ts` is a jump for `key`; if not, and it moves the key, its skipped steps are spent."""
+        max_jump = self.max_jump
+        assert max_jump is not None
+        if view is not None:
+            held = view[0]
+        elif self.learn is not None and self._started is not None and now - self._started >= self.learn:
+            held = TS_NONE  # learnt: a key nobody mentioned so far is new, and starts at 1
+        else:
             return False
-        bucket[0] = tokens - 1.0
-        return True
-
-    def _forget_idle_senders(self, now: float) -> None:
-        """Drop the buckets that have refilled: a new bucket starts full, so nothing changes for them."""
-        rate = self.rate
-        assert rate is not None
-        for sender, (tokens, last) in list(self._buckets.items()):
-            if tokens + max(0.0, now - last) * rate >= self._burst:
-                del self._buckets[sender]
+        if not is_newer(ts, held):
+            return False
+        steps = ts if held == TS_NONE else steps_ahead(ts, held)
+        if steps > max_jump:
+            return True
+        budget = self._skips.get(key)
+        if budget is None:
+            budget = self._skips[key] = [float(max_jump), now]
+        left = min(float(max_jump), budget[0] + max(0.0, now - budget[1]) * max_jump)  # refills max_jump a second
+        budget[1] = now
+        if steps - 1 > left:
+            budget[0] = left
+            return True
+        budget[0] = left - (steps - 1)
+        return False
 
     def _let_through(self, link: str, policy: LinkPolicy, key: int, ts: int, robot: int, value: int,
                      view: tuple[int, int, int] | None, now: float) -> None:
@@ -258,6 +286,31 @@ class Guard:
                 else f"robot {robot} with two values (two robots sharing id {robot}?)"
             self.warnings.append(f"warning: key {key} changes hands by conflict more than {self.flap:g} times "
                                  f"a second, between {pair}")
+
+
+def _take_token(buckets: dict[tuple[str, Any], list[float]], who: tuple[str, Any], rate: float, now: float) -> bool:
+    """Take a token from `who`'s bucket (`rate` a second, a burst of one second's worth, at least one)."""
+    burst = max(rate, 1.0)
+    bucket = buckets.get(who)
+    if bucket is None:
+        if len(buckets) >= MAX_SENDERS:
+            _forget_full_buckets(buckets, rate, burst, now)
+        bucket = buckets[who] = [burst, now]
+    tokens = min(burst, bucket[0] + max(0.0, now - bucket[1]) * rate)  # a clock stepping back adds none
+    bucket[1] = now
+    if tokens < 1.0:
+        bucket[0] = tokens
+        return False
+    bucket[0] = tokens - 1.0
+    return True
+
+
+def _forget_full_buckets(buckets: dict[tuple[str, Any], list[float]], rate: float, burst: float,
+                         now: float) -> None:
+    """Drop the buckets that have refilled: a new bucket starts full, so nothing changes for them."""
+    for who, (tokens, last) in list(buckets.items()):
+        if tokens + max(0.0, now - last) * rate >= burst:
+            del buckets[who]
 
 
 def _writes(head: int, ts: int, robot: int, value: int, view: tuple[int, int, int] | None) -> bool:

@@ -82,6 +82,7 @@ class Mode(enum.Enum):
 
 UnitListener = Callable[[Link[Any], float, Any], None]
 HeardListener = Callable[[Heard], None]
+RefusedListener = Callable[[Heard, str], None]  # a message the guard refused, and its drop counter name
 TickListener = Callable[["Node"], None]
 
 
@@ -116,6 +117,7 @@ class Node:
         ]
         self.on_unit: list[UnitListener] = []
         self.on_heard: list[HeardListener] = []
+        self.on_refused: list[RefusedListener] = []  # what the guard refused (a sniffer shows it too)
         self.on_tick: list[TickListener] = []
         self.ticks = 0
         self._readers = LinkReaders(self.links)
@@ -227,6 +229,7 @@ class Node:
         link = self.links[index]
         feed = link.framing.feed
         sender_of = link.sender_of
+        source_of = getattr(link.framing, "source_of", None)  # who really sent it, where more than the link
         engine = self.engine
         outlets = self.outlets
         guard = self.guard
@@ -244,9 +247,14 @@ class Node:
                 continue
             heard_count += len(messages)
             sender = sender_of(unit) if guard is not None or self.on_heard else None
+            told = False
             if guard is not None:
-                messages = guard.filter(link.name, sender, messages, t, link.counters)
-            if self.on_heard:
+                source = source_of(unit) if source_of is not None else None
+                if self.on_refused:
+                    messages, told = self._judge_and_tell(guard, link, sender, source, messages, t), True
+                else:
+                    messages = guard.filter(link.name, sender, messages, t, link.counters, source)
+            if self.on_heard and not told:
                 for msg in messages:
                     heard = Heard(msg, link.name, t, sender)
                     for h_listener in self.on_heard:
@@ -263,6 +271,24 @@ class Node:
                         for msg in messages:
                             outlet.push(msg)
         link.counters["in"] += heard_count
+
+    def _judge_and_tell(self, guard: Guard, link: Link[Any], sender: int | None, source: str | None,
+                        messages: list[Message], t: float) -> list[Message]:
+        """Tell the listeners every message, passed (on_heard) or refused (on_refused), in the order heard,
+        as a sniffer shows them; the ones that passed."""
+        kept = []
+        for msg in messages:
+            reason = guard.check(link.name, sender, msg, t, source)
+            heard = Heard(msg, link.name, t, sender)
+            if reason is None:
+                kept.append(msg)
+                for h_listener in self.on_heard:
+                    h_listener(heard)
+            else:
+                link.counters[reason] += 1
+                for r_listener in self.on_refused:
+                    r_listener(heard, reason)
+        return kept
 
     def _receive_from_domain(self, engine: Stigmergy, index: int, messages: list[Message]) -> None:
         """Receive what link `index` (one broadcast domain) heard, noting each PUT stored from it.

@@ -9,6 +9,9 @@ Two writes with the same timestamp from different robots are a conflict: the
 view settles it with the engine's rule (`higher_robot_wins` unless told
 otherwise), so it shows what every robot's engine will hold, and counts it once,
 however often either side is relayed afterwards.
+
+A message a guard refused (`refuse`) is counted under its key, with the latest
+one and why; it never changes the entry shown.
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ class KeyView:
     conflicts: int = 0
     sender_ts: dict[int, int] = field(default_factory=dict)  # sender -> timestamp of its last message
     contenders: set[int] = field(default_factory=set)  # robots that wrote the shown timestamp
+    refused: int = 0  # messages a guarded bridge would refuse (shown, never part of the entry)
+    last_refused: str = ""  # the latest of them and why, e.g. "jump: ts 32767 robot 9"
 
     def stale_senders(self) -> list[int]:
         return sorted(s for s, ts in self.sender_ts.items() if is_newer(self.timestamp, ts))
@@ -47,11 +52,7 @@ class SwarmView:
 
     def add(self, heard: Heard) -> None:
         msg = heard.message
-        view = self.keys.get(msg.key)
-        if view is None:
-            view = self.keys[msg.key] = KeyView()
-        self.messages += 1
-        view.last_seen = heard.t
+        view = self._seen(heard)
         if msg.op is Op.PUT:
             view.puts += 1
         else:
@@ -70,3 +71,18 @@ class SwarmView:
             local = Entry(view.value, view.timestamp, view.robot)
             winner = self.onconflict(msg.key, local, Entry(msg.value, msg.timestamp, msg.robot))
             view.value, view.robot = winner[0], winner[2]  # the winner keeps the timestamp, as in the engine
+
+    def refuse(self, heard: Heard, reason: str) -> None:
+        """A message a guard refused (`reason` its drop counter): counted and described, the entry unchanged."""
+        msg = heard.message
+        view = self._seen(heard)
+        view.refused += 1
+        view.last_refused = f"{reason.removeprefix('drop_')}: {msg.op.name} ts {msg.timestamp} robot {msg.robot}"
+
+    def _seen(self, heard: Heard) -> KeyView:
+        view = self.keys.get(heard.message.key)
+        if view is None:
+            view = self.keys[heard.message.key] = KeyView()
+        self.messages += 1
+        view.last_seen = heard.t
+        return view

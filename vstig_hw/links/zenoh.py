@@ -9,8 +9,11 @@ fresh one (Zenoh's Python API cannot report a port it picked itself from port 0,
 short of opening its admin space to every peer). A config file passes through unchanged: only the keys the
 spec names override it, and our closed defaults fill only what it leaves unset.
 
-Opening a link that listens beyond loopback, or scouts, with no authentication
-configured (user/password, public keys or mutual TLS) logs one warning line.
+Opening a link that lets unauthenticated peers in from the network logs one
+warning line: a listener beyond loopback that is neither covered by user/password
+or known public keys nor a TLS/QUIC listener with mutual TLS, or multicast
+scouting without such authentication. The loopback default is open to every
+user of this PC (README "Many PCs").
 
 The zenoh library is imported when a link is built, not when a spec is parsed.
 """
@@ -132,6 +135,7 @@ log = logging.getLogger(__name__)
 
 _LOCAL_HOSTS = ("127.", "[::1]", "localhost")
 _LOCAL_PROTOCOLS = ("unixsock-stream", "unixpipe", "vsock")
+_TLS_PROTOCOLS = ("tls", "quic")  # the links mutual TLS authenticates
 
 
 def _free_loopback_port() -> int:
@@ -183,6 +187,8 @@ def _config_and_listener(spec: ZenohSpec) -> tuple[zenoh.Config, str | None]:
         config.insert_json5("scouting/multicast/enabled", json.dumps(spec.scout))
     elif _json(config, "scouting/multicast/enabled") is None:
         config.insert_json5("scouting/multicast/enabled", "false")
+    if _json(config, "timestamping/enabled") is None:  # stamped samples name their session: --source-rate
+        config.insert_json5("timestamping/enabled", "true")
     return config, ours
 
 
@@ -214,23 +220,36 @@ def _is_local(endpoint: str) -> bool:
     return protocol in _LOCAL_PROTOCOLS or address.startswith(_LOCAL_HOSTS)
 
 
-def _authenticated(config: zenoh.Config) -> bool:
+def _every_peer_authenticates(config: zenoh.Config) -> bool:
+    """Whether every session, on any link, must authenticate: user/password (Zenoh then refuses a peer that
+    offers none), or public keys checked against a known-keys file (a key size alone lets any key in)."""
     user = _json(config, "transport/auth/usrpwd/user")
     dictionary = _json(config, "transport/auth/usrpwd/dictionary_file")
-    pubkey = _json(config, "transport/auth/pubkey")
-    mtls = _json(config, "transport/link/tls/enable_mtls")
-    return bool(user or dictionary or mtls or any(v for v in (pubkey or {}).values()))
+    known_keys = _json(config, "transport/auth/pubkey/known_keys_file")
+    return bool(user or dictionary or known_keys)
+
+
+def _mtls(config: zenoh.Config) -> bool:
+    return bool(_json(config, "transport/link/tls/enable_mtls"))
+
+
+def _client_certificate_needed(config: zenoh.Config, endpoint: str) -> bool:
+    """Whether a peer reaching `endpoint` must show a certificate: mutual TLS covers TLS and QUIC links only."""
+    return _mtls(config) and endpoint.partition("/")[0] in _TLS_PROTOCOLS
 
 
 def exposure(config: zenoh.Config) -> str | None:
-    """Why this configuration is open to the network without authentication, or None if it is not."""
-    if _authenticated(config):
+    """Why this configuration lets unauthenticated peers in from the network, or None if it does not."""
+    if _every_peer_authenticates(config):
         return None
     reasons = []
-    beyond = [e for e in _endpoints(config, "listen/endpoints") if not _is_local(e)]
+    beyond = [e for e in _endpoints(config, "listen/endpoints")
+              if not _is_local(e) and not _client_certificate_needed(config, e)]
     if beyond:
         reasons.append(f"listens on {', '.join(beyond)}")
-    if _json(config, "scouting/multicast/enabled") is not False:
+    allowed = _json(config, "transport/link/protocols")
+    tls_only = _mtls(config) and bool(allowed) and set(allowed) <= set(_TLS_PROTOCOLS)
+    if _json(config, "scouting/multicast/enabled") is not False and not tls_only:
         reasons.append("scouts the LAN by multicast")
     return " and ".join(reasons) or None
 

@@ -186,7 +186,9 @@ class ZenohTransport:
 
     def _heard(self, sample: zenoh.Sample) -> None:
         """Zenoh's callback thread: hand the sample to `read` (nothing else runs here)."""
-        self._inbox.put(ZenohSample(str(sample.key_expr), sample.payload.to_bytes()))
+        stamp = sample.timestamp  # the publishing session's id, where it stamps (ours do: vstig_hw.links.zenoh)
+        self._inbox.put(ZenohSample(str(sample.key_expr), sample.payload.to_bytes(),
+                                    None if stamp is None else str(stamp.get_id())))
 
     # -- moving samples ------------------------------------------------------
     def read(self, timeout: float) -> list[ZenohSample]:
