@@ -33,7 +33,15 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
-pytest: $(STAMP) sysdeps
+# Foxglove's own WebSocket client and decoders from npm, for the live view's tests (tests/live, gitignored).
+NODE_STAMP := tests/live/node_modules/.installed
+
+$(NODE_STAMP): tests/live/package.json | sysdeps
+	@if command -v npm >/dev/null; then \
+	  cd tests/live && npm install --silent --no-audit --no-fund --no-package-lock && touch node_modules/.installed; \
+	else echo "npm is missing: the live view's client tests will skip"; fi
+
+pytest: $(STAMP) sysdeps $(NODE_STAMP)
 	$(BIN)/pytest
 
 test: lint typecheck pytest
