@@ -30,6 +30,7 @@ from ..capture.rosbag import MSGDEF, TYPE_NAME, cdr_message, topic_for
 from ..counters import Counters
 from ..links.link import Heard
 from ..values import ValueType, from_raw
+from ..wire import Message
 from .node import Node
 from .spread import LiveSpread
 from .swarmview import SwarmView
@@ -81,7 +82,9 @@ class LiveView:
         # Each counter has one writer thread, and every name exists from the start: copying them is safe.
         self.counters = Counters(drop_behind=0, sent=0, subscribed=0, subscriptions=0)
         self._capacity = inbox
-        self._inbox: collections.deque[tuple[Heard, str | None]] = collections.deque()
+        # (link, time heard, sender, messages, why refused or None), one per unit the gateway handled
+        self._inbox: collections.deque[tuple[str, float, int | None, list[Message], str | None]] = \
+            collections.deque()
         self._view = SwarmView()
         if larger_value_wins:
             from ..engine import larger_value_wins as rule
@@ -93,6 +96,7 @@ class LiveView:
         self._next_table = 0.0
         self._table_at = -1  # view.messages when the table was last sent
         self._stop = threading.Event()
+        self._pumping = threading.Lock()  # our thread, and whoever calls pump() to hand everything over now
         self._thread: threading.Thread | None = None
         self._server: Any = None
         self._links: dict[str, Any] = {}
@@ -129,7 +133,7 @@ class LiveView:
         self._table = json_channel("/vstig/table", "vstig_hw.Table", TABLE_SCHEMA)
         self._writes = json_channel("/vstig/writes", "vstig_hw.WriteSpread", WRITE_SCHEMA)
         self._stats_channel = json_channel("/vstig/stats", "vstig_hw.Stats", STATS_SCHEMA)
-        self.node.on_heard.append(self._heard)
+        self.node.on_messages.append(self._heard)
         self.node.on_refused.append(self._refused)
         self.node.on_tick.append(self._tick)
         self._thread = threading.Thread(target=self._run, name="vstig-live-view", daemon=True)
@@ -137,8 +141,8 @@ class LiveView:
 
     def close(self) -> None:
         node = self.node
-        if self._heard in node.on_heard:
-            node.on_heard.remove(self._heard)
+        if self._heard in node.on_messages:
+            node.on_messages.remove(self._heard)
         if self._refused in node.on_refused:
             node.on_refused.remove(self._refused)
         if self._tick in node.on_tick:
@@ -164,15 +168,15 @@ class LiveView:
         return f"ws://{host}:{self.port}"
 
     # -- the gateway's thread: as little as possible ---------------------------
-    def _heard(self, heard: Heard) -> None:
+    def _heard(self, link: str, t: float, sender: int | None, messages: list[Message]) -> None:
         if len(self._inbox) < self._capacity:
-            self._inbox.append((heard, None))
+            self._inbox.append((link, t, sender, messages, None))
         else:
-            self.counters["drop_behind"] += 1
+            self.counters["drop_behind"] += len(messages)
 
     def _refused(self, heard: Heard, reason: str) -> None:
         if len(self._inbox) < self._capacity:
-            self._inbox.append((heard, reason))
+            self._inbox.append((heard.link, heard.t, heard.sender, [heard.message], reason))
         else:
             self.counters["drop_behind"] += 1
 
@@ -193,19 +197,25 @@ class LiveView:
 
     def pump(self) -> None:
         """Hand what the gateway heard to the SDK; send table, writes and stats when due."""
+        with self._pumping:
+            self._pump()
+
+    def _pump(self) -> None:
         inbox, links, view, spread = self._inbox, self._links, self._view, self._spread
         sent = 0
+        add, spread_add = view.add_message, spread.add_message
         while inbox:
-            heard, reason = inbox.popleft()
-            channel = links.get(heard.link)
-            if channel is not None:
-                channel.log(cdr_message(heard.message, heard.sender), round(heard.t * 1e9))
-                sent += 1
-            if reason is None:
-                view.add(heard)
-                spread.add(heard)
-            else:
-                view.refuse(heard, reason)
+            link, t, sender, messages, reason = inbox.popleft()
+            log = links[link].log
+            stamp = round(t * 1e9)
+            for msg in messages:
+                log(cdr_message(msg, sender), stamp)
+                if reason is None:
+                    add(msg, t, sender)
+                    spread_add(msg, link, t, sender)
+                else:
+                    view.refuse(Heard(msg, link, t, sender), reason)
+            sent += len(messages)
         self.counters["sent"] += sent
         stats, self._stats = self._stats, None
         if stats is not None:

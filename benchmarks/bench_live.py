@@ -1,0 +1,100 @@
+"""The live view's cost to the gateway: relay CPU per message with `--foxglove` and one viewer, beside without.
+
+An engine bridge between two python-can virtual buses relays a busy swarm's traffic (50 robots, the
+realistic mix). CPU is the whole process's (`time.process_time`: the gateway's loop, its reader
+threads, the live view's thread and the SDK's server threads), divided by the messages heard. The
+viewer is Foxglove's own client (tests/live, under Node) subscribed to every channel, in its own
+process; without Node and `make test`'s npm install the figure is left out, saying why.
+Goal (issue 27): at most 1.2x.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import can
+
+from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.gateway import Mode, Node
+from vstig_hw.links.can import can_link
+
+from .bench_wire import realistic_mix
+from .registry import Result, benchmark
+
+_N = 20_000
+_BATCH = 200  # frames sent before the gateway catches up: a bus delivering in bursts
+_CLIENT = Path(__file__).resolve().parents[1] / "tests" / "live" / "foxglove_client.cjs"
+
+
+def _frames(n: int) -> list[can.Message]:
+    framings = [CanFraming(CanIdScheme(), sender) for sender in range(50)]
+    return [framings[msg.robot % 50].encode(msg)[0] for msg in realistic_mix(n)]
+
+
+def _relay_cpu(frames: list[can.Message], run: int, viewer: bool) -> float:
+    """CPU seconds per message heard by an engine bridge, with a live view and a viewer on it or not."""
+    channel = f"bench-live-{run}-{viewer}"
+    node = Node([can_link("virtual", channel, robot_id=1), can_link("virtual", channel + "-out", robot_id=1)],
+                200, mode=Mode.ENGINE, budget=None)
+    sender = can.Bus(interface="virtual", channel=channel)
+    drain = can.Bus(interface="virtual", channel=channel + "-out")
+    view = client = None
+    try:
+        if viewer:
+            from vstig_hw.gateway.liveview import LiveView
+
+            view = LiveView(node, port=0)
+            view.open()
+            client = subprocess.Popen([shutil.which("node") or "node", str(_CLIENT), view.url],
+                                      stdin=subprocess.PIPE, stdout=subprocess.DEVNULL)
+            deadline = time.monotonic() + 30
+            while view.counters["subscriptions"] < 2 + len(node.links) + 1:  # table, writes, stats, each link
+                if time.monotonic() > deadline:
+                    raise RuntimeError("the viewer did not subscribe within 30 s")
+                time.sleep(0.05)
+        with node:
+            heard = node.links[0].counters
+            start = time.process_time()
+            for at in range(0, len(frames), _BATCH):
+                for frame in frames[at:at + _BATCH]:
+                    sender.send(frame)
+                while heard["in"] < at + _BATCH:
+                    node.poll(0.01)
+                while drain.recv(0) is not None:
+                    pass
+            if view is not None:
+                view.pump()  # what the viewer has not been handed yet is part of the cost
+            spent = time.process_time() - start
+        if view is not None and view.counters["subscriptions"]:
+            assert view.counters["sent"] >= len(frames), view.counters
+        return spent / len(frames)
+    finally:
+        if view is not None:
+            view.close()
+        if client is not None:
+            assert client.stdin is not None
+            client.stdin.close()
+            client.wait(timeout=10)
+        sender.shutdown()
+        drain.shutdown()
+
+
+@benchmark("live")
+def relay_cpu() -> Iterator[Result]:
+    """Best of three runs each, alternated, so both see the same machine."""
+    if shutil.which("node") is None or not (_CLIENT.parent / "node_modules" / "@foxglove" / "ws-protocol").is_dir():
+        print("live.relay_cpu: left out: needs node and tests/live/node_modules (make test installs them)",
+              file=sys.stderr)
+        return
+    frames = _frames(_N)
+    without, with_viewer = [], []
+    for run in range(3):
+        without.append(_relay_cpu(frames, run, viewer=False))
+        with_viewer.append(_relay_cpu(frames, run, viewer=True))
+    yield Result("live.relay CPU/msg, --foxglove + 1 viewer", min(with_viewer) * 1e6, "us",
+                 "without --foxglove (goal <= 1.2x)", min(without) * 1e6)
