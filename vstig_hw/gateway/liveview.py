@@ -43,7 +43,8 @@ INBOX = 65_536  # messages heard and not yet handed to the SDK: ~1 s of a satura
 BACKLOG = 4096  # messages the SDK queues per viewer before it drops that viewer's oldest
 PUMP = 0.02  # seconds between two hand-overs: a message reaches Foxglove within ~20 ms
 TABLE_ROWS = 500  # keys per /vstig/table message: the most recently heard, in key order
-WRITE_ROWS = 200  # writes per /vstig/writes tick
+WRITE_ROWS = 50  # writes per /vstig/writes tick
+LINK_RATE = 2000.0  # messages a second per link channel: what a Foxglove panel can show, not all a bus can carry
 
 _INT = {"type": "integer"}
 _NUM = {"type": "number"}
@@ -73,14 +74,17 @@ class LiveView:
 
     def __init__(self, node: Node, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *,
                  value_type: ValueType = "uint16", larger_value_wins: bool = False, rate: float = 10.0,
-                 inbox: int = INBOX, backlog: int = BACKLOG) -> None:
+                 inbox: int = INBOX, backlog: int = BACKLOG, link_rate: float = LINK_RATE) -> None:
         self.node = node
         self.host, self.port = host, port
         self.value_type = value_type
         self.interval = 1.0 / rate
         self.backlog = backlog
+        self.link_rate = link_rate
+        self._allowance: dict[str, float] = {}  # per link channel: messages it may still send (a token bucket)
+        self._pumped = time.monotonic()
         # Each counter has one writer thread, and every name exists from the start: copying them is safe.
-        self.counters = Counters(drop_behind=0, sent=0, subscribed=0, subscriptions=0)
+        self.counters = Counters(drop_behind=0, sent=0, throttled=0, subscribed=0, subscriptions=0)
         self._capacity = inbox
         # (link, time heard, sender, messages, why refused or None), one per unit the gateway handled
         self._inbox: collections.deque[tuple[str, float, int | None, list[Message], str | None]] = \
@@ -202,21 +206,35 @@ class LiveView:
 
     def _pump(self) -> None:
         inbox, links, view, spread = self._inbox, self._links, self._view, self._spread
-        sent = 0
+        now = time.monotonic()
+        # Each link channel may send link_rate messages a second (bursts of a tenth of that); the rest are
+        # counted `throttled`. Table, writes and stats still count every message. Unwatched: none sent.
+        refill, self._pumped = (now - self._pumped) * self.link_rate, now
+        allowance = {name: min(self.link_rate / 10, self._allowance.get(name, 0.0) + refill) if channel.has_sinks()
+                     else 0.0 for name, channel in links.items()}
+        sent = throttled = 0
         add, spread_add = view.add_message, spread.add_message
         while inbox:
             link, t, sender, messages, reason = inbox.popleft()
-            log = links[link].log
-            stamp = round(t * 1e9)
+            may = allowance[link]
+            if may >= len(messages):
+                log = links[link].log
+                stamp = round(t * 1e9)
+                for msg in messages:
+                    log(cdr_message(msg, sender), stamp)
+                allowance[link] = may - len(messages)
+                sent += len(messages)
+            elif may or links[link].has_sinks():
+                throttled += len(messages)
             for msg in messages:
-                log(cdr_message(msg, sender), stamp)
                 if reason is None:
                     add(msg, t, sender)
                     spread_add(msg, link, t, sender)
                 else:
                     view.refuse(Heard(msg, link, t, sender), reason)
-            sent += len(messages)
+        self._allowance = allowance
         self.counters["sent"] += sent
+        self.counters["throttled"] += throttled
         stats, self._stats = self._stats, None
         if stats is not None:
             self._stats_channel.log(_json({"links": {k: dict(v) for k, v in stats.items()
