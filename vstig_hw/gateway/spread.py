@@ -83,8 +83,10 @@ class LiveSpread:
         write = self._newest.get(key)
         if write is None or ((timestamp != write.timestamp or robot != write.robot) and \
                 self._newer(timestamp, robot, msg.value, write)):
-            if write is not None:
+            if write is not None:  # its final row; the sender showing the newer entry is caught up on it too
                 write.superseded = True
+                if sender is not None and sender not in write.caught_up:
+                    write.caught_up[sender] = max(0.0, t - write.t)
                 self._changed[write.code] = write
                 del self._newest[key]  # re-inserted last: the dict stays in order of first appearance
             write = self._newest[key] = WriteSpread(key, msg.value, timestamp, robot, t, link)
