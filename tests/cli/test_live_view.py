@@ -27,8 +27,9 @@ from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, stop, wait_for
 from robots import PtyRobot, Robot
 
 from vstig_hw.capture.rosbag import MSGDEF, TYPE_NAME, topic_for
+from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
-from vstig_hw.wire import Message
+from vstig_hw.wire import Message, Op
 
 LIVE = Path(__file__).resolve().parents[1] / "live"
 CLIENT = LIVE / "foxglove_client.cjs"
@@ -80,9 +81,10 @@ class Lines:
 class Viewer:
     """The Node client: its JSON lines as events."""
 
-    def __init__(self, url: str, *protocols: str) -> None:
+    def __init__(self, url: str, *protocols: str, stall: bool = False) -> None:
         self.process = subprocess.Popen([_node(), str(CLIENT), url, *protocols], stdin=subprocess.PIPE,
-                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                        env={**os.environ, "STALL": "1" if stall else "0"})
         self.events: queue.Queue[dict[str, Any]] = queue.Queue()
         self.seen: list[dict[str, Any]] = []
         threading.Thread(target=self._read, daemon=True).start()
@@ -295,3 +297,67 @@ def test_a_bind_beyond_loopback_warns() -> None:
         assert quiet.returncode == 0 and "WARNING" not in quiet.stderr, quiet.stderr
     finally:
         radio.close()
+
+
+def test_a_stuck_viewer_never_holds_up_the_gateway() -> None:
+    """A viewer that stops reading and one that reads, while a radio floods a bridge: every message is
+    relayed, the reading viewer's table counts them all, and the link channel's excess is counted."""
+    _node()
+    radio, robot = PtyPeer(), PtyPeer()  # the flooding radio, and a robot on a second radio the bridge relays to
+    framing = make_serial_framing("cobs8")
+    flood = [Message(Op.PUT, 1 + i % 500, i & 0xFFFF, 1 + i // 500, 7) for i in range(N_FLOOD)]
+    bridge = start_vstig("bridge", f"serial:{radio.path}?framing=cobs8", f"serial:{robot.path}?framing=cobs8",
+                         "--robot-id", "200", "--no-refresh", "--foxglove", "0")
+    assert bridge.stderr is not None
+    err = Lines(bridge.stderr)
+    viewers: list[Viewer] = []
+    try:
+        url = err.first(_URL).group(1)
+        stuck, reading = Viewer(url, stall=True), Viewer(url)
+        viewers += [stuck, reading]
+        stuck.until(lambda: any(e["event"] == "stalled" for e in stuck.seen))
+        reading.until(lambda: bool(reading.messages("/vstig/table")))
+        wait_for(lambda: has_open(bridge.pid, radio.path), 30)
+        decoder = make_serial_framing("cobs8")  # what the bridge relays to the second radio
+        keys_relayed: set[int] = set()
+        data = b"".join(unit for msg in flood for unit in framing.encode(msg))
+        for at in range(0, len(data), 4096):
+            radio.write(data[at:at + 4096])
+            keys_relayed.update(m.key for m in decoder.feed(robot.read(0)))
+
+        def every_key_relayed() -> bool:
+            keys_relayed.update(m.key for m in decoder.feed(robot.read(0.05)))
+            return len(keys_relayed) >= 500
+
+        wait_for(every_key_relayed, 60)
+        reading.until(lambda: (_table_messages(reading) or 0) >= N_FLOOD, 60)
+    finally:
+        for viewer in viewers:
+            if viewer.process.poll() is None:
+                viewer.process.kill()
+        bridge.terminate()
+        bridge.wait(timeout=20)
+        err.join()
+        radio.close()
+        robot.close()
+    assert bridge.returncode == 0, "".join(err.lines)
+    (live,) = [line for line in err.lines if line.startswith("live: ")]
+    counts = dict(item.split("=") for item in live.removeprefix("live: ").split())
+    assert int(counts.get("throttled", 0)) > 0, live  # the link channel's excess, counted
+    assert "drop_behind" not in counts, live
+
+
+N_FLOOD = 20_000
+
+
+def _table_messages(viewer: Viewer) -> int | None:
+    tables = viewer.messages("/vstig/table")
+    return tables[-1]["data"]["messages"] if tables else None
+
+
+def has_open(pid: int, path: str) -> bool:
+    fds = Path(f"/proc/{pid}/fd")
+    try:
+        return any(os.path.realpath(fd) == path for fd in fds.iterdir())
+    except OSError:  # a descriptor closed while we looked
+        return False

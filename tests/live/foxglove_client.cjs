@@ -4,7 +4,7 @@
 // Subscribes to every channel advertised; prints one JSON object per line on stdout:
 //   {"event":"open","protocol":...}, {"event":"serverInfo",...}, {"event":"advertise","channels":[...]},
 //   {"event":"message","topic":...,"logTime":"<ns>","data":{...decoded...}}, {"event":"error"|"close",...}
-// Stops when stdin closes.
+// Stops when stdin closes. With STALL=1 in its environment it stops reading once subscribed: a stuck viewer.
 "use strict";
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const WebSocket = require("ws");
@@ -47,6 +47,10 @@ client.on("advertise", (channels) => {
   for (const channel of channels) {
     const decode = decoderFor(channel);
     bySubscription.set(client.subscribe(channel.id), { topic: channel.topic, decode });
+  }
+  if (process.env.STALL === "1") {
+    ws._socket.pause(); // read nothing more: the server's queue for us fills up
+    out({ event: "stalled" });
   }
 });
 client.on("message", ({ subscriptionId, timestamp, data }) => {
