@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, stop, wait_for
+from peers import PtyPeer, SlcanAdapter, has_open, run_vstig, start_vstig, stop, wait_for
 from robots import PtyRobot, Robot
 
 from vstig_hw.capture.rosbag import MSGDEF, TYPE_NAME, topic_for
@@ -318,6 +318,7 @@ def test_a_stuck_viewer_never_holds_up_the_gateway() -> None:
         stuck.until(lambda: any(e["event"] == "stalled" for e in stuck.seen))
         reading.until(lambda: bool(reading.messages("/vstig/table")))
         wait_for(lambda: has_open(bridge.pid, radio.path), 30)
+        time.sleep(0.3)  # pyserial flushes the input right after opening
         decoder = make_serial_framing("cobs8")  # what the bridge relays to the second radio
         keys_relayed: set[int] = set()
         data = b"".join(unit for msg in flood for unit in framing.encode(msg))
@@ -353,11 +354,3 @@ N_FLOOD = 20_000
 def _table_messages(viewer: Viewer) -> int | None:
     tables = viewer.messages("/vstig/table")
     return tables[-1]["data"]["messages"] if tables else None
-
-
-def has_open(pid: int, path: str) -> bool:
-    fds = Path(f"/proc/{pid}/fd")
-    try:
-        return any(os.path.realpath(fd) == path for fd in fds.iterdir())
-    except OSError:  # a descriptor closed while we looked
-        return False
