@@ -210,8 +210,9 @@ class LiveView:
         # Each link channel may send link_rate messages a second (bursts of a tenth of that); the rest are
         # counted `throttled`. Table, writes and stats still count every message. Unwatched: none sent.
         refill, self._pumped = (now - self._pumped) * self.link_rate, now
-        allowance = {name: min(self.link_rate / 10, self._allowance.get(name, 0.0) + refill) if channel.has_sinks()
-                     else 0.0 for name, channel in links.items()}
+        watched = {name for name, channel in links.items() if channel.has_sinks()}
+        allowance = {name: min(self.link_rate / 10, self._allowance.get(name, 0.0) + refill) if name in watched
+                     else 0.0 for name in links}
         sent = throttled = 0
         add, spread_add = view.add_message, spread.add_message
         while inbox:
@@ -224,7 +225,7 @@ class LiveView:
                     log(cdr_message(msg, sender), stamp)
                 allowance[link] = may - len(messages)
                 sent += len(messages)
-            elif may or links[link].has_sinks():
+            elif link in watched:
                 throttled += len(messages)
             for msg in messages:
                 if reason is None:
