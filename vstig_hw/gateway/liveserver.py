@@ -43,6 +43,7 @@ from .swarmview import SwarmView
 __all__ = ["LiveServer", "main"]
 
 BACKLOG = 4096  # messages the SDK queues per viewer before it drops that viewer's oldest
+INBOX = 65_536  # units read from the gateway and not yet handed to the SDK
 PUMP = 0.05  # seconds between two hand-overs: a message reaches Foxglove within ~50 ms
 TABLE_ROWS = 500  # keys per /vstig/table message: the most recently heard, in key order
 WRITE_ROWS = 50  # writes per /vstig/writes tick
@@ -87,7 +88,7 @@ class LiveServer:
         self._allowance: dict[str, float] = {}  # per link channel: messages it may still send (a token bucket)
         self._pumped = time.monotonic()
         # Each counter has one writer thread, and every name exists from the start: copying them is safe.
-        self.counters = Counters(sent=0, throttled=0, subscribed=0, subscriptions=0)
+        self.counters = Counters(drop_behind=0, sent=0, throttled=0, subscribed=0, subscriptions=0)
         # (link, time heard, sender, messages, why refused or None), one per unit the gateway handled
         self._inbox: collections.deque[tuple[str, float, int | None, list[Message], str | None]] = \
             collections.deque()
@@ -100,6 +101,7 @@ class LiveServer:
         self._stats: dict[str, Any] | None = None
         self._next_table = 0.0
         self._table_at = -1  # view.messages when the table was last sent
+        self._table_again = 0.0
         self._stop = threading.Event()
         self._pumping = threading.Lock()  # our thread, and whoever calls pump() to hand everything over now
         self._thread: threading.Thread | None = None
@@ -159,7 +161,10 @@ class LiveServer:
 
     # -- what the gateway sends (any thread) -------------------------------------------
     def feed(self, link: str, t: float, sender: int | None, messages: list[Message], reason: str | None = None) -> None:
-        self._inbox.append((link, t, sender, messages, reason))
+        if len(self._inbox) < INBOX:
+            self._inbox.append((link, t, sender, messages, reason))
+        else:  # our thread is behind the gateway: counted with the gateway's own (the two are added up)
+            self.counters["drop_behind"] += len(messages)
 
     def set_stats(self, stats: dict[str, Any]) -> None:
         """The gateway's counters (`Node.stats()` as plain dicts) and its side of the live view's."""
@@ -210,7 +215,8 @@ class LiveServer:
         self.counters["throttled"] += throttled
         stats, self._stats = self._stats, None
         if stats is not None and self._stats_channel.has_sinks():
-            live = {**stats.get(LIVE_STATS, {}), **self.counters}
+            live = dict(self.counters)
+            live["drop_behind"] += stats.get(LIVE_STATS, {}).get("drop_behind", 0)
             self._stats_channel.log(_json({"links": {k: v for k, v in stats.items() if k not in ("engine", LIVE_STATS)},
                                            "engine": stats.get("engine", {}), "live": live}))
         now = time.monotonic()
@@ -224,8 +230,9 @@ class LiveServer:
             for row in self._spread.updates(wall, WRITE_ROWS):
                 self._writes.log(_json(row))
             self._spread.forget_before(wall)
-        if self._table.has_sinks() and self._view.messages != self._table_at:
-            self._table_at = self._view.messages
+        now = time.monotonic()  # unchanged, it is sent again each second: for a viewer who just came
+        if self._table.has_sinks() and (self._view.messages != self._table_at or now >= self._table_again):
+            self._table_at, self._table_again = self._view.messages, now + 1.0
             self._table.log(_json(self.table()))
 
     def table(self) -> dict[str, Any]:
