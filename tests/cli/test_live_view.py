@@ -354,3 +354,39 @@ N_FLOOD = 20_000
 def _table_messages(viewer: Viewer) -> int | None:
     tables = viewer.messages("/vstig/table")
     return tables[-1]["data"]["messages"] if tables else None
+
+
+def test_the_gateway_outlives_its_live_view_server() -> None:
+    """The live view's server process killed mid-run: the bridge relays on, says so once, counts the rest."""
+    radio, robot = PtyPeer(), PtyPeer()
+    framing, decoder = make_serial_framing("cobs8"), make_serial_framing("cobs8")
+    bridge = start_vstig("bridge", f"serial:{radio.path}?framing=cobs8", f"serial:{robot.path}?framing=cobs8",
+                         "--robot-id", "200", "--no-refresh", "--foxglove", "0")
+    assert bridge.stderr is not None
+    err = Lines(bridge.stderr)
+    try:
+        err.first(_URL)
+        (server,) = Path(f"/proc/{bridge.pid}/task/{bridge.pid}/children").read_text().split()
+        os.kill(int(server), 9)
+        wait_for(lambda: has_open(bridge.pid, radio.path), 30)
+        time.sleep(0.3)  # pyserial flushes the input right after opening
+        heard: list[Message] = []
+        for key in range(1, 51):
+            radio.write(b"".join(framing.encode(Message(Op.PUT, key, key, 1, 7))))
+            heard += decoder.feed(robot.read(0.02))
+
+        def relayed() -> bool:
+            heard.extend(decoder.feed(robot.read(0.05)))
+            return {m.key for m in heard} >= set(range(1, 51))
+
+        wait_for(relayed, 30)
+    finally:
+        bridge.terminate()
+        bridge.wait(timeout=20)
+        err.join()
+        radio.close()
+        robot.close()
+    assert bridge.returncode == 0, "".join(err.lines)
+    assert sum("its server process ended" in line for line in err.lines) == 1, err.lines
+    (live,) = [line for line in err.lines if line.startswith("live: ")]
+    assert "drop_behind=" in live, live

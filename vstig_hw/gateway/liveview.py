@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import collections
 import json
+import logging
 import subprocess
 import sys
 import threading
@@ -25,6 +26,8 @@ from ..wire import Message
 from .node import Node
 
 __all__ = ["DEFAULT_PORT", "LIVE_STATS", "LiveView"]
+
+log = logging.getLogger(__name__)
 
 DEFAULT_PORT = 8765  # Foxglove's default for a WebSocket connection
 LIVE_STATS = "live"  # the live view's counters, beside the links' in /vstig/stats and on exit
@@ -178,7 +181,8 @@ class LiveView:
                 else:
                     refused.extend([at, t, sender, list(msg), reason] for msg in messages)
             stats, self._stats = self._stats, None
-            if pipe is None:
+            if pipe is None:  # the server is gone
+                self.counters["drop_behind"] += len(records) + len(refused)
                 return
             frames = []
             if records:
@@ -194,3 +198,5 @@ class LiveView:
             except (BrokenPipeError, OSError, ValueError):  # the server died: the gateway goes on without it
                 self._pipe = None
                 self.counters["drop_behind"] += len(records) + len(refused)
+                log.warning("live view: its server process ended; the gateway goes on without it (what it "
+                            "hears from now on is counted under live: drop_behind)")
