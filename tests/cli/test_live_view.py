@@ -299,35 +299,58 @@ def test_a_bind_beyond_loopback_warns() -> None:
         radio.close()
 
 
+class RadioBridge:
+    """`vstig bridge --foxglove 0` between two pty radios (cobs8): `radio` floods it, `robot` hears the relay."""
+
+    def __init__(self) -> None:
+        self.radio, self.robot = PtyPeer(), PtyPeer()
+        self.process = start_vstig("bridge", f"serial:{self.radio.path}?framing=cobs8",
+                                   f"serial:{self.robot.path}?framing=cobs8", "--robot-id", "200", "--no-refresh",
+                                   "--foxglove", "0")
+        assert self.process.stderr is not None
+        self.err = Lines(self.process.stderr)
+
+    def ready(self) -> None:
+        """Until the bridge reads the radio (pyserial flushes the input right after opening)."""
+        wait_for(lambda: has_open(self.process.pid, self.radio.path), 30)
+        time.sleep(0.3)
+
+    def stop(self) -> str:
+        """SIGTERM it, as Ctrl-C would; its `live:` line."""
+        self.process.terminate()
+        self.process.wait(timeout=20)
+        self.err.join()
+        self.radio.close()
+        self.robot.close()
+        assert self.process.returncode == 0, "".join(self.err.lines)
+        (live,) = [line for line in self.err.lines if line.startswith("live: ")]
+        return live
+
+
 def test_a_stuck_viewer_never_holds_up_the_gateway() -> None:
     """A viewer that stops reading and one that reads, while a radio floods a bridge: every message is
     relayed, the reading viewer's table counts them all, and the link channel's excess is counted."""
     _node()
-    radio, robot = PtyPeer(), PtyPeer()  # the flooding radio, and a robot on a second radio the bridge relays to
     framing = make_serial_framing("cobs8")
     flood = [Message(Op.PUT, 1 + i % 500, i & 0xFFFF, 1 + i // 500, 7) for i in range(N_FLOOD)]
-    bridge = start_vstig("bridge", f"serial:{radio.path}?framing=cobs8", f"serial:{robot.path}?framing=cobs8",
-                         "--robot-id", "200", "--no-refresh", "--foxglove", "0")
-    assert bridge.stderr is not None
-    err = Lines(bridge.stderr)
+    bridge = RadioBridge()
     viewers: list[Viewer] = []
     try:
-        url = err.first(_URL).group(1)
+        url = bridge.err.first(_URL).group(1)
         stuck, reading = Viewer(url, stall=True), Viewer(url)
         viewers += [stuck, reading]
         stuck.until(lambda: any(e["event"] == "stalled" for e in stuck.seen))
         reading.until(lambda: bool(reading.messages("/vstig/table")))
-        wait_for(lambda: has_open(bridge.pid, radio.path), 30)
-        time.sleep(0.3)  # pyserial flushes the input right after opening
+        bridge.ready()
         decoder = make_serial_framing("cobs8")  # what the bridge relays to the second radio
         keys_relayed: set[int] = set()
         data = b"".join(unit for msg in flood for unit in framing.encode(msg))
         for at in range(0, len(data), 4096):
-            radio.write(data[at:at + 4096])
-            keys_relayed.update(m.key for m in decoder.feed(robot.read(0)))
+            bridge.radio.write(data[at:at + 4096])
+            keys_relayed.update(m.key for m in decoder.feed(bridge.robot.read(0)))
 
         def every_key_relayed() -> bool:
-            keys_relayed.update(m.key for m in decoder.feed(robot.read(0.05)))
+            keys_relayed.update(m.key for m in decoder.feed(bridge.robot.read(0.05)))
             return len(keys_relayed) >= 500
 
         wait_for(every_key_relayed, 60)
@@ -336,13 +359,7 @@ def test_a_stuck_viewer_never_holds_up_the_gateway() -> None:
         for viewer in viewers:
             if viewer.process.poll() is None:
                 viewer.process.kill()
-        bridge.terminate()
-        bridge.wait(timeout=20)
-        err.join()
-        radio.close()
-        robot.close()
-    assert bridge.returncode == 0, "".join(err.lines)
-    (live,) = [line for line in err.lines if line.startswith("live: ")]
+        live = bridge.stop()
     counts = dict(item.split("=") for item in live.removeprefix("live: ").split())
     assert int(counts.get("throttled", 0)) > 0, live  # the link channel's excess, counted
     assert "drop_behind" not in counts, live
@@ -358,35 +375,24 @@ def _table_messages(viewer: Viewer) -> int | None:
 
 def test_the_gateway_outlives_its_live_view_server() -> None:
     """The live view's server process killed mid-run: the bridge relays on, says so once, counts the rest."""
-    radio, robot = PtyPeer(), PtyPeer()
     framing, decoder = make_serial_framing("cobs8"), make_serial_framing("cobs8")
-    bridge = start_vstig("bridge", f"serial:{radio.path}?framing=cobs8", f"serial:{robot.path}?framing=cobs8",
-                         "--robot-id", "200", "--no-refresh", "--foxglove", "0")
-    assert bridge.stderr is not None
-    err = Lines(bridge.stderr)
+    bridge = RadioBridge()
     try:
-        err.first(_URL)
-        (server,) = Path(f"/proc/{bridge.pid}/task/{bridge.pid}/children").read_text().split()
+        bridge.err.first(_URL)
+        (server,) = Path(f"/proc/{bridge.process.pid}/task/{bridge.process.pid}/children").read_text().split()
         os.kill(int(server), 9)
-        wait_for(lambda: has_open(bridge.pid, radio.path), 30)
-        time.sleep(0.3)  # pyserial flushes the input right after opening
+        bridge.ready()
         heard: list[Message] = []
         for key in range(1, 51):
-            radio.write(b"".join(framing.encode(Message(Op.PUT, key, key, 1, 7))))
-            heard += decoder.feed(robot.read(0.02))
+            bridge.radio.write(b"".join(framing.encode(Message(Op.PUT, key, key, 1, 7))))
+            heard += decoder.feed(bridge.robot.read(0.02))
 
         def relayed() -> bool:
-            heard.extend(decoder.feed(robot.read(0.05)))
+            heard.extend(decoder.feed(bridge.robot.read(0.05)))
             return {m.key for m in heard} >= set(range(1, 51))
 
         wait_for(relayed, 30)
     finally:
-        bridge.terminate()
-        bridge.wait(timeout=20)
-        err.join()
-        radio.close()
-        robot.close()
-    assert bridge.returncode == 0, "".join(err.lines)
-    assert sum("its server process ended" in line for line in err.lines) == 1, err.lines
-    (live,) = [line for line in err.lines if line.startswith("live: ")]
+        live = bridge.stop()
+    assert sum("its server process ended" in line for line in bridge.err.lines) == 1, bridge.err.lines
     assert "drop_behind=" in live, live
