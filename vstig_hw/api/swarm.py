@@ -1,10 +1,12 @@
 """`vstig_hw.join(...)`: a Python program as a swarm member, through the gateway's Node on a thread of its own.
 
-The Node stays single-threaded: its loop runs on one background thread, and
-every call that changes or reads it there (`put`, `get`, `keys`...) is handed
-to that thread with `Node.call_soon` and waited for as a Future. A call made on
-the gateway thread itself (inside an `onconflict` hook) runs at once. `entry`,
-`has` and `size` read the table directly: one dict lookup, atomic in CPython.
+The Node's loop runs on one background thread. A call from another thread
+(`put`, `get`, `keys`...) runs on the caller's thread holding `Node.lock`, which
+the loop holds only while it works, never while it waits for the links: no
+thread hand-off, so a put reaches the links as fast as through the Node itself.
+What must wait without blocking (asyncio, a confirmed put) is handed to the loop
+with `Node.call_soon` and awaited as a Future. `entry`, `has` and `size` read the
+table directly: one dict lookup, atomic in CPython.
 
 A confirmed put is `vstig put`'s own logic (`gateway.oneshot.ConfirmedPut`),
 stepped by the gateway thread after every poll instead of by a loop of its own.
@@ -292,12 +294,21 @@ class Swarm:
             self._closed_because = f"its gateway stopped: {type(error).__name__}: {error}"
         finally:
             self._stop.set()
-            self._node.close()
+            with self._node.lock:  # no caller is inside the Node while it closes, and none gets in after
+                if self._closed_because is None:
+                    self._closed_because = "its gateway stopped"
+                self._node.close()
             self._hub.close()
             self._fail_waiting()
 
     def _step_puts(self) -> bool:
         """Between polls, on the gateway thread: step every confirmed put; never stops the loop."""
+        if self._puts:
+            with self._node.lock:
+                self._step_puts_now()
+        return False
+
+    def _step_puts_now(self) -> None:
         if self._puts:
             now = time.monotonic()
             going = []
@@ -314,7 +325,6 @@ class Swarm:
                 else:
                     going.append((put, future))
             self._puts = going
-        return False
 
     def _put_future(self, key: int, raw: int, *, timeout: float, tries: int,
                     learn: float) -> concurrent.futures.Future[PutResult]:
@@ -354,7 +364,10 @@ class Swarm:
         return entry
 
     def _call(self, call: Callable[[], T]) -> T:
-        return self.submit(call).result()
+        """Run `call` on this thread with the Node to ourselves: its lock is free whenever the loop waits."""
+        with self._node.lock:
+            self._check_open()
+            return call()
 
     def _raw(self, key: int, value: float | str) -> int:
         check_key(key)

@@ -125,6 +125,7 @@ class Node:
         self.on_change: list[ChangeListener] = []  # the table changed (Python API's watch); see `_receive_telling`
         self.ticks = 0
         self._calls: collections.deque[Callable[[], None]] = collections.deque()  # `call_soon`'s, for the loop
+        self.lock = threading.RLock()  # `poll` works under it; another thread holding it may call put/get
         self._readers = LinkReaders(self.links)
         self._next_tick = 0.0
         self._retry_at: float | None = None
@@ -221,21 +222,22 @@ class Node:
             item = arrivals.get(timeout=timeout) if timeout > 0 else arrivals.get_nowait()
         except queue.Empty:
             item = None
-        heard_on = 0  # bit i: link i delivered in this poll
-        while item is not None:
-            self._arrive(*item)
-            heard_on |= 1 << item[0]
-            try:
-                item = arrivals.get_nowait()
-            except queue.Empty:
-                item = None
-        calls = self._calls
-        while calls:
-            calls.popleft()()
-        now = time.monotonic()
-        if now >= self._next_tick:
-            self._tick(now)
-        self._spread(now, heard_on)
+        with self.lock:  # held while working, never while waiting: other threads may call in between
+            heard_on = 0  # bit i: link i delivered in this poll
+            while item is not None:
+                self._arrive(*item)
+                heard_on |= 1 << item[0]
+                try:
+                    item = arrivals.get_nowait()
+                except queue.Empty:
+                    item = None
+            calls = self._calls
+            while calls:
+                calls.popleft()()
+            now = time.monotonic()
+            if now >= self._next_tick:
+                self._tick(now)
+            self._spread(now, heard_on)
 
     def _arrive(self, index: int, t: float, units: list[Any]) -> None:
         link = self.links[index]
@@ -322,6 +324,8 @@ class Node:
                     del heard_from[msg[0] & KEY_MAX]
 
     # -- other threads and watchers (the Python API, vstig_hw.api) ----------------
+    # A Node is single-threaded, with two ways in for another thread: hold `lock` (an RLock `poll`
+    # holds only while it works, never while it waits) around put/get/ask, or hand a call to the loop.
     def call_soon(self, call: Callable[[], None]) -> None:
         """Run `call` on the loop's thread at its next poll, waking a loop that waits; safe from any thread.
 
