@@ -30,9 +30,11 @@ from ..gateway.oneshot import ConfirmedPut, HearsItself, PutResult, not_taken
 from ..gateway.refresh import RoundRobinGet
 from ..links.assemble import LinkBuildError, assemble_links
 from ..links.link import Link, LinkSpec
+from ..links.registry import parse
 from ..values import VALUE_TYPES, ValueType, from_raw, to_raw
 from ..wire import KEY_MAX, check_field
 from .changes import DEFAULT_BUFFER, Change, ChangeHub, OnChange, Subscription, Watch
+from .tables import MAX_TABLE, specs_for_table, table_of
 
 __all__ = ["DEFAULT_WAIT", "HearsItself", "NotTaken", "Swarm", "SwarmClosed", "join"]
 
@@ -70,7 +72,8 @@ class Swarm:
 
     def __init__(self, links: Sequence[Link[Any]], robot_id: int, *, period: float, budget: int | None,
                  guard: Guard | None, onconflict: ConflictResolver | None, onconflictlost: ConflictLost | None,
-                 refresh: bool, value_type: ValueType) -> None:
+                 refresh: bool, value_type: ValueType, specs: Sequence[LinkSpec] | None = None,
+                 options: dict[str, Any] | None = None) -> None:
         if value_type not in VALUE_TYPES:
             raise ValueError(f"value_type must be one of {', '.join(VALUE_TYPES)}, got {value_type!r}")
         self.value_type: ValueType = value_type
@@ -95,6 +98,9 @@ class Swarm:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._closed_because: str | None = "it is not open yet"
+        self._specs = None if specs is None else list(specs)  # what `stigmergy(n)` derives its links from
+        self._options = options or {}
+        self._tables: dict[int, Swarm] = {}
 
     # -- lifetime --------------------------------------------------------------
     def open(self) -> Swarm:
@@ -121,6 +127,8 @@ class Swarm:
         self._hub.close()
         for callback in self._callbacks:
             callback.cancel()
+        for table in self._tables.values():
+            table.close()
         self._fail_waiting()
 
     @property
@@ -191,6 +199,28 @@ class Swarm:
     def value(self, entry: Entry) -> float:
         """An entry's raw value seen as this swarm's `value_type`."""
         return from_raw(entry.value, self.value_type)
+
+    def stigmergy(self, table: int) -> Swarm:
+        """Table `table` (0..255) on the same media, as Buzz's `stigmergy.create(id)`: an independent Swarm.
+
+        It is carried apart where the medium can (29-bit CAN IDs: `extended=1`;
+        zenoh: its key space), joined with the same robot id and options, and
+        closed with this swarm; asking again gives the same one. A link that cannot
+        carry it raises ValueError naming the link.
+        """
+        check_field("stigmergy", MAX_TABLE, table)
+        self._check_open()
+        if self._specs is None:
+            raise ValueError("stigmergy: this swarm was joined with Link objects or a Guard object, which belong to "
+                             "one table; join with link specs (and max_jump=) to derive another table's")
+        if table == table_of(self._specs):
+            return self
+        with self._lock:
+            joined = self._tables.get(table)
+            if joined is None or joined.closed:
+                joined = self._tables[table] = join(*specs_for_table(self._specs, table), robot_id=self.robot_id,
+                                                    **self._options)
+        return joined
 
     # -- conflicts, under Buzz's names ---------------------------------------------
     def onconflict(self, rule: ConflictResolver) -> ConflictResolver:
@@ -461,13 +491,21 @@ def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget
         if budget < 1:
             raise ValueError(f"budget must be at least 1 message per period (or None: no limit), got {budget}")
     try:
-        built = assemble_links(links, robot_id)
+        specs = [parse(link) if isinstance(link, str) else link for link in links]
+    except ValueError as error:
+        raise ValueError(f"links: {error}") from None
+    try:
+        built = assemble_links(specs, robot_id)
     except LinkBuildError as error:
         raise ValueError(f"{error.argument}: {error}") from None
-    if guard is None and max_jump is not None:
-        guard = Guard(max_jump=max_jump)
-    swarm = Swarm(built, robot_id, period=period, budget=budget, guard=guard, onconflict=onconflict,
-                  onconflictlost=onconflictlost, refresh=refresh, value_type=value_type)
+    options: dict[str, Any] = {"period": period, "budget": budget, "max_jump": max_jump, "onconflict": onconflict,
+                               "onconflictlost": onconflictlost, "refresh": refresh, "value_type": value_type}
+    swarm = Swarm(built, robot_id, period=period, budget=budget,
+                  guard=Guard(max_jump=max_jump) if guard is None and max_jump is not None else guard,
+                  onconflict=onconflict, onconflictlost=onconflictlost, refresh=refresh, value_type=value_type,
+                  specs=None if any(isinstance(spec, Link) for spec in specs) or guard is not None
+                  else [spec for spec in specs if not isinstance(spec, Link)],
+                  options=options)
     return swarm.open()
 
 
