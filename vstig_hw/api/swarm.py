@@ -17,6 +17,7 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -34,6 +35,7 @@ from ..links.registry import parse
 from ..values import VALUE_TYPES, ValueType, from_raw, to_raw
 from ..wire import KEY_MAX, check_field
 from .changes import DEFAULT_BUFFER, Change, ChangeHub, OnChange, Subscription, Watch
+from .recording import Recording
 from .tables import MAX_TABLE, specs_for_table, table_of
 
 __all__ = ["DEFAULT_WAIT", "HearsItself", "NotTaken", "Swarm", "SwarmClosed", "join"]
@@ -101,6 +103,7 @@ class Swarm:
         self._specs = None if specs is None else list(specs)  # what `stigmergy(n)` derives its links from
         self._options = options or {}
         self._tables: dict[int, Swarm] = {}
+        self._recordings: list[Recording] = []
 
     # -- lifetime --------------------------------------------------------------
     def open(self) -> Swarm:
@@ -273,6 +276,21 @@ class Swarm:
         self._callbacks.append(handle)
         return handle
 
+    # -- captures ------------------------------------------------------------------
+    def record(self, path: str | os.PathLike[str], *, overwrite: bool = False,
+               max_bytes: int | None = None) -> Recording:
+        """Start recording what the links hear into `path`, as `vstig record` would; `stop()` the Recording.
+
+        The extension picks the format (CAN: .log .asc .blf .csv .pcap .trc; serial
+        and zenoh: any name; .mcap for links of several media, with the mcap extra).
+        An existing file is never replaced unless `overwrite` (FileExistsError);
+        `max_bytes` rotates to numbered files. Recordings stop when the swarm closes.
+        """
+        self._check_open()
+        recording = Recording(self._node, path, overwrite=overwrite, max_bytes=max_bytes)
+        self._recordings.append(recording)
+        return recording
+
     # -- what happened -------------------------------------------------------------
     def stats(self) -> dict[str, Counters]:
         """The gateway's counters per link and the engine's outcomes, then the API's own under "api"."""
@@ -327,7 +345,9 @@ class Swarm:
             with self._node.lock:  # no caller is inside the Node while it closes, and none gets in after
                 if self._closed_because is None:
                     self._closed_because = "its gateway stopped"
-                self._node.close()
+                self._node.close()  # hands every unit already read to the recordings
+                for recording in self._recordings:
+                    recording.stop()
             self._hub.close()
             self._fail_waiting()
 
