@@ -14,17 +14,17 @@ so no area is visited twice. The PC watches every area key and reports.
 
 from __future__ import annotations
 
-import argparse
 import random
 import sys
 import time
 from dataclasses import dataclass, field
 
+from _args import example_arguments
+
 import vstig_hw
 from vstig_hw import Entry, Stigmergy
 from vstig_hw.api import Swarm
 from vstig_hw.api.virtual import VirtualRobots
-from vstig_hw.links import parse
 
 FIRST_AREA = 100
 OPEN, CLAIMED, DONE = 0, 1, 2
@@ -110,17 +110,7 @@ class AreaProgram:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("links", nargs="*", help="link specs (vstig links); none: stand-in robots")
-    parser.add_argument("--robot-id", type=int, default=100)
-    parser.add_argument("--areas", type=int, default=16)
-    parser.add_argument("--seconds", type=float, default=30.0)
-    args = parser.parse_args()
-    for spec in args.links:  # a bad spec is one line, before anything opens
-        try:
-            parse(spec)
-        except ValueError as error:
-            parser.error(str(error))
+    args = example_arguments(__doc__, 30.0, lambda parser: parser.add_argument("--areas", type=int, default=16))
     areas = list(range(FIRST_AREA, FIRST_AREA + args.areas))
     if args.links:
         with vstig_hw.join(*args.links, robot_id=args.robot_id) as swarm:

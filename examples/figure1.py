@@ -11,16 +11,16 @@ its own and has to reach every robot on every link.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from collections.abc import Callable
+
+from _args import example_arguments
 
 import vstig_hw
 from vstig_hw.api import Swarm
 from vstig_hw.api.virtual import FIGURE1_KEY, VirtualRobots, figure1
 from vstig_hw.engine import larger_value_wins
-from vstig_hw.links import parse
 
 KEY = FIGURE1_KEY
 
@@ -42,16 +42,7 @@ def holding(robots: VirtualRobots, value: int) -> int:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("links", nargs="*", help="link specs (vstig links); none: stand-in robots")
-    parser.add_argument("--robot-id", type=int, default=100)
-    parser.add_argument("--seconds", type=float, default=20.0)
-    args = parser.parse_args()
-    for spec in args.links:  # a bad spec is one line, before anything opens
-        try:
-            parse(spec)
-        except ValueError as error:
-            parser.error(str(error))
+    args = example_arguments(__doc__, 20.0)
     if args.links:
         with vstig_hw.join(*args.links, robot_id=args.robot_id, onconflict=larger_value_wins) as swarm:
             print(f"the swarm agrees on {play(swarm, args.seconds)}")

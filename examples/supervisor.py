@@ -13,16 +13,16 @@ came back charged.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
 import time
+
+from _args import example_arguments
 
 import vstig_hw
 from vstig_hw import Stigmergy
 from vstig_hw.api import Change, NotTaken, Swarm
 from vstig_hw.api.virtual import VirtualRobots
-from vstig_hw.links import parse
 
 BATTERY, HOME = 200, 300
 LOW = 20
@@ -92,20 +92,11 @@ def id_range(text: str) -> list[int]:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("links", nargs="*", help="link specs (vstig links); none: stand-in robots")
-    parser.add_argument("--robot-id", type=int, default=100)
-    parser.add_argument("--robots", type=id_range, default=None, help="the robots' ids, e.g. 1-12")
-    parser.add_argument("--seconds", type=float, default=30.0)
-    args = parser.parse_args()
-    for spec in args.links:  # a bad spec is one line, before anything opens
-        try:
-            parse(spec)
-        except ValueError as error:
-            parser.error(str(error))
+    args = example_arguments(__doc__, 30.0, lambda parser: parser.add_argument(
+        "--robots", type=id_range, default=None, help="the robots' ids, e.g. 1-12"))
     if args.links:
         if args.robots is None:
-            parser.error("--robots: name the robots to supervise, e.g. 1-12")
+            args.error("--robots: name the robots to supervise, e.g. 1-12")
         with vstig_hw.join(*args.links, robot_id=args.robot_id) as swarm:
             done = supervise(swarm, args.robots, args.seconds).finished.is_set()
         return 0 if done else 1
