@@ -231,6 +231,7 @@ class ChangeHub:
         self.closed = False
 
     def add(self, subscription: Subscription) -> None:
+        """Start handing changes to `subscription` (closed at once if the hub is)."""
         with self._lock:
             if self.closed:
                 subscription.closed = True
@@ -241,6 +242,7 @@ class ChangeHub:
                 self._attach(True)
 
     def remove(self, subscription: Subscription) -> None:
+        """Stop handing changes to `subscription`."""
         with self._lock:
             if subscription not in self._subscriptions:
                 return
@@ -249,6 +251,7 @@ class ChangeHub:
                 self._attach(False)
 
     def publish(self, key: int, old: Entry | None, new: Entry, link: str | None, sender: int | None) -> None:
+        """Offer one change to every subscription (the gateway thread; never blocks)."""
         change = Change(key, old, new, link, sender)
         for subscription in self._subscriptions:
             subscription.offer(change)
@@ -263,4 +266,5 @@ class ChangeHub:
             subscription._wake()
 
     def overflow(self) -> int:
+        """Changes dropped, summed over the subscriptions."""
         return sum(s.overflow for s in self._subscriptions)

@@ -86,6 +86,7 @@ class PutResult:
 
     @property
     def superseded(self) -> bool:
+        """The swarm holds an entry other than our last write."""
         return self.holds != self.written
 
 
