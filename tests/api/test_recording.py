@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import threading
 import time
 from pathlib import Path
 
@@ -15,9 +16,17 @@ from vstig_hw.api.virtual import VirtualRobots
 from vstig_hw.capture.decodefile import decode_file
 
 
-def writer(robot: Stigmergy, step: int) -> None:
-    if step <= 3:
-        robot.put(10 + robot.robot_id, step)
+class Writer:
+    """Each robot writes its key three times, once the recording runs (what is sent before, nobody records)."""
+
+    def __init__(self) -> None:
+        self.go = threading.Event()
+        self.writes: dict[int, int] = {}
+
+    def __call__(self, robot: Stigmergy, step: int) -> None:
+        if self.go.is_set() and self.writes.get(robot.robot_id, 0) < 3:
+            self.writes[robot.robot_id] = self.writes.get(robot.robot_id, 0) + 1
+            robot.put(10 + robot.robot_id, self.writes[robot.robot_id])
 
 
 def decoded(path: Path) -> list[dict[str, object]]:
@@ -27,9 +36,11 @@ def decoded(path: Path) -> list[dict[str, object]]:
 
 
 def test_a_recording_holds_what_the_bus_carried_until_stopped(tmp_path: Path) -> None:
+    writer = Writer()
     with VirtualRobots(can_ids=[1, 2], program=writer) as robots, \
             vstig_hw.join(*robots.links, robot_id=50) as swarm:
         recording = swarm.record(tmp_path / "swarm.log")
+        writer.go.set()
         deadline = time.monotonic() + 5
         while [swarm.entry(11), swarm.entry(12)] != [Entry(3, 3, 1), Entry(3, 3, 2)] and time.monotonic() < deadline:
             time.sleep(0.01)

@@ -458,11 +458,12 @@ class Swarm:
 
     def _attach_hub(self, attach: bool) -> None:
         """The Node tells changes only while someone watches: without, it keeps its fast path."""
-        listeners = self._node.on_change
-        if attach and self._hub.publish not in listeners:
-            listeners.append(self._hub.publish)
-        elif not attach and self._hub.publish in listeners:
-            listeners.remove(self._hub.publish)
+        with self._node.lock:  # not while the gateway goes through them
+            listeners = self._node.on_change
+            if attach and self._hub.publish not in listeners:
+                listeners.append(self._hub.publish)
+            elif not attach and self._hub.publish in listeners:
+                listeners.remove(self._hub.publish)
 
     def _resolve(self, key: int, local: Entry, remote: Entry) -> Entry:
         try:
