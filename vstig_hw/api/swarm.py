@@ -305,6 +305,11 @@ class Swarm:
         """The names of the swarm's links, as counters and changes name them."""
         return [link.name for link in self._node.links]
 
+    @property
+    def reachable(self) -> dict[str, str]:
+        """Where links are reachable by others, by link name (a zenoh link: the endpoints it listens on)."""
+        return {link.name: about for link in self._node.links if (about := getattr(link.transport, "about", ""))}
+
     # -- for vstig_hw.aio and tools: the same calls as Futures ------------------------
     def submit(self, call: Callable[[], T]) -> concurrent.futures.Future[T]:
         """Run `call()` on the gateway thread (with the Node to itself); its result as a Future."""
