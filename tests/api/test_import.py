@@ -21,3 +21,8 @@ def test_join_and_aio_load_on_first_use() -> None:
     assert {"vstig_hw.api.swarm", "vstig_hw.gateway.node"} <= _loaded("import vstig_hw\nvstig_hw.join")
     assert "vstig_hw.api.aio" in _loaded("import vstig_hw.aio")
     assert "vstig_hw.api.aio" in _loaded("import vstig_hw\nvstig_hw.aio.join")
+
+
+def test_the_api_loads_no_extras_library() -> None:
+    loaded = _loaded("import vstig_hw, vstig_hw.aio, vstig_hw.api.virtual\nvstig_hw.join")
+    assert not {"zenoh", "numpy", "numba", "matplotlib", "mcap"} & loaded
