@@ -273,3 +273,41 @@ def test_confirm_inside_a_conflict_hook_is_refused_not_deadlocked(swarm: Swarm, 
     scripted.close()
     assert wait_for(lambda: refused)
     assert "cannot run on it (inside onconflict or onconflictlost)" in str(refused[0])
+
+
+def test_a_conflict_rule_that_returns_nonsense_never_stops_the_gateway(swarm: Swarm, robots: VirtualRobots) -> None:
+    swarm.onconflict(lambda key, local, remote: "neither")  # type: ignore[arg-type,return-value]
+    swarm.put(500, 1)
+    scripted = Scripted(robots, 203)
+    scripted.put(500, 2, 1)
+    scripted.close()
+    assert wait_for(lambda: swarm.entry(500) == Entry(2, 1, 203))  # the higher robot id won instead
+    assert swarm.stats()["api"]["hook_error"] == 1
+    assert swarm.put(501, 1, confirm=True) == Entry(1, 1, ME)  # and the gateway still runs
+
+
+def test_close_ends_a_confirmed_put_that_waits() -> None:
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    failed: list[BaseException] = []
+    try:
+        swarm = vstig_hw.join(f"serial:{os.ttyname(slave)}", robot_id=ME)
+
+        def waiting() -> None:
+            try:
+                swarm.put(1, 1, confirm=True, timeout=30)
+            except BaseException as error:
+                failed.append(error)
+
+        thread = threading.Thread(target=waiting)
+        thread.start()
+        time.sleep(0.2)
+        started = time.monotonic()
+        swarm.close()
+        thread.join(5)
+        assert time.monotonic() - started < 2
+        assert len(failed) == 1 and isinstance(failed[0], SwarmClosed)
+        assert "is closed: it was closed" in str(failed[0])
+    finally:
+        os.close(master)
+        os.close(slave)

@@ -471,8 +471,12 @@ class Swarm:
                 listeners.remove(self._hub.publish)
 
     def _resolve(self, key: int, local: Entry, remote: Entry) -> Entry:
+        """The user's rule, checked here: a rule that raises or returns what the engine cannot store is
+        logged and counted, and the higher robot id wins, so the gateway thread never stops on it."""
         try:
-            return self._rule(key, local, remote)
+            chosen = self._rule(key, local, remote)
+            _check_winner(chosen, local, remote, self.robot_id)
+            return chosen
         except Exception:
             log.exception("onconflict %r failed on key %d", self._rule, key)
             self._hook_failed()
@@ -550,6 +554,19 @@ def checked_keys(keys: Iterable[int] | None) -> list[int] | None:
     for key in checked:
         check_key(key)
     return checked
+
+
+def _check_winner(chosen: object, local: Entry, remote: Entry, robot_id: int) -> None:
+    """ValueError unless `chosen` is an entry the engine can store as a conflict's winner (see engine.py)."""
+    if not isinstance(chosen, tuple) or len(chosen) != 3:
+        raise ValueError(f"onconflict must return an Entry(value, timestamp, robot), got {chosen!r}")
+    value, _, robot = chosen
+    check_field("the winner's value", 0xFFFF, value)
+    check_field("the winner's robot", 0xFFFF, robot)
+    if (value, robot) not in ((local.value, local.robot), (remote.value, remote.robot)) \
+            and robot not in (robot_id, local.robot, remote.robot):
+        raise ValueError(f"onconflict returned {chosen!r}: a new value must name this robot ({robot_id}) or "
+                         f"the writer of one of the two entries ({local.robot} or {remote.robot})")
 
 
 def _settle(future: concurrent.futures.Future[T], call: Callable[[], T]) -> None:
