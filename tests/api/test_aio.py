@@ -6,6 +6,7 @@ import asyncio
 import itertools
 import time
 from collections.abc import AsyncIterator
+from pathlib import Path
 
 import pytest
 
@@ -81,3 +82,18 @@ def test_a_slow_async_reader_loses_the_oldest_counted() -> None:
 async def _take(watch: AsyncWatch, n: int) -> AsyncIterator[Change]:
     for _ in range(n):
         yield await watch.__anext__()
+
+
+def test_an_async_swarm_opens_another_table_and_records(tmp_path: Path) -> None:
+    async def main() -> None:
+        channel = f"aio-tables-{time.monotonic_ns()}"
+        async with vstig_hw.aio.join(f"can:virtual:{channel}?extended=1", robot_id=ME) as swarm:
+            table = await swarm.stigmergy(2)
+            recording = swarm.record(tmp_path / "t.log")
+            await swarm.put(1, 10)
+            await table.put(1, 20)
+            assert swarm.entry(1) == Entry(10, 1, ME) and table.entry(1) == Entry(20, 1, ME)
+            recording.stop()
+        assert table.sync.closed
+
+    asyncio.run(main())

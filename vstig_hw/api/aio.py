@@ -9,6 +9,7 @@ and closing (links may take a moment to open) run in a worker thread.
 from __future__ import annotations
 
 import asyncio
+import os
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
@@ -18,6 +19,7 @@ from ..gateway.guard import DEFAULT_MAX_JUMP, Guard
 from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD
 from ..values import ValueType, from_raw
 from .changes import DEFAULT_BUFFER, AsyncWatch
+from .recording import Recording
 from .swarm import DEFAULT_WAIT, LinkLike, Swarm, SwarmClosed, check_key, checked_keys
 from .swarm import join as join_sync
 
@@ -118,6 +120,17 @@ class AsyncSwarm:
     def onconflictlost(self, hook: ConflictLost | None) -> ConflictLost | None:
         """As `Swarm.onconflictlost` (runs on the gateway thread: a plain function)."""
         return self.sync.onconflictlost(hook)
+
+    async def stigmergy(self, table: int) -> AsyncSwarm:
+        """As `Swarm.stigmergy`: table `table` on the same media (its links open in a worker thread)."""
+        swarm = self.sync
+        tables = AsyncSwarm(lambda: swarm.stigmergy(table))
+        return await tables.open()
+
+    def record(self, path: str | os.PathLike[str], *, overwrite: bool = False,
+               max_bytes: int | None = None) -> Recording:
+        """As `Swarm.record`: start recording what the links hear into `path`."""
+        return self.sync.record(path, overwrite=overwrite, max_bytes=max_bytes)
 
     async def _wait(self, call: Callable[[], T]) -> T:
         return await asyncio.wrap_future(self.sync.submit(call))
