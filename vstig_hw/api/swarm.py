@@ -139,6 +139,10 @@ class Swarm:
         """Whether the swarm can no longer be used."""
         return self._closed_because is not None
 
+    def __repr__(self) -> str:
+        state = "open" if self._closed_because is None else f"closed: {self._closed_because}"
+        return f"<Swarm robot {self.robot_id} on {', '.join(self.links)} ({state})>"
+
     def __enter__(self) -> Swarm:
         return self
 
@@ -414,6 +418,8 @@ class Swarm:
 
     def _put_now(self, key: int, raw: int) -> Entry:
         self._node.put(key, raw)
+        if not self._on_gateway_thread() and any(len(outlet) for outlet in self._node.outlets):
+            self._node.call_soon(_nothing)  # a budget held some back: the loop, waiting, must see when to send it
         entry = self._engine.entry(key)
         assert entry is not None
         return entry
