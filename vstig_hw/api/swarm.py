@@ -225,8 +225,9 @@ class Swarm:
         with self._lock:
             joined = self._tables.get(table)
             if joined is None or joined.closed:
-                joined = self._tables[table] = join(*specs_for_table(self._specs, table), robot_id=self.robot_id,
-                                                    **self._options)
+                listening = [getattr(link.transport, "listening", ()) for link in self._node.links]
+                joined = self._tables[table] = join(*specs_for_table(self._specs, table, listening),
+                                                    robot_id=self.robot_id, **self._options)
         return joined
 
     # -- conflicts, under Buzz's names ---------------------------------------------

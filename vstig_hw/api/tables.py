@@ -2,7 +2,10 @@
 
 A table is carried apart from the others where the medium has room for it:
 29-bit CAN IDs have an 8-bit stigmergy field (`can:...?extended=1&stigmergy=N`),
-a zenoh link a key space per stigmergy (`vstig/<swarm>/<N>/...`). Everything
+a zenoh link a key space per stigmergy (`vstig/<swarm>/<N>/...`). A table's
+zenoh session cannot bind the first one's endpoints again: it listens on none and
+connects where the first connects and to the first's own endpoints, so it meets
+every session the first one meets (checked on loopback with two programs). Everything
 else is refused in one line naming the link: 11-bit CAN tells tables apart only
 by `id_base`, which a lab assigns, and a serial radio or a Buzz dialect link
 carries one table.
@@ -28,20 +31,23 @@ def table_of(specs: Sequence[LinkSpec]) -> int | None:
     return tables.pop() if len(tables) == 1 else None
 
 
-def specs_for_table(specs: Sequence[LinkSpec], table: int) -> list[LinkSpec]:
-    """The specs that carry `table` where `specs` carry theirs; ValueError naming a link that cannot."""
+def specs_for_table(specs: Sequence[LinkSpec], table: int,
+                    listening: Sequence[tuple[str, ...]] = ()) -> list[LinkSpec]:
+    """The specs that carry `table` where `specs` carry theirs; ValueError naming a link that cannot.
+
+    `listening` has, per spec, the endpoints its open link listens on (zenoh).
+    """
     derived: list[LinkSpec] = []
-    for spec in specs:
+    for number, spec in enumerate(specs):
         if isinstance(spec, CanSpec) and spec.extended:
             derived.append(replace(spec, stigmergy=table))
         elif isinstance(spec, CanSpec):
             raise ValueError(f"stigmergy: can:{spec.interface}:{spec.channel} has 11-bit IDs, which tell tables "
                              "apart only by id_base: add extended=1 to carry several, or join once per id_base")
-        elif isinstance(spec, ZenohSpec) and spec.listen:
-            raise ValueError(f"stigmergy: zenoh:{spec.swarm} listens on {','.join(spec.listen)}, which a second "
-                             "table's session cannot bind again: give it connect= instead")
         elif isinstance(spec, ZenohSpec):
-            derived.append(replace(spec, stigmergy=table))
+            ours = listening[number] if number < len(listening) else ()
+            derived.append(replace(spec, stigmergy=table, listen=(),
+                                   connect=tuple(dict.fromkeys((*spec.connect, *ours)))))
         else:
             raise ValueError(f"stigmergy: {spec.kind}:{spec.name} carries one table (a {spec.kind} link has no "
                              "stigmergy field); a second table needs CAN with extended=1 or zenoh")
