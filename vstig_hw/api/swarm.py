@@ -418,9 +418,12 @@ class Swarm:
         return result
 
     def _put_now(self, key: int, raw: int) -> Entry:
-        self._node.put(key, raw)
-        if not self._on_gateway_thread() and any(len(outlet) for outlet in self._node.outlets):
-            self._node.call_soon(_nothing)  # a budget held some back: the loop, waiting, must see when to send it
+        node = self._node
+        node.put(key, raw)
+        for outlet in node.outlets:
+            if len(outlet):  # a budget held some back: the loop, waiting, must see when to send it
+                node.call_soon(_nothing)
+                break
         entry = self._engine.entry(key)
         assert entry is not None
         return entry
@@ -433,6 +436,8 @@ class Swarm:
 
     def _raw(self, key: int, value: float | str) -> int:
         check_key(key)
+        if type(value) is int and 0 <= value <= 0xFFFF and self.value_type == "uint16":  # the common case, at once
+            return value
         try:
             return to_raw(value, self.value_type)
         except (ValueError, TypeError) as error:
@@ -548,6 +553,8 @@ def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget
 
 def check_key(key: int) -> None:
     """ValueError naming `key` unless it is a key (0..32767)."""
+    if type(key) is int and 0 <= key <= KEY_MAX:
+        return
     check_field("key", KEY_MAX, key)
 
 
