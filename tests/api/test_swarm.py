@@ -311,3 +311,18 @@ def test_close_ends_a_confirmed_put_that_waits() -> None:
     finally:
         os.close(master)
         os.close(slave)
+
+
+def test_what_was_put_before_close_still_goes_out() -> None:
+    channel = f"drain-{os.getpid()}-{time.monotonic_ns()}"
+    neighbour = can.Bus(interface="virtual", channel=channel)
+    codec = can_framing_for(9)
+    swarm = vstig_hw.join(f"can:virtual:{channel}", robot_id=ME, budget=1, period=0.1, refresh=False)
+    for key in range(600, 605):
+        swarm.put(key, key)
+    swarm.close()  # the budget lets one message out per period: four still queued
+    heard = set()
+    while (frame := neighbour.recv(0.2)) is not None:
+        heard |= {msg.key for msg in codec.feed(frame) if msg.robot == ME}
+    neighbour.shutdown()
+    assert set(range(600, 605)) <= heard

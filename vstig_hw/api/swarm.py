@@ -41,6 +41,7 @@ from .tables import MAX_TABLE, specs_for_table, table_of
 __all__ = ["DEFAULT_WAIT", "HearsItself", "NotTaken", "Swarm", "SwarmClosed", "join"]
 
 DEFAULT_WAIT = 2.0  # seconds a confirmed write waits for a neighbour, as `vstig put --wait`
+CLOSE_DRAIN = 5.0  # seconds close() lets queued messages go out at most, as `vstig put` does before it exits
 
 log = logging.getLogger("vstig_hw.api")
 T = TypeVar("T")
@@ -126,7 +127,7 @@ class Swarm:
         if thread is not None and thread.is_alive():
             self._node.call_soon(_nothing)  # wake the loop now rather than at its next tick
             if thread is not threading.current_thread():  # on it (a hook closing the swarm), it ends by itself
-                thread.join(5.0)  # it closes the links on its way out
+                thread.join(CLOSE_DRAIN + 2.0)  # it sends what is queued, then closes the links
         self._hub.close()
         for callback in self._callbacks:
             callback.cancel()
@@ -345,8 +346,11 @@ class Swarm:
 
     # -- inside ------------------------------------------------------------------------
     def _run(self) -> None:
+        node = self._node
         try:
-            self._node.run(stop=self._stop, until=self._step_puts)
+            node.run(stop=self._stop, until=self._step_puts)
+            # Closing: what was put but held back by a budget still goes out, for a little while.
+            node.run(until=lambda: not any(len(outlet) for outlet in node.outlets), duration=CLOSE_DRAIN)
         except BaseException as error:  # a link or a hook broke the loop: every caller hears why
             log.exception("the gateway thread stopped")
             self._closed_because = f"its gateway stopped: {type(error).__name__}: {error}"
