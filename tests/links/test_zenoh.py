@@ -256,8 +256,8 @@ def test_a_client_with_no_router_retries_with_backoff_instead_of_failing(caplog:
 
 # -- the zenoh capture -----------------------------------------------------------------
 def test_a_zenoh_capture_round_trips_and_a_bad_line_is_named(tmp_path: Path) -> None:
-    from vstig_hw.capture.files import RotatingCapture, read_capture
-    from vstig_hw.capture.records import CaptureError, Record
+    from vstig_hw.capture.files import RotatingCapture
+    from vstig_hw.capture.records import CaptureError, Record, read_capture
 
     path = str(tmp_path / "lab.zcap")
     sample = ZenohFraming(ZenohKeySpace("lab"), sender=201).encode_batch(MESSAGES)[0]

@@ -20,9 +20,8 @@ from ..wire import Message
 from . import candump
 from .decoded import Decoder, default_framings
 from .fastlog import parse_chunk, seconds
-from .files import read_capture
 from .filters import Filter, RecordFilter
-from .records import CaptureError, Record
+from .records import CaptureError, Record, read_capture
 from .serial_log import is_serial_capture
 
 __all__ = ["Fed", "analyze_captures"]

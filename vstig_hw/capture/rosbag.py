@@ -23,8 +23,7 @@ from ..wire import Message, Op
 from .decoded import Decoder
 from .records import MESSAGE_FRAMING, CaptureError, Record, cut_short
 
-__all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "CarriedMessages", "McapCaptureWriter",
-           "read_mcap", "topic_for"]
+__all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "McapCaptureWriter", "read_mcap", "topic_for"]
 
 TYPE_NAME = "vstig_msgs/msg/Message"
 MSGDEF = """\
@@ -130,27 +129,6 @@ class McapCaptureWriter:
     def close(self) -> None:
         self._writer.finish()  # type: ignore[no-untyped-call]
         self._file.close()
-
-
-class CarriedMessages:
-    """The framing of records that carry `(Message, sender)` already (read from MCAP)."""
-
-    name = MESSAGE_FRAMING
-
-    def __init__(self) -> None:
-        self.drops = Counters()
-
-    def feed(self, unit: tuple[Message, int | None]) -> list[Message]:
-        return [unit[0]]
-
-    def encode(self, msg: Message) -> list[tuple[Message, int | None]]:
-        return [(msg, None)]
-
-    def sender_of(self, unit: tuple[Message, int | None]) -> int | None:
-        return unit[1]
-
-    def tick(self) -> None:
-        """Nothing to expire."""
 
 
 def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
