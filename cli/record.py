@@ -9,9 +9,9 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.decoded import Decoder, default_framings
+from vstig_hw.capture.decoded import Decoder, RecordFilter, default_framings
 from vstig_hw.capture.files import RotatingCapture
-from vstig_hw.capture.filters import Filter, RecordFilter
+from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import (
     APPENDABLE,
     CAN_EXTENSIONS,

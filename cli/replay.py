@@ -10,8 +10,8 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.decoded import Decoder, default_framings
-from vstig_hw.capture.filters import Filter, filter_records
+from vstig_hw.capture.decoded import Decoder, default_framings, filter_records
+from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CAN_FRAMING, CaptureError, Record, read_capture
 from vstig_hw.capture.replay import replay
 from vstig_hw.engine import Stigmergy

@@ -400,7 +400,8 @@ def test_clients_survive_their_router_going_away_and_coming_back(caplog: pytest.
 
 
 def test_capture_filters_cut_a_zenoh_sample_by_key_and_sender() -> None:
-    from vstig_hw.capture.filters import Filter, filter_records
+    from vstig_hw.capture.decoded import filter_records
+    from vstig_hw.capture.filters import Filter
     from vstig_hw.capture.records import Record
 
     space = ZenohKeySpace("lab")

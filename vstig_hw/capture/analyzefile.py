@@ -18,9 +18,9 @@ from ..analysis import NO_SENDER, Analyzer, Batch
 from ..counters import Counters
 from ..wire import Message
 from . import candump
-from .decoded import Decoder, default_framings
+from .decoded import Decoder, RecordFilter, default_framings
 from .fastlog import parse_chunk, seconds
-from .filters import Filter, RecordFilter
+from .filters import Filter
 from .records import CaptureError, Record, read_capture
 from .serial_log import is_serial_capture
 

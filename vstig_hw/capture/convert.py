@@ -22,9 +22,9 @@ from collections.abc import Iterator, Sequence
 
 from ..counters import Counters
 from ..framing.zenoh import ZenohFraming
-from .decoded import Decoder, default_framings
+from .decoded import Decoder, RecordFilter, default_framings
 from .files import RotatingCapture
-from .filters import Filter, RecordFilter
+from .filters import Filter
 from .records import (
     CAN_EXTENSIONS,
     CAN_FRAMING,

@@ -1,4 +1,4 @@
-"""Decoding: captured records to Messages, and Messages to text, JSON lines or CSV; a whole file at once.
+"""Decoding: captured records to Messages (those a `Filter` keeps), and Messages to text, JSON lines or CSV.
 
 Each (link, framing, direction) gets its own framing instance, so fragments
 (epuck4) reassemble per radio exactly as they did live. A framing's module is
@@ -9,6 +9,11 @@ framing alone, no dialect.
 to pay for numpy (installed with the analyze extra), a uniform chunk goes
 through the vectorised `fastlog` path (JSON lines only), any other chunk line by
 line. Every other capture type goes record by record through the framings.
+
+`RecordFilter` keeps a unit whose messages pass: a CAN frame when any of its
+messages passes (a classic frame holds one), while a serial chunk, whose bytes
+need not align with frames, is decoded and its passing messages re-encoded in
+the same framing.
 """
 
 from __future__ import annotations
@@ -22,16 +27,17 @@ from typing import IO, TYPE_CHECKING, Any
 from ..counters import Counters
 from ..extras import missing
 from ..values import ValueType, from_raw
-from ..wire import Message
+from ..wire import Message, encode
 from .records import CAN_FRAMING, MESSAGE_FRAMING, CaptureError, Record, file_position, read_capture, sniff
 
 if TYPE_CHECKING:
+    from ..framing.base import Framing
     from .fastlog import Classify
     from .filters import Filter
     from .time_columns import TimeColumn
 
-__all__ = ["CSV_HEADER", "FORMATS", "CarriedMessages", "Decoded", "Decoder", "as_csv", "as_json", "as_text",
-           "decode_file", "default_framings"]
+__all__ = ["CSV_HEADER", "FORMATS", "CarriedMessages", "Decoded", "Decoder", "RecordFilter", "as_csv", "as_json",
+           "as_text", "decode_file", "default_framings", "filter_records"]
 
 CSV_HEADER = "t,link,can_id,op,key,value,timestamp,robot\n"
 
@@ -138,6 +144,70 @@ class Decoder:
             yield from self.decode(record)
 
 
+class RecordFilter:
+    """A `Filter` applied along one capture: times count from its first record (`t0`)."""
+
+    def __init__(self, keep: Filter, decoder: Decoder | None = None) -> None:
+        self.keep = keep
+        self.decoder = decoder or Decoder()
+        self.t0: float | None = None
+        self.filtered_out = 0  # messages `messages` decoded but did not pass
+        self._encoders: dict[str, Framing[bytes]] = {}
+
+    def since_start(self, t: float) -> float:
+        if self.t0 is None:
+            self.t0 = t
+        return t - self.t0
+
+    def messages(self, record: Record) -> tuple[int | None, list[Decoded]]:
+        """The record's sender (None if its medium names none) and its messages that pass."""
+        t = self.since_start(record.t)
+        decoded = self.decoder.decode(record)
+        sender = self.decoder.sender_of(record) if decoded else None
+        if self.keep:
+            passed = [d for d in decoded if self.keep.accepts(t, record.link, sender, d.message)]
+            self.filtered_out += len(decoded) - len(passed)
+            decoded = passed
+        return sender, decoded
+
+    def units(self, record: Record) -> list[Record]:
+        """The record if its unit passes, none if not; a serial chunk decided by message comes back re-encoded."""
+        if not self.keep.accepts_unit(self.since_start(record.t), record.link):
+            return []
+        if not self.keep.by_message:
+            return [record]
+        _, passed = self.messages(record)
+        if record.framing in (CAN_FRAMING, MESSAGE_FRAMING):  # one message per unit (classic CAN, MCAP)
+            return [record] if passed else []
+        if record.framing == "zenoh":  # a sample keeps its key (its sender) and carries what passed
+            from ..framing.zenoh import ZenohSample
+
+            payload = b"".join(encode(d.message) for d in passed)
+            sample = ZenohSample(record.unit.key, payload)
+            return [Record(record.t, record.link, record.framing, sample, record.direction)] if payload else []
+        encoder = self._encoder(record.framing)
+        chunk = b"".join(unit for d in passed for unit in encoder.encode(d.message))
+        return [Record(record.t, record.link, record.framing, chunk, record.direction)] if chunk else []
+
+    def _encoder(self, framing: str) -> Framing[bytes]:
+        from ..framing import make_serial_framing
+
+        encoder = self._encoders.get(framing)
+        if encoder is None:
+            encoder = self._encoders[framing] = make_serial_framing(framing)
+        return encoder
+
+
+def filter_records(records: Iterable[Record], keep: Filter, decoder: Decoder | None = None) -> Iterator[Record]:
+    """The records of a capture that pass `keep` (all of them, unchanged, for an empty filter)."""
+    if not keep:
+        yield from records
+        return
+    passing = RecordFilter(keep, decoder)
+    for record in records:
+        yield from passing.units(record)
+
+
 def as_json(d: Decoded, value_type: ValueType = "uint16") -> str:
     m = d.message
     row: dict[str, Any] = {"t": round(d.t, 6), "link": d.link}
@@ -212,8 +282,6 @@ def _passing(keep: Filter | None, decoder: Decoder) -> Callable[[Record], list[D
     """A record's messages that `keep` passes (every one, with no filter: the filters module is not loaded)."""
     if not keep:
         return decoder.decode
-    from .filters import RecordFilter
-
     passing = RecordFilter(keep, decoder)
     return lambda record: passing.messages(record)[1]
 
