@@ -19,7 +19,7 @@ from typing import IO, Any, TypeVar, cast
 __all__ = ["APPENDABLE", "CAN_EXTENSIONS", "CAN_FRAMING", "LINE_CAPTURE_HEADERS", "MCAP_EXTENSION",
            "MESSAGE_FRAMING", "NAMELESS_EXTENSIONS", "READABLE_EXTENSIONS", "READERS", "WRITERS", "CaptureError",
            "Record", "capture_suffix", "cut_short", "file_position", "line_capture_format", "link_names_lost",
-           "parse_lines", "read_capture", "skip_or_raise", "sniff", "sniff_suffix", "writer_class"]
+           "parse_lines", "read_capture", "reader_for", "skip_or_raise", "sniff", "sniff_suffix", "writer_class"]
 
 T = TypeVar("T")
 
@@ -176,8 +176,13 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
     (`file_position`); the MCAP reader does not show its file.
     """
     fmt = fmt or sniff(path)
-    reader = cast(Reader, _member(*READERS[fmt]))
+    reader = reader_for(fmt)
     yield from reader(path, skip_bad, bad) if fmt == MCAP_EXTENSION else reader(path, skip_bad, bad, opened)
+
+
+def reader_for(fmt: str) -> Reader:
+    """The reader of a format (a key of `READERS`), its module imported now."""
+    return cast(Reader, _member(*READERS[fmt]))
 
 
 def writer_class(medium: str) -> Callable[..., Any]:
