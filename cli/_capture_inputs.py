@@ -13,7 +13,7 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.records import READABLE_EXTENSIONS, CaptureError, line_capture_format, sniff_suffix
+from vstig_hw.capture.records import READABLE_EXTENSIONS, CaptureError, line_capture_at, sniff_suffix
 
 __all__ = ["INPUT_FORMATS", "input_format_option", "input_name", "readable_capture", "renamed"]
 
@@ -38,17 +38,11 @@ def renamed(error: CaptureError, read: str, name: str) -> CaptureError:
     return error if read == name else CaptureError(name, error.line, error.problem)
 
 
-def _ours(path: str) -> bool:
-    """Whether the file is one of our line captures (found by its header, whatever its name)."""
-    with open(path, "rb") as file:
-        return line_capture_format(file.read(_SNIFF_BYTES)) is not None
-
-
 @contextlib.contextmanager
 def readable_capture(path: str, input_format: str | None) -> Iterator[str]:
     """A regular file to read `path` from whose name shows its type; a stream (-, a pipe) is copied first."""
     regular = path != "-" and os.path.isfile(path)
-    if regular and input_format is None and (path.lower().endswith(READABLE_EXTENSIONS) or _ours(path)):
+    if regular and input_format is None and (path.lower().endswith(READABLE_EXTENSIONS) or line_capture_at(path)):
         yield path
         return
     with tempfile.TemporaryDirectory(prefix="vstig-capture-") as folder:

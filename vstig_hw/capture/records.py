@@ -18,8 +18,9 @@ from typing import IO, Any, TypeVar, cast
 
 __all__ = ["APPENDABLE", "CAN_EXTENSIONS", "CAN_FRAMING", "LINE_CAPTURE_HEADERS", "MCAP_EXTENSION",
            "MESSAGE_FRAMING", "NAMELESS_EXTENSIONS", "READABLE_EXTENSIONS", "READERS", "WRITERS", "CaptureError",
-           "Record", "capture_suffix", "cut_short", "file_position", "line_capture_format", "link_names_lost",
-           "parse_lines", "read_capture", "reader_for", "skip_or_raise", "sniff", "sniff_suffix", "writer_class"]
+           "Record", "capture_suffix", "cut_short", "file_position", "line_capture_at", "line_capture_format",
+           "link_names_lost", "parse_lines", "read_capture", "reader_for", "skip_or_raise", "sniff", "sniff_suffix",
+           "writer_class"]
 
 T = TypeVar("T")
 
@@ -126,13 +127,17 @@ def line_capture_format(head: bytes) -> str | None:
     return None
 
 
+def line_capture_at(path: str) -> str | None:
+    """`serial` or `zenoh` for a file that starts with our line capture's header (any version, any name)."""
+    with open(path, "rb") as file:
+        return line_capture_format(file.read(_HEAD_BYTES))
+
+
 def sniff(path: str) -> str:
     """The format of the capture at `path`, a key of `READERS`, from one open: its header, else its extension."""
     if not os.path.isfile(path):
         raise CaptureError(path, None, "no such file")
-    with open(path, "rb") as file:
-        head = file.read(_HEAD_BYTES)
-    found = line_capture_format(head)
+    found = line_capture_at(path)
     if found is not None:
         return found
     suffix = capture_suffix(path)
