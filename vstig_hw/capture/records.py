@@ -105,7 +105,8 @@ WRITERS: dict[str, tuple[str, str]] = {  # by medium; a CAN writer picks python-
 _HEAD_BYTES = max(map(len, LINE_CAPTURE_HEADERS))
 _PCAP_MAGICS = tuple(m.to_bytes(4, order) for m in (0xA1B2C3D4, 0xA1B23C4D) for order in ("big", "little"))
 
-Reader = Callable[..., Iterator[Record]]
+# Every reader: (path, skip_bad, bad, opened) -> records in file order; see `read_capture`.
+Reader = Callable[[str, bool, list[CaptureError] | None, Callable[[IO[Any]], None] | None], Iterator[Record]]
 
 
 def capture_suffix(path: str) -> str:
@@ -180,9 +181,7 @@ def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
     `opened` is handed the file being read once it is open, so a caller can tell how far reading got
     (`file_position`); the MCAP reader does not show its file.
     """
-    fmt = fmt or sniff(path)
-    reader = reader_for(fmt)
-    yield from reader(path, skip_bad, bad) if fmt == MCAP_EXTENSION else reader(path, skip_bad, bad, opened)
+    yield from reader_for(fmt or sniff(path))(path, skip_bad, bad, opened)
 
 
 def reader_for(fmt: str) -> Reader:

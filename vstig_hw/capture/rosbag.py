@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import functools
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import IO, Any
 
 from ..counters import Counters
@@ -131,11 +131,13 @@ class McapCaptureWriter:
         self._file.close()
 
 
-def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+              opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
     """The messages of an MCAP capture in log-time order, as `MESSAGE_FRAMING` records named by link.
 
     A file with no footer (its recorder was killed) is read in file order up to its last complete
-    chunk, and the cut is reported by `cut_short`.
+    chunk, and the cut is reported by `cut_short`. `opened` (every reader's signature) is not called:
+    the file is read through its index, so how far into it the reader is says nothing of progress.
     """
     try:
         from mcap.reader import make_reader
