@@ -38,7 +38,7 @@ pytest: $(STAMP) sysdeps
 
 # The docs site, strict: a broken link, anchor or API reference fails. Browse it from site/index.html.
 docs: $(STAMP)
-	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 test: lint typecheck docs pytest
 
