@@ -1,4 +1,4 @@
-"""The README's ten-line engine example runs and prints what its comments say."""
+"""The README's ten-line taste of Python runs and prints what its comments say."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ README = Path(__file__).resolve().parents[2] / "README.md"
 
 
 def test_readme_engine_example_runs() -> None:
-    section = README.read_text().split("## The engine in ten lines", 1)[1]
+    section = README.read_text().split("## A taste of Python", 1)[1]
     code = section.split("```python", 1)[1].split("```", 1)[0]
     assert len(code.strip().splitlines()) <= 10
     out = io.StringIO()
