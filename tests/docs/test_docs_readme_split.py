@@ -52,7 +52,9 @@ def normalise(text: str) -> str:
 
 
 def sentences(body: str) -> list[str]:
-    return [s for s in re.split(r"(?<=[.:;!?])\s+", normalise(body)) if len(s) >= 25]
+    """The body's sentences, never across a paragraph or a code fence."""
+    pieces = re.split(r"\n\s*\n|^```.*$", body, flags=re.M)
+    return [s for piece in pieces for s in re.split(r"(?<=[.:;!?])\s+", normalise(piece)) if len(s) >= 25]
 
 
 def page_text(pages: list[str]) -> str:
