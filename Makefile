@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 CORE_STAMP := $(VENV)/.installed-core
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck layers pytest bench sysdeps clean fuzz soak
+.PHONY: demo test lint typecheck layers pytest docs bench sysdeps clean fuzz soak
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -40,7 +40,11 @@ layers: $(STAMP)
 pytest: $(STAMP) sysdeps
 	$(BIN)/pytest
 
-test: lint typecheck layers pytest
+# The docs site, strict: a broken link, anchor or API reference fails. Browse it from site/index.html.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+test: lint typecheck layers docs pytest
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
@@ -61,4 +65,4 @@ soak: $(STAMP)
 	$(BIN)/python tests/soak/run.py --seconds $(SOAK_SECONDS)
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) build site *.egg-info .pytest_cache .mypy_cache .ruff_cache

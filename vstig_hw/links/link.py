@@ -27,7 +27,7 @@ class Heard:
 class Link(Generic[Unit]):
     """`one_domain`: every node on the medium hears every frame any of them sends (a CAN bus, a
     blabbermouth relay), so an engine gateway does not echo an entry back onto the link it came
-    from (README "Echo suppression"). False, the safe default, where a robot may be out of
+    from (docs/explanation/design.md, "Echo suppression"). False, the safe default, where a robot may be out of
     another's range (radios): there the re-broadcast carries the entry a hop further."""
 
     def __init__(self, name: str, transport: Transport[Unit], framing: Framing[Unit], *,

@@ -13,7 +13,7 @@ Opening a link that lets unauthenticated peers in from the network logs one
 warning line: a listener beyond loopback that is neither covered by user/password
 or known public keys nor a TLS/QUIC listener with mutual TLS, or multicast
 scouting without such authentication. The loopback default is open to every
-user of this PC (README "Many PCs").
+user of this PC (docs/how-to/many-pcs.md).
 
 The zenoh library is imported when a link is built, not when a spec is parsed.
 """
@@ -280,7 +280,7 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
     open_to = exposure(first)
     if open_to:
         log.warning("%s: WARNING: this gateway %s with no authentication: anyone on the network can read "
-                    "and write the swarm (configure TLS and user/password with config=, see README 'Many PCs')",
+                    "and write the swarm (configure TLS and user/password with config=, see docs/how-to/many-pcs.md)",
                     name, open_to)
     reaches = "; ".join(filter(None, (
         f"connecting to {', '.join(connecting)}" if connecting else "",

@@ -17,7 +17,7 @@ logged once, and `listening` names the port really bound.
 
 Congestion control is chosen by the caller: BLOCK where losing a sample loses
 data (replay, put), DROP for the gateway, whose protocol repairs losses and whose
-other links must not stall behind a slow network (README, "Many PCs").
+other links must not stall behind a slow network (docs/how-to/many-pcs.md).
 
 Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session subscribed),
 `tx_dropped`, `lost`, `unreachable`, `reconnects`.
