@@ -85,8 +85,8 @@ def command(robots: int, drop: float, seed: int, step: float, max_steps: int, ga
                     click.echo(f"step {s:3d}: {agreed:3d}/{robots} robots hold {robots}")
 
             report = run_demo(config, line, stop)
-    if stop.is_set():
+    if report.interrupted:  # run_demo sets `stop` itself to end its gateways: that is no interruption
         click.echo("interrupted", err=True)
     _report(report)
-    if report.converged_at is None and not stop.is_set():
+    if report.converged_at is None and not report.interrupted:
         raise click.ClickException(f"the swarm did not converge in {max_steps} steps")
