@@ -10,7 +10,7 @@ from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType
 
 from ._common import build_links, lossless
-from ._numbers import KEY
+from ._numbers import KEY, Finite
 from .errors import LINK, reports_errors
 from .put import shown
 
@@ -18,7 +18,7 @@ from .put import shown
 @click.command()
 @click.argument("key", type=KEY)
 @click.option("--on", "link", type=LINK, required=True, help="The link to ask through.")
-@click.option("--wait", type=click.FloatRange(0.0, 3600.0), default=2.0, show_default=True,
+@click.option("--wait", type=Finite(0.0, 3600.0), default=2.0, show_default=True,
               help="Seconds to ask and listen; the newest entry heard in that time is printed.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=254, show_default=True)
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)

@@ -11,7 +11,7 @@ from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
 from ._common import build_links, lossless
-from ._numbers import KEY, NegativeNumbersAreArguments
+from ._numbers import KEY, Finite, NegativeNumbersAreArguments
 from .errors import LINK, reports_errors
 
 
@@ -25,9 +25,9 @@ def shown(entry: Entry, value_type: ValueType) -> str:
 @click.option("--on", "link", type=LINK, required=True, help="The link to put through.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=254, show_default=True)
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
-@click.option("--learn", type=click.FloatRange(0.0, 60.0), default=0.5, show_default=True,
+@click.option("--learn", type=Finite(0.0, 60.0), default=0.5, show_default=True,
               help="Seconds to ask the swarm for the key first (every control step), so the write is newer.")
-@click.option("--wait", type=click.FloatRange(0.0, 3600.0), default=2.0, show_default=True,
+@click.option("--wait", type=Finite(0.0, 3600.0), default=2.0, show_default=True,
               help="Seconds each write waits for a neighbour to show it took the write.")
 @click.option("--tries", type=click.IntRange(1, 100), default=3, show_default=True,
               help="Writes at most, when the swarm answers with a newer or conflicting entry.")

@@ -30,6 +30,7 @@ from vstig_hw.links.zenoh import ZenohSpec
 from ._capture_options import filter_options
 from ._common import StatusLine, build_links, describe_links, must_hear, print_counters, run_until_stopped
 from ._files import overwrite_option, refuse_to_replace
+from ._numbers import Finite
 from .errors import LINK, reports_errors
 
 
@@ -78,7 +79,7 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
 @click.option("--append", is_flag=True, help=f"Add to FILE if it exists (CAN: {' '.join(APPENDABLE)}; serial).")
 @click.option("--max-bytes", help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
                                   "an existing numbered file is skipped, never replaced.")
-@click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @filter_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: str | None,

@@ -23,6 +23,7 @@ from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
 
 from ._files import overwrite_option, refuse_to_replace
+from ._numbers import Finite, finite
 
 
 def _model_options(fn: Any) -> Any:
@@ -31,11 +32,11 @@ def _model_options(fn: Any) -> Any:
         click.option("--budget", default=1, show_default=True, type=click.IntRange(1),
                      help="messages a robot may broadcast per control step"),
         click.option("--range", "radio_range", default=RANGE, show_default=True,
-                     type=click.FloatRange(0, min_open=True),
+                     type=Finite(0, min_open=True),
                      help="communication range R in metres"),
-        click.option("--density", default=DENSITY, show_default=True, type=click.FloatRange(0, min_open=True),
+        click.option("--density", default=DENSITY, show_default=True, type=Finite(0, min_open=True),
                      help="density D = N*pi*R^2 / area (cluster: L^2; motion: L^2 minus the 4 columns)"),
-        click.option("--body-radius", default=BODY_RADIUS, show_default=True, type=click.FloatRange(0),
+        click.option("--body-radius", default=BODY_RADIUS, show_default=True, type=Finite(0),
                      help="robot body radius in metres (overlap and line of sight)"),
         click.option("--occlusion/--no-occlusion", default=True, show_default=True,
                      help="bodies block line of sight, as in ARGoS"),
@@ -56,12 +57,12 @@ def _motion_options(fn: Any) -> Any:
     """How robots move in the motion arena (section 4.2); the speed cap is set per command."""
     options = [
         click.option("--control-step", default=Config.control_step, show_default=True,
-                     type=click.FloatRange(0, min_open=True),
+                     type=Finite(0, min_open=True),
                      help="seconds per control step: how long robots move in one (motion), and what turns steps "
                           "into seconds (B/s, --capture's times)"),
-        click.option("--repulsion", default=Config.repulsion, show_default=True, type=click.FloatRange(0),
+        click.option("--repulsion", default=Config.repulsion, show_default=True, type=Finite(0),
                      help="gap in metres at which a neighbour's or obstacle's push equals the forward drive (motion)"),
-        click.option("--turn-noise", default=Config.turn_noise, show_default=True, type=click.FloatRange(0),
+        click.option("--turn-noise", default=Config.turn_noise, show_default=True, type=Finite(0),
                      help="standard deviation of the random turn per control step, in radians (motion)"),
     ]
     for option in reversed(options):
@@ -98,7 +99,7 @@ def _progress(transient: bool = False) -> Any:
                    "or motion: robots diffusing through the arena of section 4.2.")
 @click.option("--robots", default=100, show_default=True, type=click.IntRange(1, U16_MAX + 1),
               help="swarm size N (robot ids 0..N-1)")
-@click.option("--drop", default=0.0, show_default=True, type=click.FloatRange(0, 1, max_open=True),
+@click.option("--drop", default=0.0, show_default=True, type=Finite(0, 1, max_open=True),
               help="packet drop probability P")
 @click.option("--runs", default=10, show_default=True, type=click.IntRange(1),
               help="Independent runs (new layout and losses each); the summary is over all of them.")
@@ -107,7 +108,7 @@ def _progress(transient: bool = False) -> Any:
               help="also write run 0's radio traffic as a CAN capture (.log candump, .asc, .blf...): robot i is "
                    "CAN node i, time = step x --control-step; for checking `vstig analyze`")
 @_model_options
-@click.option("--speed", default=Config.speed, show_default=True, type=click.FloatRange(0),
+@click.option("--speed", default=Config.speed, show_default=True, type=Finite(0),
               help="forward speed cap S in m/s (motion)")
 @_motion_options
 @click.option("--snapshot", type=click.Path(dir_okay=False, path_type=Path),
@@ -313,9 +314,10 @@ def paper_motion(runs: int, output: Path, robots: int, densities: str, speeds: s
 
 def _numbers(option: str, text: str) -> list[float]:
     try:
-        values = [float(part) for part in text.split(",") if part.strip()]
+        values = [finite(part) for part in text.split(",") if part.strip()]
     except ValueError:
-        raise click.BadParameter(f"{text!r} is not a comma-separated list of numbers", param_hint=option) from None
+        raise click.BadParameter(f"{text!r} is not a comma-separated list of finite numbers",
+                                 param_hint=option) from None
     if not values:
         raise click.BadParameter("needs at least one number", param_hint=option)
     return values

@@ -21,6 +21,7 @@ from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 from ._capture_options import filter_options
 from ._common import VALUE_TYPE_HELP, build_links, describe_links, must_hear, print_counters, run_until_stopped
 from ._guard import GuardChoice, guard_options, take_warnings
+from ._numbers import Finite
 from .errors import LINK, reports_errors
 
 _TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
@@ -58,7 +59,7 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 @click.option("--larger-value-wins", "larger", is_flag=True,
               help="Settle conflicts as a swarm running the paper's Figure 1 rule does (larger value), "
                    "instead of the default higher robot id.")
-@click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @click.option("--hide-refused", is_flag=True,
               help="Leave out what the guard options would refuse (it is still counted under the table).")
 @filter_options
