@@ -38,6 +38,25 @@ def finite(text: str) -> float:
     return number
 
 
+_SIZE_UNITS = {"k": 1 << 10, "m": 1 << 20, "g": 1 << 30}
+
+
+class ByteSize(click.ParamType):
+    """A positive size in bytes: 500000, 64k, 10M, 1G."""
+
+    name = "SIZE"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> int:
+        if isinstance(value, int):
+            return value
+        text = str(value)
+        scale = _SIZE_UNITS.get(text[-1:].lower(), 1)
+        number = text[:-1] if scale > 1 else text
+        if not number.isdigit() or int(number) <= 0:
+            self.fail(f"{text!r} is not a size like 500000, 64k or 10M", param, ctx)
+        return int(number) * scale
+
+
 class WireKey(click.ParamType):
     """A stigmergy key, 0..32767, written as VALUE may be: 23, 0x17, 0o27, 0b10111."""
 

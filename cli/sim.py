@@ -44,7 +44,7 @@ def _model_options(fn: Any) -> Any:
                      help="re-draw split layouts (else each robot must learn its own component's highest id)"),
         click.option("--max-steps", default=200_000, show_default=True, type=click.IntRange(1),
                      help="give up on a run after this many control steps"),
-        click.option("--seed", default=1, show_default=True, type=int,
+        click.option("--seed", default=1, show_default=True, type=click.IntRange(0),
                      help="Base random seed (each run derives its own from it): the same seed, the same results."),
         click.option("--workers", default=None, type=click.IntRange(1), help="processes [default: all cores]"),
     ]

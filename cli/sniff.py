@@ -133,18 +133,18 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
         return
     from rich.live import Live
 
-    if not sys.stdout.isatty():
-        click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
-                   "(--jsonl streams every message instead)", err=True)
+    with node:  # opened first: a port that cannot open is the one line said, with no note before it
+        if not sys.stdout.isatty():
+            click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
+                       "(--jsonl streams every message instead)", err=True)
+        with Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
+            def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
+                _warn(firewall)  # on a terminal, Live prints stderr above the table
+                height = live.console.size.height if live.console.is_terminal else None
+                live.update(_table(view, value_type, node, height))
 
-    with node, Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
-        def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
-            _warn(firewall)  # on a terminal, Live prints stderr above the table
-            height = live.console.size.height if live.console.is_terminal else None
-            live.update(_table(view, value_type, node, height))
-
-        describe_links(node)
-        run_until_stopped(node, redraw, duration)
+            describe_links(node)
+            run_until_stopped(node, redraw, duration)
     _warn(firewall)
     print_counters(node)
 

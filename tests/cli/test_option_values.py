@@ -66,3 +66,26 @@ def test_a_float_option_refuses_nan_and_inf_naming_the_option(tmp_path: Path, ar
     result = CliRunner().invoke(cli, line)
     assert result.exit_code == 2, result.output
     assert option in result.output and "Traceback" not in result.output, result.output
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [
+        (["sim", "--seed", "-5", "--runs", "1"], "--seed"),
+        (["sim", "paper", "--seed", "-5", "--runs", "1"], "--seed"),
+        (["record", "can:virtual:x", "-o", "{tmp}/r.log", "--max-bytes", "-5"], "--max-bytes"),
+        (["record", "can:virtual:x", "-o", "{tmp}/r.log", "--max-bytes", "0"], "--max-bytes"),
+    ],
+)
+def test_a_negative_count_or_size_is_a_usage_error_naming_the_option(tmp_path: Path, args: list[str],
+                                                                      option: str) -> None:
+    result = CliRunner().invoke(cli, [arg.format(tmp=tmp_path) for arg in args])
+    assert result.exit_code == 2, result.output
+    assert f"Invalid value for '{option}'" in result.output and "Traceback" not in result.output, result.output
+
+
+def test_sniff_on_a_missing_port_says_only_the_error() -> None:
+    result = CliRunner().invoke(cli, ["sniff", "serial:/dev/vstig-no-such-port"])  # stdout is no terminal here
+    assert result.exit_code == 1
+    assert result.output.splitlines() == [line for line in result.output.splitlines() if line.startswith("Error:")]
+    assert "vstig-no-such-port" in result.output
