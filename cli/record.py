@@ -56,8 +56,7 @@ def _target(output: str | None, link: LinkSpec, extension: str) -> str:
 def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
     if overwrite and append:
         raise click.UsageError("give --overwrite or --append, not both")
-    if not append:
-        refuse_to_replace(path, overwrite, ", --append adds to it")
+    refuse_to_replace(path, overwrite or append, ", --append adds to it")  # appending replaces nothing
 
 
 @click.command()

@@ -22,7 +22,7 @@ from vstig_hw.sim.grid import Cell
 from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
 
-from ._files import overwrite_option, refuse_to_replace
+from ._files import overwrite_option, refuse_links_in, refuse_to_replace
 from ._numbers import Finite, finite
 
 
@@ -200,6 +200,9 @@ def _unconverged_note(s: Summary, max_steps: int) -> None:
                    "(raise --max-steps)", err=True)
 
 
+_REPORTS = ("summary.csv", "runs.csv", "comparison.md")  # what `sim paper` and `paper-motion` write in -o DIR
+
+
 @command.command()
 @click.option("--runs", default=50, show_default=True, type=click.IntRange(1), help="runs per condition")
 @click.option("-o", "--output", "output", default=Path("sim-paper"), show_default=True,
@@ -214,6 +217,7 @@ def paper(runs: int, output: Path, sizes: tuple[int, ...], seed: int, workers: i
 
     template = _config("cluster", 10, 0.0, **model)
     configs = [c for c in paper_configs(template) if not sizes or c.robots in sizes]
+    refuse_links_in(output, (*_REPORTS, "figure3.png"))  # before the runs, which may take hours
     output.mkdir(parents=True, exist_ok=True)
     cells, wall = _run_grid("Figure 3 grid", configs, runs, seed, workers)
     write_csv(cells, output / "summary.csv", output / "runs.csv")
@@ -299,6 +303,7 @@ def paper_motion(runs: int, output: Path, robots: int, densities: str, speeds: s
                                                         grid["--drops"])]
     except ValueError as error:
         raise click.UsageError(str(error)) from None
+    refuse_links_in(output, (*_REPORTS, "figure5.png"))
     output.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()[0]
     cells, wall = _run_grid("Figure 5 grid", configs, runs, seed, workers)
