@@ -17,7 +17,7 @@ from typing import Any
 import click
 
 from vstig_hw.sim import Config, Summary, run_many, summarize
-from vstig_hw.sim.experiment import MOTION, TOPOLOGY_NAMES, RunResult, Task
+from vstig_hw.sim.experiment import MAX_RUNS, MAX_WORKERS, MOTION, TOPOLOGY_NAMES, RunResult, Task
 from vstig_hw.sim.grid import Cell
 from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
@@ -46,7 +46,8 @@ def _model_options(fn: Any) -> Any:
                      help="give up on a run after this many control steps"),
         click.option("--seed", default=1, show_default=True, type=click.IntRange(0),
                      help="Base random seed (each run derives its own from it): the same seed, the same results."),
-        click.option("--workers", default=None, type=click.IntRange(1), help="processes [default: all cores]"),
+        click.option("--workers", default=None, type=click.IntRange(1, MAX_WORKERS),
+                     help="processes [default: all cores]"),
     ]
     for option in reversed(options):
         fn = option(fn)
@@ -101,8 +102,9 @@ def _progress(transient: bool = False) -> Any:
               help="swarm size N (robot ids 0..N-1)")
 @click.option("--drop", default=0.0, show_default=True, type=Finite(0, 1, max_open=True),
               help="packet drop probability P")
-@click.option("--runs", default=10, show_default=True, type=click.IntRange(1),
-              help="Independent runs (new layout and losses each); the summary is over all of them.")
+@click.option("--runs", default=10, show_default=True, type=click.IntRange(1, MAX_RUNS),
+              help=f"Independent runs (new layout and losses each); the summary is over all of them (at most "
+                   f"{MAX_RUNS:,}; a bar on a terminal shows how far they are).")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--capture", type=click.Path(dir_okay=False, writable=True),
               help="also write run 0's radio traffic as a CAN capture (.log candump, .asc, .blf...): robot i is "
@@ -204,7 +206,8 @@ _REPORTS = ("summary.csv", "runs.csv", "comparison.md")  # what `sim paper` and 
 
 
 @command.command()
-@click.option("--runs", default=50, show_default=True, type=click.IntRange(1), help="runs per condition")
+@click.option("--runs", default=50, show_default=True, type=click.IntRange(1, MAX_RUNS),
+              help=f"runs per condition (at most {MAX_RUNS:,} over all conditions)")
 @click.option("-o", "--output", "output", default=Path("sim-paper"), show_default=True,
               type=click.Path(file_okay=False, path_type=Path), help="folder for the CSV, PNG and markdown")
 @click.option("--robots", "sizes", multiple=True, type=click.IntRange(1, U16_MAX + 1),
@@ -217,6 +220,7 @@ def paper(runs: int, output: Path, sizes: tuple[int, ...], seed: int, workers: i
 
     template = _config("cluster", 10, 0.0, **model)
     configs = [c for c in paper_configs(template) if not sizes or c.robots in sizes]
+    _bounded(runs, len(configs))
     refuse_links_in(output, (*_REPORTS, "figure3.png"))  # before the runs, which may take hours
     output.mkdir(parents=True, exist_ok=True)
     cells, wall = _run_grid("Figure 3 grid", configs, runs, seed, workers)
@@ -225,6 +229,14 @@ def paper(runs: int, output: Path, sizes: tuple[int, ...], seed: int, workers: i
     (output / "comparison.md").write_text(markdown_table(cells, runs, wall))
     _unconverged_cells(cells)
     click.echo(f"wrote {output}/summary.csv, runs.csv, figure3.png, comparison.md in {wall:.0f} s")
+
+
+def _bounded(runs: int, conditions: int) -> None:
+    """A grid's runs over all its conditions stay within MAX_RUNS (every result is held until the end)."""
+    if runs * conditions > MAX_RUNS:
+        raise click.BadParameter(f"{runs} runs x {conditions} conditions = {runs * conditions:,} runs, more than the "
+                                 f"{MAX_RUNS:,} a grid holds: at most {MAX_RUNS // conditions:,} per condition",
+                                 param_hint="'--runs'")
 
 
 def _run_grid(title: str, configs: list[Config], runs: int, seed: int, workers: int | None) -> tuple[list[Cell], float]:
@@ -277,7 +289,8 @@ def _draw_snapshot(config: Config, seed: int, step: int, path: Path) -> None:
 
 
 @command.command("paper-motion")
-@click.option("--runs", default=50, show_default=True, type=click.IntRange(1), help="runs per condition")
+@click.option("--runs", default=50, show_default=True, type=click.IntRange(1, MAX_RUNS),
+              help=f"runs per condition (at most {MAX_RUNS:,} over all conditions)")
 @click.option("-o", "--output", "output", default=Path("sim-paper-motion"), show_default=True,
               type=click.Path(file_okay=False, path_type=Path), help="folder for the CSV, PNG and markdown")
 @click.option("--robots", default=100, show_default=True, type=click.IntRange(1, U16_MAX + 1), help="swarm size N")
@@ -303,6 +316,7 @@ def paper_motion(runs: int, output: Path, robots: int, densities: str, speeds: s
                                                         grid["--drops"])]
     except ValueError as error:
         raise click.UsageError(str(error)) from None
+    _bounded(runs, len(configs))
     refuse_links_in(output, (*_REPORTS, "figure5.png"))
     output.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()[0]
