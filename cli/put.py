@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import click
 
 from vstig_hw.engine import Entry
@@ -51,7 +53,8 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
         raw = to_raw(value, value_type)
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="VALUE") from None
-    node = Node(build_links([lossless(link)], robot_id), robot_id)
+    started = time.monotonic()  # --learn and --wait bound the whole command: opening the link is part of them
+    node = Node(build_links([lossless(link, opening=learn + wait)], robot_id), robot_id)
     name = node.links[0].name
     transmit_only = getattr(node.links[0].framing, "transmit_only", False)
     if transmit_only and not no_confirm:
@@ -60,7 +63,7 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
     with node:
         try:
             result = put_confirmed(node, key, raw, learn=0.0 if transmit_only else learn, wait=wait, tries=tries,
-                                   confirm=not no_confirm)
+                                   confirm=not no_confirm, spent=time.monotonic() - started)
         except HearsItself as error:
             raise click.ClickException(str(error)) from None
     ours = shown(result.written, value_type)

@@ -90,12 +90,15 @@ class PutResult:
 
 
 def put_confirmed(node: Node, key: int, value: int, *, learn: float, wait: float, tries: int = 3,
-                  confirm: bool = True) -> PutResult:
+                  confirm: bool = True, spent: float = 0.0) -> PutResult:
     """Write `value` under `key` through an open ENGINE node, as described above.
 
     Each write waits up to `wait` seconds for a neighbour to show it. Without
     `confirm` (a radio that cannot answer) it writes once and returns unconfirmed.
+    `spent`: seconds already used opening the node, taken from `learn`, then from the first write's wait.
     """
+    learn, over = max(0.0, learn - spent), max(0.0, spent - learn)
+    first_wait = max(0.0, wait - over)
     engine = node.engine
     if engine is None:
         raise RuntimeError(f"a {node.mode.value} node cannot write")
@@ -111,7 +114,7 @@ def put_confirmed(node: Node, key: int, value: int, *, learn: float, wait: float
         written, made = _write(node, key, value), 1
         if confirm:
             while True:
-                node.run(until=partial(_settled, watch, written, engine), duration=wait)
+                node.run(until=partial(_settled, watch, written, engine), duration=first_wait if made == 1 else wait)
                 _check_not_echoed(node, watch, confirm)
                 if engine.entry(key) == written or made >= tries:
                     break
