@@ -9,8 +9,9 @@ from typing import Any
 
 import click
 
-from vstig_hw.gateway import ENGINE_STATS, Node, stop_on_signals
+from vstig_hw.gateway import Node, stop_on_signals
 from vstig_hw.links import Link, LinkSpec
+from vstig_hw.links.assemble import LinkBuildError, assemble_links
 from vstig_hw.links.can import CanSpec
 from vstig_hw.links.zenoh import ZenohSpec
 
@@ -22,24 +23,12 @@ def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool 
 
     A robot id that a CAN link's ID scheme has no room for is a usage error naming --robot-id.
     """
-    if not listen_only:
-        for spec in specs:
-            if isinstance(spec, CanSpec) and robot_id > spec.scheme().max_sender:
-                raise click.BadParameter(f"{robot_id} does not fit can:{spec.interface}:{spec.channel}: its "
-                                         f"{29 if spec.extended else 11}-bit IDs carry node ids "
-                                         f"0..{spec.scheme().max_sender} (extended=1 gives 29-bit IDs: 0..65535)",
-                                         param_hint="'--robot-id'")
-    links: list[Link[Any]] = []
-    seen: dict[str, int] = {ENGINE_STATS: 1}  # that name is taken by the engine's counters
-    for spec in specs:
-        name = spec.name
-        seen[name] = seen.get(name, 0) + 1
-        if seen[name] > 1:
-            name = f"{name}-{seen[name]}"
-        try:
-            links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
-        except ValueError as error:  # building opens nothing: what fails here is how the link was asked for
-            raise click.UsageError(f"{spec.kind}:{spec.name}: {error}") from None
+    try:
+        links = assemble_links(specs, robot_id, listen_only)
+    except LinkBuildError as error:
+        if error.argument == "robot_id":
+            raise click.BadParameter(str(error), param_hint="'--robot-id'") from None
+        raise click.UsageError(str(error)) from None
     for spec in specs:  # once every link could be built: a link that cannot (a missing extra) is the one line said
         if isinstance(spec, CanSpec) and spec.interface == "virtual":
             click.echo(f"note: can:virtual:{spec.channel} is a bus inside this process only: no other program "

@@ -8,7 +8,7 @@ import click
 
 from vstig_hw.engine import Entry
 from vstig_hw.gateway import Node
-from vstig_hw.gateway.oneshot import HearsItself, put_confirmed
+from vstig_hw.gateway.oneshot import HearsItself, not_taken, put_confirmed
 from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
@@ -66,14 +66,8 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
                                    confirm=not no_confirm, spent=time.monotonic() - started)
         except HearsItself as error:
             raise click.ClickException(str(error)) from None
-    ours = shown(result.written, value_type)
-    if result.superseded:
-        assert result.holds is not None
-        raise click.ClickException(f"key {key}: the swarm holds {shown(result.holds, value_type)} on {name}, "
-                                   f"not our write ({ours}), after {result.tries} writes")
-    if not result.confirmed and not no_confirm:
-        said = (f"the last entry heard was {shown(result.heard, value_type)}" if result.heard
-                else "nothing was heard for the key")
-        raise click.ClickException(f"key {key}: no neighbour on {name} took our write ({ours}) within "
-                                   f"{wait:g} s; {said}")
-    click.echo(f"put key={key} {ours} on {name}" + (" (not confirmed: --no-confirm)" if no_confirm else ""))
+    problem = not_taken(result, key, name, wait, lambda entry: shown(entry, value_type), confirm=not no_confirm)
+    if problem is not None:
+        raise click.ClickException(problem)
+    click.echo(f"put key={key} {shown(result.written, value_type)} on {name}"
+               + (" (not confirmed: --no-confirm)" if no_confirm else ""))

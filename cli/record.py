@@ -15,10 +15,10 @@ from vstig_hw.capture.files import (
     CAN_EXTENSIONS,
     MCAP_EXTENSION,
     RotatingCapture,
-    capture_suffix,
     link_names_lost,
 )
 from vstig_hw.capture.filters import Filter, RecordFilter
+from vstig_hw.capture.plan import capture_medium
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.extras import require
 from vstig_hw.framing.can import CanFraming
@@ -90,17 +90,10 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
     media = {_medium(link) for link in links}
     first = _medium(links[0])
     path = _target(output, links[0], MCAP_EXTENSION if len(media) > 1 else ".log" if first == "can" else ".cap")
-    medium = "mcap" if path.lower().endswith(MCAP_EXTENSION) else first
-    if medium != "mcap" and len(media) > 1:
-        raise click.UsageError(f"links of different media (CAN, serial, zenoh) go into a {MCAP_EXTENSION} capture "
-                               "together (a CAN log holds CAN frames, a serial capture UART bytes, a zenoh capture "
-                               "samples)")
-    if medium == "can" and not path.lower().endswith(CAN_EXTENSIONS):
-        raise click.UsageError(f"a CAN capture is chosen by extension: {', '.join(CAN_EXTENSIONS)} or "
-                               f"{MCAP_EXTENSION} (got {path})")
-    if medium == "can" and link_names_lost(path) and len(links) > 1:
-        raise click.UsageError(f"a {capture_suffix(path)} capture names no link, so {len(links)} links would become "
-                               "one: record them as .log, .asc, .blf or .mcap")
+    try:
+        medium = capture_medium(path, [_medium(link) for link in links])
+    except ValueError as error:
+        raise click.UsageError(str(error)) from None
     _refuse_to_destroy(path, overwrite, append)
     if medium == "mcap":
         require("mcap", f"vstig record -o {path}")  # before the links open

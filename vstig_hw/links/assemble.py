@@ -1,0 +1,72 @@
+"""Links from what a user names them by: spec strings, parsed specs or ready Link objects, with unique names.
+
+Shared by the CLI (`bridge`, `put`, `get`...) and the Python API (`vstig_hw.join`), so a spec means the
+same thing in both and the same bad spec gets the same one line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from ..gateway.node import ENGINE_STATS
+from .can import CanSpec
+from .link import Link, LinkSpec
+from .registry import parse
+
+__all__ = ["LinkBuildError", "assemble_links", "check_robot_id"]
+
+
+class LinkBuildError(ValueError):
+    """A link that cannot be built as asked; `argument` names what is wrong: "robot_id" or "links"."""
+
+    def __init__(self, message: str, argument: str) -> None:
+        super().__init__(message)
+        self.argument = argument
+
+
+def check_robot_id(specs: Sequence[LinkSpec], robot_id: int) -> None:
+    """LinkBuildError("robot_id") when a CAN spec's ID scheme has no room for `robot_id` as a sender."""
+    for spec in specs:
+        if isinstance(spec, CanSpec) and robot_id > spec.scheme().max_sender:
+            raise LinkBuildError(f"{robot_id} does not fit can:{spec.interface}:{spec.channel}: its "
+                                 f"{29 if spec.extended else 11}-bit IDs carry node ids 0..{spec.scheme().max_sender} "
+                                 "(extended=1 gives 29-bit IDs: 0..65535)", "robot_id")
+
+
+def assemble_links(items: Sequence[str | LinkSpec | Link[Any]], robot_id: int = 0,
+                   listen_only: bool = False) -> list[Link[Any]]:
+    """One Link per item, a spec named after its device (made unique: radio, radio-2...); Links pass as they are.
+
+    A bad spec or item raises LinkBuildError("links") with one line naming it.
+    """
+    specs: list[LinkSpec | Link[Any]] = []
+    for number, item in enumerate(items):
+        if isinstance(item, str):
+            try:
+                specs.append(parse(item))
+            except ValueError as error:
+                raise LinkBuildError(str(error), "links") from None
+        elif isinstance(item, Link | LinkSpec):
+            specs.append(item)
+        else:
+            raise LinkBuildError(f"link {number + 1} is a {type(item).__name__}: give a spec string "
+                                 "(e.g. 'can:socketcan:can0') or a Link", "links")
+    if not listen_only:
+        check_robot_id([spec for spec in specs if not isinstance(spec, Link)], robot_id)
+    links: list[Link[Any]] = []
+    seen: dict[str, int] = {ENGINE_STATS: 1}  # that name is taken by the engine's counters
+    for spec in specs:
+        if isinstance(spec, Link):
+            seen[spec.name] = seen.get(spec.name, 0) + 1
+            links.append(spec)
+            continue
+        name = spec.name
+        seen[name] = seen.get(name, 0) + 1
+        if seen[name] > 1:
+            name = f"{name}-{seen[name]}"
+        try:
+            links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
+        except ValueError as error:  # building opens nothing: what fails here is how the link was asked for
+            raise LinkBuildError(f"{spec.kind}:{spec.name}: {error}", "links") from None
+    return links
