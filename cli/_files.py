@@ -2,11 +2,8 @@
 
 A file the user names may be the wrong one (a capture typed where a picture was meant), so every command
 refuses it the same way, before doing any work. Reports a command names itself inside an output folder
-(`sim paper -o DIR`) are its own and are regenerated in place.
-
-No output is written through a symbolic link, with or without --overwrite: a dangling link would create its
-target wherever it points, and a live one replace a file the user never named (a capture tool is often run as
-root). A link to a folder is fine: the file made inside it is a new name.
+(`sim paper -o DIR`) are its own and are regenerated in place. No output is written through a symbolic
+link, even with --overwrite (vstig_hw.outputs, the rule a program's recordings follow too).
 """
 
 from __future__ import annotations
@@ -18,6 +15,8 @@ from typing import Any
 
 import click
 
+from vstig_hw.outputs import LinkedOutput, refuse_symlink
+
 
 def overwrite_option(target: str) -> Callable[..., Any]:
     """The --overwrite flag of a command that writes `target` (how its help names the file)."""
@@ -26,9 +25,10 @@ def overwrite_option(target: str) -> Callable[..., Any]:
 
 def refuse_link(path: str | Path) -> None:
     """A usage error naming `path` if it is a symbolic link (dangling or not)."""
-    if os.path.islink(path):
-        raise click.UsageError(f"{path} is a symbolic link: name the file itself (no output is written "
-                               "through a link, even with --overwrite)")
+    try:
+        refuse_symlink(path)
+    except LinkedOutput as error:
+        raise click.UsageError(str(error)) from None
 
 
 def refuse_links_in(folder: Path, names: tuple[str, ...]) -> None:
