@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 CORE_STAMP := $(VENV)/.installed-core
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck pytest bench sysdeps clean fuzz soak
+.PHONY: demo test lint typecheck layers pytest bench sysdeps clean fuzz soak
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -33,10 +33,14 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# The import contracts in pyproject.toml ([tool.importlinter]): layers, and no cycles.
+layers: $(STAMP)
+	$(BIN)/lint-imports
+
 pytest: $(STAMP) sysdeps
 	$(BIN)/pytest
 
-test: lint typecheck pytest
+test: lint typecheck layers pytest
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks

@@ -13,9 +13,7 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.files import READABLE_EXTENSIONS, sniff_suffix
-from vstig_hw.capture.records import CaptureError
-from vstig_hw.capture.serial_log import is_serial_capture
+from vstig_hw.capture.records import READABLE_EXTENSIONS, CaptureError, line_capture_at, sniff_suffix
 
 __all__ = ["INPUT_FORMATS", "input_format_option", "input_name", "readable_capture", "renamed"]
 
@@ -44,7 +42,7 @@ def renamed(error: CaptureError, read: str, name: str) -> CaptureError:
 def readable_capture(path: str, input_format: str | None) -> Iterator[str]:
     """A regular file to read `path` from whose name shows its type; a stream (-, a pipe) is copied first."""
     regular = path != "-" and os.path.isfile(path)
-    if regular and input_format is None and (path.lower().endswith(READABLE_EXTENSIONS) or is_serial_capture(path)):
+    if regular and input_format is None and (path.lower().endswith(READABLE_EXTENSIONS) or line_capture_at(path)):
         yield path
         return
     with tempfile.TemporaryDirectory(prefix="vstig-capture-") as folder:

@@ -16,6 +16,7 @@ from ._numbers import Finite
 F = TypeVar("F", bound=Callable[..., Any])
 
 SHOWN_SKIPPED = 5  # damage lines shown; the summary counts them all
+VALUE_TYPE_HELP = "How to show the 16-bit value field: unsigned, signed (two's complement) or half-precision float."
 skip_bad_option = click.option(
     "--skip-bad", is_flag=True,
     help="Count malformed lines, and a file cut short (a killed recorder's), and go on instead of stopping there.")
@@ -40,8 +41,6 @@ def parse_id_base(text: str | None) -> int | None:
 def reading_options(fn: F) -> F:
     """Add how to read captures: --skip-bad, --value-type, --id-base, --extended, --deployment."""
     from vstig_hw.values import VALUE_TYPES
-
-    from ._common import VALUE_TYPE_HELP
 
     options = [
         skip_bad_option,

@@ -15,8 +15,6 @@ from vstig_hw.links.assemble import LinkBuildError, assemble_links
 from vstig_hw.links.can import CanSpec
 from vstig_hw.links.zenoh import ZenohSpec
 
-VALUE_TYPE_HELP = "How to show the 16-bit value field: unsigned, signed (two's complement) or half-precision float."
-
 
 def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool = False) -> list[Link[Any]]:
     """One Link per spec, named after its device (made unique: radio, radio-2...).

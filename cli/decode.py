@@ -10,11 +10,9 @@ from collections.abc import Callable, Iterator
 
 import click
 
-from vstig_hw.capture.convert import convert
-from vstig_hw.capture.decodefile import FORMATS, decode_file
-from vstig_hw.capture.files import CAN_EXTENSIONS, MCAP_EXTENSION, link_names_lost
+from vstig_hw.capture.decoded import FORMATS, decode_file
 from vstig_hw.capture.filters import Filter
-from vstig_hw.capture.records import CaptureError
+from vstig_hw.capture.records import CAN_EXTENSIONS, MCAP_EXTENSION, CaptureError, link_names_lost
 from vstig_hw.capture.time_columns import TIME_STYLES, TimeColumn
 from vstig_hw.extras import require
 from vstig_hw.values import ValueType
@@ -30,6 +28,8 @@ _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth
 def _convert(files: dict[str, str], output: str, skip_bad: bool, base: int | None, extended: bool,
              deployment: str | None, keep: Filter) -> None:
     """Convert `files` (the file read -> the name the user gave) into `output`; errors name the user's files."""
+
+    from vstig_hw.capture.convert import convert  # only -o converts: decode's printing path never loads it
 
     def named(error: CaptureError) -> CaptureError:
         return renamed(error, error.path, files.get(error.path, error.path))

@@ -7,7 +7,7 @@ from typing import Any
 
 import click
 
-from vstig_hw.demo_swarm import DemoConfig, DemoReport, Medium, run_demo
+from vstig_hw.demo.swarm import DemoConfig, DemoReport, Medium, run_demo
 from vstig_hw.extras import require
 from vstig_hw.gateway import stop_on_signals
 

@@ -10,17 +10,31 @@ import functools
 import os
 import traceback
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
 from vstig_hw.capture.records import CaptureError
-from vstig_hw.links import LinkSpec, parse
-from vstig_hw.transports.base import TransportError, one_line
+
+if TYPE_CHECKING:
+    from vstig_hw.links import LinkSpec
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-RUNTIME_ERRORS = (TransportError, CaptureError, OSError, ValueError, RuntimeError)
+
+def runtime_errors() -> tuple[type[Exception], ...]:
+    """The errors a user can cause; the transports' module is loaded only once something failed (decode never
+    loads a transport)."""
+    from vstig_hw.transports.base import TransportError
+
+    return (TransportError, CaptureError, OSError, ValueError, RuntimeError)
+
+
+def one_line(error: BaseException) -> str:
+    """The transports' one-line form of an error, loaded (like `runtime_errors`) only once something failed."""
+    from vstig_hw.transports.base import one_line
+
+    return one_line(error)
 
 
 def debugging() -> bool:
@@ -48,13 +62,12 @@ def reports_errors(fn: F) -> F:
             return fn(*args, **kwargs)
         except (click.ClickException, click.exceptions.Exit, click.Abort, KeyboardInterrupt):
             raise
-        except RUNTIME_ERRORS as error:
+        except Exception as error:
             if debugging():
                 traceback.print_exc()
-            raise click.ClickException(describe(error)) from None
-        except Exception as error:  # a bug, not the user's fault: still one line unless debugging
-            if debugging():
-                traceback.print_exc()
+            if isinstance(error, runtime_errors()):
+                raise click.ClickException(describe(error)) from None
+            # a bug, not the user's fault: still one line unless debugging
             raise click.ClickException(f"unexpected {type(error).__name__}: {one_line(error)} "
                                        "(run `vstig --debug ...` for the traceback)") from None
 
@@ -68,6 +81,8 @@ class LinkSpecType(click.ParamType):
     name = "LINK"
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> LinkSpec:
+        from vstig_hw.links import LinkSpec, parse  # when a command takes links: decode never loads them
+
         if isinstance(value, LinkSpec):
             return value
         try:

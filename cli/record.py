@@ -9,17 +9,18 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.decoded import Decoder, default_framings
-from vstig_hw.capture.files import (
+from vstig_hw.capture.decoded import Decoder, RecordFilter, default_framings
+from vstig_hw.capture.files import RotatingCapture
+from vstig_hw.capture.filters import Filter
+from vstig_hw.capture.plan import capture_medium
+from vstig_hw.capture.records import (
     APPENDABLE,
     CAN_EXTENSIONS,
+    CAN_FRAMING,
     MCAP_EXTENSION,
-    RotatingCapture,
+    Record,
     link_names_lost,
 )
-from vstig_hw.capture.filters import Filter, RecordFilter
-from vstig_hw.capture.plan import capture_medium
-from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.extras import require
 from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node

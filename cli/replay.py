@@ -10,10 +10,9 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.decoded import Decoder, default_framings
-from vstig_hw.capture.files import read_capture
-from vstig_hw.capture.filters import Filter, filter_records
-from vstig_hw.capture.records import CAN_FRAMING, CaptureError, Record
+from vstig_hw.capture.decoded import Decoder, default_framings, filter_records
+from vstig_hw.capture.filters import Filter
+from vstig_hw.capture.records import CAN_FRAMING, CaptureError, Record, read_capture
 from vstig_hw.capture.replay import replay
 from vstig_hw.engine import Stigmergy
 from vstig_hw.gateway import stop_on_signals
@@ -21,8 +20,8 @@ from vstig_hw.links import Link, LinkSpec
 from vstig_hw.links.can import CanSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._capture_options import echo_skipped, filter_options, skip_bad_option
-from ._common import VALUE_TYPE_HELP, StatusLine, build_links, lossless
+from ._capture_options import VALUE_TYPE_HELP, echo_skipped, filter_options, skip_bad_option
+from ._common import StatusLine, build_links, lossless
 from ._numbers import Finite
 from .errors import LINK, reports_errors
 

@@ -18,8 +18,8 @@ from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._capture_options import filter_options
-from ._common import VALUE_TYPE_HELP, build_links, describe_links, must_hear, print_counters, run_until_stopped
+from ._capture_options import VALUE_TYPE_HELP, filter_options
+from ._common import build_links, describe_links, must_hear, print_counters, run_until_stopped
 from ._guard import GuardChoice, guard_options, take_warnings
 from ._numbers import Finite
 from .errors import LINK, reports_errors

@@ -3,22 +3,28 @@
 from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
-from .engine import Entry, Outcome, Stigmergy
 from .wire import DecodeError, Message, Op, decode, encode
+
+if TYPE_CHECKING:
+    from .api import Change, NotTaken, Swarm, SwarmClosed, join
+    from .engine import Entry, Outcome, Stigmergy
 
 __version__ = "0.1.0"
 
 __all__ = ["Change", "DecodeError", "Entry", "Message", "NotTaken", "Op", "Outcome", "Stigmergy", "Swarm",
            "SwarmClosed", "__version__", "decode", "encode", "join"]
 
-# The Python API loads when first used, so `import vstig_hw` stays light (no threads, no link modules).
+# The engine and the Python API load when first used, so `import vstig_hw` stays light: a command that
+# only reads captures never loads the engine, and nothing starts threads or imports link modules.
+_ENGINE = ("Entry", "Outcome", "Stigmergy")
 _API = ("Change", "NotTaken", "Swarm", "SwarmClosed", "join")
-
-if TYPE_CHECKING:
-    from .api import Change, NotTaken, Swarm, SwarmClosed, join
 
 
 def __getattr__(name: str) -> Any:
+    if name in _ENGINE:
+        from . import engine
+
+        return getattr(engine, name)
     if name in _API:
         from . import api
 

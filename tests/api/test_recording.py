@@ -13,7 +13,7 @@ import pytest
 import vstig_hw
 from vstig_hw import Entry, Stigmergy
 from vstig_hw.api.virtual import VirtualRobots
-from vstig_hw.capture.decodefile import decode_file
+from vstig_hw.capture.decoded import decode_file
 
 
 class Writer:

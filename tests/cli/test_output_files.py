@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from vstig_cli.main import cli
-from vstig_hw.capture.files import read_capture
+from vstig_hw.capture.records import read_capture
 
 LOG = "".join(f"(1700000000.{i}00000) can0 60{i}#000300{i:02X}00010001\n" for i in range(1, 4))
 PRECIOUS = b"an earlier capture"

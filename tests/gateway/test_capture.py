@@ -18,10 +18,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vstig_hw.capture import candump
-from vstig_hw.capture.decodefile import decode_file
+from vstig_hw.capture.decoded import decode_file
 from vstig_hw.capture.fastlog import chunk_to_jsonl
-from vstig_hw.capture.files import RotatingCapture, read_capture, rotated_name
-from vstig_hw.capture.records import CaptureError, Record
+from vstig_hw.capture.files import RotatingCapture, rotated_name
+from vstig_hw.capture.records import CaptureError, Record, read_capture
 from vstig_hw.capture.replay import replay
 from vstig_hw.capture.serial_log import HEADER, parse_line
 

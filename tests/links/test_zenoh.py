@@ -256,8 +256,8 @@ def test_a_client_with_no_router_retries_with_backoff_instead_of_failing(caplog:
 
 # -- the zenoh capture -----------------------------------------------------------------
 def test_a_zenoh_capture_round_trips_and_a_bad_line_is_named(tmp_path: Path) -> None:
-    from vstig_hw.capture.files import RotatingCapture, read_capture
-    from vstig_hw.capture.records import CaptureError, Record
+    from vstig_hw.capture.files import RotatingCapture
+    from vstig_hw.capture.records import CaptureError, Record, read_capture
 
     path = str(tmp_path / "lab.zcap")
     sample = ZenohFraming(ZenohKeySpace("lab"), sender=201).encode_batch(MESSAGES)[0]
@@ -400,7 +400,8 @@ def test_clients_survive_their_router_going_away_and_coming_back(caplog: pytest.
 
 
 def test_capture_filters_cut_a_zenoh_sample_by_key_and_sender() -> None:
-    from vstig_hw.capture.filters import Filter, filter_records
+    from vstig_hw.capture.decoded import filter_records
+    from vstig_hw.capture.filters import Filter
     from vstig_hw.capture.records import Record
 
     space = ZenohKeySpace("lab")

@@ -28,7 +28,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from ..demo_swarm import CanRobots, Medium, PtyRadio
+from ..demo.swarm import CanRobots, Medium, PtyRadio
 from ..engine import ConflictResolver, Stigmergy, larger_value_wins
 from ..framing import make_serial_framing
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .files import CAN_EXTENSIONS, MCAP_EXTENSION, capture_suffix, link_names_lost
+from .records import CAN_EXTENSIONS, MCAP_EXTENSION, capture_suffix, link_names_lost
 
 __all__ = ["capture_medium"]
 

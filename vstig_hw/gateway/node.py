@@ -36,7 +36,7 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from ..counters import Counters
+from ..counters import ENGINE_STATS, Counters
 from ..engine import ConflictResolver, Entry, Outcome, Stigmergy
 from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
@@ -50,7 +50,6 @@ __all__ = ["DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "
 
 DEFAULT_PERIOD = 0.1  # the paper's control step
 DEFAULT_BUDGET = 64  # messages per link per tick: ~8 kB/s of cobs8, within a 115200-baud radio
-ENGINE_STATS = "engine"  # the stats() entry of the engine's outcome counts
 
 
 SWITCH_INTERVAL = 0.0005  # seconds: how soon a reader thread with a frame gets the GIL from the loop

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from ..gateway.node import ENGINE_STATS
+from ..counters import ENGINE_STATS
 from .can import CanSpec
 from .link import Link, LinkSpec
 from .registry import parse

@@ -28,14 +28,14 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from .counters import Counters
-from .engine import Stigmergy, larger_value_wins
-from .framing import make_serial_framing
-from .gateway import Node
-from .links.can import CanSpec
-from .links.link import Link
-from .links.serial import SerialSpec
-from .links.zenoh import ZenohSpec
+from ..counters import Counters
+from ..engine import Stigmergy, larger_value_wins
+from ..framing import make_serial_framing
+from ..gateway import Node
+from ..links.can import CanSpec
+from ..links.link import Link
+from ..links.serial import SerialSpec
+from ..links.zenoh import ZenohSpec
 
 __all__ = ["DemoConfig", "DemoReport", "run_demo"]
 
@@ -138,7 +138,7 @@ class CanRobots:
     def __init__(self, medium: Medium, channel: str, drop: float, rng: random.Random) -> None:
         import can
 
-        from .framing.can import can_framing_for
+        from ..framing.can import can_framing_for
 
         self.medium, self.drop, self.rng = medium, drop, rng
         self.buses = [can.Bus(interface="virtual", channel=channel) for _ in medium.robots]
