@@ -20,7 +20,7 @@ class Finite(click.FloatRange):
 
     Click's FloatRange lets NaN through every bound (no comparison with NaN is true) and `inf` through an open
     one: `--wait nan` would wait for ever, `--speed nan` send everything at once. Every float option uses this
-    type (tests/cli/test_usage.py walks them all).
+    type (tests/cli/test_option_values.py walks them all).
     """
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
