@@ -11,6 +11,8 @@ import click
 
 from vstig_hw.capture.records import CaptureError
 
+from ._numbers import Finite
+
 F = TypeVar("F", bound=Callable[..., Any])
 
 SHOWN_SKIPPED = 5  # damage lines shown; the summary counts them all
@@ -69,8 +71,8 @@ def filter_options(fn: F) -> F:
         click.option("--op", "only_ops", multiple=True, type=click.Choice(["PUT", "GET"], case_sensitive=False),
                      help="Only PUTs or only GETs."),
         click.option("--link", "only_links", multiple=True, help="Only this link, by name (repeatable)."),
-        click.option("--since", type=click.FloatRange(0), help="Only from this many seconds after the first record."),
-        click.option("--until", type=click.FloatRange(0), help="Only before this many seconds after the first record."),
+        click.option("--since", type=Finite(0), help="Only from this many seconds after the first record."),
+        click.option("--until", type=Finite(0), help="Only before this many seconds after the first record."),
     ]
 
     @functools.wraps(fn)

@@ -42,9 +42,15 @@ def describe_links(node: Node) -> None:
             click.echo(f"{link.name}: {about}", err=True)
 
 
-def lossless(spec: LinkSpec) -> LinkSpec:
-    """The spec for a command that must not lose what it sends (put, get, replay): Zenoh BLOCKs, not DROPs."""
-    return replace(spec, block=True) if isinstance(spec, ZenohSpec) else spec
+def lossless(spec: LinkSpec, opening: float | None = None) -> LinkSpec:
+    """The spec for a command that must not lose what it sends (put, get, replay): Zenoh BLOCKs, not DROPs.
+
+    `opening`: the seconds a one-shot command (get, put) lets the link take to open, so its --wait bounds the
+    whole command (a Zenoh link otherwise waits 3 s for a peer it was told to connect to).
+    """
+    if not isinstance(spec, ZenohSpec):
+        return spec
+    return replace(spec, block=True, **({} if opening is None else {"peer_wait": opening}))
 
 
 def run_until_stopped(node: Node, status: Any = None, duration: float | None = None) -> None:

@@ -13,6 +13,8 @@ from vstig_hw.gateway.guard import DEFAULT_MAX_JUMP, Guard, IdSet, LinkPolicy
 from vstig_hw.links import Link
 from vstig_hw.wire import KEY_MAX, U16_MAX
 
+from ._numbers import Finite
+
 Pairs = list[tuple[str, IdSet]]
 
 
@@ -38,15 +40,15 @@ _OPTIONS = [
                  help="Refuse a PUT/GET more than N timestamps newer than our entry (drop_jump); 0 turns it off. "
                       "A climb in steps skips at most N timestamps a second per key. "
                       "A key we do not hold passes at any timestamp (see --learn)."),
-    click.option("--learn", type=click.FloatRange(0.0), metavar="S",
+    click.option("--learn", type=Finite(0.0), metavar="S",
                  help="S seconds after the first message heard, a key we do not hold yet is new to the swarm: "
                       "it must start within --max-jump of timestamp 0 (drop_jump). Default: it passes at any "
                       "timestamp."),
-    click.option("--rate", type=click.FloatRange(0.0, min_open=True), metavar="N",
+    click.option("--rate", type=Finite(0.0, min_open=True), metavar="N",
                  help="At most N messages per second from each sender id the medium names (CAN node id, zenoh "
                       "gateway id; a serial link is one sender); excess counted drop_rate. Ids are claims: "
                       "see --source-rate."),
-    click.option("--source-rate", type=click.FloatRange(0.0, min_open=True), metavar="N",
+    click.option("--source-rate", type=Finite(0.0, min_open=True), metavar="N",
                  help="At most N messages per second from each real source, whatever ids it claims: a serial or "
                       "CAN link is one source, a zenoh peer's session (the id zenoh stamps on its samples) is one; "
                       "excess counted drop_source_rate."),
@@ -59,7 +61,7 @@ _OPTIONS = [
                  help="The keys LINK may write, e.g. radio=100-199 (drop_key); it may still read any. Repeatable."),
     click.option("--read-only", multiple=True, metavar="LINK",
                  help="What LINK says reaches our table but is never relayed to another link. Repeatable."),
-    click.option("--flap", type=click.FloatRange(0.0, min_open=True), metavar="M",
+    click.option("--flap", type=Finite(0.0, min_open=True), metavar="M",
                  help="Warn once about a key that changes hands by conflict more than M times a second "
                       "(two robots sharing an id)."),
 ]

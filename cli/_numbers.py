@@ -1,7 +1,9 @@
-"""Command-line numbers for `put` and `get`: a KEY in decimal or hex, and negative VALUEs without `--`."""
+"""Command-line numbers: finite floats for every float option, a KEY in decimal or hex, and negative VALUEs
+without `--` (put, get)."""
 
 from __future__ import annotations
 
+import math
 import re
 from typing import Any
 
@@ -11,6 +13,48 @@ from vstig_hw.wire import KEY_MAX
 
 # What a negative VALUE looks like (int16 -5, float16 -1.5e3, -inf, -0x10): an argument, not an option.
 _NEGATIVE_NUMBER = re.compile(r"-(\d|\.\d|inf\b|nan\b)", re.IGNORECASE)
+
+
+class Finite(click.FloatRange):
+    """A float option's type: a finite number, within the bounds given (as click.FloatRange).
+
+    Click's FloatRange lets NaN through every bound (no comparison with NaN is true) and `inf` through an open
+    one: `--wait nan` would wait for ever, `--speed nan` send everything at once. Every float option uses this
+    type (tests/cli/test_option_values.py walks them all).
+    """
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        number = click.FLOAT.convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return super().convert(number, param, ctx)
+
+
+def finite(text: str) -> float:
+    """A finite float from text a command splits itself (`--drops 0,0.5`); ValueError otherwise."""
+    number = float(text)
+    if not math.isfinite(number):
+        raise ValueError(f"{text!r} is not a finite number")
+    return number
+
+
+_SIZE_UNITS = {"k": 1 << 10, "m": 1 << 20, "g": 1 << 30}
+
+
+class ByteSize(click.ParamType):
+    """A positive size in bytes: 500000, 64k, 10M, 1G."""
+
+    name = "SIZE"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> int:
+        if isinstance(value, int):
+            return value
+        text = str(value)
+        scale = _SIZE_UNITS.get(text[-1:].lower(), 1)
+        number = text[:-1] if scale > 1 else text
+        if not number.isdigit() or int(number) <= 0:
+            self.fail(f"{text!r} is not a size like 500000, 64k or 10M", param, ctx)
+        return int(number) * scale
 
 
 class WireKey(click.ParamType):

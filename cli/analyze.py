@@ -22,6 +22,7 @@ from vstig_hw.values import ValueType, from_raw
 from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
 from ._capture_options import echo_skipped, filter_options, parse_id_base, reading_options
 from ._files import overwrite_option, refuse_to_replace
+from ._numbers import Finite
 from .errors import reports_errors
 
 _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a terminal)
@@ -35,7 +36,7 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
               help="Write a PNG: (a) a key's writes spreading through the senders, (b) convergence times, "
                    "(c) traffic per link (alone where no link names senders).")
 @overwrite_option("the --plot FILE")
-@click.option("--window", default=DEFAULT_WINDOW, show_default=True, type=click.FloatRange(0, min_open=True),
+@click.option("--window", default=DEFAULT_WINDOW, show_default=True, type=Finite(0, min_open=True),
               help="Seconds either side of a write in which a sender must be heard to count as active.")
 @click.option("--conflict", type=click.Choice(CONFLICT_RULES), default="robot", show_default=True,
               help="Which of two writes with one timestamp is newer: the higher robot id (Buzz's default) "

@@ -12,6 +12,7 @@ from vstig_hw.links import LinkSpec
 
 from ._common import build_links, describe_links, print_counters, run_until_stopped
 from ._guard import GuardChoice, guard_options, take_warnings
+from ._numbers import Finite
 from .errors import LINK, reports_errors
 
 
@@ -25,7 +26,7 @@ def _raw_note(robot_id: int | None) -> str:
 @click.command()
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), help="The PC's robot id (required unless --raw).")
-@click.option("--tick", type=click.FloatRange(0.001, 60), default=DEFAULT_PERIOD, show_default=True,
+@click.option("--tick", type=Finite(0.001, 60), default=DEFAULT_PERIOD, show_default=True,
               help="Control period in seconds.")
 @click.option("--budget", type=click.IntRange(1, 1_000_000), default=DEFAULT_BUDGET, show_default=True,
               help="Messages per link per tick.")
@@ -35,7 +36,7 @@ def _raw_note(robot_id: int | None) -> str:
 @click.option("--refresh/--no-refresh", default=True, show_default=True,
               help="GET one key of the table per tick, round-robin, as a robot's program would: repairs gateways "
                    "that were apart (network partition, restart) without waiting for the next write.")
-@click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @guard_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,

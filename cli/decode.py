@@ -19,7 +19,7 @@ from vstig_hw.values import ValueType
 
 from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
 from ._capture_options import echo_skipped, filter_options, parse_id_base, reading_options
-from ._files import overwrite_option, refuse_to_replace
+from ._files import overwrite_option, refuse_link, refuse_to_replace
 from .errors import reports_errors
 
 _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
@@ -119,6 +119,7 @@ def _check_choices(fmt: str, time_style: str | None, output: str | None) -> None
 def _check_output(output: str, files: tuple[str, ...], fmt: str, overwrite: bool) -> None:
     """Before any reading: -o has a name we can write (--format mcap: an .mcap one), an existing one needs
     --overwrite, and no input is the output (writing would empty it before it was read)."""
+    refuse_link(output)  # first: a link to an input is refused as a link
     if fmt == "mcap" and not output.lower().endswith(MCAP_EXTENSION):
         raise click.UsageError(f"an MCAP capture is named *{MCAP_EXTENSION} (got {output})")
     if os.path.exists(output) and any(path != "-" and os.path.samefile(path, output) for path in files):

@@ -11,6 +11,7 @@ from vstig_hw.demo.swarm import DemoConfig, DemoReport, Medium, run_demo
 from vstig_hw.extras import require
 from vstig_hw.gateway import stop_on_signals
 
+from ._numbers import Finite
 from .errors import reports_errors
 
 
@@ -52,10 +53,10 @@ def _report(report: DemoReport) -> None:
 @click.command()
 @click.option("--robots", default=30, show_default=True, type=click.IntRange(6, 240),
               help="Swarm size, split over the three media.")
-@click.option("--drop", default=0.75, show_default=True, type=click.FloatRange(0, 0.95),
+@click.option("--drop", default=0.75, show_default=True, type=Finite(0, 0.95),
               help="Probability that a robot (or the gateway, on a radio) misses a message.")
 @click.option("--seed", default=1, show_default=True, type=int, help="Random seed: the same seed, the same run.")
-@click.option("--step", default=0.1, show_default=True, type=click.FloatRange(0.01, 1.0),
+@click.option("--step", default=0.1, show_default=True, type=Finite(0.01, 1.0),
               help="Seconds per control step.")
 @click.option("--max-steps", default=300, show_default=True, type=click.IntRange(1, 10_000),
               help="Give up (exit 1) if the swarm has not agreed after this many control steps.")
@@ -85,8 +86,8 @@ def command(robots: int, drop: float, seed: int, step: float, max_steps: int, ga
                     click.echo(f"step {s:3d}: {agreed:3d}/{robots} robots hold {robots}")
 
             report = run_demo(config, line, stop)
-    if stop.is_set():
+    if report.interrupted:  # run_demo sets `stop` itself to end its gateways: that is no interruption
         click.echo("interrupted", err=True)
     _report(report)
-    if report.converged_at is None and not stop.is_set():
+    if report.converged_at is None and not report.interrupted:
         raise click.ClickException(f"the swarm did not converge in {max_steps} steps")

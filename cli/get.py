@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import click
 
 from vstig_hw.gateway import Node
@@ -10,7 +12,7 @@ from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType
 
 from ._common import build_links, lossless
-from ._numbers import KEY
+from ._numbers import KEY, Finite
 from .errors import LINK, reports_errors
 from .put import shown
 
@@ -18,7 +20,7 @@ from .put import shown
 @click.command()
 @click.argument("key", type=KEY)
 @click.option("--on", "link", type=LINK, required=True, help="The link to ask through.")
-@click.option("--wait", type=click.FloatRange(0.0, 3600.0), default=2.0, show_default=True,
+@click.option("--wait", type=Finite(0.0, 3600.0), default=2.0, show_default=True,
               help="Seconds to ask and listen; the newest entry heard in that time is printed.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=254, show_default=True)
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
@@ -31,12 +33,13 @@ def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: Va
 
     Example: vstig get 3 --on serial:/dev/ttyUSB0?framing=epuck4 --wait 5
     """
-    node = Node(build_links([lossless(link)], robot_id), robot_id)
+    started = time.monotonic()  # --wait bounds the whole command: opening the link is part of it
+    node = Node(build_links([lossless(link, opening=wait)], robot_id), robot_id)
     name = node.links[0].name
     if getattr(node.links[0].framing, "transmit_only", False):
         raise click.BadParameter(f"{name} only transmits: no neighbour can answer", param_hint="'--on'")
     with node:
-        entry = get_newest(node, key, wait)
+        entry = get_newest(node, key, max(0.0, wait - (time.monotonic() - started)))
     if entry is None:
         raise click.ClickException(f"no neighbour on {name} answered for key {key} within {wait:g} s")
     click.echo(f"key={key} {shown(entry, value_type)}")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import click
 
 from vstig_hw.engine import Entry
@@ -11,7 +13,7 @@ from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
 from ._common import build_links, lossless
-from ._numbers import KEY, NegativeNumbersAreArguments
+from ._numbers import KEY, Finite, NegativeNumbersAreArguments
 from .errors import LINK, reports_errors
 
 
@@ -25,9 +27,9 @@ def shown(entry: Entry, value_type: ValueType) -> str:
 @click.option("--on", "link", type=LINK, required=True, help="The link to put through.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=254, show_default=True)
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
-@click.option("--learn", type=click.FloatRange(0.0, 60.0), default=0.5, show_default=True,
+@click.option("--learn", type=Finite(0.0, 60.0), default=0.5, show_default=True,
               help="Seconds to ask the swarm for the key first (every control step), so the write is newer.")
-@click.option("--wait", type=click.FloatRange(0.0, 3600.0), default=2.0, show_default=True,
+@click.option("--wait", type=Finite(0.0, 3600.0), default=2.0, show_default=True,
               help="Seconds each write waits for a neighbour to show it took the write.")
 @click.option("--tries", type=click.IntRange(1, 100), default=3, show_default=True,
               help="Writes at most, when the swarm answers with a newer or conflicting entry.")
@@ -51,7 +53,8 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
         raw = to_raw(value, value_type)
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="VALUE") from None
-    node = Node(build_links([lossless(link)], robot_id), robot_id)
+    started = time.monotonic()  # --learn and --wait bound the whole command: opening the link is part of them
+    node = Node(build_links([lossless(link, opening=learn + wait)], robot_id), robot_id)
     name = node.links[0].name
     transmit_only = getattr(node.links[0].framing, "transmit_only", False)
     if transmit_only and not no_confirm:
@@ -60,7 +63,7 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
     with node:
         try:
             result = put_confirmed(node, key, raw, learn=0.0 if transmit_only else learn, wait=wait, tries=tries,
-                                   confirm=not no_confirm)
+                                   confirm=not no_confirm, spent=time.monotonic() - started)
         except HearsItself as error:
             raise click.ClickException(str(error)) from None
     problem = not_taken(result, key, name, wait, lambda entry: shown(entry, value_type), confirm=not no_confirm)

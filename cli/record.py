@@ -31,16 +31,8 @@ from vstig_hw.links.zenoh import ZenohSpec
 from ._capture_options import filter_options
 from ._common import StatusLine, build_links, describe_links, must_hear, print_counters, run_until_stopped
 from ._files import overwrite_option, refuse_to_replace
+from ._numbers import ByteSize, Finite
 from .errors import LINK, reports_errors
-
-
-def _size(text: str) -> int:
-    units = {"k": 1 << 10, "m": 1 << 20, "g": 1 << 30}
-    scale = units.get(text[-1:].lower(), 1)
-    number = text[:-1] if scale > 1 else text
-    if not number.isdigit() or int(number) <= 0:
-        raise click.BadParameter(f"{text!r} is not a size like 500000, 64k or 10M")
-    return int(number) * scale
 
 
 def _medium(spec: LinkSpec) -> str:
@@ -65,8 +57,7 @@ def _target(output: str | None, link: LinkSpec, extension: str) -> str:
 def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
     if overwrite and append:
         raise click.UsageError("give --overwrite or --append, not both")
-    if not append:
-        refuse_to_replace(path, overwrite, ", --append adds to it")
+    refuse_to_replace(path, overwrite or append, ", --append adds to it")  # appending replaces nothing
 
 
 @click.command()
@@ -77,12 +68,12 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
                    f"(our line formats); any links: {MCAP_EXTENSION} (rosbag2, decoded messages, one topic per link).")
 @overwrite_option("FILE")
 @click.option("--append", is_flag=True, help=f"Add to FILE if it exists (CAN: {' '.join(APPENDABLE)}; serial).")
-@click.option("--max-bytes", help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
+@click.option("--max-bytes", type=ByteSize(), help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
                                   "an existing numbered file is skipped, never replaced.")
-@click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @filter_options
 @reports_errors
-def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: str | None,
+def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: int | None,
             duration: float | None, keep: Filter) -> None:
     """Record the LINKS' traffic into a file until Ctrl-C (passive: never transmits).
 
@@ -104,7 +95,6 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
         medium = capture_medium(path, [_medium(link) for link in links])
     except ValueError as error:
         raise click.UsageError(str(error)) from None
-    limit = _size(max_bytes) if max_bytes else None
     _refuse_to_destroy(path, overwrite, append)
     if medium == "mcap":
         require("mcap", f"vstig record -o {path}")  # before the links open
@@ -127,7 +117,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
     node.on_tick.append(lambda _: captures and captures[0].flush())
     try:
         with node:
-            captures.append(RotatingCapture(path, medium, limit, Decoder(default_framings(deployment=deployment)),
+            captures.append(RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
                                             append=append))
             click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
                        err=True)

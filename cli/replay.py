@@ -22,6 +22,7 @@ from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ._capture_options import VALUE_TYPE_HELP, echo_skipped, filter_options, skip_bad_option
 from ._common import StatusLine, build_links, lossless
+from ._numbers import Finite
 from .errors import LINK, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
@@ -130,16 +131,16 @@ def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, dep
 @click.option("--onto", type=ONTO, multiple=True,
               help="Send the capture onto this link with its original timing; NAME=LINK sends only the capture's "
                    "link NAME there (repeat for each link; links not named are skipped).")
-@click.option("--speed", type=click.FloatRange(0.001, 1000), default=1.0, show_default=True,
+@click.option("--speed", type=Finite(0.001, 1000), default=1.0, show_default=True,
               help="Play this many times faster than recorded (0.5: half speed).")
 @click.option("--loop", is_flag=True, help="Start again at the end, until Ctrl-C.")
-@click.option("--skip-gaps", type=click.FloatRange(0.0), metavar="SECONDS",
+@click.option("--skip-gaps", type=Finite(0.0), metavar="SECONDS",
               help="Wait at most SECONDS between two units, however long the capture's gap.")
 @click.option("--ignore-timestamps", is_flag=True, help="Send every unit at once, one after the other.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=0, show_default=True,
               help="Sender id for messages re-encoded onto another medium.")
 @click.option("--table", is_flag=True, help="Feed an offline engine instead and print its table.")
-@click.option("--at", type=click.FloatRange(0.0), help="With --table: stop at T seconds after the first record.")
+@click.option("--at", type=Finite(0.0), help="With --table: stop at T seconds after the first record.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
               help=VALUE_TYPE_HELP)
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),

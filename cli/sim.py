@@ -17,12 +17,13 @@ from typing import Any
 import click
 
 from vstig_hw.sim import Config, Summary, run_many, summarize
-from vstig_hw.sim.experiment import MOTION, TOPOLOGY_NAMES, RunResult, Task
+from vstig_hw.sim.experiment import MAX_RUNS, MAX_WORKERS, MOTION, TOPOLOGY_NAMES, RunResult, Task
 from vstig_hw.sim.grid import Cell
 from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
 
-from ._files import overwrite_option, refuse_to_replace
+from ._files import overwrite_option, refuse_links_in, refuse_to_replace
+from ._numbers import Finite, finite
 
 
 def _model_options(fn: Any) -> Any:
@@ -31,11 +32,11 @@ def _model_options(fn: Any) -> Any:
         click.option("--budget", default=1, show_default=True, type=click.IntRange(1),
                      help="messages a robot may broadcast per control step"),
         click.option("--range", "radio_range", default=RANGE, show_default=True,
-                     type=click.FloatRange(0, min_open=True),
+                     type=Finite(0, min_open=True),
                      help="communication range R in metres"),
-        click.option("--density", default=DENSITY, show_default=True, type=click.FloatRange(0, min_open=True),
+        click.option("--density", default=DENSITY, show_default=True, type=Finite(0, min_open=True),
                      help="density D = N*pi*R^2 / area (cluster: L^2; motion: L^2 minus the 4 columns)"),
-        click.option("--body-radius", default=BODY_RADIUS, show_default=True, type=click.FloatRange(0),
+        click.option("--body-radius", default=BODY_RADIUS, show_default=True, type=Finite(0),
                      help="robot body radius in metres (overlap and line of sight)"),
         click.option("--occlusion/--no-occlusion", default=True, show_default=True,
                      help="bodies block line of sight, as in ARGoS"),
@@ -43,9 +44,10 @@ def _model_options(fn: Any) -> Any:
                      help="re-draw split layouts (else each robot must learn its own component's highest id)"),
         click.option("--max-steps", default=200_000, show_default=True, type=click.IntRange(1),
                      help="give up on a run after this many control steps"),
-        click.option("--seed", default=1, show_default=True, type=int,
+        click.option("--seed", default=1, show_default=True, type=click.IntRange(0),
                      help="Base random seed (each run derives its own from it): the same seed, the same results."),
-        click.option("--workers", default=None, type=click.IntRange(1), help="processes [default: all cores]"),
+        click.option("--workers", default=None, type=click.IntRange(1, MAX_WORKERS),
+                     help="processes [default: all cores]"),
     ]
     for option in reversed(options):
         fn = option(fn)
@@ -56,12 +58,12 @@ def _motion_options(fn: Any) -> Any:
     """How robots move in the motion arena (section 4.2); the speed cap is set per command."""
     options = [
         click.option("--control-step", default=Config.control_step, show_default=True,
-                     type=click.FloatRange(0, min_open=True),
+                     type=Finite(0, min_open=True),
                      help="seconds per control step: how long robots move in one (motion), and what turns steps "
                           "into seconds (B/s, --capture's times)"),
-        click.option("--repulsion", default=Config.repulsion, show_default=True, type=click.FloatRange(0),
+        click.option("--repulsion", default=Config.repulsion, show_default=True, type=Finite(0),
                      help="gap in metres at which a neighbour's or obstacle's push equals the forward drive (motion)"),
-        click.option("--turn-noise", default=Config.turn_noise, show_default=True, type=click.FloatRange(0),
+        click.option("--turn-noise", default=Config.turn_noise, show_default=True, type=Finite(0),
                      help="standard deviation of the random turn per control step, in radians (motion)"),
     ]
     for option in reversed(options):
@@ -98,16 +100,17 @@ def _progress(transient: bool = False) -> Any:
                    "or motion: robots diffusing through the arena of section 4.2.")
 @click.option("--robots", default=100, show_default=True, type=click.IntRange(1, U16_MAX + 1),
               help="swarm size N (robot ids 0..N-1)")
-@click.option("--drop", default=0.0, show_default=True, type=click.FloatRange(0, 1, max_open=True),
+@click.option("--drop", default=0.0, show_default=True, type=Finite(0, 1, max_open=True),
               help="packet drop probability P")
-@click.option("--runs", default=10, show_default=True, type=click.IntRange(1),
-              help="Independent runs (new layout and losses each); the summary is over all of them.")
+@click.option("--runs", default=10, show_default=True, type=click.IntRange(1, MAX_RUNS),
+              help=f"Independent runs (new layout and losses each); the summary is over all of them (at most "
+                   f"{MAX_RUNS:,}; a bar on a terminal shows how far they are).")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--capture", type=click.Path(dir_okay=False, writable=True),
               help="also write run 0's radio traffic as a CAN capture (.log candump, .asc, .blf...): robot i is "
                    "CAN node i, time = step x --control-step; for checking `vstig analyze`")
 @_model_options
-@click.option("--speed", default=Config.speed, show_default=True, type=click.FloatRange(0),
+@click.option("--speed", default=Config.speed, show_default=True, type=Finite(0),
               help="forward speed cap S in m/s (motion)")
 @_motion_options
 @click.option("--snapshot", type=click.Path(dir_okay=False, path_type=Path),
@@ -199,8 +202,12 @@ def _unconverged_note(s: Summary, max_steps: int) -> None:
                    "(raise --max-steps)", err=True)
 
 
+_REPORTS = ("summary.csv", "runs.csv", "comparison.md")  # what `sim paper` and `paper-motion` write in -o DIR
+
+
 @command.command()
-@click.option("--runs", default=50, show_default=True, type=click.IntRange(1), help="runs per condition")
+@click.option("--runs", default=50, show_default=True, type=click.IntRange(1, MAX_RUNS),
+              help=f"runs per condition (at most {MAX_RUNS:,} over all conditions)")
 @click.option("-o", "--output", "output", default=Path("sim-paper"), show_default=True,
               type=click.Path(file_okay=False, path_type=Path), help="folder for the CSV, PNG and markdown")
 @click.option("--robots", "sizes", multiple=True, type=click.IntRange(1, U16_MAX + 1),
@@ -213,6 +220,8 @@ def paper(runs: int, output: Path, sizes: tuple[int, ...], seed: int, workers: i
 
     template = _config("cluster", 10, 0.0, **model)
     configs = [c for c in paper_configs(template) if not sizes or c.robots in sizes]
+    _bounded(runs, len(configs))
+    refuse_links_in(output, (*_REPORTS, "figure3.png"))  # before the runs, which may take hours
     output.mkdir(parents=True, exist_ok=True)
     cells, wall = _run_grid("Figure 3 grid", configs, runs, seed, workers)
     write_csv(cells, output / "summary.csv", output / "runs.csv")
@@ -220,6 +229,14 @@ def paper(runs: int, output: Path, sizes: tuple[int, ...], seed: int, workers: i
     (output / "comparison.md").write_text(markdown_table(cells, runs, wall))
     _unconverged_cells(cells)
     click.echo(f"wrote {output}/summary.csv, runs.csv, figure3.png, comparison.md in {wall:.0f} s")
+
+
+def _bounded(runs: int, conditions: int) -> None:
+    """A grid's runs over all its conditions stay within MAX_RUNS (every result is held until the end)."""
+    if runs * conditions > MAX_RUNS:
+        raise click.BadParameter(f"{runs} runs x {conditions} conditions = {runs * conditions:,} runs, more than the "
+                                 f"{MAX_RUNS:,} a grid holds: at most {MAX_RUNS // conditions:,} per condition",
+                                 param_hint="'--runs'")
 
 
 def _run_grid(title: str, configs: list[Config], runs: int, seed: int, workers: int | None) -> tuple[list[Cell], float]:
@@ -272,7 +289,8 @@ def _draw_snapshot(config: Config, seed: int, step: int, path: Path) -> None:
 
 
 @command.command("paper-motion")
-@click.option("--runs", default=50, show_default=True, type=click.IntRange(1), help="runs per condition")
+@click.option("--runs", default=50, show_default=True, type=click.IntRange(1, MAX_RUNS),
+              help=f"runs per condition (at most {MAX_RUNS:,} over all conditions)")
 @click.option("-o", "--output", "output", default=Path("sim-paper-motion"), show_default=True,
               type=click.Path(file_okay=False, path_type=Path), help="folder for the CSV, PNG and markdown")
 @click.option("--robots", default=100, show_default=True, type=click.IntRange(1, U16_MAX + 1), help="swarm size N")
@@ -298,6 +316,8 @@ def paper_motion(runs: int, output: Path, robots: int, densities: str, speeds: s
                                                         grid["--drops"])]
     except ValueError as error:
         raise click.UsageError(str(error)) from None
+    _bounded(runs, len(configs))
+    refuse_links_in(output, (*_REPORTS, "figure5.png"))
     output.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()[0]
     cells, wall = _run_grid("Figure 5 grid", configs, runs, seed, workers)
@@ -313,9 +333,10 @@ def paper_motion(runs: int, output: Path, robots: int, densities: str, speeds: s
 
 def _numbers(option: str, text: str) -> list[float]:
     try:
-        values = [float(part) for part in text.split(",") if part.strip()]
+        values = [finite(part) for part in text.split(",") if part.strip()]
     except ValueError:
-        raise click.BadParameter(f"{text!r} is not a comma-separated list of numbers", param_hint=option) from None
+        raise click.BadParameter(f"{text!r} is not a comma-separated list of finite numbers",
+                                 param_hint=option) from None
     if not values:
         raise click.BadParameter("needs at least one number", param_hint=option)
     return values

@@ -21,6 +21,7 @@ from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 from ._capture_options import VALUE_TYPE_HELP, filter_options
 from ._common import build_links, describe_links, must_hear, print_counters, run_until_stopped
 from ._guard import GuardChoice, guard_options, take_warnings
+from ._numbers import Finite
 from .errors import LINK, reports_errors
 
 _TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
@@ -58,7 +59,7 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 @click.option("--larger-value-wins", "larger", is_flag=True,
               help="Settle conflicts as a swarm running the paper's Figure 1 rule does (larger value), "
                    "instead of the default higher robot id.")
-@click.option("--for", "duration", type=click.FloatRange(0.0), help="Stop after this many seconds.")
+@click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @click.option("--hide-refused", is_flag=True,
               help="Leave out what the guard options would refuse (it is still counted under the table).")
 @filter_options
@@ -132,18 +133,18 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
         return
     from rich.live import Live
 
-    if not sys.stdout.isatty():
-        click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
-                   "(--jsonl streams every message instead)", err=True)
+    with node:  # opened first: a port that cannot open is the one line said, with no note before it
+        if not sys.stdout.isatty():
+            click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
+                       "(--jsonl streams every message instead)", err=True)
+        with Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
+            def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
+                _warn(firewall)  # on a terminal, Live prints stderr above the table
+                height = live.console.size.height if live.console.is_terminal else None
+                live.update(_table(view, value_type, node, height))
 
-    with node, Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
-        def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
-            _warn(firewall)  # on a terminal, Live prints stderr above the table
-            height = live.console.size.height if live.console.is_terminal else None
-            live.update(_table(view, value_type, node, height))
-
-        describe_links(node)
-        run_until_stopped(node, redraw, duration)
+            describe_links(node)
+            run_until_stopped(node, redraw, duration)
     _warn(firewall)
     print_counters(node)
 

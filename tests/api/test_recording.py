@@ -68,3 +68,15 @@ def test_a_recording_never_replaces_a_file_and_refuses_a_format_that_cannot_hold
                 can_only.record(tmp_path / "x.txt")
             can_only.record(existing, overwrite=True).stop()
     assert existing.read_text() != "keep me"
+
+
+def test_a_recording_is_never_written_through_a_symbolic_link(tmp_path: Path) -> None:
+    target = tmp_path / "notes.txt"
+    target.write_text("keep me")
+    (tmp_path / "live.log").symlink_to(target)
+    (tmp_path / "dangling.log").symlink_to(tmp_path / "nowhere.log")
+    with VirtualRobots(can_ids=[1], radio_ids=[]) as robots, vstig_hw.join(*robots.links, robot_id=50) as swarm:
+        for name in ("live.log", "dangling.log"):
+            with pytest.raises(ValueError, match=rf"{name} is a symbolic link"):
+                swarm.record(tmp_path / name, overwrite=True)
+    assert target.read_text() == "keep me" and not (tmp_path / "nowhere.log").exists()

@@ -19,6 +19,7 @@ from ..capture.records import CAN_FRAMING, Record
 from ..framing.can import CanFraming
 from ..gateway.node import Node
 from ..links.link import Link
+from ..outputs import refuse_symlink
 
 __all__ = ["Recording", "link_medium"]
 
@@ -39,6 +40,7 @@ class Recording:
         medium = capture_medium(path, [link_medium(link) for link in node.links])
         if max_bytes is not None and (isinstance(max_bytes, bool) or not isinstance(max_bytes, int) or max_bytes < 1):
             raise ValueError(f"max_bytes must be a positive number of bytes (or None), got {max_bytes!r}")
+        refuse_symlink(path)  # even with overwrite: a link would be written through
         if os.path.lexists(path) and not overwrite:
             raise FileExistsError(f"{path} exists: a capture is never replaced unless overwrite=True")
         if medium == "mcap":

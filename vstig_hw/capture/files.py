@@ -16,8 +16,6 @@ from .records import WRITERS, CaptureError, Record, capture_suffix, writer_class
 
 __all__ = ["CaptureWriter", "RotatingCapture", "rotated_name"]
 
-_SIZE_CHECK_EVERY = 64  # writes between size checks: a stat per frame would cost more than the write
-
 
 class CaptureWriter(Protocol):
     def write(self, record: Record) -> None: ...
@@ -52,6 +50,8 @@ class RotatingCapture:
         self.files = [path]
         self.records = 0
         self._writer = self._open(path, append)
+        self._in_file = 0  # records written to the current file
+        self._next_check = 1  # the record count of the current file at which its size is next looked at
 
     def _open(self, path: str, append: bool = False) -> CaptureWriter:
         with self._naming(path):
@@ -72,15 +72,31 @@ class RotatingCapture:
         with self._naming():
             self._writer.write(record)
         self.records += 1
-        if self.max_bytes and self.records % _SIZE_CHECK_EVERY == 0 and self._writer.size() >= self.max_bytes:
-            with self._naming():
-                self._writer.close()
+        self._in_file += 1
+        if self.max_bytes and self._in_file >= self._next_check:
+            self._check_size(self.max_bytes)
+
+    def _check_size(self, limit: int) -> None:
+        """Rotate once the file holds `limit` bytes; else plan the next look.
+
+        The writer's size is a tell(), yet one per record costs a fifth of the write: the next look comes
+        after half the records that would fill what is left at this file's mean record size, so looks
+        thicken to one per record as the file nears its limit (a record over twice the mean may overshoot).
+        """
+        size = self._writer.size()
+        if size < limit:
+            mean = size / self._in_file
+            self._next_check = self._in_file + max(1, int((limit - size) / (2 * mean)) if mean > 0 else 1)
+            return
+        with self._naming():
+            self._writer.close()
+        self.index += 1
+        while os.path.lexists(rotated_name(self.base, self.index)):
             self.index += 1
-            while os.path.lexists(rotated_name(self.base, self.index)):
-                self.index += 1
-            path = rotated_name(self.base, self.index)
-            self.files.append(path)
-            self._writer = self._open(path)
+        path = rotated_name(self.base, self.index)
+        self.files.append(path)
+        self._writer = self._open(path)
+        self._in_file, self._next_check = 0, 1
 
     def flush(self) -> None:
         """Push what is written to the file (the recorder does this every tick, so `tail -f` works)."""

@@ -69,6 +69,7 @@ class DemoReport:
     media: list[Medium]
     gateway: dict[str, Counters]  # per link; "<gateway id>/<link>" when there are several gateways
     highest: int
+    interrupted: bool = False  # the caller's stop ended the run (not convergence, not --max-steps)
 
 
 class PtyRadio:
@@ -204,6 +205,7 @@ def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] 
     converged_at = None
     start = time.monotonic()
     step = 0
+    interrupted = False
     try:
         for n, arena in enumerate(_arenas(links, config.gateways, f"demo-{channel}")):
             nodes.append(Node(arena, GATEWAY_ID + n, period=config.step, onconflict=larger_value_wins))
@@ -224,6 +226,7 @@ def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] 
                 converged_at = step
                 break
             if stopped.wait(max(0.0, deadline - time.monotonic())):
+                interrupted = True
                 break
     finally:
         stopped.set()
@@ -242,7 +245,7 @@ def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] 
         traffic = nodes[0].stats()
     else:
         traffic = {f"{node_id(node)}/{name}": c for node in nodes for name, c in node.stats().items()}
-    return DemoReport(converged_at, step, time.monotonic() - start, media, traffic, highest)
+    return DemoReport(converged_at, step, time.monotonic() - start, media, traffic, highest, interrupted)
 
 
 def node_id(node: Node) -> int:

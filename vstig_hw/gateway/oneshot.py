@@ -100,12 +100,14 @@ class ConfirmedPut:
     """
 
     def __init__(self, node: Node, key: int, value: int, *, learn: float, wait: float, tries: int = 3,
-                 confirm: bool = True) -> None:
+                 confirm: bool = True, spent: float = 0.0) -> None:
         engine = node.engine
         if engine is None:
             raise RuntimeError(f"a {node.mode.value} node cannot write")
         self.node, self.engine, self.key, self.value = node, engine, key, value
-        self.learn, self.wait, self.tries, self.confirm = learn, wait, tries, confirm
+        # `spent`: seconds already used opening the node, taken from `learn`, then from the first write's wait
+        self.learn, self.wait, self.tries, self.confirm = max(0.0, learn - spent), wait, tries, confirm
+        self._first_wait = max(0.0, wait - max(0.0, spent - learn))
         self.watch = KeyWatch(key, engine.robot_id)
         self.asker = _Asker(key)
         self.written: Entry | None = None  # None while learning
@@ -160,7 +162,7 @@ class ConfirmedPut:
 
     def _write(self, now: float) -> None:
         self.written, self.made = _write(self.node, self.key, self.value), self.made + 1
-        self.deadline = now + self.wait
+        self.deadline = now + (self._first_wait if self.made == 1 else self.wait)
         self.done = not self.confirm
 
     def _check_not_echoed(self) -> None:
@@ -168,13 +170,14 @@ class ConfirmedPut:
 
 
 def put_confirmed(node: Node, key: int, value: int, *, learn: float, wait: float, tries: int = 3,
-                  confirm: bool = True) -> PutResult:
+                  confirm: bool = True, spent: float = 0.0) -> PutResult:
     """Write `value` under `key` through an open ENGINE node whose loop nobody else runs, as described above.
 
     Each write waits up to `wait` seconds for a neighbour to show it. Without
     `confirm` (a radio that cannot answer) it writes once and returns unconfirmed.
+    `spent`: seconds already used opening the node, taken from `learn`, then from the first write's wait.
     """
-    put = ConfirmedPut(node, key, value, learn=learn, wait=wait, tries=tries, confirm=confirm)
+    put = ConfirmedPut(node, key, value, learn=learn, wait=wait, tries=tries, confirm=confirm, spent=spent)
     try:
         if not put.start(time.monotonic()):
             node.run(until=lambda: put.step(time.monotonic()))

@@ -10,8 +10,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ..counters import ENGINE_STATS
-from .can import CanSpec
-from .link import Link, LinkSpec
+from .link import Link, LinkSpec, NamesSenders
 from .registry import parse
 
 __all__ = ["LinkBuildError", "assemble_links", "check_robot_id"]
@@ -26,12 +25,13 @@ class LinkBuildError(ValueError):
 
 
 def check_robot_id(specs: Sequence[LinkSpec], robot_id: int) -> None:
-    """LinkBuildError("robot_id") when a CAN spec's ID scheme has no room for `robot_id` as a sender."""
+    """LinkBuildError("robot_id") when a spec's sender field (a CAN ID scheme) has no room for `robot_id`."""
     for spec in specs:
-        if isinstance(spec, CanSpec) and robot_id > spec.scheme().max_sender:
-            raise LinkBuildError(f"{robot_id} does not fit can:{spec.interface}:{spec.channel}: its "
-                                 f"{29 if spec.extended else 11}-bit IDs carry node ids 0..{spec.scheme().max_sender} "
-                                 "(extended=1 gives 29-bit IDs: 0..65535)", "robot_id")
+        if isinstance(spec, NamesSenders):
+            try:
+                spec.check_sender(robot_id)
+            except ValueError as error:
+                raise LinkBuildError(str(error), "robot_id") from None
 
 
 def assemble_links(items: Sequence[str | LinkSpec | Link[Any]], robot_id: int = 0,

@@ -113,3 +113,12 @@ class LinkSpec(Protocol):
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` is the sender a link transmits under where the medium names one."""
         ...
+
+
+@runtime_checkable
+class NamesSenders(Protocol):
+    """A spec whose medium carries the sender's robot id in a field of limited width (CAN arbitration IDs)."""
+
+    def check_sender(self, robot_id: int) -> None:
+        """ValueError, one line naming the link, when `robot_id` does not fit the sender field."""
+        ...

@@ -66,6 +66,7 @@ class ZenohSpec:
     stigmergy: int = 0
     scout: bool | None = None  # None: the config file's, else off
     block: bool = False  # Zenoh congestion control BLOCK instead of DROP: set by commands that must not lose a sample
+    peer_wait: float | None = None  # seconds opening may wait for a peer it connects to (None: 3); one-shot commands
 
     @property
     def kind(self) -> str:
@@ -288,5 +289,5 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
     transport = ZenohTransport(make_config, space.subscription, name=name, block=spec.block,
                                expects_peer=bool(connecting) or _mode(first) == "client",
                                listening=tuple(_endpoints(first, "listen/endpoints")), reaches=reaches,
-                               rebind=fresh_listener if ours else None)
+                               rebind=fresh_listener if ours else None, peer_wait=spec.peer_wait)
     return Link(name, transport, framing)
