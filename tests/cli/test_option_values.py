@@ -10,8 +10,8 @@ import click
 import pytest
 from click.testing import CliRunner
 
-from vstig_cli._numbers import Finite
 from vstig_cli.main import cli
+from vstig_cli.options import Finite
 
 CAPTURE = "(1.000000) can0 600#0001000200030004\n"
 

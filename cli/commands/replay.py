@@ -20,10 +20,8 @@ from vstig_hw.links import Link, LinkSpec
 from vstig_hw.links.can import CanSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._capture_options import VALUE_TYPE_HELP, echo_skipped, filter_options, skip_bad_option
-from ._common import StatusLine, build_links, lossless
-from ._numbers import Finite
-from .errors import LINK, reports_errors
+from ..options import VALUE_TYPE_HELP, Finite, echo_skipped, filter_options, skip_bad_option
+from ..running import LINK, StatusLine, build_links, lossless, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 

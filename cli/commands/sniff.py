@@ -18,11 +18,8 @@ from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ._capture_options import VALUE_TYPE_HELP, filter_options
-from ._common import build_links, describe_links, must_hear, print_counters, run_until_stopped
-from ._guard import GuardChoice, guard_options, take_warnings
-from ._numbers import Finite
-from .errors import LINK, reports_errors
+from ..options import VALUE_TYPE_HELP, Finite, GuardChoice, filter_options, guard_options, take_warnings
+from ..running import LINK, build_links, describe_links, must_hear, print_counters, reports_errors, run_until_stopped
 
 _TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
 

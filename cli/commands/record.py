@@ -28,11 +28,17 @@ from vstig_hw.links import Link, LinkSpec
 from vstig_hw.links.can import CanSpec
 from vstig_hw.links.zenoh import ZenohSpec
 
-from ._capture_options import filter_options
-from ._common import StatusLine, build_links, describe_links, must_hear, print_counters, run_until_stopped
-from ._files import overwrite_option, refuse_to_replace
-from ._numbers import ByteSize, Finite
-from .errors import LINK, reports_errors
+from ..options import ByteSize, Finite, filter_options, overwrite_option, refuse_to_replace
+from ..running import (
+    LINK,
+    StatusLine,
+    build_links,
+    describe_links,
+    must_hear,
+    print_counters,
+    reports_errors,
+    run_until_stopped,
+)
 
 
 def _medium(spec: LinkSpec) -> str:

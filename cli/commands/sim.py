@@ -22,8 +22,7 @@ from vstig_hw.sim.grid import Cell
 from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
 
-from ._files import overwrite_option, refuse_links_in, refuse_to_replace
-from ._numbers import Finite, finite
+from ..options import Finite, finite, overwrite_option, refuse_links_in, refuse_to_replace
 
 
 def _model_options(fn: Any) -> Any:

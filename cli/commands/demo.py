@@ -11,8 +11,8 @@ from vstig_hw.demo.swarm import DemoConfig, DemoReport, Medium, run_demo
 from vstig_hw.extras import require
 from vstig_hw.gateway import stop_on_signals
 
-from ._numbers import Finite
-from .errors import reports_errors
+from ..options import Finite
+from ..running import reports_errors
 
 
 def _drops(medium: Medium) -> str:

@@ -11,9 +11,8 @@ from vstig_hw.gateway.oneshot import get_newest
 from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType
 
-from ._common import build_links, lossless
-from ._numbers import KEY, Finite
-from .errors import LINK, reports_errors
+from ..options import KEY, Finite
+from ..running import LINK, build_links, lossless, reports_errors
 from .put import shown
 
 

@@ -10,10 +10,8 @@ from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency
 from vstig_hw.links import LinkSpec
 
-from ._common import build_links, describe_links, print_counters, run_until_stopped
-from ._guard import GuardChoice, guard_options, take_warnings
-from ._numbers import Finite
-from .errors import LINK, reports_errors
+from ..options import Finite, GuardChoice, guard_options, take_warnings
+from ..running import LINK, build_links, describe_links, print_counters, reports_errors, run_until_stopped
 
 
 def _raw_note(robot_id: int | None) -> str:

@@ -12,9 +12,8 @@ from vstig_hw.gateway.oneshot import HearsItself, not_taken, put_confirmed
 from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
-from ._common import build_links, lossless
-from ._numbers import KEY, Finite, NegativeNumbersAreArguments
-from .errors import LINK, reports_errors
+from ..options import KEY, Finite, NegativeNumbersAreArguments
+from ..running import LINK, build_links, lossless, reports_errors
 
 
 def shown(entry: Entry, value_type: ValueType) -> str:

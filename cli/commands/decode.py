@@ -17,10 +17,20 @@ from vstig_hw.capture.time_columns import TIME_STYLES, TimeColumn
 from vstig_hw.extras import require
 from vstig_hw.values import ValueType
 
-from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
-from ._capture_options import echo_skipped, filter_options, parse_id_base, reading_options
-from ._files import overwrite_option, refuse_link, refuse_to_replace
-from .errors import reports_errors
+from ..options import (
+    echo_skipped,
+    filter_options,
+    input_format_option,
+    input_name,
+    overwrite_option,
+    parse_id_base,
+    readable_capture,
+    reading_options,
+    refuse_link,
+    refuse_to_replace,
+    renamed,
+)
+from ..running import reports_errors
 
 _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 

@@ -19,11 +19,20 @@ from vstig_hw.counters import Counters
 from vstig_hw.extras import require
 from vstig_hw.values import ValueType, from_raw
 
-from ._capture_inputs import input_format_option, input_name, readable_capture, renamed
-from ._capture_options import echo_skipped, filter_options, parse_id_base, reading_options
-from ._files import overwrite_option, refuse_to_replace
-from ._numbers import Finite
-from .errors import reports_errors
+from ..options import (
+    Finite,
+    echo_skipped,
+    filter_options,
+    input_format_option,
+    input_name,
+    overwrite_option,
+    parse_id_base,
+    readable_capture,
+    reading_options,
+    refuse_to_replace,
+    renamed,
+)
+from ..running import reports_errors
 
 _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a terminal)
 
