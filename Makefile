@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 CORE_STAMP := $(VENV)/.installed-core
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck pytest bench sysdeps clean fuzz soak
+.PHONY: demo test lint typecheck layers pytest docs bench sysdeps clean fuzz soak
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -33,6 +33,10 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# The import contracts in pyproject.toml ([tool.importlinter]): layers, and no cycles.
+layers: $(STAMP)
+	$(BIN)/lint-imports
+
 # Foxglove's own WebSocket client and decoders from npm, for the live view's tests (tests/live, gitignored).
 NODE_STAMP := tests/live/node_modules/.installed
 
@@ -45,7 +49,11 @@ $(NODE_STAMP): tests/live/package.json | sysdeps
 pytest: $(STAMP) sysdeps $(NODE_STAMP)
 	$(BIN)/pytest
 
-test: lint typecheck pytest
+# The docs site, strict: a broken link, anchor or API reference fails. Browse it from site/index.html.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+test: lint typecheck layers docs pytest
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
@@ -66,4 +74,4 @@ soak: $(STAMP)
 	$(BIN)/python tests/soak/run.py --seconds $(SOAK_SECONDS)
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) build site *.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -51,7 +51,7 @@ def _relay_cpu(frames: list[can.Message], run: int, viewer: bool) -> tuple[float
     view = client = None
     try:
         if viewer:
-            from vstig_hw.gateway.liveview import LiveView
+            from vstig_hw.live.view import LiveView
 
             view = LiveView(node, port=0)
             view.open()

@@ -1,10 +1,12 @@
 """`vstig`: the click group.
 
-Each command lives in its own module of this package, named after the command,
-and exposes it as `command`. The group finds them by module name and imports one
-only when it runs, so `vstig put` does not pay for numpy or matplotlib. The
-command list in `vstig --help` reads each command's docstring from its source
-for the same reason: importing them all would load numpy and python-can.
+Each command lives in its own module of `commands/`, named after the command, and
+exposes it as `command`; the shared options and the helpers for running and failing
+live beside it (`options.py`, `running.py`), so no helper can become a command. The
+group finds commands by module name and imports one only when it runs, so
+`vstig put` does not pay for numpy or matplotlib. The command list in `vstig --help`
+reads each command's docstring from its source for the same reason: importing them
+all would load numpy and python-can.
 A command beyond the core install (`_NEEDS_EXTRA`) whose extra is missing is refused
 with one line naming the extra, before its module is imported.
 
@@ -27,16 +29,14 @@ import click
 from vstig_hw import __version__
 from vstig_hw.extras import MissingExtra, require
 
-from . import _streams
-from .errors import reports_errors
+from .running import flush_streams, guard_streams, reports_errors
 
 INTERRUPTED = 128 + 2  # the shell's status for a command ended by SIGINT
 
-_NOT_COMMANDS = {"main", "errors"}
 # Commands beyond the core install: the extra each needs, and which of its modules the command loads
 # as it starts (None: all of them). Checked before the command's module is imported.
 _NEEDS_EXTRA: dict[str, tuple[str, tuple[str, ...] | None]] = {"sim": ("sim", None), "analyze": ("analyze", ("numpy",))}
-_HERE = Path(__file__).parent
+_COMMANDS = Path(__file__).parent / "commands"
 
 
 def _module(cmd_name: str) -> str:
@@ -45,7 +45,7 @@ def _module(cmd_name: str) -> str:
 
 def _docstring(cmd_name: str) -> str:
     """The docstring of the module's `command` function, read without importing the module."""
-    tree = ast.parse((_HERE / f"{_module(cmd_name)}.py").read_text(encoding="utf-8"))
+    tree = ast.parse((_COMMANDS / f"{_module(cmd_name)}.py").read_text(encoding="utf-8"))
     for node in tree.body:
         if isinstance(node, ast.FunctionDef) and node.name == "command":
             return ast.get_docstring(node) or ""
@@ -54,8 +54,8 @@ def _docstring(cmd_name: str) -> str:
 
 class CommandFolder(click.Group):
     def list_commands(self, ctx: click.Context) -> list[str]:
-        names = (m.name for m in pkgutil.iter_modules([str(_HERE)]))
-        return sorted(n.replace("_", "-") for n in names if not n.startswith("_") and n not in _NOT_COMMANDS)
+        names = (m.name for m in pkgutil.iter_modules([str(_COMMANDS)]))
+        return sorted(n.replace("_", "-") for n in names if not n.startswith("_"))
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
         if cmd_name not in self.list_commands(ctx):
@@ -66,7 +66,7 @@ class CommandFolder(click.Group):
                 require(extra, f"vstig {cmd_name}", modules)
             except MissingExtra as error:  # a runtime failure (exit 1), before any of the command runs
                 raise click.ClickException(str(error)) from None
-        module = importlib.import_module(f"{__package__}.{_module(cmd_name)}")
+        module = importlib.import_module(f"{__package__}.commands.{_module(cmd_name)}")
         command: click.Command = module.command
         _report_errors(command)
         return command
@@ -103,7 +103,7 @@ def run(args: list[str] | None = None) -> int:
     """Run the CLI and return its exit status; no exception escapes."""
     try:
         result = cli.main(args, standalone_mode=False)
-        _streams.flush()
+        flush_streams()
     except click.ClickException as error:  # usage errors (2), runtime failures and failed output (1)
         error.show()
         return error.exit_code
@@ -118,12 +118,12 @@ def run(args: list[str] | None = None) -> int:
         return INTERRUPTED
     finally:
         with contextlib.suppress(click.ClickException, click.exceptions.Exit):
-            _streams.flush()  # after a failure we already report: do not replace it
+            flush_streams()  # after a failure we already report: do not replace it
     return result if isinstance(result, int) else 0
 
 
 def main() -> None:
-    _streams.guard()
+    guard_streams()
     sys.exit(run())
 
 

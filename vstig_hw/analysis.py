@@ -10,7 +10,7 @@ the key, in one of its own messages.
 Pure: no files, no clock. Feed it message columns (`Batch`, or messages one by
 one with `add_messages`) in roughly time order; `report()` gives the figures.
 
-Definitions (the README's analyze section states them for users):
+Definitions (docs/how-to/analyze.md states them for users):
 - *active sender* of a write at time t: a sender heard at some time in
   [t - window, t + window], to a resolution of window/8;
 - *newer*: a higher timestamp (serial-number arithmetic, as the engine compares),

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 from collections import Counter
 
+# A gateway's stats() entry of the engine's outcome counts; a link may not take this name.
+ENGINE_STATS = "engine"
+
 
 class Counters(Counter[str]):
     """A Counter of event names ("crc", "bad_length", "rx", ...) with a terse summary."""

@@ -22,7 +22,7 @@ from core_session import EXTRAS_LIBRARIES
 from installs import build_wheel, fresh_venv, install, installed_modules, site_packages
 
 from vstig_cli.main import cli
-from vstig_hw.capture.decodefile import FAST_PATH_BYTES
+from vstig_hw.capture.decoded import FAST_PATH_BYTES
 
 SESSION = Path(__file__).with_name("core_session.py")
 

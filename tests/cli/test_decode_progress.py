@@ -11,7 +11,7 @@ import can
 import pytest
 from peers import VSTIG, run_vstig_on_a_terminal_stderr
 
-from vstig_hw.capture.decodefile import decode_file
+from vstig_hw.capture.decoded import decode_file
 from vstig_hw.capture.files import RotatingCapture
 from vstig_hw.capture.records import Record
 

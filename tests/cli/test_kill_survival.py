@@ -22,8 +22,7 @@ import pytest
 from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, wait_for
 
 from vstig_hw import Message, Op, encode
-from vstig_hw.capture.files import read_capture
-from vstig_hw.capture.records import CaptureError
+from vstig_hw.capture.records import CaptureError, read_capture
 from vstig_hw.framing import make_serial_framing
 
 MESSAGES = [Message(Op.PUT, 9, 100 + i, i + 1, 3) for i in range(20)]

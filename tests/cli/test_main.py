@@ -45,6 +45,17 @@ def test_command_list_in_help_matches_what_each_command_says() -> None:
         assert ours.getvalue() == clicks.getvalue() and "sniff" in ours.getvalue()
 
 
+def test_the_commands_are_the_modules_of_the_commands_folder_and_nothing_else() -> None:
+    import click
+
+    folder = Path(__file__).parents[2] / "cli" / "commands"
+    modules = sorted(p.stem.replace("_", "-") for p in folder.glob("*.py") if not p.stem.startswith("_"))
+    assert cli.list_commands(click.Context(cli)) == modules
+    assert {"analyze", "bridge", "decode", "demo", "get", "links", "put", "record", "replay", "sim", "sniff"} <= set(
+        modules)
+    assert not {"main", "options", "running"} & set(modules)  # the shared helpers live outside the folder
+
+
 def test_help_does_not_import_the_heavy_libraries() -> None:
     probe = ("import sys\nfrom vstig_cli.main import cli\n"
              "try:\n    cli(['--help'])\nexcept SystemExit:\n    pass\n"

@@ -14,8 +14,7 @@ from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, stop, wait_for
 
 from vstig_cli.main import cli
 from vstig_hw import Message, Op, encode
-from vstig_hw.capture.files import read_capture
-from vstig_hw.capture.records import CaptureError
+from vstig_hw.capture.records import CaptureError, read_capture
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.links import parse
 

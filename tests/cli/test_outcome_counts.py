@@ -80,7 +80,7 @@ def test_sniff_reports_what_each_message_would_do_to_a_robot() -> None:
 
 
 def test_a_device_named_engine_does_not_hide_the_engine_counters(tmp_path: Path) -> None:
-    from vstig_cli._common import build_links
+    from vstig_cli.running import build_links
     from vstig_hw.links import parse
 
     (link,) = build_links([parse(f"serial:{tmp_path / 'engine'}")])

@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from vstig_cli.main import cli
-from vstig_hw.capture.files import read_capture
+from vstig_hw.capture.records import read_capture
 
 LOG = "".join(f"(1700000000.{i}00000) can0 60{i}#000300{i:02X}00010001\n" for i in range(1, 4))
 PRECIOUS = b"an earlier capture"
@@ -105,3 +105,53 @@ def test_sim_paper_regenerates_its_reports_in_the_folder(tmp_path: Path) -> None
     code, output = _vstig("sim", "paper", "--runs", "1", "--robots", "10", "--workers", "1", "-o", str(out))
     assert code == 0, output
     assert "| cluster N=10 P=0.75 |" in (out / "comparison.md").read_text()
+
+
+# Every command that writes a file the user names refuses a symbolic link there, dangling or not, with or
+# without --overwrite (or --append): exit 2, one line, nothing written where the link points.
+_THROUGH_A_LINK = [
+    ["record", "can:virtual:x", "-o", "{out}.log", "--for", "0.1"],
+    ["record", "can:virtual:x", "-o", "{out}.log", "--for", "0.1", "--overwrite"],
+    ["record", "can:virtual:x", "-o", "{out}.log", "--for", "0.1", "--append"],
+    ["decode", "{log}", "-o", "{out}.log"],
+    ["decode", "{log}", "-o", "{out}.log", "--overwrite"],
+    ["analyze", "{log}", "--plot", "{out}.png", "--overwrite"],
+    ["sim", "--runs", "1", "--robots", "10", "--capture", "{out}.log", "--overwrite"],
+    ["sim", "--topology", "motion", "--robots", "10", "--snapshot", "{out}.png", "--overwrite"],
+]
+
+
+@pytest.mark.parametrize("dangling", [True, False], ids=["dangling", "live"])
+@pytest.mark.parametrize("args", _THROUGH_A_LINK, ids=lambda args: " ".join(args[:1] + args[3:]))
+def test_no_output_is_written_through_a_symbolic_link(tmp_path: Path, log: Path, args: list[str],
+                                                      dangling: bool) -> None:
+    line = [arg.format(out=tmp_path / "out", log=log) for arg in args]
+    link = Path(next(arg for arg in line if arg.startswith(str(tmp_path / "out"))))
+    target = tmp_path / f"elsewhere{link.suffix}"
+    if not dangling:
+        target.write_bytes(PRECIOUS)
+    link.symlink_to(target)
+    code, output = _vstig(*line)
+    assert code == 2, output
+    assert f"{link} is a symbolic link" in output and "Traceback" not in output, output
+    assert (target.read_bytes() == PRECIOUS) if not dangling else not target.exists()
+
+
+def test_sim_paper_writes_no_report_through_a_link(tmp_path: Path) -> None:
+    out = tmp_path / "paper"
+    out.mkdir()
+    target = tmp_path / "elsewhere.csv"
+    target.write_bytes(PRECIOUS)
+    (out / "runs.csv").symlink_to(target)
+    code, output = _vstig("sim", "paper", "--runs", "1", "--robots", "10", "--workers", "1", "-o", str(out))
+    assert code == 2 and f"{out / 'runs.csv'} is a symbolic link" in output, output
+    assert target.read_bytes() == PRECIOUS
+
+
+def test_an_output_folder_that_is_a_link_is_fine(tmp_path: Path, log: Path) -> None:
+    real = tmp_path / "real"
+    real.mkdir()
+    (tmp_path / "linked").symlink_to(real)
+    code, output = _vstig("decode", str(log), "-o", str(tmp_path / "linked" / "copy.log"))
+    assert code == 0, output
+    assert len(list(read_capture(str(real / "copy.log")))) == 3

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from peers import PtyPeer
 
 from vstig_cli.main import cli
-from vstig_hw.capture.files import read_capture
+from vstig_hw.capture.records import read_capture
 
 OLD = "(1700000000.000000) can0 605#0005000100010007\n"
 

@@ -137,8 +137,15 @@ def test_demo_converges() -> None:
     done = run_vstig("demo", "--robots", "12", "--drop", "0.5", "--max-steps", "200", timeout=90)
     assert done.returncode == 0, done.stderr
     assert "converged: all 12 robots hold 12" in done.stdout
+    assert "interrupted" not in done.stderr  # nobody stopped it
     for medium in ("can", "cobs8", "epuck4"):
         assert any(line.startswith(medium) for line in done.stdout.splitlines())
+
+
+def test_demo_that_gives_up_fails_without_saying_interrupted() -> None:
+    done = run_vstig("demo", "--robots", "6", "--drop", "0.95", "--step", "0.01", "--max-steps", "1", timeout=60)
+    assert done.returncode == 1, done.stderr
+    assert "did not converge in 1 steps" in done.stderr and "interrupted" not in done.stderr, done.stderr
 
 
 @pytest.mark.slow

@@ -183,7 +183,7 @@ def test_sniff_filters_what_it_shows_and_its_table_says_what_fits() -> None:
 
     import can
 
-    from vstig_cli.sniff import _table
+    from vstig_cli.commands.sniff import _table
     from vstig_hw import Message, Op
     from vstig_hw.gateway.swarmview import SwarmView
     from vstig_hw.links import Heard

@@ -107,3 +107,21 @@ def test_a_put_nobody_hears_is_an_error_not_a_success() -> None:
     done = run_vstig("put", "1", "5", "--on", "zenoh:lonely", "--learn", "0", "--wait", "1")
     assert done.returncode == 1
     assert done.stderr.strip().startswith("Error: key 1: no neighbour on zenoh-lonely took our write")
+
+
+@pytest.mark.parametrize(("args", "budget"), [
+    (["get", "3", "--wait", "1"], 1.0),
+    (["put", "3", "5", "--learn", "0.5", "--wait", "1"], 1.5),
+])
+def test_the_wait_bounds_the_whole_command_when_the_peer_is_unreachable(args: list[str], budget: float) -> None:
+    """Opening counts against the wait: a peer that never answers no longer adds 3 s to it (measured in
+    process, so the interpreter's start is not counted; 0.8 s covers the Zenoh session's own start)."""
+    from click.testing import CliRunner
+
+    from vstig_cli.main import cli
+
+    started = time.monotonic()
+    result = CliRunner().invoke(cli, [*args, "--on", "zenoh:lab?connect=tcp/127.0.0.1:1"])
+    took = time.monotonic() - started
+    assert result.exit_code == 1 and "no neighbour on zenoh-lab" in result.output, result.output
+    assert took < budget + 0.8, f"{took:.2f} s for a budget of {budget} s"

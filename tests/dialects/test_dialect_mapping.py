@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import struct
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -86,6 +89,61 @@ def test_truncated_symbol_files(tmp_path: Path) -> None:
     for name in ("short.bo", "short.basm"):
         with pytest.raises(DeploymentError, match="5"):
             read_bbz_symbols(tmp_path / name)
+
+
+def _fifo(path: Path) -> Path:
+    os.mkfifo(path)
+    return path
+
+
+@pytest.mark.parametrize(("symbols", "says"), [
+    ("/dev/zero", "/dev/zero: the BittyBuzz symbols must be a regular file"),
+    ("pipe.bo", "pipe.bo: the BittyBuzz symbols must be a regular file"),  # a FIFO: no wait for a writer
+    (".", ": the BittyBuzz symbols must be a regular file"),
+    ("huge.basm", "huge.basm: the BittyBuzz symbols is larger than the 16 MiB read at most"),
+    ("bad.basm", "bad.basm:1: '!\u00b2' is not '!count'"),  # int('²') once escaped as a bare ValueError
+    (r"nul\u0000.bo", "cannot read the BittyBuzz symbols: embedded null byte"),  # a TOML escape
+])
+def test_symbols_that_are_not_a_small_regular_file_are_named(tmp_path: Path, symbols: str, says: str) -> None:
+    _fifo(tmp_path / "pipe.bo")
+    with open(tmp_path / "huge.basm", "wb") as huge:  # sparse: no disk used
+        huge.truncate((16 << 20) + 1)
+    (tmp_path / "bad.basm").write_text("!\u00b2\n'id\n")
+    deployment = tmp_path / "lab.toml"
+    deployment.write_text(f'# a lab\n[bittybuzz]\nsymbols = "{symbols}"\n')
+    with pytest.raises(DeploymentError) as caught:
+        load_deployment(deployment)
+    message = str(caught.value)
+    assert message.startswith(f"{deployment}:3: bittybuzz.symbols: "), message
+    assert says in message, message
+
+
+@pytest.mark.parametrize("name", ["/dev/zero", "pipe.toml", "."])
+def test_a_deployment_that_is_not_a_regular_file_is_named(tmp_path: Path, name: str) -> None:
+    _fifo(tmp_path / "pipe.toml")
+    path = tmp_path / name if not name.startswith("/") else Path(name)
+    with pytest.raises(DeploymentError, match="the deployment file must be a regular file") as caught:
+        load_deployment(path)
+    assert str(caught.value).startswith(f"{path}: ")
+
+
+def test_a_deployment_that_is_not_utf8_names_its_line(tmp_path: Path) -> None:
+    (tmp_path / "lab.toml").write_bytes(b"[keys]\nx = { key = 1, type = \"int16\" } # \xff\n")
+    with pytest.raises(DeploymentError, match=r"lab\.toml:2: not UTF-8 text"):
+        load_deployment(tmp_path / "lab.toml")
+
+
+def test_symbols_are_found_beside_the_deployment_file_whatever_the_working_folder(tmp_path: Path) -> None:
+    (tmp_path / "lab").mkdir()
+    (tmp_path / "lab" / "behavior.basm").write_text("!1\n'x\n")
+    (tmp_path / "lab" / "lab.toml").write_text('[bittybuzz]\nsymbols = "behavior.basm"\n'
+                                               '[keys]\nx = { key = 1, type = "int16" }\n')
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    code = ("from vstig_hw.dialects.mapping import load_deployment; "
+            "print(load_deployment('../lab/lab.toml').keys['x'].bbz_id)")
+    done = subprocess.run([sys.executable, "-c", code], cwd=elsewhere, capture_output=True, text=True, timeout=60)
+    assert done.stdout.strip() == "0", done.stderr
 
 
 def test_buzz_values_by_key_type() -> None:

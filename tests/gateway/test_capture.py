@@ -6,6 +6,7 @@ import contextlib
 import gzip
 import io
 import json
+import os
 import sys
 import threading
 import time
@@ -17,10 +18,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vstig_hw.capture import candump
-from vstig_hw.capture.decodefile import decode_file
+from vstig_hw.capture.decoded import decode_file
 from vstig_hw.capture.fastlog import chunk_to_jsonl
-from vstig_hw.capture.files import RotatingCapture, read_capture, rotated_name
-from vstig_hw.capture.records import CaptureError, Record
+from vstig_hw.capture.files import RotatingCapture, rotated_name
+from vstig_hw.capture.records import CaptureError, Record, read_capture
 from vstig_hw.capture.replay import replay
 from vstig_hw.capture.serial_log import HEADER, parse_line
 
@@ -117,6 +118,30 @@ def test_rotation_by_size_keeps_every_record(tmp_path: Path) -> None:
     assert len(writer.files) > 3 and writer.files[1] == rotated_name(path, 1) == str(tmp_path / "big_001.cap")
     total = [r for f in writer.files for r in read_capture(f)]
     assert len(total) == 1000 and total[-1].unit == bytes([999 & 0xFF] * 10)
+
+
+@pytest.mark.parametrize("ext", [".log", ".asc", ".cap"])
+def test_a_small_size_limit_rotates_at_the_record_that_reaches_it(tmp_path: Path, ext: str) -> None:
+    """Twenty records of about 40 bytes under a 300-byte limit: a file ends at the first record that reaches
+    the limit, not some records later."""
+    path = str(tmp_path / f"small{ext}")
+    medium = "serial" if ext == ".cap" else "can"
+    writer = RotatingCapture(path, medium, max_bytes=300)
+    sizes = []
+    for i in range(20):
+        before = writer.files[-1]
+        if medium == "can":
+            frame = can.Message(timestamp=1700000000.5 + i, arbitration_id=0x600, data=bytes([i] * 8),
+                                is_extended_id=False)
+            writer.write(Record(frame.timestamp, "lab", "can", frame))
+        else:
+            writer.write(Record(1.0 + i, "r", "cobs8", bytes([i] * 10)))
+        if writer.files[-1] != before:
+            sizes.append(os.path.getsize(before))
+    writer.close()
+    assert len(writer.files) >= 2, writer.files
+    assert all(300 <= size < 300 + 80 for size in sizes), sizes  # one record (under 80 bytes) past at most
+    assert sum(1 for f in writer.files for _ in read_capture(f)) == 20
 
 
 def test_unknown_capture_type_is_named(tmp_path: Path) -> None:

@@ -7,8 +7,8 @@ from pathlib import Path
 import can
 import pytest
 
-from vstig_hw.capture.files import RotatingCapture, read_capture
-from vstig_hw.capture.records import CaptureError, Record
+from vstig_hw.capture.files import RotatingCapture
+from vstig_hw.capture.records import CaptureError, Record, read_capture
 
 T0 = 1700000000.123456
 

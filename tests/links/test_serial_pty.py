@@ -360,3 +360,37 @@ def test_bad_line_settings_and_use_before_open_name_the_port(pty: tuple[int, str
         SerialTransport(path, parity="Q").open()
     with pytest.raises(TransportError, match="not open"):
         SerialTransport(path).read(0.01)
+
+
+@pytest.mark.parametrize("spec", [
+    "serial:spy://{port}?file={victim}",
+    "serial:SPY://{port}?raw&fil%65={victim}&framing=epuck4",  # pyserial lower-cases the scheme, decodes the key
+    "serial:spy://{port}?file={victim}?baud=9600",
+    "kilobot-ohc:spy://{port}?file={victim}",
+])
+def test_a_pyserial_url_that_writes_a_file_is_refused_as_it_is_parsed(pty: tuple[int, str], tmp_path: Path,
+                                                                      spec: str) -> None:
+    victim = tmp_path / "victim.txt"
+    victim.write_text("a lab notebook")
+    text = spec.format(port=pty[1], victim=victim)
+    with pytest.raises(ValueError, match=r"pyserial's spy:// writes file=\.\.\., and a link never writes files"):
+        parse(text)
+    result = subprocess.run([sys.executable, "-m", "vstig_cli.main", "record", text, "-o", str(tmp_path / "r.cap"),
+                             "--for", "0.5"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "spy:// writes file=" in result.stderr, result.stderr
+    assert victim.read_text() == "a lab notebook" and not (tmp_path / "r.cap").exists()
+
+
+def test_the_spy_handler_without_a_file_still_opens_the_port(pty: tuple[int, str]) -> None:
+    master, path = pty
+    link = parse(f"serial:spy://{path}?framing=cobs8").build()  # spy logs a hexdump to stderr
+    robot = PtyRobot(master)
+    link.open()
+    try:
+        sent = random_messages(3, seed=5)
+        for msg in sent:
+            robot.send(encode_for("cobs8", msg))
+        assert hear(link, 3) == sent
+    finally:
+        link.close()
+        robot.stop()

@@ -256,8 +256,8 @@ def test_a_client_with_no_router_retries_with_backoff_instead_of_failing(caplog:
 
 # -- the zenoh capture -----------------------------------------------------------------
 def test_a_zenoh_capture_round_trips_and_a_bad_line_is_named(tmp_path: Path) -> None:
-    from vstig_hw.capture.files import RotatingCapture, read_capture
-    from vstig_hw.capture.records import CaptureError, Record
+    from vstig_hw.capture.files import RotatingCapture
+    from vstig_hw.capture.records import CaptureError, Record, read_capture
 
     path = str(tmp_path / "lab.zcap")
     sample = ZenohFraming(ZenohKeySpace("lab"), sender=201).encode_batch(MESSAGES)[0]
@@ -400,7 +400,8 @@ def test_clients_survive_their_router_going_away_and_coming_back(caplog: pytest.
 
 
 def test_capture_filters_cut_a_zenoh_sample_by_key_and_sender() -> None:
-    from vstig_hw.capture.filters import Filter, filter_records
+    from vstig_hw.capture.decoded import filter_records
+    from vstig_hw.capture.filters import Filter
     from vstig_hw.capture.records import Record
 
     space = ZenohKeySpace("lab")
@@ -454,11 +455,21 @@ def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_o
                 attacker.put(f"vstig/lab/0/{1000 + i}", encode(Message(Op.PUT, 1, i, i + 1, 1000 + i)),
                              congestion_control=zenoh.CongestionControl.BLOCK)
             honest.send_many([Message(Op.PUT, 2, v, v + 1, 202) for v in range(20)])
-            node.run(duration=2.0)
+
+            def refused() -> int:  # mostly the source rate; a sample let through after a long refusal may jump
+                return sum(n for name, n in gateway.counters.items() if name.startswith("drop_"))
+
+            def all_accounted() -> bool:  # every attacker sample heard or refused, every honest one heard
+                attacker_heard = sum(h.message.key == 1 for h in heard)
+                return (attacker_heard + refused() >= 1000
+                        and sum(h.message.key == 2 for h in heard) >= 20)
+
+            node.run(until=all_accounted, duration=10.0)
         finally:
             attacker.close()  # type: ignore[no-untyped-call]
             honest.close()
     from_attacker = [h for h in heard if h.message.key == 1]
     assert 50 <= len(from_attacker) <= 200, len(from_attacker)  # a burst of 50, then 50 a second
-    assert gateway.counters["drop_source_rate"] == 1000 - len(from_attacker)
+    assert refused() == 1000 - len(from_attacker), dict(gateway.counters)
+    assert gateway.counters["drop_source_rate"] >= 1000 - len(from_attacker) - 10
     assert [h.message.value for h in heard if h.message.key == 2] == list(range(20))  # another session: its own

@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from vstig_cli.main import cli
-from vstig_hw.capture.files import read_capture
+from vstig_hw.capture.records import read_capture
 from vstig_hw.sim import Config
 
 STEP_SECONDS = Config.control_step  # the paper's 0.1 s, which --control-step changes

@@ -43,8 +43,8 @@ def test_an_arena_too_dense_for_the_bodies_is_a_clear_error() -> None:
 
 
 @pytest.mark.parametrize(("option", "value", "named"), [
-    ("--range", "nan", "radio_range"), ("--range", "1e300", "radio_range"), ("--range", "inf", "radio_range"),
-    ("--density", "nan", "density"), ("--body-radius", "nan", "body_radius"),
+    ("--range", "nan", "'--range'"), ("--range", "1e300", "radio_range"), ("--range", "inf", "'--range'"),
+    ("--density", "nan", "'--density'"), ("--body-radius", "nan", "'--body-radius'"),
 ])
 def test_silly_geometry_is_a_usage_error_not_a_traceback(option: str, value: str, named: str) -> None:
     result = CliRunner().invoke(cli, ["sim", "--robots", "5", "--runs", "1", "--workers", "1", option, value])
@@ -66,3 +66,42 @@ def test_paper_grid_for_ten_robots_writes_csv_png_and_comparison(tmp_path: Path)
     assert (out / "figure3.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     table = (out / "comparison.md").read_text()
     assert "| cluster N=10 P=0.75 | mean" in table and "| 6 |" in table
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["sim", "--runs", "99999999999999999999"], "'--runs': 99999999999999999999 is not in the range 1<=x<=100000"),
+    (["sim", "--runs", "100001"], "'--runs': 100001 is not in the range 1<=x<=100000"),
+    (["sim", "paper", "--runs", "10000", "-o", "{tmp}/paper"], "at most 2,222 per condition"),
+    (["sim", "paper-motion", "--runs", "10000", "-o", "{tmp}/paper"], "at most 2,222 per condition"),
+    (["sim", "--workers", "100000"], "'--workers': 100000 is not in the range"),
+])
+def test_runs_are_bounded_before_anything_is_allocated(tmp_path: Path, args: list[str], says: str) -> None:
+    result = CliRunner().invoke(cli, [arg.format(tmp=tmp_path) for arg in args])
+    assert result.exit_code == 2 and says in result.output, result.output
+    assert not (tmp_path / "paper").exists()  # refused before its folder is made
+
+
+def test_long_runs_show_a_bar_on_a_terminal(tmp_path: Path) -> None:
+    """stderr on a pty: the bar counts runs done (a log file gets none: see the JSON test)."""
+    import os
+    import subprocess
+    import sys
+
+    master, slave = os.openpty()
+    try:
+        done = subprocess.run([sys.executable, "-m", "vstig_cli.main", "sim", "--robots", "10", "--runs", "40",
+                               "--workers", "1", "--json"], stdout=subprocess.PIPE, stderr=slave, timeout=120)
+        os.close(slave)
+        screen = b""
+        while True:
+            try:
+                chunk = os.read(master, 65536)
+            except OSError:  # the pty is closed and drained
+                break
+            if not chunk:
+                break
+            screen += chunk
+    finally:
+        os.close(master)
+    assert done.returncode == 0 and json.loads(done.stdout)["runs"] == 40
+    assert b"/40" in screen and b"cluster N=10" in screen, screen[-400:]

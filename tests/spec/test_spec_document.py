@@ -72,7 +72,7 @@ def test_the_table_of_contents_covers_every_numbered_section() -> None:
 def test_files_the_documents_name_exist() -> None:
     # Paths with a folder are ours; bare names may be kilolib's (`ohc.c`, `message.h`).
     named = re.compile(r"`((?:[\w.-]+/)+[\w.-]+\.(?:json|md|c|h|py|lua|dbc))`")
-    for doc in [*DOCS, ROOT / "README.md"]:
+    for doc in [*DOCS, ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]:
         for name in named.findall(doc.read_text(encoding="utf-8")):
             candidates = [doc.parent / name, SPEC / name, ROOT / name]
             assert any(p.exists() for p in candidates), f"{doc.name} names {name}, which does not exist"

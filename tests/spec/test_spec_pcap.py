@@ -112,7 +112,7 @@ def test_pcapng_from_wiresharks_own_editcap_reads_the_same_frames(tmp_path: Path
     import shutil
     import subprocess
 
-    from vstig_hw.capture.files import read_capture
+    from vstig_hw.capture.records import read_capture
 
     editcap = shutil.which("editcap")
     if editcap is None:

@@ -7,7 +7,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vstig_hw.capture.filters import Filter, RecordFilter, filter_records
+from vstig_hw.capture.decoded import RecordFilter, filter_records
+from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CAN_FRAMING, Record
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.wire import Message, Op, encode

@@ -12,8 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vstig_cli.main import cli
-from vstig_hw.capture.files import read_capture
-from vstig_hw.capture.records import CAN_FRAMING, CaptureError, Record
+from vstig_hw.capture.records import CAN_FRAMING, CaptureError, Record, read_capture
 from vstig_hw.capture.rosbag import TYPE_NAME, McapCaptureWriter, cdr_message, topic_for
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.wire import Message, Op, encode

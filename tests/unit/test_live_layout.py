@@ -28,7 +28,7 @@ def test_the_layout_shows_table_writes_and_stats() -> None:
     topics = {path.split(".")[0] for path in paths}
     assert topics == {"/vstig/table", "/vstig/writes", "/vstig/stats"}
     fields = {path.split(".", 1)[1] for path in paths if "." in path}
-    from vstig_hw.gateway.liveserver import STATS_SCHEMA, TABLE_SCHEMA, WRITE_SCHEMA
+    from vstig_hw.live.server import STATS_SCHEMA, TABLE_SCHEMA, WRITE_SCHEMA
 
     known = {"rows"} | set(WRITE_SCHEMA["properties"]) | {f"{part}.{name}" for part in STATS_SCHEMA["properties"]
                                                           for name in ("stored", "conflict", "sent", "throttled",

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from vstig_hw.analysis import DEFAULT_WINDOW, Analyzer
-from vstig_hw.gateway.spread import DEFAULT_WINDOW as LIVE_WINDOW
-from vstig_hw.gateway.spread import LiveSpread
 from vstig_hw.links.link import Heard
+from vstig_hw.live.spread import DEFAULT_WINDOW as LIVE_WINDOW
+from vstig_hw.live.spread import LiveSpread
 from vstig_hw.wire import Message, Op
 
 T0 = 1_700_000_000.0

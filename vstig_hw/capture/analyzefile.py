@@ -18,12 +18,10 @@ from ..analysis import NO_SENDER, Analyzer, Batch
 from ..counters import Counters
 from ..wire import Message
 from . import candump
-from .decoded import Decoder, default_framings
+from .decoded import Decoder, RecordFilter, default_framings
 from .fastlog import parse_chunk, seconds
-from .files import read_capture
-from .filters import Filter, RecordFilter
-from .records import CaptureError, Record
-from .serial_log import is_serial_capture
+from .filters import Filter
+from .records import CaptureError, Record, read_capture, sniff
 
 __all__ = ["Fed", "analyze_captures"]
 
@@ -50,16 +48,14 @@ def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, skip_bad: bool
     decoder = Decoder(default_framings(id_base, extended, deployment))
     sink = _Sink(analyzer, decoder, keep or Filter())
     bad: list[CaptureError] = []
-    if len(paths) == 1 and _bulk_readable(paths[0]) and not extended:
+    formats = [sniff(path) for path in paths]
+    if formats == [".log"] and not extended:
         drops = _candump_chunks(paths[0], sink, skip_bad, bad, id_base, progress)
         drops.update(decoder.drops())
         return Fed(drops, bad, sink.filtered_out)
-    sink.add_records(heapq.merge(*(read_capture(path, skip_bad, bad) for path in paths), key=lambda r: r.t))
+    readers = (read_capture(path, skip_bad, bad, fmt=fmt) for path, fmt in zip(paths, formats, strict=True))
+    sink.add_records(heapq.merge(*readers, key=lambda r: r.t))
     return Fed(decoder.drops(), bad, sink.filtered_out)
-
-
-def _bulk_readable(path: str) -> bool:
-    return path.endswith(".log") and not is_serial_capture(path)
 
 
 class _Sink:

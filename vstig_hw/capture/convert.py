@@ -22,10 +22,19 @@ from collections.abc import Iterator, Sequence
 
 from ..counters import Counters
 from ..framing.zenoh import ZenohFraming
-from .decoded import Decoder, default_framings
-from .files import CAN_EXTENSIONS, MCAP_EXTENSION, RotatingCapture, capture_suffix, read_capture
-from .filters import Filter, RecordFilter
-from .records import CAN_FRAMING, MESSAGE_FRAMING, CaptureError, Record
+from .decoded import Decoder, RecordFilter, default_framings
+from .files import RotatingCapture
+from .filters import Filter
+from .records import (
+    CAN_EXTENSIONS,
+    CAN_FRAMING,
+    MCAP_EXTENSION,
+    MESSAGE_FRAMING,
+    CaptureError,
+    Record,
+    capture_suffix,
+    read_capture,
+)
 
 __all__ = ["convert", "output_medium"]
 

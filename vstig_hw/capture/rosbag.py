@@ -15,7 +15,7 @@ from __future__ import annotations
 import functools
 import re
 import struct
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import IO, Any
 
 from ..counters import Counters
@@ -24,8 +24,8 @@ from ..wire import Message, Op
 from .decoded import Decoder
 from .records import MESSAGE_FRAMING, CaptureError, Record, cut_short
 
-__all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "CarriedMessages", "McapCaptureWriter",
-           "cdr_message", "read_mcap", "topic_for"]
+__all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "McapCaptureWriter", "cdr_message", "read_mcap",
+           "topic_for"]
 
 TYPE_NAME = "vstig_msgs/msg/Message"
 MSGDEF = """\
@@ -138,32 +138,13 @@ class McapCaptureWriter:
         self._file.close()
 
 
-class CarriedMessages:
-    """The framing of records that carry `(Message, sender)` already (read from MCAP)."""
-
-    name = MESSAGE_FRAMING
-
-    def __init__(self) -> None:
-        self.drops = Counters()
-
-    def feed(self, unit: tuple[Message, int | None]) -> list[Message]:
-        return [unit[0]]
-
-    def encode(self, msg: Message) -> list[tuple[Message, int | None]]:
-        return [(msg, None)]
-
-    def sender_of(self, unit: tuple[Message, int | None]) -> int | None:
-        return unit[1]
-
-    def tick(self) -> None:
-        """Nothing to expire."""
-
-
-def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None) -> Iterator[Record]:
+def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+              opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
     """The messages of an MCAP capture in log-time order, as `MESSAGE_FRAMING` records named by link.
 
     A file with no footer (its recorder was killed) is read in file order up to its last complete
-    chunk, and the cut is reported by `cut_short`.
+    chunk, and the cut is reported by `cut_short`. `opened` (every reader's signature) is not called:
+    the file is read through its index, so how far into it the reader is says nothing of progress.
     """
     try:
         from mcap.reader import make_reader

@@ -18,9 +18,9 @@ from typing import IO, Any
 
 from ..framing.zenoh import ZenohSample
 from .records import CaptureError, Record
-from .serial_log import SerialCaptureWriter, is_serial_capture, match_line, read_line_capture
+from .serial_log import SerialCaptureWriter, match_line, read_line_capture
 
-__all__ = ["HEADER", "ZenohCaptureWriter", "is_zenoh_capture", "read_zenoh_capture"]
+__all__ = ["HEADER", "ZenohCaptureWriter", "read_zenoh_capture"]
 
 HEADER = "# vstig zenoh capture v1"
 _LINE = re.compile(r"\((\d+\.\d+)\) (\S+) (\S+) (rx|tx) (\S+) ((?:[0-9a-fA-F]{2})*)\Z")
@@ -49,7 +49,3 @@ def parse_line(path: str, number: int, line: str) -> Record | None:
 def read_zenoh_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
                        opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
     return read_line_capture(path, parse_line, skip_bad, bad, opened, HEADER)
-
-
-def is_zenoh_capture(path: str) -> bool:
-    return is_serial_capture(path, HEADER)

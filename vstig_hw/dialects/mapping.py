@@ -35,6 +35,9 @@ count, little-endian, then NUL-terminated strings in id order) and the `.basm` (
 from __future__ import annotations
 
 import math
+import os
+import re
+import stat
 import struct
 import tomllib
 from dataclasses import dataclass, field
@@ -195,20 +198,44 @@ def _bbz_from_raw(raw: int, value_type: DialectValueType) -> tuple[int, int] | N
 # --------------------------------------------------------------------------
 
 
+DEPLOYMENT_MAX_BYTES = 1 << 20  # a deployment file maps a few hundred keys at most
+SYMBOLS_MAX_BYTES = 16 << 20  # a compiled script's .bo or .basm; its string table has at most 65535 ids
+
+
+def _read_regular(path: Path, limit: int, what: str) -> bytes:
+    """The bytes of `path`, a regular file of at most `limit` bytes; anything else a DeploymentError naming it.
+
+    Opened without blocking (a FIFO would wait for a writer) and checked on the open descriptor, so a
+    device (/dev/zero), a pipe or a folder is refused before a byte is read.
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except (OSError, ValueError) as error:  # ValueError: a NUL in the name
+        reason = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
+        raise DeploymentError(f"{path}: cannot read {what}: {reason}") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise DeploymentError(f"{path}: {what} must be a regular file, not a device, pipe or folder")
+    with os.fdopen(fd, "rb") as file:
+        data = file.read(limit + 1)  # not st_size alone: a file may grow while read
+    if len(data) > limit:
+        raise DeploymentError(f"{path}: {what} is larger than the {limit >> 20} MiB read at most")
+    return data
+
+
 def read_bbz_symbols(path: Path) -> list[str]:
     """The string table of a compiled Buzz script (.bo or .basm): index = BittyBuzz string id."""
-    try:
-        data = path.read_bytes()
-    except OSError as error:
-        raise DeploymentError(f"{path}: cannot read the BittyBuzz symbols: {error.strerror or error}") from None
+    data = _read_regular(path, SYMBOLS_MAX_BYTES, "the BittyBuzz symbols")
     if path.suffix == ".basm":
         lines = data.decode("utf-8", "replace").splitlines()
         if not lines or not lines[0].startswith("!"):
-            raise DeploymentError(f"{path}: a .basm starts with the '!count' line of its string table")
-        strings = [line[1:].rstrip() for line in lines[1:] if line.startswith("'")]
+            raise DeploymentError(f"{path}:1: a .basm starts with the '!count' line of its string table")
         count = lines[0][1:].strip()
-        if not count.isdigit() or len(strings) < int(count):
-            raise DeploymentError(f"{path}: the string table announces {count} strings, found {len(strings)}")
+        if not (count.isascii() and count.isdigit()) or int(count) > 0xFFFF:
+            raise DeploymentError(f"{path}:1: {lines[0][:40]!r} is not '!count' with a count in 0..65535")
+        strings = [line[1:].rstrip() for line in lines[1:] if line.startswith("'")]
+        if len(strings) < int(count):
+            raise DeploymentError(f"{path}:1: the string table announces {count} strings, found {len(strings)}")
         return strings[:int(count)]
     if len(data) < 2:
         raise DeploymentError(f"{path}: too short for a .bo string table")
@@ -216,6 +243,12 @@ def read_bbz_symbols(path: Path) -> list[str]:
     if data[2:].count(b"\0") < announced:
         raise DeploymentError(f"{path}: the .bo announces {announced} strings but the file ends first")
     return [s.decode("utf-8", "replace") for s in data[2:].split(b"\0")[:announced]]
+
+
+def _line_of(text: str, key: str) -> str:
+    """`:N` for the first line of TOML `text` that sets `key` (tomllib keeps no positions), or ''."""
+    match = re.search(rf"^[ \t]*{re.escape(key)}[ \t]*=", text, re.MULTILINE)
+    return f":{text.count(chr(10), 0, match.start()) + 1}" if match else ""
 
 
 def _int(table: dict[str, Any], name: str, where: str, low: int, high: int, default: int) -> int:
@@ -247,7 +280,7 @@ def parse_deployment(text: str, source: str = "<deployment>", base: Path | None 
         try:
             symbols = read_bbz_symbols(path if path.is_absolute() or base is None else base / path)
         except DeploymentError as error:
-            raise DeploymentError(f"{source}: bittybuzz.symbols: {error}") from None
+            raise DeploymentError(f"{source}{_line_of(text, 'symbols')}: bittybuzz.symbols: {error}") from None
     ids = {name: index for index, name in reversed(list(enumerate(symbols)))}
     entries: dict[str, KeyMap] = {}
     for name, spec in keys.items():
@@ -284,10 +317,13 @@ def _no_clash(entries: dict[str, KeyMap], source: str) -> None:
 
 
 def load_deployment(path: str | Path) -> Deployment:
-    """Read a deployment TOML file (errors name the file)."""
+    """Read a deployment TOML file: a regular file, bounded in size; a relative symbols path is taken from the
+    file's folder. Errors name the file (and the line, where TOML gives one)."""
     file = Path(path)
+    data = _read_regular(file, DEPLOYMENT_MAX_BYTES, "the deployment file")
     try:
-        text = file.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise DeploymentError(f"{file}: cannot read the deployment file: {error}") from None
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        line = data.count(b"\n", 0, error.start) + 1
+        raise DeploymentError(f"{file}:{line}: not UTF-8 text") from None
     return parse_deployment(text, str(file), file.parent)

@@ -26,6 +26,7 @@ before the engine, a raw relay or a listener does.
 
 from __future__ import annotations
 
+import collections
 import enum
 import gc
 import queue
@@ -35,8 +36,8 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from ..counters import Counters
-from ..engine import ConflictResolver, Outcome, Stigmergy
+from ..counters import ENGINE_STATS, Counters
+from ..engine import ConflictResolver, Entry, Outcome, Stigmergy
 from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
 from ..timestamps import TS_NONE
@@ -49,7 +50,6 @@ __all__ = ["DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "
 
 DEFAULT_PERIOD = 0.1  # the paper's control step
 DEFAULT_BUDGET = 64  # messages per link per tick: ~8 kB/s of cobs8, within a 115200-baud radio
-ENGINE_STATS = "engine"  # the stats() entry of the engine's outcome counts
 
 
 SWITCH_INTERVAL = 0.0005  # seconds: how soon a reader thread with a frame gets the GIL from the loop
@@ -87,6 +87,8 @@ TickListener = Callable[["Node"], None]
 # What one unit carried, after the guard: link name, time heard, sender (None: the medium names none), messages.
 # Cheaper than on_heard on a busy gateway: one call per unit and no `Heard` built (the live view uses it).
 MessagesListener = Callable[[str, float, "int | None", list[Message]], None]
+# key, entry before (None: new key), entry after, link it came from (None: our own put), sender (None: unnamed)
+ChangeListener = Callable[[int, Entry | None, Entry, str | None, int | None], None]
 
 
 class Node:
@@ -123,7 +125,10 @@ class Node:
         self.on_refused: list[RefusedListener] = []  # what the guard refused (a sniffer shows it too)
         self.on_tick: list[TickListener] = []
         self.on_messages: list[MessagesListener] = []
+        self.on_change: list[ChangeListener] = []  # the table changed (Python API's watch); see `_receive_telling`
         self.ticks = 0
+        self._calls: collections.deque[Callable[[], None]] = collections.deque()  # `call_soon`'s, for the loop
+        self.lock = threading.RLock()  # `poll` works under it; another thread holding it may call put/get
         self._readers = LinkReaders(self.links)
         self._next_tick = 0.0
         self._retry_at: float | None = None
@@ -168,7 +173,11 @@ class Node:
 
     # -- the robot's program (ENGINE mode) --------------------------------------
     def put(self, key: int, value: int) -> None:
-        self._engine().put(key, value)
+        engine = self._engine()
+        old = engine.entry(key) if self.on_change else None
+        engine.put(key, value)
+        if self.on_change:
+            self._tell(key, old, None, engine.robot_id)
         self._spread(time.monotonic())
 
     def get(self, key: int) -> int | None:
@@ -216,18 +225,22 @@ class Node:
             item = arrivals.get(timeout=timeout) if timeout > 0 else arrivals.get_nowait()
         except queue.Empty:
             item = None
-        heard_on = 0  # bit i: link i delivered in this poll
-        while item is not None:
-            self._arrive(*item)
-            heard_on |= 1 << item[0]
-            try:
-                item = arrivals.get_nowait()
-            except queue.Empty:
-                item = None
-        now = time.monotonic()
-        if now >= self._next_tick:
-            self._tick(now)
-        self._spread(now, heard_on)
+        with self.lock:  # held while working, never while waiting: other threads may call in between
+            heard_on = 0  # bit i: link i delivered in this poll
+            while item is not None:
+                self._arrive(*item)
+                heard_on |= 1 << item[0]
+                try:
+                    item = arrivals.get_nowait()
+                except queue.Empty:
+                    item = None
+            calls = self._calls
+            while calls:
+                calls.popleft()()
+            now = time.monotonic()
+            if now >= self._next_tick:
+                self._tick(now)
+            self._spread(now, heard_on)
 
     def _arrive(self, index: int, t: float, units: list[Any]) -> None:
         link = self.links[index]
@@ -250,7 +263,8 @@ class Node:
             if not messages:
                 continue
             heard_count += len(messages)
-            sender = sender_of(unit) if guard is not None or self.on_heard or self.on_messages else None
+            sender = sender_of(unit) if guard is not None or self.on_heard or self.on_change or self.on_messages \
+                else None
             told = False
             if guard is not None:
                 source = source_of(unit) if source_of is not None else None
@@ -267,7 +281,9 @@ class Node:
                 for m_listener in self.on_messages:
                     m_listener(link.name, t, sender, messages)
             if engine is not None:
-                if link.one_domain and outlets:
+                if self.on_change:
+                    self._receive_telling(engine, index, messages, sender)
+                elif link.one_domain and outlets:
                     self._receive_from_domain(engine, index, messages)
                 else:
                     for msg in messages:
@@ -313,6 +329,37 @@ class Node:
                 noted = heard_from.get(msg[0] & KEY_MAX)
                 if noted is not None and noted[1] == index:
                     del heard_from[msg[0] & KEY_MAX]
+
+    # -- other threads and watchers (the Python API, vstig_hw.api) ----------------
+    # A Node is single-threaded, with two ways in for another thread: hold `lock` (an RLock `poll`
+    # holds only while it works, never while it waits) around put/get/ask, or hand a call to the loop.
+    def call_soon(self, call: Callable[[], None]) -> None:
+        """Run `call` on the loop's thread at its next poll, waking a loop that waits; safe from any thread.
+
+        The loop runs it between draining what links heard and ticking; an exception
+        it raises ends `run`, so a caller wraps what may fail.
+        """
+        self._calls.append(call)  # deque.append is atomic: no lock shared with the loop
+        self._readers.arrivals.put(None)  # the wake-up: poll's drain stops at None, harmlessly
+
+    def _receive_telling(self, engine: Stigmergy, index: int, messages: list[Message], sender: int | None) -> None:
+        """Receive as `_arrive` does, one message at a time, telling `on_change` of every entry that changed."""
+        link = self.links[index]
+        domain = link.one_domain and self.outlets
+        for msg in messages:
+            key = msg[0] & KEY_MAX
+            old = engine.entry(key)
+            if domain:
+                self._receive_from_domain(engine, index, [msg])
+            else:
+                engine.receive(msg)
+            self._tell(key, old, link.name, sender)
+
+    def _tell(self, key: int, old: Entry | None, link: str | None, sender: int | None) -> None:
+        new = self.engine.entry(key) if self.engine is not None else None
+        if new is not None and new != old:
+            for listener in self.on_change:
+                listener(key, old, new, link, sender)
 
     def _tick(self, now: float) -> None:
         self.ticks += 1

@@ -24,8 +24,8 @@ when the re-broadcast that stored it was lost).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import partial
 
 from ..engine import Entry, Stigmergy
 from ..links.link import Heard
@@ -33,7 +33,7 @@ from ..timestamps import TS_NONE
 from ..wire import Op
 from .node import Node
 
-__all__ = ["HearsItself", "KeyWatch", "PutResult", "get_newest", "put_confirmed"]
+__all__ = ["ConfirmedPut", "HearsItself", "KeyWatch", "PutResult", "get_newest", "not_taken", "put_confirmed"]
 
 
 class HearsItself(RuntimeError):
@@ -86,43 +86,122 @@ class PutResult:
 
     @property
     def superseded(self) -> bool:
+        """The swarm holds an entry other than our last write."""
         return self.holds != self.written
 
 
+class ConfirmedPut:
+    """One confirmed write as steps, driven by whoever runs the node's loop (`put_confirmed`, the Python API).
+
+    Call `start` once, then `step` after every poll until it returns True, then
+    `result`; `detach` (also on failure) removes its listeners. Everything runs on
+    the loop's thread. Without `confirm` (a radio that cannot answer) it writes
+    once and is done, unconfirmed.
+    """
+
+    def __init__(self, node: Node, key: int, value: int, *, learn: float, wait: float, tries: int = 3,
+                 confirm: bool = True, spent: float = 0.0) -> None:
+        engine = node.engine
+        if engine is None:
+            raise RuntimeError(f"a {node.mode.value} node cannot write")
+        self.node, self.engine, self.key, self.value = node, engine, key, value
+        # `spent`: seconds already used opening the node, taken from `learn`, then from the first write's wait
+        self.learn, self.wait, self.tries, self.confirm = max(0.0, learn - spent), wait, tries, confirm
+        self._first_wait = max(0.0, wait - max(0.0, spent - learn))
+        self.watch = KeyWatch(key, engine.robot_id)
+        self.asker = _Asker(key)
+        self.written: Entry | None = None  # None while learning
+        self.made = 0
+        self.deadline = 0.0
+        self.done = False
+
+    def start(self, now: float) -> bool:
+        """Attach the listeners and ask (learning) or write; True when already done (no confirm)."""
+        self.node.on_heard.append(self.watch)
+        self.node.on_tick.append(self.asker)
+        if self.learn:
+            self.asker(self.node)
+            self.deadline = now + self.learn
+            return False
+        self._write(now)
+        return self.done
+
+    def step(self, now: float) -> bool:
+        """After a poll: True once done; HearsItself when the link brings our own GETs back."""
+        if self.done:
+            return True
+        watch = self.watch
+        if self.written is None:
+            if not (self.confirm and watch.hears_itself) and now < self.deadline:
+                return False
+            self._check_not_echoed()
+            self._write(now)
+            return self.done
+        if not _settled(watch, self.written, self.engine) and now < self.deadline:
+            return False
+        self._check_not_echoed()
+        if self.engine.entry(self.key) == self.written or self.made >= self.tries:
+            self.done = True
+        else:
+            watch.seen.clear()
+            self._write(now)
+        return self.done
+
+    def detach(self) -> None:
+        """Remove the listeners (safe to call twice)."""
+        for listeners, listener in ((self.node.on_heard, self.watch), (self.node.on_tick, self.asker)):
+            if listener in listeners:
+                listeners.remove(listener)  # type: ignore[arg-type]
+
+    def result(self) -> PutResult:
+        """What became of the write (after `step` returned True)."""
+        assert self.written is not None
+        holds = self.engine.entry(self.key)
+        confirmed = self.confirm and self.written in self.watch.seen and holds == self.written
+        return PutResult(self.written, confirmed, self.made, holds, self.watch.last)
+
+    def _write(self, now: float) -> None:
+        self.written, self.made = _write(self.node, self.key, self.value), self.made + 1
+        self.deadline = now + (self._first_wait if self.made == 1 else self.wait)
+        self.done = not self.confirm
+
+    def _check_not_echoed(self) -> None:
+        _check_not_echoed(self.node, self.watch, self.confirm)
+
+
 def put_confirmed(node: Node, key: int, value: int, *, learn: float, wait: float, tries: int = 3,
-                  confirm: bool = True) -> PutResult:
-    """Write `value` under `key` through an open ENGINE node, as described above.
+                  confirm: bool = True, spent: float = 0.0) -> PutResult:
+    """Write `value` under `key` through an open ENGINE node whose loop nobody else runs, as described above.
 
     Each write waits up to `wait` seconds for a neighbour to show it. Without
     `confirm` (a radio that cannot answer) it writes once and returns unconfirmed.
+    `spent`: seconds already used opening the node, taken from `learn`, then from the first write's wait.
     """
-    engine = node.engine
-    if engine is None:
-        raise RuntimeError(f"a {node.mode.value} node cannot write")
-    watch = KeyWatch(key, engine.robot_id)
-    asker = _Asker(key)
-    node.on_heard.append(watch)
-    node.on_tick.append(asker)
+    put = ConfirmedPut(node, key, value, learn=learn, wait=wait, tries=tries, confirm=confirm, spent=spent)
     try:
-        if learn:
-            asker(node)
-            node.run(until=lambda: confirm and watch.hears_itself, duration=learn)
-            _check_not_echoed(node, watch, confirm)
-        written, made = _write(node, key, value), 1
-        if confirm:
-            while True:
-                node.run(until=partial(_settled, watch, written, engine), duration=wait)
-                _check_not_echoed(node, watch, confirm)
-                if engine.entry(key) == written or made >= tries:
-                    break
-                watch.seen.clear()
-                written, made = _write(node, key, value), made + 1
+        if not put.start(time.monotonic()):
+            node.run(until=lambda: put.step(time.monotonic()))
         _drain(node)
     finally:
-        node.on_heard.remove(watch)
-        node.on_tick.remove(asker)
-    confirmed = confirm and written in watch.seen and engine.entry(key) == written
-    return PutResult(written, confirmed, made, engine.entry(key), watch.last)
+        put.detach()
+    return put.result()
+
+
+def not_taken(result: PutResult, key: int, where: str, wait: float, show: Callable[[Entry], str] = str, *,
+              confirm: bool = True) -> str | None:
+    """Why the write was not taken, in one line naming what the swarm holds; None when it was.
+
+    Superseded is always a failure; unconfirmed only when a confirmation was asked for.
+    """
+    ours = show(result.written)
+    if result.superseded:
+        assert result.holds is not None
+        return (f"key {key}: the swarm holds {show(result.holds)} on {where}, not our write ({ours}), "
+                f"after {result.tries} writes")
+    if confirm and not result.confirmed:
+        said = f"the last entry heard was {show(result.heard)}" if result.heard else "nothing was heard for the key"
+        return f"key {key}: no neighbour on {where} took our write ({ours}) within {wait:g} s; {said}"
+    return None
 
 
 def get_newest(node: Node, key: int, wait: float) -> Entry | None:

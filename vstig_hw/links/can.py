@@ -73,6 +73,14 @@ class CanSpec:
 
         return CanIdScheme(extended=self.extended, base=self.id_base, stigmergy=self.stigmergy)
 
+    def check_sender(self, robot_id: int) -> None:
+        """ValueError when this link's ID scheme has no room for `robot_id` as a sender."""
+        max_sender = self.scheme().max_sender
+        if robot_id > max_sender:
+            raise ValueError(f"{robot_id} does not fit can:{self.interface}:{self.channel}: its "
+                             f"{29 if self.extended else 11}-bit IDs carry node ids 0..{max_sender} "
+                             "(extended=1 gives 29-bit IDs: 0..65535)")
+
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` is the sender field a CAN link transmits under."""
         return can_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)

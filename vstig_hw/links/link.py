@@ -27,7 +27,7 @@ class Heard:
 class Link(Generic[Unit]):
     """`one_domain`: every node on the medium hears every frame any of them sends (a CAN bus, a
     blabbermouth relay), so an engine gateway does not echo an entry back onto the link it came
-    from (README "Echo suppression"). False, the safe default, where a robot may be out of
+    from (docs/explanation/design.md, "Echo suppression"). False, the safe default, where a robot may be out of
     another's range (radios): there the re-broadcast carries the entry a hop further."""
 
     def __init__(self, name: str, transport: Transport[Unit], framing: Framing[Unit], *,
@@ -112,4 +112,13 @@ class LinkSpec(Protocol):
 
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` is the sender a link transmits under where the medium names one."""
+        ...
+
+
+@runtime_checkable
+class NamesSenders(Protocol):
+    """A spec whose medium carries the sender's robot id in a field of limited width (CAN arbitration IDs)."""
+
+    def check_sender(self, robot_id: int) -> None:
+        """ValueError, one line naming the link, when `robot_id` does not fit the sender field."""
         ...

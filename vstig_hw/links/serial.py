@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
+from urllib.parse import parse_qs, urlsplit
 
 from .grammar import bad, check_port, integer, safe_name, split_query
 from .link import Link
@@ -92,6 +93,24 @@ def _dialect(spec: str, example: str, params: dict[str, str], framing: str) -> d
     return {"dialect": "bittybuzz", "deployment": params["deployment"]}
 
 
+# pyserial URL handlers' parameters that open a file for writing: spy:// truncates `file=` as it opens.
+_WRITING_PARAMETERS = {"spy": ("file",)}
+
+
+def _port(spec: str, example: str, port: str) -> str:
+    """The port, present and clean, and no pyserial URL that would write a file the user did not name to vstig
+    (no --overwrite could guard it, and each reconnect would truncate it again)."""
+    port = check_port(spec, example, port)
+    parts = urlsplit(port) if "://" in port else None
+    for name in _WRITING_PARAMETERS.get(parts.scheme if parts else "", ()):
+        # read as pyserial reads it: the query after the first '?', percent-decoded (fil%65= is file=)
+        if parts and name in parse_qs(parts.query, keep_blank_values=True):
+            raise bad(spec, f"pyserial's {parts.scheme}:// writes {name}=..., and a link never writes files "
+                      f"(drop {name}=: {parts.scheme}:// then logs to stderr; `vstig record` keeps a capture)",
+                      example)
+    return port
+
+
 def parse_serial(spec: str, body: str) -> SerialSpec:
     """`body` is the spec after `serial:`."""
     example = _SERIAL_EXAMPLE
@@ -106,14 +125,14 @@ def parse_serial(spec: str, body: str) -> SerialSpec:
         if framing != "epuck4":
             raise bad(spec, f"expiry_ticks is an epuck4 option, not one of framing={framing}", example)
         expiry_ticks = integer(spec, example, "expiry_ticks", params["expiry_ticks"], 1, 254)
-    return SerialSpec(port=check_port(spec, example, port), baud=baud, framing=framing, expiry_ticks=expiry_ticks,
+    return SerialSpec(port=_port(spec, example, port), baud=baud, framing=framing, expiry_ticks=expiry_ticks,
                       **_dialect(spec, example, params, framing))
 
 
 def parse_ohc(spec: str, body: str) -> SerialSpec:
     """`body` is the spec after `kilobot-ohc:`."""
     port, params = split_query(spec, body, _OHC_EXAMPLE, _DIALECT_KEYS, "://" in body)
-    return SerialSpec(port=check_port(spec, _OHC_EXAMPLE, port), baud=OHC_BAUD, framing="kilobot-ohc",
+    return SerialSpec(port=_port(spec, _OHC_EXAMPLE, port), baud=OHC_BAUD, framing="kilobot-ohc",
                       **_dialect(spec, _OHC_EXAMPLE, params, "kilobot-ohc"))
 
 

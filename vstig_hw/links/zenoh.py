@@ -13,7 +13,7 @@ Opening a link that lets unauthenticated peers in from the network logs one
 warning line: a listener beyond loopback that is neither covered by user/password
 or known public keys nor a TLS/QUIC listener with mutual TLS, or multicast
 scouting without such authentication. The loopback default is open to every
-user of this PC (README "Many PCs").
+user of this PC (docs/how-to/many-pcs.md).
 
 The zenoh library is imported when a link is built, not when a spec is parsed.
 """
@@ -66,6 +66,7 @@ class ZenohSpec:
     stigmergy: int = 0
     scout: bool | None = None  # None: the config file's, else off
     block: bool = False  # Zenoh congestion control BLOCK instead of DROP: set by commands that must not lose a sample
+    peer_wait: float | None = None  # seconds opening may wait for a peer it connects to (None: 3); one-shot commands
 
     @property
     def kind(self) -> str:
@@ -280,7 +281,7 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
     open_to = exposure(first)
     if open_to:
         log.warning("%s: WARNING: this gateway %s with no authentication: anyone on the network can read "
-                    "and write the swarm (configure TLS and user/password with config=, see README 'Many PCs')",
+                    "and write the swarm (configure TLS and user/password with config=, see docs/how-to/many-pcs.md)",
                     name, open_to)
     reaches = "; ".join(filter(None, (
         f"connecting to {', '.join(connecting)}" if connecting else "",
@@ -288,5 +289,5 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
     transport = ZenohTransport(make_config, space.subscription, name=name, block=spec.block,
                                expects_peer=bool(connecting) or _mode(first) == "client",
                                listening=tuple(_endpoints(first, "listen/endpoints")), reaches=reaches,
-                               rebind=fresh_listener if ours else None)
+                               rebind=fresh_listener if ours else None, peer_wait=spec.peer_wait)
     return Link(name, transport, framing)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import can
 import numpy as np
 
-from ..capture.files import CanCaptureWriter
+from ..capture.canlog import CanCaptureWriter
 from ..capture.records import CAN_FRAMING, Record
 from ..framing.can import CanIdScheme
 from ..wire import Message, encode

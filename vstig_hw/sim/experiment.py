@@ -246,6 +246,13 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+# Every run's result is held until the summary: a bound on runs is a bound on memory (100,000 runs: tens of MB).
+# Past a few thousand runs a summary's figures no longer move; `sim --runs` and the grids' runs x conditions
+# are refused beyond this.
+MAX_RUNS = 100_000
+MAX_WORKERS = 256  # processes; more than a machine's cores only adds memory
+
+
 def run_tasks(
     tasks: Iterable[Task], workers: int | None = None, on_done: Callable[[Task, RunResult], None] | None = None
 ) -> dict[Task, RunResult]:

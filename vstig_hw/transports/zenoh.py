@@ -17,7 +17,7 @@ logged once, and `listening` names the port really bound.
 
 Congestion control is chosen by the caller: BLOCK where losing a sample loses
 data (replay, put), DROP for the gateway, whose protocol repairs losses and whose
-other links must not stall behind a slow network (README, "Many PCs").
+other links must not stall behind a slow network (docs/how-to/many-pcs.md).
 
 Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session subscribed),
 `tx_dropped`, `lost`, `unreachable`, `reconnects`.
@@ -66,6 +66,7 @@ class ZenohTransport:
         reaches: str = "",
         rebind: Callable[[], tuple[str, ...]] | None = None,
         backoff: tuple[float, float] = (0.5, 10.0),
+        peer_wait: float | None = None,
     ) -> None:
         self.name = name
         self.listening = listening  # the endpoints it listens on (a free loopback port by default)
@@ -77,6 +78,8 @@ class ZenohTransport:
         self.congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self._make_config = make_config
         self._expects_peer = expects_peer  # told to connect somewhere: finding nobody is worth a line
+        # How long open() may take in all while it waits for that peer (a one-shot command's budget bounds it).
+        self._peer_wait = _FIRST_PEER_WAIT_S if peer_wait is None else peer_wait
         self._backoff_min, self._backoff_max = backoff
         self._delay = self._backoff_min
         self._next_try = 0.0
@@ -105,7 +108,7 @@ class ZenohTransport:
             log.warning("%s: %s; retrying with backoff", self.name, exc)
             return
         if self._expects_peer:
-            self._await_peer(_FIRST_PEER_WAIT_S)
+            self._await_peer(self._opened_at + self._peer_wait - time.monotonic())
 
     def _await_peer(self, seconds: float) -> None:
         """Wait (briefly) for the peer or router we connect to, so what we send first is not sent to nobody."""

@@ -1,0 +1,1 @@
+"""The `vstig` commands, one module each, named after the command (`vstig_cli.main` finds them here)."""

@@ -1,0 +1,96 @@
+"""`vstig bridge LINK LINK... --robot-id N`: the PC joins the swarm on every link."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from vstig_hw.engine import larger_value_wins
+from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency
+from vstig_hw.links import LinkSpec
+
+from ..live import Address, foxglove_option, live_view
+from ..options import Finite, GuardChoice, guard_options, take_warnings
+from ..running import LINK, build_links, describe_links, print_counters, reports_errors, run_until_stopped
+
+
+def _raw_note(robot_id: int | None) -> str:
+    """What a raw bridge sends as: messages re-encoded onto CAN carry a sender id in the CAN ID."""
+    if robot_id is None:
+        return "raw; messages re-encoded onto CAN go out as node 0, --robot-id N chooses"
+    return f"raw; messages re-encoded onto CAN go out as node {robot_id}"
+
+
+@click.command()
+@click.argument("links", nargs=-1, required=True, type=LINK)
+@click.option("--robot-id", type=click.IntRange(0, 0xFFFF), help="The PC's robot id (required unless --raw).")
+@click.option("--tick", type=Finite(0.001, 60), default=DEFAULT_PERIOD, show_default=True,
+              help="Control period in seconds.")
+@click.option("--budget", type=click.IntRange(1, 1_000_000), default=DEFAULT_BUDGET, show_default=True,
+              help="Messages per link per tick.")
+@click.option("--raw", is_flag=True, help="Relay every frame between links, translating framings, with no engine.")
+@click.option("--larger-value-wins", "larger", is_flag=True,
+              help="Resolve conflicts by the larger value (the paper's Figure 1) instead of the higher robot id.")
+@click.option("--refresh/--no-refresh", default=True, show_default=True,
+              help="GET one key of the table per tick, round-robin, as a robot's program would: repairs gateways "
+                   "that were apart (network partition, restart) without waiting for the next write.")
+@click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
+@foxglove_option
+@guard_options
+@reports_errors
+def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
+            larger: bool, refresh: bool, duration: float | None, foxglove: Address | None,
+            guard: GuardChoice) -> None:
+    """Run the gateway: one engine on every LINK, until Ctrl-C.
+
+    The status line and the counters printed on exit have each link's counters
+    and the engine's receive outcomes (stored, answered, stale, same, conflict,
+    unknown, invalid).
+
+    Example: vstig bridge can:socketcan:can0 serial:/dev/ttyUSB0?framing=epuck4 --robot-id 200
+
+    A guard checks what every link hears before the engine sees it: timestamp jumps are refused by
+    default; --learn, --rate, --source-rate, --trust, --deny, --keys, --read-only and --flap add
+    policies. LINK names are those printed at start (the device's name: can0, ttyUSB0...). Refusals
+    are counted per link (drop_jump, drop_rate, drop_source_rate, drop_untrusted, drop_key).
+
+    \b
+    Many PCs: add a zenoh link on each (vstig links lists its options), e.g.
+    vstig bridge can:socketcan:can0 zenoh:lab?connect=tcp/10.0.0.5:7447 --robot-id 201
+
+    --foxglove 8765 shows the swarm live in Foxglove (docs/how-to/live-view.md).
+    """
+    if robot_id is None and not raw:
+        raise click.UsageError("--robot-id is required (the PC's id in the swarm), or use --raw")
+    if raw and len(links) < 2:
+        raise click.UsageError("--raw needs at least two links to bridge")
+    built = build_links(links, robot_id or 0)
+    firewall = guard.build(built)
+    node = Node(built, robot_id or 0, mode=Mode.RAW if raw else Mode.ENGINE,
+                period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
+                onconflict=larger_value_wins if larger else None, guard=firewall)
+    if refresh and not raw:
+        node.on_tick.append(RoundRobinGet())
+    live = sys.stderr.isatty()
+    favour_latency()
+
+    def status() -> None:
+        line = node.summary()
+        for warning in take_warnings(firewall):
+            click.echo(f"\r\x1b[K{warning}" if live else warning, err=True)
+        if live:
+            click.echo(f"\r\x1b[K{line}", nl=False, err=True)
+
+    with live_view(node, foxglove, larger_value_wins=larger), node:
+        click.echo(f"bridging {', '.join(link.name for link in node.links)} "
+                   f"({_raw_note(robot_id) if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
+        describe_links(node)
+        try:
+            run_until_stopped(node, status, duration)
+        finally:
+            if live:
+                click.echo(err=True)
+    for warning in take_warnings(firewall):
+        click.echo(warning, err=True)
+    print_counters(node)

@@ -1,0 +1,44 @@
+"""`vstig get KEY --on LINK [--wait S]`: ask the swarm for a key's value."""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+from vstig_hw.gateway import Node
+from vstig_hw.gateway.oneshot import get_newest
+from vstig_hw.links import LinkSpec
+from vstig_hw.values import VALUE_TYPES, ValueType
+
+from ..options import KEY, Finite
+from ..running import LINK, build_links, lossless, reports_errors
+from .put import shown
+
+
+@click.command()
+@click.argument("key", type=KEY)
+@click.option("--on", "link", type=LINK, required=True, help="The link to ask through.")
+@click.option("--wait", type=Finite(0.0, 3600.0), default=2.0, show_default=True,
+              help="Seconds to ask and listen; the newest entry heard in that time is printed.")
+@click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=254, show_default=True)
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@reports_errors
+def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: ValueType) -> None:
+    """Print the newest value neighbours hold for KEY, heard within --wait (exit 1 if none answers).
+
+    It asks every control step for the whole --wait, so a newer entry that
+    arrives after the first answer is the one printed. KEY takes decimal or 0x hex.
+
+    Example: vstig get 3 --on serial:/dev/ttyUSB0?framing=epuck4 --wait 5
+    """
+    started = time.monotonic()  # --wait bounds the whole command: opening the link is part of it
+    node = Node(build_links([lossless(link, opening=wait)], robot_id), robot_id)
+    name = node.links[0].name
+    if getattr(node.links[0].framing, "transmit_only", False):
+        raise click.BadParameter(f"{name} only transmits: no neighbour can answer", param_hint="'--on'")
+    with node:
+        entry = get_newest(node, key, max(0.0, wait - (time.monotonic() - started)))
+    if entry is None:
+        raise click.ClickException(f"no neighbour on {name} answered for key {key} within {wait:g} s")
+    click.echo(f"key={key} {shown(entry, value_type)}")

@@ -1,0 +1,143 @@
+"""`vstig record LINK... [-o FILE|FOLDER]`: capture links' raw units into one file; no frame lost on Ctrl-C,
+and no capture lost ever: an existing file is replaced only when asked."""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Any
+
+import click
+
+from vstig_hw.capture.decoded import Decoder, RecordFilter, default_framings
+from vstig_hw.capture.files import RotatingCapture
+from vstig_hw.capture.filters import Filter
+from vstig_hw.capture.plan import capture_medium
+from vstig_hw.capture.records import (
+    APPENDABLE,
+    CAN_EXTENSIONS,
+    CAN_FRAMING,
+    MCAP_EXTENSION,
+    Record,
+    link_names_lost,
+)
+from vstig_hw.extras import require
+from vstig_hw.framing.can import CanFraming
+from vstig_hw.gateway import Mode, Node
+from vstig_hw.links import Link, LinkSpec
+from vstig_hw.links.can import CanSpec
+from vstig_hw.links.zenoh import ZenohSpec
+
+from ..options import ByteSize, Finite, filter_options, overwrite_option, refuse_to_replace
+from ..running import (
+    LINK,
+    StatusLine,
+    build_links,
+    describe_links,
+    must_hear,
+    print_counters,
+    reports_errors,
+    run_until_stopped,
+)
+
+
+def _medium(spec: LinkSpec) -> str:
+    """The capture format a link's units go into without .mcap."""
+    return "can" if isinstance(spec, CanSpec) else "zenoh" if isinstance(spec, ZenohSpec) else "serial"
+
+
+def _target(output: str | None, link: LinkSpec, extension: str) -> str:
+    """The file to write: OUTPUT itself, or a new timestamped name (named after the first link) in OUTPUT
+    (a folder) or here."""
+    if output is not None and not os.path.isdir(output):
+        return output
+    folder = output or ""
+    stem = os.path.join(folder, f"vstig-{link.name}-{time.strftime('%Y-%m-%d_%H%M%S')}")
+    path, n = stem + extension, 1
+    while os.path.lexists(path):  # two recorders started in the same second
+        n += 1
+        path = f"{stem}-{n}{extension}"
+    return path
+
+
+def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
+    if overwrite and append:
+        raise click.UsageError("give --overwrite or --append, not both")
+    refuse_to_replace(path, overwrite or append, ", --append adds to it")  # appending replaces nothing
+
+
+@click.command()
+@click.argument("links", nargs=-1, required=True, type=LINK)
+@click.option("-o", "--output", type=click.Path(path_type=str),
+              help="FILE, or a folder for a timestamped name (the default: one here, as candump -l). "
+                   f"CAN by extension: {' '.join(CAN_EXTENSIONS)} (.log is candump's); serial and zenoh: any name "
+                   f"(our line formats); any links: {MCAP_EXTENSION} (rosbag2, decoded messages, one topic per link).")
+@overwrite_option("FILE")
+@click.option("--append", is_flag=True, help=f"Add to FILE if it exists (CAN: {' '.join(APPENDABLE)}; serial).")
+@click.option("--max-bytes", type=ByteSize(), help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
+                                  "an existing numbered file is skipped, never replaced.")
+@click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
+@filter_options
+@reports_errors
+def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: int | None,
+            duration: float | None, keep: Filter) -> None:
+    """Record the LINKS' traffic into a file until Ctrl-C (passive: never transmits).
+
+    The links are opened before the file, and an existing capture is never replaced
+    unless you say so (--overwrite, --append).
+
+    Each record keeps its link's name, so several links make one capture in time
+    order. The filters (--key, --robot, --sender, --op, --link, --since, --until)
+    choose what is kept; a serial chunk they cut is re-encoded in its framing.
+
+    Example: vstig record can:socketcan:can0 can:socketcan:can1 -o swarm.log --max-bytes 50M
+    """
+    for link in links:
+        must_hear(link, "record")
+    media = {_medium(link) for link in links}
+    first = _medium(links[0])
+    path = _target(output, links[0], MCAP_EXTENSION if len(media) > 1 else ".log" if first == "can" else ".cap")
+    try:
+        medium = capture_medium(path, [_medium(link) for link in links])
+    except ValueError as error:
+        raise click.UsageError(str(error)) from None
+    _refuse_to_destroy(path, overwrite, append)
+    if medium == "mcap":
+        require("mcap", f"vstig record -o {path}")  # before the links open
+    node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
+    # Units become messages again for an .mcap file and for filters that look into messages: robot dialects'
+    # links name the deployment file that maps their keys.
+    deployment = next((d for spec in links if (d := getattr(spec, "deployment", None))), None)
+    passing = RecordFilter(keep, Decoder(default_framings(deployment=deployment)))
+    captures: list[RotatingCapture] = []  # opened once the links are: a dead link leaves the file alone
+
+    def write(source: Link[Any], t: float, unit: Any) -> None:
+        if not captures:  # units handed over while a failed file open closes the node have nowhere to go
+            return
+        framing = CAN_FRAMING if isinstance(source.framing, CanFraming) else source.framing.name
+        record = Record(t, source.name, framing, unit)
+        for kept in passing.units(record) if keep else (record,):
+            captures[0].write(kept)
+
+    node.on_unit.append(write)
+    node.on_tick.append(lambda _: captures and captures[0].flush())
+    try:
+        with node:
+            captures.append(RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
+                                            append=append))
+            click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
+                       err=True)
+            if medium == "can" and link_names_lost(path):
+                click.echo(f"{path} names no link: decode reads its frames back as one unnamed link", err=True)
+            describe_links(node)
+            line = StatusLine()
+            status = (lambda: line.show(f"{captures[0].records} units  {node.summary()}")) if line.live else None
+            try:
+                run_until_stopped(node, status, duration)
+            finally:
+                line.end()
+    finally:
+        if captures:
+            captures[0].close()  # after the node: its close() handed over every unit already read
+    print_counters(node)
+    click.echo(f"{captures[0].records} units in {', '.join(captures[0].files)}", err=True)

@@ -1,0 +1,158 @@
+"""`vstig sniff LINK...`: watch the swarm's traffic, decoded; never transmits."""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import click
+
+from vstig_hw.capture.filters import Filter
+from vstig_hw.engine import larger_value_wins
+from vstig_hw.framing.can import CanFraming
+from vstig_hw.gateway import Mode, Node
+from vstig_hw.gateway.guard import Guard
+from vstig_hw.gateway.swarmview import SwarmView
+from vstig_hw.links import Heard, LinkSpec
+from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
+
+from ..live import Address, foxglove_option, live_view
+from ..options import VALUE_TYPE_HELP, Finite, GuardChoice, filter_options, guard_options, take_warnings
+from ..running import LINK, build_links, describe_links, must_hear, print_counters, reports_errors, run_until_stopped
+
+_TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
+
+
+def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, height: int | None = None) -> Any:
+    """The table, keys in order; on a terminal only the rows that fit, and the title says how many."""
+    from rich.table import Table
+
+    keys = sorted(view.keys)
+    shown = keys if height is None else keys[:max(1, height - _TABLE_CHROME)]
+    title = f"vstig sniff: {view.messages} messages, {len(keys)} keys"
+    if len(shown) < len(keys):
+        title += f" (keys {shown[0]}..{shown[-1]} fit here; --key K shows chosen ones)"
+    table = Table(title=title, caption=node.summary() if node else None)
+    for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders",
+                   "refused (latest)"):
+        table.add_column(column, justify="left" if column in ("stale senders", "refused (latest)") else "right")
+    now = time.time()
+    for key in shown:
+        k = view.keys[key]
+        stale = k.stale_senders()
+        table.add_row(str(key), str(from_raw(k.value, value_type)), str(k.timestamp), str(k.robot),
+                      f"{now - k.last_seen:.1f}s ago", str(k.puts), str(k.gets), str(k.conflicts),
+                      ", ".join(map(str, stale[:12])) + (" ..." if len(stale) > 12 else ""),
+                      f"{k.refused} ({k.last_refused})" if k.refused else "")
+    return table
+
+
+@click.command()
+@click.argument("links", nargs=-1, required=True, type=LINK)
+@click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
+@click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
+              help=VALUE_TYPE_HELP)
+@click.option("--larger-value-wins", "larger", is_flag=True,
+              help="Settle conflicts as a swarm running the paper's Figure 1 rule does (larger value), "
+                   "instead of the default higher robot id.")
+@click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
+@click.option("--hide-refused", is_flag=True,
+              help="Leave out what the guard options would refuse (it is still counted under the table).")
+@foxglove_option
+@filter_options
+@guard_options
+@reports_errors
+def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
+            hide_refused: bool, foxglove: Address | None, keep: Filter, guard: GuardChoice) -> None:
+    """Decode what each LINK hears live, per key; passive: never transmits.
+
+    The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
+    what is shown; --since and --until count from the first message heard.
+
+    The counters (live under the table, and on exit) include the receive outcomes
+    an engine that heard every message would count: stored, answered, stale,
+    same, conflict, unknown, invalid.
+
+    Example: vstig sniff can:socketcan:can0 --jsonl | jq .
+
+    The guard options are bridge's: what a bridge with them would refuse is shown too, marked
+    with the reason (the "refused" column; "refused" in --jsonl, null for what passes), never
+    changes a key's entry, and is counted under the table (drop_jump, drop_rate...).
+    --hide-refused leaves it out.
+
+    --foxglove 8765 serves the same live, to Foxglove (docs/how-to/live-view.md): every
+    message, the table, each write's spread and the counters.
+    """
+    for link in links:
+        must_hear(link, "sniff")
+    rule = larger_value_wins if larger else None
+    built = build_links(links, listen_only=True)
+    firewall = guard.build(built)
+    # The engine never transmits: it counts what each message would do to a robot that heard them all.
+    node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule)
+    view = SwarmView(rule) if rule else SwarmView()
+    listeners: list[Callable[[Heard, str | None], None]] = [
+        lambda message, reason: view.add(message) if reason is None else view.refuse(message, reason)]
+    first: list[float] = []
+
+    def heard(message: Heard, reason: str | None = None) -> None:
+        first[:] = first or [message.t]
+        if not keep or keep.accepts(message.t - first[0], message.link, message.sender, message.message):
+            for listener in listeners:
+                listener(message, reason)
+
+    node.on_heard.append(heard)
+    if not hide_refused:
+        node.on_refused.append(heard)
+    if jsonl:
+        import json
+
+        out = sys.stdout
+
+        # The same row as `decode --format jsonl` (can_id on CAN links only, sender where the medium names one),
+        # and `refused`: the drop counter a guarded bridge would count it under, or null.
+        can_schemes = {link.name: link.framing.scheme for link in node.links if isinstance(link.framing, CanFraming)}
+
+        def emit(heard: Heard, reason: str | None) -> None:
+            m = heard.message
+            row: dict[str, Any] = {"t": round(heard.t, 6), "link": heard.link}
+            scheme = can_schemes.get(heard.link)
+            if scheme is not None and heard.sender is not None:
+                row["can_id"] = scheme.can_id(m.op, heard.sender)
+            row.update(op=m.op.name, key=m.key, value=from_raw(m.value, value_type), timestamp=m.timestamp,
+                       robot=m.robot, sender=heard.sender, refused=reason)
+            out.write(json.dumps(row) + "\n")
+            out.flush()
+
+        listeners.append(emit)
+        node.on_tick.append(lambda _node: _warn(firewall))
+        with live_view(node, foxglove, value_type=value_type, larger_value_wins=larger), node:
+            describe_links(node)
+            run_until_stopped(node, duration=duration)
+        _warn(firewall)
+        print_counters(node)
+        return
+    from rich.live import Live
+
+    # The live view first, then the node: a port that cannot be bound or opened is the one line said
+    with live_view(node, foxglove, value_type=value_type, larger_value_wins=larger), node:
+        if not sys.stdout.isatty():
+            click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
+                       "(--jsonl streams every message instead)", err=True)
+        with Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
+            def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
+                _warn(firewall)  # on a terminal, Live prints stderr above the table
+                height = live.console.size.height if live.console.is_terminal else None
+                live.update(_table(view, value_type, node, height))
+
+            describe_links(node)
+            run_until_stopped(node, redraw, duration)
+    _warn(firewall)
+    print_counters(node)
+
+
+def _warn(firewall: Guard) -> None:
+    for warning in take_warnings(firewall):
+        click.echo(warning, err=True)

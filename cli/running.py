@@ -1,0 +1,270 @@
+"""How a command runs and ends: every failure as one line and its exit status (usage 2, runtime 1),
+stdout and stderr that fail the way a command-line tool should, and running a node over links until
+stopped. The gateway and the links load only when a command uses them: decode imports this module too."""
+
+from __future__ import annotations
+
+import functools
+import io
+import os
+import sys
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any, TextIO, TypeVar
+
+import click
+
+from vstig_hw.capture.records import CaptureError
+
+if TYPE_CHECKING:
+    from vstig_hw.gateway import Node
+    from vstig_hw.links import Link, LinkSpec
+
+
+# -- How every command fails: usage errors exit 2, runtime failures exit 1.
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def runtime_errors() -> tuple[type[Exception], ...]:
+    """The errors a user can cause; the transports' module is loaded only once something failed (decode never
+    loads a transport)."""
+    from vstig_hw.transports.base import TransportError
+
+    return (TransportError, CaptureError, OSError, ValueError, RuntimeError)
+
+
+def one_line(error: BaseException) -> str:
+    """The transports' one-line form of an error, loaded (like `runtime_errors`) only once something failed."""
+    from vstig_hw.transports.base import one_line
+
+    return one_line(error)
+
+
+def debugging() -> bool:
+    ctx = click.get_current_context(silent=True)
+    root = ctx.find_root() if ctx else None
+    return bool(os.environ.get("VSTIG_DEBUG")) or bool(root and (root.obj or {}).get("debug"))
+
+
+def describe(error: BaseException) -> str:
+    """One line for the user: an OS error names its file first (`/proc/x: No such file or directory`)."""
+    if isinstance(error, OSError) and error.strerror and error.filename is not None:
+        return f"{error.filename}: {error.strerror}"
+    return one_line(error)
+
+
+def reports_errors(fn: F) -> F:
+    """Turn the runtime errors a user can cause into one line and exit status 1.
+
+    Ctrl-C passes through to `main`, which ends every command the same way (status 130, quietly).
+    """
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except (click.ClickException, click.exceptions.Exit, click.Abort, KeyboardInterrupt):
+            raise
+        except Exception as error:
+            if debugging():
+                traceback.print_exc()
+            if isinstance(error, runtime_errors()):
+                raise click.ClickException(describe(error)) from None
+            # a bug, not the user's fault: still one line unless debugging
+            raise click.ClickException(f"unexpected {type(error).__name__}: {one_line(error)} "
+                                       "(run `vstig --debug ...` for the traceback)") from None
+
+    wrapper.reports_errors = True  # type: ignore[attr-defined]
+    return wrapper  # type: ignore[return-value]
+
+
+class LinkSpecType(click.ParamType):
+    """A link spec on the command line; a bad one is a usage error (exit 2) naming the bad part."""
+
+    name = "LINK"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> LinkSpec:
+        from vstig_hw.links import LinkSpec, parse  # when a command takes links: decode never loads them
+
+        if isinstance(value, LinkSpec):
+            return value
+        try:
+            return parse(value)
+        except ValueError as error:
+            self.fail(str(error), param, ctx)
+
+
+LINK = LinkSpecType()
+
+
+# -- stdout and stderr that fail the way a command-line tool should.
+
+class PipeClosed(click.exceptions.Exit):
+    """The reading end of our output pipe closed: stop quietly with status 0."""
+
+    def __init__(self) -> None:
+        super().__init__(0)
+
+
+class OutputFailed(click.ClickException):
+    """Writing to stdout failed (full disk, closed descriptor...): one line, status 1."""
+
+
+class _GuardedFile(io.FileIO):
+    """A standard stream's descriptor whose write errors become PipeClosed or OutputFailed."""
+
+    def __init__(self, fd: int, label: str) -> None:
+        super().__init__(fd, "wb", closefd=False)
+        self.label = label
+        self.failed = False
+
+    def write(self, data: Any) -> int:
+        if self.failed:
+            return len(data)
+        try:
+            return super().write(data) or 0
+        except OSError as error:
+            self.failed = True
+            if self.label == "stderr":
+                return len(data)  # a status line nobody can see must not stop the work
+            if isinstance(error, BrokenPipeError):
+                raise PipeClosed() from None
+            raise OutputFailed(f"cannot write to {self.label}: {error.strerror or error}") from None
+
+
+class _ClosedStream(io.RawIOBase):
+    """Stands in for a descriptor that was closed before we started (`>&-`)."""
+
+    def __init__(self, label: str, complain: bool) -> None:
+        super().__init__()
+        self.label = label
+        self.complain = complain
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, data: Any) -> int:
+        if self.complain:
+            self.complain = False
+            raise OutputFailed(f"cannot write to {self.label}: it is closed")
+        return len(memoryview(data))
+
+
+def _rebuild(stream: TextIO | None, fd: int, label: str) -> TextIO | None:
+    if stream is None:  # Python found the descriptor closed at startup
+        raw: io.RawIOBase = _ClosedStream(label, complain=(label == "stdout"))
+        return io.TextIOWrapper(io.BufferedWriter(raw), encoding="utf-8", write_through=True)  # type: ignore[arg-type]
+    try:
+        if stream.fileno() != fd:
+            return stream  # already redirected inside this process (a test harness): leave it be
+    except (OSError, ValueError, io.UnsupportedOperation):
+        return stream
+    stream.flush()
+    buffered = io.BufferedWriter(_GuardedFile(fd, label))
+    return io.TextIOWrapper(buffered, encoding=stream.encoding, errors=stream.errors,  # type: ignore[arg-type]
+                            line_buffering=stream.line_buffering, write_through=getattr(stream, "write_through", False))
+
+
+def guard_streams() -> None:
+    """Replace sys.stdout and sys.stderr by guarded streams over the same descriptors."""
+    sys.stdout = _rebuild(sys.stdout, 1, "stdout")  # type: ignore[assignment]
+    sys.stderr = _rebuild(sys.stderr, 2, "stderr")  # type: ignore[assignment]
+
+
+def flush_streams() -> None:
+    """Flush both streams now, so a failure is reported by us and not by the interpreter's exit."""
+    for stream in (sys.stdout, sys.stderr):
+        if stream is not None:
+            stream.flush()
+
+
+# -- Running a node over links: building them from specs, running until stopped, its counters.
+
+def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool = False) -> list[Link[Any]]:
+    """One Link per spec, named after its device (made unique: radio, radio-2...).
+
+    A robot id that a CAN link's ID scheme has no room for is a usage error naming --robot-id.
+    """
+    from vstig_hw.links.assemble import LinkBuildError, assemble_links
+    from vstig_hw.links.can import CanSpec
+
+    try:
+        links = assemble_links(specs, robot_id, listen_only)
+    except LinkBuildError as error:
+        if error.argument == "robot_id":
+            raise click.BadParameter(str(error), param_hint="'--robot-id'") from None
+        raise click.UsageError(str(error)) from None
+    for spec in specs:  # once every link could be built: a link that cannot (a missing extra) is the one line said
+        if isinstance(spec, CanSpec) and spec.interface == "virtual":
+            click.echo(f"note: can:virtual:{spec.channel} is a bus inside this process only: no other program "
+                       "hears it (vcan or can:udp_multicast: reach other processes)", err=True)
+    return links
+
+
+def describe_links(node: Node) -> None:
+    """One line per link whose transport says where it is reachable (a Zenoh link's endpoints)."""
+    for link in node.links:
+        about = getattr(link.transport, "about", "")
+        if about:
+            click.echo(f"{link.name}: {about}", err=True)
+
+
+def lossless(spec: LinkSpec, opening: float | None = None) -> LinkSpec:
+    """The spec for a command that must not lose what it sends (put, get, replay): Zenoh BLOCKs, not DROPs.
+
+    `opening`: the seconds a one-shot command (get, put) lets the link take to open, so its --wait bounds the
+    whole command (a Zenoh link otherwise waits 3 s for a peer it was told to connect to).
+    """
+    from vstig_hw.links.zenoh import ZenohSpec
+
+    if not isinstance(spec, ZenohSpec):
+        return spec
+    return replace(spec, block=True, **({} if opening is None else {"peer_wait": opening}))
+
+
+def run_until_stopped(node: Node, status: Any = None, duration: float | None = None) -> None:
+    """Run the node until Ctrl-C/SIGTERM (or `duration`), refreshing `status()` every half second."""
+    from vstig_hw.gateway.shutdown import stop_on_signals
+
+    with stop_on_signals() as stop:
+        if status is None:
+            node.run(stop=stop, duration=duration)
+            return
+        import time
+
+        end = None if duration is None else time.monotonic() + duration
+        while not stop.is_set() and (end is None or time.monotonic() < end):
+            node.run(stop=stop, duration=0.5 if end is None else max(0.0, min(0.5, end - time.monotonic())))
+            status()
+
+
+def print_counters(node: Node) -> None:
+    for name, counters in node.stats().items():
+        click.echo(f"{name}: {counters.summary()}", err=True)
+
+
+class StatusLine:
+    """One line on stderr, redrawn in place, only when stderr is a terminal (a log file gets none)."""
+
+    def __init__(self) -> None:
+        self.live = sys.stderr.isatty()
+        self.drawn = False
+
+    def show(self, text: str) -> None:
+        if self.live:
+            click.echo(f"\r\x1b[K{text}", nl=False, err=True)
+            self.drawn = True
+
+    def end(self) -> None:
+        if self.drawn:
+            click.echo(err=True)
+            self.drawn = False
+
+
+def must_hear(spec: LinkSpec, command: str) -> None:
+    """Refuse a listening command on a transmit-only link, instead of listening to nothing."""
+    if spec.kind == "kilobot-ohc":
+        raise click.UsageError(f"{command} needs a link that receives; kilobot-ohc:{spec.name} is transmit-only "
+                               "(the overhead controller never hears the robots)")
