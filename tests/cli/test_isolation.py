@@ -1,0 +1,197 @@
+"""No link can stall another: `vstig bridge` processes beside a radio nobody reads and a peer sending huge samples.
+
+The healthy path is timed message by message (perf_counter is system-wide, so the
+times taken in this process compare with each other): it must keep a p50 delay
+under 50 ms and lose nothing, and the bridge's memory must stay bounded.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import socket
+import statistics
+import threading
+import time
+from typing import Any
+
+from peers import PtyPeer, start_vstig, stop, wait_for
+
+from vstig_hw import Message, Op, encode
+from vstig_hw.framing import make_serial_framing
+
+RATE_HZ = 500
+COUNT = 3000  # 6 s of traffic
+PROBE_KEY = 32767
+
+
+def _fill(radio: PtyPeer) -> None:
+    """Fill what the radio's pty buffers towards its far end, as a radio would that stopped reading long ago."""
+    os.set_blocking(radio.slave, False)
+    try:
+        while True:
+            os.write(radio.slave, bytes(4096))
+    except BlockingIOError:
+        pass
+
+
+def _rss_kb(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as status:
+        return int(next(line.split()[1] for line in status if line.startswith("VmRSS:")))
+
+
+class Listener:
+    """The far end of a radio that does read: the time each message (by key) first arrived."""
+
+    def __init__(self, radio: PtyPeer) -> None:
+        self.radio = radio
+        self.arrived: dict[int, float] = {}
+        self._framing = make_serial_framing("cobs8")
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        while not self._stop.is_set():
+            data = self.radio.read(0.05)
+            stamp = time.perf_counter()
+            for msg in self._framing.feed(data) if data else ():
+                self.arrived.setdefault(msg.key, stamp)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+def _counters(err: str, link: str) -> dict[str, int]:
+    line = next(line for line in err.splitlines() if re.fullmatch(rf"{re.escape(link)}: (\w+=\d+ ?)+", line))
+    return {name: int(n) for name, n in re.findall(r"(\w+)=(\d+)", line)}
+
+
+def _send_paced(radio: PtyPeer, count: int) -> list[float]:
+    """Message i (key i, a new entry) written to the radio at start + i / RATE_HZ; the times written."""
+    cobs8 = make_serial_framing("cobs8")
+    frames = [cobs8.encode(Message(Op.PUT, i, i, 1, 7))[0] for i in range(count)]
+    sent = []
+    start = time.perf_counter() + 0.05
+    for i, frame in enumerate(frames):
+        pause = start + i / RATE_HZ - time.perf_counter()
+        if pause > 0:
+            time.sleep(pause)
+        sent.append(time.perf_counter())
+        radio.write(frame)
+    return sent
+
+
+def _await_bridge(into: PtyPeer, out: Listener) -> None:
+    """Until a probe written on one radio comes out of the other: the bridge is up."""
+    cobs8 = make_serial_framing("cobs8")
+    stamp = iter(range(1, 60_000))
+    wait_for(lambda: PROBE_KEY in out.arrived, 30,
+             step=lambda: (into.write(cobs8.encode(Message(Op.PUT, PROBE_KEY, 1, next(stamp), 7))[0]),
+                           time.sleep(0.1)))
+
+
+def _delays(sent: list[float], out: Listener) -> list[float]:
+    return sorted(out.arrived[i] - sent[i] for i in range(len(sent)) if i in out.arrived)
+
+
+def test_a_radio_nobody_reads_delays_no_other_link() -> None:
+    source, healthy, deaf = PtyPeer(), PtyPeer(), PtyPeer()
+    _fill(deaf)
+    names = [os.path.basename(radio.path) for radio in (source, healthy, deaf)]
+    bridge = start_vstig("bridge", *(f"serial:{radio.path}?framing=cobs8" for radio in (source, healthy, deaf)),
+                         "--robot-id", "200", "--budget", "2000", "--no-refresh")
+    echo = Listener(source)  # the source radio hears the gateway's re-broadcasts: it reads them
+    out = Listener(healthy)
+    try:
+        _await_bridge(source, out)
+        rss_before = _rss_kb(bridge.pid)
+        sent = _send_paced(source, COUNT)
+        wait_for(lambda: len(out.arrived) > COUNT, 10, step=lambda: time.sleep(0.1))
+        rss_after = _rss_kb(bridge.pid)
+    finally:
+        _out, err = stop(bridge)
+        echo.close()
+        out.close()
+        for radio in (source, healthy, deaf):
+            radio.close()
+    assert bridge.returncode == 0, err
+    delays = _delays(sent, out)
+    assert len(delays) == COUNT  # the healthy radio lost nothing
+    assert statistics.median(delays) < 0.050, f"p50 {statistics.median(delays) * 1e3:.1f} ms"
+    stuck = _counters(err, names[2])
+    assert stuck.get("tx_overflow", 0) > 0, stuck  # the deaf radio really stopped taking: its oldest were dropped
+    assert err.count(f"{names[2]}: the device does not take what we send") == 1  # logged once for the episode
+    assert rss_after - rss_before < 20_000, (rss_before, rss_after)  # kB: the deaf radio's queue is bounded
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def _zenoh_peer(endpoint: str) -> Any:
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
+HUGE_SAMPLES = 8
+
+
+def test_huge_zenoh_samples_are_refused_unread_while_honest_samples_go_through() -> None:
+    import zenoh
+
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    radio = PtyPeer()
+    bridge = start_vstig("bridge", f"zenoh:lab?listen={endpoint}", f"serial:{radio.path}?framing=cobs8",
+                         "--robot-id", "200", "--no-refresh")
+    out = Listener(radio)
+    peer, flooder = _zenoh_peer(endpoint), _zenoh_peer(endpoint)  # an honest gateway, and one sending huge samples
+    huge = encode(Message(Op.PUT, 1, 1, 1, 300)) * (4 * 1024 * 1024 // 8)  # 4 MB: 524,288 messages
+    try:
+        stamp = iter(range(1, 60_000))
+        wait_for(lambda: PROBE_KEY in out.arrived, 30,  # the bridge is up and hears this session
+                 step=lambda: (peer.put("vstig/lab/0/301", encode(Message(Op.PUT, PROBE_KEY, 1, next(stamp), 301))),
+                               time.sleep(0.1)))
+        rss_before = _rss_kb(bridge.pid)
+
+        def flood() -> None:
+            for _ in range(HUGE_SAMPLES):
+                flooder.put("vstig/lab/0/300", huge, congestion_control=zenoh.CongestionControl.BLOCK)
+                time.sleep(0.3)
+
+        flooding = threading.Thread(target=flood)
+        flooding.start()
+        count = 600  # 3 s at RATE_HZ, the huge samples among them
+        sent = []
+        start = time.perf_counter() + 0.05
+        for i in range(count):
+            pause = start + i / RATE_HZ - time.perf_counter()
+            if pause > 0:
+                time.sleep(pause)
+            sent.append(time.perf_counter())
+            peer.put("vstig/lab/0/301", encode(Message(Op.PUT, i, i, 1, 301)))
+        flooding.join()
+        wait_for(lambda: len(out.arrived) > count, 10, step=lambda: time.sleep(0.1))
+        rss_after = _rss_kb(bridge.pid)
+    finally:
+        peer.close()  # type: ignore[no-untyped-call]
+        flooder.close()  # type: ignore[no-untyped-call]
+        _out, err = stop(bridge)
+        out.close()
+        radio.close()
+    assert bridge.returncode == 0, err
+    delays = _delays(sent, out)
+    assert len(delays) == count  # every honest message crossed
+    assert statistics.median(delays) < 0.050, f"p50 {statistics.median(delays) * 1e3:.1f} ms"
+    assert _counters(err, "zenoh-lab").get("rx_oversize") == HUGE_SAMPLES, err  # all refused, none decoded
+    assert err.count("refused a 4194304-byte sample") == 1
+    # kB: Zenoh's own reassembly buffers (~24 MB, as much for 15 samples as for 5); decoding them took 75 MB more
+    assert rss_after - rss_before < 40_000, (rss_before, rss_after)
