@@ -12,6 +12,8 @@ import os
 import re
 import socket
 import statistics
+import subprocess
+import sys
 import threading
 import time
 from typing import Any
@@ -195,3 +197,52 @@ def test_huge_zenoh_samples_are_refused_unread_while_honest_samples_go_through()
     assert err.count("refused a 4194304-byte sample") == 1
     # kB: Zenoh's own reassembly buffers (~24 MB, as much for 15 samples as for 5); decoding them took 75 MB more
     assert rss_after - rss_before < 40_000, (rss_before, rss_after)
+
+
+FLOOD = """
+import json, sys, time
+import zenoh
+from vstig_hw import Message, Op, encode
+config = zenoh.Config()
+config.insert_json5("connect/endpoints", json.dumps([sys.argv[1]]))
+config.insert_json5("scouting/multicast/enabled", "false")
+session = zenoh.open(config)
+publisher = session.declare_publisher("vstig/lab/0/300", congestion_control=zenoh.CongestionControl.DROP)
+# The same 64 entries again and again: the gateway decodes, judges and merges every one (the work a flood
+# costs) and has nothing new to send, so the healthy radio's bandwidth stays the honest messages'.
+payload = b"".join(encode(Message(Op.PUT, 20000 + k, 1, 1, 300)) for k in range(64))
+end, sent = time.monotonic() + float(sys.argv[2]), 0
+while time.monotonic() < end:  # unpaced: as fast as this process can publish
+    publisher.put(payload)
+    sent += 1
+print(sent)
+"""
+
+
+def test_an_unpaced_zenoh_flood_does_not_starve_another_links_reads() -> None:
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    source, healthy = PtyPeer(), PtyPeer()
+    bridge = start_vstig("bridge", f"zenoh:lab?listen={endpoint}", *(f"serial:{radio.path}?framing=cobs8"
+                                                                    for radio in (source, healthy)),
+                         "--robot-id", "200", "--budget", "2000", "--no-refresh")
+    echo, out = Listener(source), Listener(healthy)
+    try:
+        _await_bridge(source, out)
+        flooder = subprocess.Popen([sys.executable, "-c", FLOOD, endpoint, "5"], stdout=subprocess.PIPE, text=True)
+        time.sleep(1.0)  # the flood is under way
+        sent = _send_paced(source, 1000)  # 2 s
+        flooded, _ = flooder.communicate(timeout=30)
+        wait_for(lambda: len(out.arrived) > 1000, 10, step=lambda: time.sleep(0.1))
+    finally:
+        _out, err = stop(bridge)
+        echo.close()
+        out.close()
+        source.close()
+        healthy.close()
+    assert bridge.returncode == 0, err
+    assert int(flooded) > 1000  # samples of 64 messages, unpaced
+    assert _counters(err, "zenoh-lab")["rx"] > 1000, err  # the gateway did take the flood
+    assert _counters(err, "engine")["same"] > 64_000, err  # and judged every message of it
+    delays = _delays(sent, out)
+    assert len(delays) == 1000
+    assert statistics.median(delays) < 0.050, f"p50 {statistics.median(delays) * 1e3:.1f} ms"

@@ -22,7 +22,7 @@ __all__ = ["Arrival", "LinkReaders"]
 
 READ_TIMEOUT = 0.05  # how long a read blocks: bounds how long stop() waits for a thread
 ERROR_BACKOFF = 0.2
-READ_AHEAD = 4  # batches a link may have waiting for the loop
+READ_AHEAD = 2  # batches a link may have waiting for the loop
 
 Arrival = tuple[int, float, list[Any]]  # (link index, wall-clock time, units)
 

@@ -49,7 +49,7 @@ __all__ = ["ZenohTransport"]
 log = logging.getLogger(__name__)
 
 _DRAIN_LIMIT = 512  # samples taken per read() after the first, so a busy swarm cannot starve the loop
-_DRAIN_BYTES = 32 * 1024  # payload bytes taken per read() (at least one sample): ~4,096 messages of loop work
+_DRAIN_BYTES = 4 * 1024  # payload bytes taken per read() (at least one sample): ~512 messages of loop work
 INBOX_LIMIT = 1024 * 1024  # payload bytes heard and not yet read; beyond, a sample is dropped (rx_overflow)
 _PEER_POLL_S = 1.0  # how often to ask the session whether any peer or router is connected
 _UNREACHABLE_AFTER_S = 3.0  # a session told to connect that has found nobody by then is reported
