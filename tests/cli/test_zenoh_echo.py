@@ -1,0 +1,60 @@
+"""Zenoh is one broadcast domain: a `vstig bridge` publishes on zenoh what its radio heard, once, and never
+publishes back onto zenoh a PUT it heard there (every other gateway heard that sample already)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+from peers import PtyPeer, start_vstig, stop, wait_for
+from test_isolation import Listener, _counters, _free_port, _zenoh_peer
+
+from vstig_hw import Message, Op, encode
+from vstig_hw.framing import make_serial_framing
+from vstig_hw.wire import decode_many
+
+
+def test_a_put_heard_on_zenoh_is_not_published_back_and_a_radios_put_is_published_once() -> None:
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    radio = PtyPeer()
+    bridge = start_vstig("bridge", f"zenoh:lab?listen={endpoint}", f"serial:{radio.path}?framing=cobs8",
+                         "--robot-id", "200", "--no-refresh")
+    out = Listener(radio)
+    peer = _zenoh_peer(endpoint)
+    published: list[list[Message]] = []  # the bridge's samples, as heard by another gateway
+    lock = threading.Lock()
+
+    def heard(sample: Any) -> None:
+        with lock:
+            published.append(decode_many(sample.payload.to_bytes()))
+
+    subscriber = peer.declare_subscriber("vstig/lab/0/200", heard)
+    cobs8 = make_serial_framing("cobs8")
+    try:
+        stamp = iter(range(1, 60_000))
+        wait_for(lambda: 32767 in out.arrived, 30,  # the bridge is up and hears this session
+                 step=lambda: (peer.put("vstig/lab/0/301", encode(Message(Op.PUT, 32767, 1, next(stamp), 301))),
+                               time.sleep(0.1)))
+        for key in range(100, 150):  # from another gateway on zenoh
+            peer.put("vstig/lab/0/301", encode(Message(Op.PUT, key, key, 1, 301)))
+            time.sleep(0.01)
+        for key in range(200, 250):  # from a robot on the radio
+            radio.write(cobs8.encode(Message(Op.PUT, key, key, 1, 7))[0])
+            time.sleep(0.01)
+        wait_for(lambda: all(k in out.arrived for k in range(100, 150)), 10)
+        wait_for(lambda: sum(len(s) for s in published) >= 50, 10)
+        time.sleep(1.0)  # anything echoed would have come by now
+    finally:
+        subscriber.undeclare()
+        peer.close()  # type: ignore[no-untyped-call]
+        _out, err = stop(bridge)
+        out.close()
+        radio.close()
+    assert bridge.returncode == 0, err
+    with lock:
+        keys = sorted(msg.key for sample in published for msg in sample)
+        samples = len(published)
+    assert keys == list(range(200, 250))  # the radio's PUTs, each once; none of what zenoh carried came back
+    assert samples == len(keys)  # paced 10 ms apart: one sample per relayed message
+    assert _counters(err, "zenoh-lab")["not_echoed"] >= 51, err
