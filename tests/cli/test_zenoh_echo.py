@@ -58,3 +58,23 @@ def test_a_put_heard_on_zenoh_is_not_published_back_and_a_radios_put_is_publishe
     assert keys == list(range(200, 250))  # the radio's PUTs, each once; none of what zenoh carried came back
     assert samples == len(keys)  # paced 10 ms apart: one sample per relayed message
     assert _counters(err, "zenoh-lab")["not_echoed"] >= 51, err
+
+
+def test_echo_and_max_sample_in_a_zenoh_spec() -> None:
+    from vstig_hw.links import parse
+    from vstig_hw.links.zenoh import ZenohSpec
+
+    default = parse("zenoh:lab")
+    assert isinstance(default, ZenohSpec) and default.max_sample == 65536 and not default.echo
+    assert default.build(robot_id=5).one_domain
+    spec = parse("zenoh:lab?max_sample=1024&echo=1")
+    assert isinstance(spec, ZenohSpec) and spec.max_sample == 1024 and spec.echo
+    link = spec.build(robot_id=5)
+    assert not link.one_domain and link.transport.max_sample == 1024  # type: ignore[attr-defined]
+    for bad, words in (("max_sample=4", "max_sample=4 is outside 8.."), ("echo=2", "echo")):
+        try:
+            parse(f"zenoh:lab?{bad}")
+        except ValueError as error:
+            assert words in str(error)
+        else:
+            raise AssertionError(f"{bad} was accepted")
