@@ -9,8 +9,8 @@ logged once, `read` returns nothing and `write` drops and counts, while the port
 is retried with exponential backoff; when it comes back, traffic resumes and
 `reconnects` counts it.
 
-Writes go straight to the port's non-blocking file descriptor where it has one
-(a device or pty), with no select per write; only a device that does not take a
+Reads and writes go straight to the port's non-blocking file descriptor where it
+has one (a device or pty): a read is one select and one read, a write one write; only a device that does not take a
 whole write at once is waited for, up to `write_timeout`, then the rest of that
 write is dropped (`tx_timeout`). `write_nowait` never waits: the gateway's loop
 writes through it while the device keeps up (see gateway/writer.py).
@@ -42,6 +42,7 @@ log = logging.getLogger(__name__)
 _MISSING = {errno.ENOENT, errno.ENODEV, errno.ENXIO}
 _DENIED = {errno.EACCES, errno.EPERM}
 _BUSY = {errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK}
+_READ_SIZE = 65536  # bytes one read takes at most: all a pty or a USB adapter holds
 
 
 def open_error(port: str, exc: BaseException) -> TransportError:
@@ -107,14 +108,18 @@ class SerialTransport:
             self._reconnect_within(timeout)
             return []
         try:
-            if self._timeout != timeout:
-                port.timeout = self._timeout = timeout
-            waiting = port.in_waiting
-            data = port.read(waiting) if waiting else port.read(1)
-            if data and not waiting:
-                more = port.in_waiting
-                if more:
-                    data += port.read(more)
+            fd = self._fd
+            if fd is not None:
+                data = self._read_fd(fd, timeout)
+            else:
+                if self._timeout != timeout:
+                    port.timeout = self._timeout = timeout
+                waiting = port.in_waiting
+                data = port.read(waiting) if waiting else port.read(1)
+                if data and not waiting:
+                    more = port.in_waiting
+                    if more:
+                        data += port.read(more)
         except (serial.SerialException, OSError) as exc:
             self._lose(exc)
             return []
@@ -123,6 +128,19 @@ class SerialTransport:
         self.counters["rx"] += 1
         self.counters["rx_bytes"] += len(data)
         return [bytes(data)]
+
+    @staticmethod
+    def _read_fd(fd: int, timeout: float) -> bytes:
+        """Whatever the device holds once it has something (one select, one read), or b"" after `timeout`."""
+        if not select.select([fd], [], [], timeout)[0]:
+            return b""
+        try:
+            data = os.read(fd, _READ_SIZE)
+        except BlockingIOError:  # another reader took it
+            return b""
+        if not data:  # what pyserial reports too: readable, yet nothing to read
+            raise serial.SerialException("device reports readiness to read but returned no data (disconnected?)")
+        return data
 
     def write(self, unit: bytes) -> None:
         """Send `unit`, waiting up to `write_timeout` for the device to take it; the rest is dropped and counted."""
