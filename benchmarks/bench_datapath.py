@@ -26,6 +26,7 @@ from typing import Any
 
 from vstig_hw import Message, Op, encode
 from vstig_hw.framing import make_serial_framing
+from vstig_hw.wire import decode
 
 from .registry import Result, benchmark
 
@@ -107,6 +108,22 @@ def _usage(pid: int) -> tuple[float, int]:
                 switches += sum(int(line.split()[1]) for line in status if "ctxt_switches" in line)
         except FileNotFoundError:  # a thread that ended meanwhile
             continue
+    return cpu, switches
+
+
+def _threads_usage(threads: list[threading.Thread]) -> tuple[float, int]:
+    """(CPU seconds, context switches) of these threads of this process so far (Linux: /proc/self/task)."""
+    cpu, switches = 0.0, 0
+    for thread in threads:
+        task = f"/proc/self/task/{thread.native_id}"
+        try:
+            with open(f"{task}/stat") as stat:
+                fields = stat.read().rsplit(")", 1)[1].split()
+            with open(f"{task}/status") as status:
+                switches += sum(int(line.split()[1]) for line in status if "ctxt_switches" in line)
+        except FileNotFoundError:
+            continue
+        cpu += (int(fields[11]) + int(fields[12])) / _TICK
     return cpu, switches
 
 
@@ -268,3 +285,77 @@ def zenoh_samples_per_relayed_message() -> Iterator[Result]:
                  "one per message relayed onto zenoh", 1.0)
     yield Result("datapath.zenoh_msgs_published_per_relayed_msg", messages / count, "msgs/msg",
                  "no echo of what zenoh carried", 1.0)
+
+
+def _can_to_pty(relay: str) -> tuple[float, float, int]:
+    """(CPU s per message, switches per message, delivered) of the relay's own threads, in this process: a robot
+    on a python-can virtual bus, a relay to a cobs8 pty radio (our gateway's loop, reader and writer threads, or a
+    bare recv -> encode -> os.write thread), the radio's far end read here."""
+    import can
+
+    from vstig_hw.framing.can import can_framing_for
+    from vstig_hw.gateway import Node
+    from vstig_hw.links import parse
+
+    channel = f"bench-datapath-{os.getpid()}-{relay}"
+    robot = can.Bus(interface="virtual", channel=channel)
+    radio = _Pty()
+    out = _Arrivals(radio)
+    codec = can_framing_for(7)
+    frames = [codec.encode(Message(Op.PUT, i, i, 1, 7))[0] for i in range(COUNT)]
+    probe = codec.encode(Message(Op.PUT, 32767, 1, 1, 7))[0]
+    stop = threading.Event()
+    cobs8 = make_serial_framing("cobs8")
+    if relay == "bare":
+        bus = can.Bus(interface="virtual", channel=channel)
+
+        def bare() -> None:
+            while not stop.is_set():
+                frame = bus.recv(0.05)
+                if frame is not None:
+                    os.write(radio.slave, cobs8.encode(decode(bytes(frame.data)))[0])
+
+        worker = threading.Thread(target=bare, daemon=True)
+        node = None
+    else:
+        links = [parse(f"can:virtual:{channel}").build("bus", robot_id=200),
+                 parse(f"serial:{radio.path}?framing=cobs8").build("radio", robot_id=200)]
+        node = Node(links, 200, budget=20_000)
+        node.open()
+        worker = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
+    worker.start()
+    try:
+        for _ in range(100):
+            robot.send(probe)
+            time.sleep(0.05)
+            if 32767 in out.arrived:
+                break
+        relay_threads = [worker] if node is None else [worker, *node._readers._threads]  # the loop, the readers
+        cpu0, sw0 = _threads_usage(relay_threads)
+        _paced(robot.send, frames)  # type: ignore[arg-type]
+        out.wait(COUNT + 1)
+        if node is not None:  # a writer thread starts only when a device is slow: count it if it did
+            relay_threads += [t for t in (o.writer._thread for o in node.outlets) if t is not None]
+        cpu1, sw1 = _threads_usage(relay_threads)
+    finally:
+        stop.set()
+        worker.join(timeout=5)
+        if node is not None:
+            node.close()
+        else:
+            bus.shutdown()
+        robot.shutdown()
+        out.close()
+        radio.close()
+    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, sum(1 for i in range(COUNT) if i in out.arrived)
+
+
+@benchmark("datapath")
+def can_to_pty_cost() -> Iterator[Result]:
+    bare = _can_to_pty("bare")
+    ours = _can_to_pty("gateway")
+    yield Result("datapath.relay_can_pty_cpu_per_msg", ours[0] * 1e6, "us",
+                 "bare virtual bus -> pty hop thread CPU/msg", bare[0] * 1e6)
+    yield Result("datapath.relay_can_pty_switches_per_msg", ours[1], "switches",
+                 "bare virtual bus -> pty hop switches/msg", bare[1])
+    yield Result("datapath.relay_can_pty_delivered", ours[2] / COUNT * 100, "%", "offered", 100.0)
