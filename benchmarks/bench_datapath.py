@@ -28,6 +28,7 @@ from vstig_hw import Message, Op, encode
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.wire import decode
 
+from .bench_cli import _sleep_paced
 from .registry import Result, benchmark
 
 VSTIG = str(Path(sys.executable).with_name("vstig"))
@@ -85,15 +86,7 @@ def _frames(count: int) -> list[bytes]:
 
 
 def _paced(write: Callable[[bytes], object], frames: list[bytes], rate_hz: int = RATE_HZ) -> list[float]:
-    sent = []
-    start = time.perf_counter() + 0.05
-    for i, frame in enumerate(frames):
-        pause = start + i / rate_hz - time.perf_counter()
-        if pause > 0:
-            time.sleep(pause)
-        sent.append(time.perf_counter())
-        write(frame)
-    return sent
+    return _sleep_paced(len(frames), rate_hz, lambda i: write(frames[i]))
 
 
 def _usage(pid: int) -> tuple[float, int]:

@@ -16,6 +16,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from peers import PtyPeer, start_vstig, stop, wait_for
@@ -71,19 +72,53 @@ def _counters(err: str, link: str) -> dict[str, int]:
     return {name: int(n) for name, n in re.findall(r"(\w+)=(\d+)", line)}
 
 
-def _send_paced(radio: PtyPeer, count: int) -> list[float]:
-    """Message i (key i, a new entry) written to the radio at start + i / RATE_HZ; the times written."""
-    cobs8 = make_serial_framing("cobs8")
-    frames = [cobs8.encode(Message(Op.PUT, i, i, 1, 7))[0] for i in range(count)]
+def _paced(count: int, send: Callable[[int], object]) -> list[float]:
+    """send(i) at start + i / RATE_HZ, sleeping between; the times sent."""
     sent = []
     start = time.perf_counter() + 0.05
-    for i, frame in enumerate(frames):
+    for i in range(count):
         pause = start + i / RATE_HZ - time.perf_counter()
         if pause > 0:
             time.sleep(pause)
         sent.append(time.perf_counter())
-        radio.write(frame)
+        send(i)
     return sent
+
+
+def _send_paced(radio: PtyPeer, count: int) -> list[float]:
+    """Message i (key i, a new entry) written to the radio at start + i / RATE_HZ; the times written."""
+    cobs8 = make_serial_framing("cobs8")
+    frames = [cobs8.encode(Message(Op.PUT, i, i, 1, 7))[0] for i in range(count)]
+    return _paced(count, lambda i: radio.write(frames[i]))
+
+
+class ZenohBridge:
+    """`vstig bridge` of a listening zenoh link and one cobs8 radio, read by a Listener, and a peer session."""
+
+    def __init__(self) -> None:
+        self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        self.radio = PtyPeer()
+        self.process = start_vstig("bridge", f"zenoh:lab?listen={self.endpoint}",
+                                   f"serial:{self.radio.path}?framing=cobs8", "--robot-id", "200", "--no-refresh")
+        self.out = Listener(self.radio)
+        self.peer = _zenoh_peer(self.endpoint)
+
+    def await_peer(self) -> None:
+        """Until a probe the peer publishes comes out of the radio: the bridge is up and hears the peer."""
+        stamp = iter(range(1, 60_000))
+        wait_for(lambda: PROBE_KEY in self.out.arrived, 30,
+                 step=lambda: (self.peer.put("vstig/lab/0/301",
+                                             encode(Message(Op.PUT, PROBE_KEY, 1, next(stamp), 301))),
+                               time.sleep(0.1)))
+
+    def stop(self) -> str:
+        """Close everything; the bridge's stderr (its exit status checked)."""
+        self.peer.close()
+        _out, err = stop(self.process)
+        self.out.close()
+        self.radio.close()
+        assert self.process.returncode == 0, err
+        return err
 
 
 def _await_bridge(into: PtyPeer, out: Listener) -> None:
@@ -150,19 +185,12 @@ HUGE_SAMPLES = 8
 def test_huge_zenoh_samples_are_refused_unread_while_honest_samples_go_through() -> None:
     import zenoh
 
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
-    radio = PtyPeer()
-    bridge = start_vstig("bridge", f"zenoh:lab?listen={endpoint}", f"serial:{radio.path}?framing=cobs8",
-                         "--robot-id", "200", "--no-refresh")
-    out = Listener(radio)
-    peer, flooder = _zenoh_peer(endpoint), _zenoh_peer(endpoint)  # an honest gateway, and one sending huge samples
+    bridge = ZenohBridge()
+    flooder = _zenoh_peer(bridge.endpoint)  # beside the honest peer, one sending huge samples
     huge = encode(Message(Op.PUT, 1, 1, 1, 300)) * (4 * 1024 * 1024 // 8)  # 4 MB: 524,288 messages
     try:
-        stamp = iter(range(1, 60_000))
-        wait_for(lambda: PROBE_KEY in out.arrived, 30,  # the bridge is up and hears this session
-                 step=lambda: (peer.put("vstig/lab/0/301", encode(Message(Op.PUT, PROBE_KEY, 1, next(stamp), 301))),
-                               time.sleep(0.1)))
-        rss_before = _rss_kb(bridge.pid)
+        bridge.await_peer()
+        rss_before = _rss_kb(bridge.process.pid)
 
         def flood() -> None:
             for _ in range(HUGE_SAMPLES):
@@ -172,25 +200,14 @@ def test_huge_zenoh_samples_are_refused_unread_while_honest_samples_go_through()
         flooding = threading.Thread(target=flood)
         flooding.start()
         count = 600  # 3 s at RATE_HZ, the huge samples among them
-        sent = []
-        start = time.perf_counter() + 0.05
-        for i in range(count):
-            pause = start + i / RATE_HZ - time.perf_counter()
-            if pause > 0:
-                time.sleep(pause)
-            sent.append(time.perf_counter())
-            peer.put("vstig/lab/0/301", encode(Message(Op.PUT, i, i, 1, 301)))
+        sent = _paced(count, lambda i: bridge.peer.put("vstig/lab/0/301", encode(Message(Op.PUT, i, i, 1, 301))))
         flooding.join()
-        wait_for(lambda: len(out.arrived) > count, 10, step=lambda: time.sleep(0.1))
-        rss_after = _rss_kb(bridge.pid)
+        wait_for(lambda: len(bridge.out.arrived) > count, 10, step=lambda: time.sleep(0.1))
+        rss_after = _rss_kb(bridge.process.pid)
     finally:
-        peer.close()  # type: ignore[no-untyped-call]
-        flooder.close()  # type: ignore[no-untyped-call]
-        _out, err = stop(bridge)
-        out.close()
-        radio.close()
-    assert bridge.returncode == 0, err
-    delays = _delays(sent, out)
+        flooder.close()
+        err = bridge.stop()
+    delays = _delays(sent, bridge.out)
     assert len(delays) == count  # every honest message crossed
     assert statistics.median(delays) < 0.050, f"p50 {statistics.median(delays) * 1e3:.1f} ms"
     assert _counters(err, "zenoh-lab").get("rx_oversize") == HUGE_SAMPLES, err  # all refused, none decoded

@@ -7,8 +7,8 @@ import threading
 import time
 from typing import Any
 
-from peers import PtyPeer, start_vstig, stop, wait_for
-from test_isolation import Listener, _counters, _free_port, _zenoh_peer
+from peers import wait_for
+from test_isolation import ZenohBridge, _counters
 
 from vstig_hw import Message, Op, encode
 from vstig_hw.framing import make_serial_framing
@@ -16,12 +16,8 @@ from vstig_hw.wire import decode_many
 
 
 def test_a_put_heard_on_zenoh_is_not_published_back_and_a_radios_put_is_published_once() -> None:
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
-    radio = PtyPeer()
-    bridge = start_vstig("bridge", f"zenoh:lab?listen={endpoint}", f"serial:{radio.path}?framing=cobs8",
-                         "--robot-id", "200", "--no-refresh")
-    out = Listener(radio)
-    peer = _zenoh_peer(endpoint)
+    bridge = ZenohBridge()
+    radio, out, peer = bridge.radio, bridge.out, bridge.peer
     published: list[list[Message]] = []  # the bridge's samples, as heard by another gateway
     lock = threading.Lock()
 
@@ -32,10 +28,7 @@ def test_a_put_heard_on_zenoh_is_not_published_back_and_a_radios_put_is_publishe
     subscriber = peer.declare_subscriber("vstig/lab/0/200", heard)
     cobs8 = make_serial_framing("cobs8")
     try:
-        stamp = iter(range(1, 60_000))
-        wait_for(lambda: 32767 in out.arrived, 30,  # the bridge is up and hears this session
-                 step=lambda: (peer.put("vstig/lab/0/301", encode(Message(Op.PUT, 32767, 1, next(stamp), 301))),
-                               time.sleep(0.1)))
+        bridge.await_peer()
         for key in range(100, 150):  # from another gateway on zenoh
             peer.put("vstig/lab/0/301", encode(Message(Op.PUT, key, key, 1, 301)))
             time.sleep(0.01)
@@ -47,11 +40,7 @@ def test_a_put_heard_on_zenoh_is_not_published_back_and_a_radios_put_is_publishe
         time.sleep(1.0)  # anything echoed would have come by now
     finally:
         subscriber.undeclare()
-        peer.close()  # type: ignore[no-untyped-call]
-        _out, err = stop(bridge)
-        out.close()
-        radio.close()
-    assert bridge.returncode == 0, err
+        err = bridge.stop()
     with lock:
         keys = sorted(msg.key for sample in published for msg in sample)
         samples = len(published)
