@@ -162,14 +162,15 @@ class SerialTransport:
                 return
             self._sent(len(unit))
             return
-        deadline = time.monotonic() + (self.settings["write_timeout"] or 0.0)
+        limit = self.settings["write_timeout"]  # None: as long as it takes (pyserial's meaning)
+        deadline = None if limit is None else time.monotonic() + limit
         while unit:
             rest = self._write_fd(fd, unit)
             if rest is None or self._fd != fd:  # sent, or the port was lost meanwhile (counted there)
                 return
             unit = rest
-            left = deadline - time.monotonic()
-            if left <= 0 or not select.select([], [fd], [], left)[1]:
+            left = None if deadline is None else deadline - time.monotonic()
+            if (left is not None and left <= 0) or not select.select([], [fd], [], left)[1]:
                 self.counters["tx_timeout"] += 1  # flow control or a deaf device held us off: drop the rest
                 self._fresh = bool(self.preamble)  # half a frame went: the next one starts clean
                 return
