@@ -352,3 +352,49 @@ def can_to_pty_cost() -> Iterator[Result]:
     yield Result("datapath.relay_can_pty_switches_per_msg", ours[1], "switches",
                  "bare virtual bus -> pty hop switches/msg", bare[1])
     yield Result("datapath.relay_can_pty_delivered", ours[2] / COUNT * 100, "%", "offered", 100.0)
+
+
+FD_BUS_MSGS_PER_S = 47_400  # a saturated CAN FD bus, 5 Mbit/s data phase, 8 messages (64 bytes) per frame
+
+
+@benchmark("datapath")
+def canfd_relay_capacity() -> Iterator[Result]:
+    """Messages a raw bridge relays CAN FD -> CAN FD (python-can virtual buses, in this process), offered at the
+    rate of a saturated 5 Mbit/s FD bus, per second of its own threads' CPU: what one core would carry."""
+    import can
+
+    from vstig_hw.framing.can import CanFraming, CanIdScheme
+    from vstig_hw.gateway import Mode, Node
+    from vstig_hw.links import parse
+
+    tag = f"{os.getpid()}"
+    robot = can.Bus(interface="virtual", channel=f"fd-in-{tag}")
+    sink = can.Bus(interface="virtual", channel=f"fd-out-{tag}")  # a receiver on the far bus (never read)
+    codec = CanFraming(CanIdScheme(), sender=7, fd=True)
+    frames = codec.encode_batch([Message(Op.PUT, i % 32768, i // 32768, 1, 7) for i in range(8 * 20_000)])
+    links = [parse(f"can:virtual:fd-in-{tag}?fd=1").build("in", robot_id=200),
+             parse(f"can:virtual:fd-out-{tag}?fd=1").build("out", robot_id=200)]
+    node = Node(links, 200, mode=Mode.RAW, budget=None)
+    stop = threading.Event()
+    node.open()
+    loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
+    loop.start()
+    try:
+        threads = [loop, *node._readers._threads]
+        cpu0, _ = _threads_usage(threads)
+        _sleep_paced(len(frames), FD_BUS_MSGS_PER_S // 8, lambda i: robot.send(frames[i]))  # a saturated FD bus
+        end = time.monotonic() + 20
+        while links[1].counters["out"] < 8 * len(frames) and time.monotonic() < end:
+            time.sleep(0.05)
+        threads += [t for t in (o.writer._thread for o in node.outlets) if t is not None]
+        cpu1, _ = _threads_usage(threads)
+        relayed = links[1].counters["out"]
+    finally:
+        stop.set()
+        loop.join(timeout=5)
+        node.close()
+        robot.shutdown()
+        sink.shutdown()
+    yield Result("datapath.canfd_relay_msgs_per_cpu_s", relayed / max(cpu1 - cpu0, 1e-9), "msg/s of a core",
+                 "saturated 5 Mbit/s CAN FD bus", FD_BUS_MSGS_PER_S)
+    yield Result("datapath.canfd_relay_delivered", relayed / (8 * len(frames)) * 100, "%", "offered", 100.0)
