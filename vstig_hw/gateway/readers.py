@@ -33,7 +33,7 @@ class LinkReaders:
         self.arrivals: queue.SimpleQueue[Arrival | None] = queue.SimpleQueue()
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
-        self._slots = [threading.BoundedSemaphore(READ_AHEAD) for _ in links]
+        self._slots = [threading.Semaphore(READ_AHEAD) for _ in links]
         self.per_poll = READ_AHEAD * len(links)  # batches the loop handles before it sends again
 
     def done(self, index: int) -> None:
@@ -42,7 +42,7 @@ class LinkReaders:
 
     def start(self) -> None:
         self._stop.clear()
-        self._slots[:] = [threading.BoundedSemaphore(READ_AHEAD) for _ in self.links]
+        self._slots[:] = [threading.Semaphore(READ_AHEAD) for _ in self.links]
         for index, link in enumerate(self.links):
             thread = threading.Thread(target=self._read, args=(index, link), name=f"read-{link.name}", daemon=True)
             thread.start()
