@@ -143,15 +143,18 @@ def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, dep
               help=VALUE_TYPE_HELP)
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
               help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
+@click.option("--verbose", "-v", is_flag=True,
+              help="Say how the replay ran: under SCHED_FIFO (where permitted) or normal scheduling, and why.")
 @skip_bad_option
 @filter_options
 @reports_errors
 def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: float, loop: bool,
             skip_gaps: float | None, ignore_timestamps: bool, robot_id: int, table: bool, at: float | None,
-            value_type: ValueType, deployment: str | None, skip_bad: bool, keep: Filter) -> None:
+            value_type: ValueType, deployment: str | None, verbose: bool, skip_bad: bool, keep: Filter) -> None:
     """Replay FILE onto live links, or show what the swarm believed (--table).
 
     Ctrl-C, SIGTERM or SIGHUP stops at once, even in a long gap: nothing is sent after it.
+    Where permitted (root or CAP_SYS_NICE) the replay runs under SCHED_FIFO; --verbose says which.
     A file cut short (its recorder was killed) is sent up to the cut, which is then
     reported: as an error, or with --skip-bad as a skipped line.
 
@@ -216,6 +219,8 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
                + ("; stopped by a signal" if done.stopped else ""), err=True)
     for link in targets.values():
         click.echo(f"{link.name}: {link.stats().summary()}", err=True)
+    if verbose:
+        click.echo(f"replay thread: {done.scheduling}", err=True)
     if unmapped:
         skipped = ", ".join(f"{name} ({count} units)" for name, count in sorted(unmapped.items()))
         click.echo(f"skipped links with no --onto: {skipped}", err=True)
