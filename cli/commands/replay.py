@@ -34,7 +34,8 @@ def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
     """
     decoder = Decoder(default_framings(deployment=deployment))
     is_can = isinstance(onto, CanSpec)
-    default_ids = is_can and onto.id_base in (None, 0x600) and not onto.extended and onto.stigmergy == 0
+    default_ids = (isinstance(onto, CanSpec) and onto.id_base in (None, 0x600) and not onto.extended
+                   and onto.stigmergy == 0)
 
     def send(record: Record) -> None:
         same = (record.framing == CAN_FRAMING and default_ids) if is_can else (record.framing == link.framing.name)
@@ -74,7 +75,7 @@ def _fresh(frame: Any) -> Any:
                        dlc=frame.dlc, check=False)
 
 
-class OntoType(click.ParamType):
+class OntoType(click.ParamType):  # type: ignore[type-arg]  # generic only from click 8.3; we take 8.1 up
     """`--onto SPEC` (every link of the capture) or `--onto NAME=SPEC` (the capture's link NAME)."""
 
     name = "[NAME=]LINK"
