@@ -90,7 +90,7 @@ def finite(text: str) -> float:
 _SIZE_UNITS = {"k": 1 << 10, "m": 1 << 20, "g": 1 << 30}
 
 
-class ByteSize(click.ParamType):
+class ByteSize(click.ParamType):  # type: ignore[type-arg]  # generic only from click 8.3; we take 8.1 up
     """A positive size in bytes: 500000, 64k, 10M, 1G."""
 
     name = "SIZE"
@@ -106,7 +106,7 @@ class ByteSize(click.ParamType):
         return int(number) * scale
 
 
-class WireKey(click.ParamType):
+class WireKey(click.ParamType):  # type: ignore[type-arg]  # generic only from click 8.3; we take 8.1 up
     """A stigmergy key, 0..32767, written as VALUE may be: 23, 0x17, 0o27, 0b10111."""
 
     name = "KEY"

@@ -80,7 +80,7 @@ def reports_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-class LinkSpecType(click.ParamType):
+class LinkSpecType(click.ParamType):  # type: ignore[type-arg]  # generic only from click 8.3; we take 8.1 up
     """A link spec on the command line; a bad one is a usage error (exit 2) naming the bad part."""
 
     name = "LINK"
@@ -155,7 +155,7 @@ class _ClosedStream(io.RawIOBase):
 def _rebuild(stream: TextIO | None, fd: int, label: str) -> TextIO | None:
     if stream is None:  # Python found the descriptor closed at startup
         raw: io.RawIOBase = _ClosedStream(label, complain=(label == "stdout"))
-        return io.TextIOWrapper(io.BufferedWriter(raw), encoding="utf-8", write_through=True)  # type: ignore[arg-type]
+        return io.TextIOWrapper(io.BufferedWriter(raw), encoding="utf-8", write_through=True)
     try:
         if stream.fileno() != fd:
             return stream  # already redirected inside this process (a test harness): leave it be
@@ -163,14 +163,15 @@ def _rebuild(stream: TextIO | None, fd: int, label: str) -> TextIO | None:
         return stream
     stream.flush()
     buffered = io.BufferedWriter(_GuardedFile(fd, label))
-    return io.TextIOWrapper(buffered, encoding=stream.encoding, errors=stream.errors,  # type: ignore[arg-type]
-                            line_buffering=stream.line_buffering, write_through=getattr(stream, "write_through", False))
+    return io.TextIOWrapper(buffered, encoding=stream.encoding, errors=stream.errors,
+                            line_buffering=bool(stream.line_buffering),
+                            write_through=getattr(stream, "write_through", False))
 
 
 def guard_streams() -> None:
     """Replace sys.stdout and sys.stderr by guarded streams over the same descriptors."""
-    sys.stdout = _rebuild(sys.stdout, 1, "stdout")  # type: ignore[assignment]
-    sys.stderr = _rebuild(sys.stderr, 2, "stderr")  # type: ignore[assignment]
+    sys.stdout = _rebuild(sys.stdout, 1, "stdout")
+    sys.stderr = _rebuild(sys.stderr, 2, "stderr")
 
 
 def flush_streams() -> None:
@@ -221,7 +222,7 @@ def lossless(spec: LinkSpec, opening: float | None = None) -> LinkSpec:
 
     if not isinstance(spec, ZenohSpec):
         return spec
-    return replace(spec, block=True, **({} if opening is None else {"peer_wait": opening}))
+    return replace(spec, block=True, peer_wait=spec.peer_wait if opening is None else opening)
 
 
 def run_until_stopped(node: Node, status: Any = None, duration: float | None = None) -> None:

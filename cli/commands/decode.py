@@ -93,9 +93,9 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, time_sty
     if output is not None:
         _check_output(output, files, fmt, overwrite)
         with contextlib.ExitStack() as spooled:  # stdin and pipes too
-            readable = {spooled.enter_context(readable_capture(path, input_format)): input_name(path)
-                        for path in files}
-            _convert(readable, output, skip_bad, base, extended, deployment, keep)
+            inputs = {spooled.enter_context(readable_capture(path, input_format)): input_name(path)
+                      for path in files}
+            _convert(inputs, output, skip_bad, base, extended, deployment, keep)
         return
     clock = TimeColumn(time_style) if time_style else None
     for number, path in enumerate(files):

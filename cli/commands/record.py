@@ -120,7 +120,11 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
             captures[0].write(kept)
 
     node.on_unit.append(write)
-    node.on_tick.append(lambda _: captures and captures[0].flush())
+    def flush(_: Node) -> None:  # every tick: what a kill leaves behind is at most one tick's frames
+        if captures:
+            captures[0].flush()
+
+    node.on_tick.append(flush)
     try:
         with node:
             captures.append(RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),

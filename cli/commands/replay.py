@@ -34,7 +34,8 @@ def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
     """
     decoder = Decoder(default_framings(deployment=deployment))
     is_can = isinstance(onto, CanSpec)
-    default_ids = is_can and onto.id_base in (None, 0x600) and not onto.extended and onto.stigmergy == 0
+    default_ids = (isinstance(onto, CanSpec) and onto.id_base in (None, 0x600) and not onto.extended
+                   and onto.stigmergy == 0)
 
     def send(record: Record) -> None:
         same = (record.framing == CAN_FRAMING and default_ids) if is_can else (record.framing == link.framing.name)
@@ -74,7 +75,7 @@ def _fresh(frame: Any) -> Any:
                        dlc=frame.dlc, check=False)
 
 
-class OntoType(click.ParamType):
+class OntoType(click.ParamType):  # type: ignore[type-arg]  # generic only from click 8.3; we take 8.1 up
     """`--onto SPEC` (every link of the capture) or `--onto NAME=SPEC` (the capture's link NAME)."""
 
     name = "[NAME=]LINK"
@@ -143,15 +144,18 @@ def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, dep
               help=VALUE_TYPE_HELP)
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
               help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
+@click.option("--verbose", "-v", is_flag=True,
+              help="Say how the replay ran: under SCHED_FIFO (where permitted) or normal scheduling, and why.")
 @skip_bad_option
 @filter_options
 @reports_errors
 def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: float, loop: bool,
             skip_gaps: float | None, ignore_timestamps: bool, robot_id: int, table: bool, at: float | None,
-            value_type: ValueType, deployment: str | None, skip_bad: bool, keep: Filter) -> None:
+            value_type: ValueType, deployment: str | None, verbose: bool, skip_bad: bool, keep: Filter) -> None:
     """Replay FILE onto live links, or show what the swarm believed (--table).
 
     Ctrl-C, SIGTERM or SIGHUP stops at once, even in a long gap: nothing is sent after it.
+    Where permitted (root or CAP_SYS_NICE) the replay runs under SCHED_FIFO; --verbose says which.
     A file cut short (its recorder was killed) is sent up to the cut, which is then
     reported: as an error, or with --skip-bad as a skipped line.
 
@@ -216,6 +220,8 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
                + ("; stopped by a signal" if done.stopped else ""), err=True)
     for link in targets.values():
         click.echo(f"{link.name}: {link.stats().summary()}", err=True)
+    if verbose:
+        click.echo(f"replay thread: {done.scheduling}", err=True)
     if unmapped:
         skipped = ", ".join(f"{name} ({count} units)" for name, count in sorted(unmapped.items()))
         click.echo(f"skipped links with no --onto: {skipped}", err=True)

@@ -118,7 +118,7 @@ def _progress(transient: bool = False) -> Any:
               help="the control step --snapshot draws")
 @overwrite_option("the --capture or --snapshot FILE")
 @click.pass_context
-def command(ctx: click.Context, topology: str, robots: int, drop: float, runs: int, as_json: bool,
+def command(ctx: click.Context, /, topology: str, robots: int, drop: float, runs: int, as_json: bool,
             capture: str | None, seed: int, workers: int | None, snapshot: Path | None, snapshot_step: int,
             overwrite: bool, **model: Any) -> None:
     """Simulate the paper's task (agree on the highest id) on real engines over a lossy radio."""

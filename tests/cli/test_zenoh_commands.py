@@ -80,7 +80,7 @@ def test_put_and_get_through_a_zenoh_link() -> None:
     with node:
         spec = _connecting_to(gateway)
         put = start_vstig("put", "5", "1234", "--on", spec, "--robot-id", "77")
-        node.run(until=lambda: engine.has(5), duration=30)
+        node.run(until=lambda: put.poll() is not None, duration=30)  # we answer its asking: that confirms it
         out, err = put.communicate(timeout=30)
         assert put.returncode == 0, err
         assert engine.entry(5) == (1234, 1, 77)

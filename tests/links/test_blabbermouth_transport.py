@@ -157,3 +157,40 @@ def test_a_bittybuzz_link_with_a_missing_deployment_names_the_file() -> None:
     spec = parse("kilobot-ohc:/dev/null?dialect=bittybuzz&deployment=/nonexistent/lab.toml")
     with pytest.raises(ValueError, match=r"/nonexistent/lab\.toml"):
         spec.build("ohc")
+
+
+def test_a_robot_that_stops_reading_is_hung_up_on_and_the_others_frames_go_on() -> None:
+    import threading
+
+    robots = [FakeRobot() for _ in range(3)]
+    robots[2].server.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # robot 2 reads nothing: fill it fast
+    size = 4096  # big frames: the deaf robot's and the kernel's buffers fill within a few MB
+    transport = BlabbermouthTransport([("127.0.0.1", r.port) for r in robots], size, connect_timeout=5,
+                                      send_timeout=0.2)
+    frames = [(5).to_bytes(2, "little") + bytes([i % 256]) * (size - 2) for i in range(4000)]  # 16 MB
+    got = bytearray()
+    try:
+        transport.open()
+        for robot in robots:
+            robot.accept()
+        sender, listener = robots[0].conn, robots[1]
+        assert sender is not None
+        sender.settimeout(10)  # while the relay waits on robot 2, robot 0's own sends wait too
+        begun = time.monotonic()
+
+        def read_robot_1() -> None:  # a robot that keeps reading, as a live one does
+            while len(got) < len(frames) * size and time.monotonic() < begun + 20:
+                got.extend(listener.read())
+
+        reading = threading.Thread(target=read_robot_1, daemon=True)
+        reading.start()
+        sender.sendall(b"".join(frames))
+        reading.join()
+        took = time.monotonic() - begun
+    finally:
+        transport.close()
+        for robot in robots:
+            robot.close()
+    assert bytes(got) == b"".join(frames)  # robot 1 got every frame, in order
+    assert transport.counters["robot_stalled"] >= 1  # robot 2 was hung up on, not waited for
+    assert took < 10, took

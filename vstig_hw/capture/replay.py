@@ -15,6 +15,13 @@ milliseconds, on a loaded machine. On Linux the replaying thread also asks for
 a 1 us timer slack while it replays (prctl PR_SET_TIMERSLACK; restored after),
 which brings the median overshoot from ~65 us to ~15 us.
 
+Where permitted (root, or CAP_SYS_NICE, or an RLIMIT_RTPRIO above 0) the
+replaying thread also runs under SCHED_FIFO at a modest real-time priority
+(`REALTIME_PRIORITY`) while it replays, so another process's time slice cannot
+push a deadline back by milliseconds; otherwise it keeps normal scheduling,
+silently (`ReplayResult.scheduling` says which, for --verbose). Deadlines stay
+absolute either way.
+
 A stop (Ctrl-C, SIGTERM) wakes the sleep at once and nothing is sent after it,
 however long the gap: no spinning to the deadline. `skip_gaps` shortens any
 wait longer than that many seconds to it (python-can's player `--skip`);
@@ -24,6 +31,8 @@ wait longer than that many seconds to it (python-can's player `--skip`);
 from __future__ import annotations
 
 import contextlib
+import errno
+import os
 import sys
 import threading
 import time
@@ -38,6 +47,28 @@ SLEEP_OVERSHOOT = 60e-6  # the first guess of how late a sleep wakes (50 us time
 _MEDIAN_STEP = 2e-6  # how far one sleep moves the running median of the overshoot
 _PR_SET_TIMERSLACK, _PR_GET_TIMERSLACK = 29, 30  # linux/prctl.h
 FINE_TIMER_SLACK_NS = 1000
+REALTIME_PRIORITY = 10  # SCHED_FIFO 1..99: above every normal process, below the kernel's IRQ threads (50)
+
+
+@contextlib.contextmanager
+def realtime_scheduling(priority: int = REALTIME_PRIORITY) -> Iterator[str]:
+    """This thread under SCHED_FIFO for the duration, where permitted; yields what it runs under, in words."""
+    setter = getattr(os, "sched_setscheduler", None)
+    if setter is None:
+        yield "normal scheduling (this system has no SCHED_FIFO)"
+        return
+    policy, param = os.sched_getscheduler(0), os.sched_getparam(0)  # pid 0: this thread (Linux tasks)
+    try:
+        setter(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        why = "needs root or CAP_SYS_NICE" if exc.errno == errno.EPERM else os.strerror(exc.errno or 0)
+        yield f"normal scheduling (SCHED_FIFO {why})"
+        return
+    try:
+        yield f"SCHED_FIFO priority {priority}"
+    finally:
+        with contextlib.suppress(OSError):
+            setter(0, policy, param)
 
 
 @contextlib.contextmanager
@@ -67,6 +98,7 @@ class ReplayResult:
     stopped: bool = False  # a stop ended the replay before the last record
     lateness: list[float] = field(default_factory=list)  # per frame, send time minus deadline (if asked)
     sleep_overshoot: float = SLEEP_OVERSHOOT  # the running median of how late our sleeps woke
+    scheduling: str = ""  # what the replaying thread ran under (SCHED_FIFO, or normal and why)
 
 
 class _Waiter:
@@ -95,15 +127,21 @@ class _Waiter:
 def replay(records: Iterable[Record], send: Callable[[Record], None], *, speed: float = 1.0,
            stop: threading.Event | None = None, skip_gaps: float | None = None, ignore_timestamps: bool = False,
            keep_lateness: bool = False, clock: Callable[[], float] = time.perf_counter,
-           sleep: Callable[[float], object] | None = None) -> ReplayResult:
-    """Call `send` for each record at its deadline; `clock` and `sleep` are for tests (default: the real ones)."""
+           sleep: Callable[[float], object] | None = None, realtime: bool = True) -> ReplayResult:
+    """Call `send` for each record at its deadline; `clock` and `sleep` are for tests (default: the real ones).
+
+    `realtime`: run under SCHED_FIFO where permitted (see the module's notes).
+    """
     if speed <= 0:
         raise ValueError(f"speed must be positive, got {speed}")
     if skip_gaps is not None and skip_gaps < 0:
         raise ValueError(f"skip_gaps must not be negative, got {skip_gaps}")
-    with fine_timer_slack():
-        return _replay(records, send, speed, stop or threading.Event(), 0.0 if ignore_timestamps else skip_gaps,
-                       keep_lateness, clock, sleep)
+    scheduling = realtime_scheduling() if realtime else contextlib.nullcontext("normal scheduling (not asked)")
+    with fine_timer_slack(), scheduling as scheduled:
+        result = _replay(records, send, speed, stop or threading.Event(), 0.0 if ignore_timestamps else skip_gaps,
+                         keep_lateness, clock, sleep)
+    result.scheduling = scheduled
+    return result
 
 
 def _replay(records: Iterable[Record], send: Callable[[Record], None], speed: float, stop: threading.Event,

@@ -24,11 +24,13 @@ from dataclasses import dataclass
 from ..counters import Counters
 from ..wire import MESSAGE_SIZE, Message, decode_many, encode
 
-__all__ = ["KEY_ROOT", "MAX_GATEWAY", "MAX_STIGMERGY", "ZenohFraming", "ZenohKeySpace", "ZenohSample", "check_swarm"]
+__all__ = ["KEY_ROOT", "MAX_GATEWAY", "MAX_SAMPLE", "MAX_STIGMERGY", "ZenohFraming", "ZenohKeySpace", "ZenohSample",
+           "check_swarm"]
 
 KEY_ROOT = "vstig"
 MAX_STIGMERGY = 0xFFFF  # Buzz numbers stigmergies with 16 bits
 MAX_GATEWAY = 0xFFFF  # a gateway is named by its robot id
+MAX_SAMPLE = 64 * 1024  # payload bytes a receiver takes by default (8,192 messages); we never send more
 _SWARM = re.compile(r"[A-Za-z0-9_.-]+\Z")  # one key-expression chunk with no wildcard or special character
 
 
@@ -114,9 +116,9 @@ class ZenohFraming:
         return [ZenohSample(self.own_key, encode(msg))]
 
     def encode_batch(self, messages: Iterable[Message]) -> list[ZenohSample]:
-        """One sample for the whole batch (none for an empty one)."""
+        """One sample for the whole batch (none for an empty one); one per MAX_SAMPLE bytes of a huge batch."""
         payload = b"".join(map(encode, messages))
-        return [ZenohSample(self.own_key, payload)] if payload else []
+        return [ZenohSample(self.own_key, payload[i:i + MAX_SAMPLE]) for i in range(0, len(payload), MAX_SAMPLE)]
 
     def feed(self, unit: ZenohSample) -> list[Message]:
         if self.space.gateway_of(unit.key) is None:

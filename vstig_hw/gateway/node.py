@@ -20,7 +20,10 @@ counters, under ENGINE_STATS.
 
 One event loop: `run` (or `poll`, one step of it) drains the reader threads'
 queue, ticks every `period`, and flushes the outlets whenever their budget
-window allows. An optional `guard` (see `guard`) sees what each link heard
+window allows. It never waits on a device: each link reads in its own thread,
+a few batches ahead at most (a flooding link waits its turn), and writes through
+its own bounded queue (`writer`), so a link that cannot take what we send delays
+no other. An optional `guard` (see `guard`) sees what each link heard
 before the engine, a raw relay or a listener does.
 """
 
@@ -157,6 +160,8 @@ class Node:
             item = arrivals.get_nowait()
             if item is not None:
                 self._arrive(*item)
+        for outlet in self.outlets:  # what the devices take within a moment still goes out
+            outlet.close()
         while self._opened:
             link = self._opened.pop()
             try:
@@ -227,9 +232,15 @@ class Node:
             item = None
         with self.lock:  # held while working, never while waiting: other threads may call in between
             heard_on = 0  # bit i: link i delivered in this poll
+            handled = 0
+            done = self._readers.done
             while item is not None:
                 self._arrive(*item)
+                done(item[0])
                 heard_on |= 1 << item[0]
+                handled += 1
+                if handled >= self._readers.per_poll:  # a flooding link cannot keep the loop from sending
+                    break
                 try:
                     item = arrivals.get_nowait()
                 except queue.Empty:
@@ -414,8 +425,8 @@ class Node:
         """Per link: in/out, queued, and every drop by reason; then the engine's outcomes, if it has one."""
         out = {link.name: link.stats() for link in self.links}
         for outlet in self.outlets:
-            if len(outlet):
-                out[outlet.link.name]["queued"] = len(outlet)
+            if len(outlet) or len(outlet.writer):
+                out[outlet.link.name]["queued"] = len(outlet) + len(outlet.writer)
         if self.engine is not None:
             out[ENGINE_STATS] = Counters({outcome.name.lower(): n for outcome, n in self.engine.counts.items()})
         return out

@@ -12,6 +12,10 @@ messages leave in any `period`-long window. A message goes out the moment the
 window allows, so a quiet gateway relays across media within the time it takes
 to wake a thread, instead of waiting up to a whole tick; a busy one is held to
 the same bandwidth the tick-aligned drain would allow.
+
+What leaves the window goes to the link's `LinkWriter`: written at once while the
+device takes it, else queued (bounded) for that link's own thread, so a device that
+stops taking data never holds up the loop or another link.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from ..counters import Counters
 from ..links.link import Link
 from ..outqueue import OutQueue
 from ..wire import Message
+from .writer import TX_QUEUE_LIMIT, LinkWriter
 
 __all__ = ["Outlet", "SendWindow"]
 
@@ -63,8 +68,10 @@ class SendWindow:
 class Outlet:
     """A link, its send queue and its budget window."""
 
-    def __init__(self, link: Link[Any], budget: int | None, period: float, *, keep_all: bool = False) -> None:
+    def __init__(self, link: Link[Any], budget: int | None, period: float, *, keep_all: bool = False,
+                 tx_queue: int = TX_QUEUE_LIMIT) -> None:
         self.link = link
+        self.writer = LinkWriter(link, tx_queue)
         self.window = SendWindow(budget, period)
         self.keep_all = keep_all  # raw mode: a FIFO of every frame, not newest-per-key
         self._newest = OutQueue()
@@ -101,7 +108,11 @@ class Outlet:
             batch = self._newest.drain(allowed)
         self.window.record(now, len(batch))
         try:
-            self.link.send_many(batch)  # one write for the batch on a byte stream (see Link.send_many)
+            self.writer.submit(self.link.units_of(batch), len(batch))  # one unit for the batch on a byte stream
         except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
             self.counters["drop_write_error"] += len(batch)
         return self.window.next_free() if len(self) else None
+
+    def close(self) -> None:
+        """Let the device take what is queued (briefly), then stop the writer."""
+        self.writer.close()

@@ -57,18 +57,22 @@ class Link(Generic[Unit]):
         wire are the same, and one system call instead of one per message keeps the
         gateway's loop from handing the GIL to a busy reader thread at each of them.
         """
+        write = self.transport.write
+        for unit in self.units_of(messages):
+            write(unit)
+        self.counters["out"] += len(messages)
+
+    def units_of(self, messages: list[Message]) -> list[Unit]:
+        """The units that carry `messages`, as few as the medium allows (see `send_many`)."""
         encode_batch = getattr(self.framing, "encode_batch", None)
         if encode_batch is not None:
-            units = encode_batch(messages)
+            units: list[Unit] = encode_batch(messages)
         else:
             encode = self.framing.encode
             units = [unit for msg in messages for unit in encode(msg)]
         if len(units) > 1 and isinstance(units[0], bytes):
-            units = [b"".join(units)]
-        write = self.transport.write
-        for unit in units:
-            write(unit)
-        self.counters["out"] += len(messages)
+            units = [b"".join(units)]  # type: ignore[list-item,arg-type]  # Unit is bytes here
+        return units
 
     def receive(self, timeout: float) -> list[Heard]:
         """Messages completed within `timeout` seconds."""

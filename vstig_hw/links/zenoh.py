@@ -26,8 +26,9 @@ import socket
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from ..framing.zenoh import MAX_STIGMERGY, ZenohFraming, ZenohKeySpace, check_swarm
+from ..framing.zenoh import MAX_SAMPLE, MAX_STIGMERGY, ZenohFraming, ZenohKeySpace, check_swarm
 from ..transports.base import TransportError, one_line
+from ..wire import MESSAGE_SIZE
 from .grammar import bad, flag, integer, safe_name, split_query
 from .link import Link
 
@@ -39,7 +40,7 @@ __all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "ZenohSpec", "exposure", "parse_zenoh
 
 GRAMMAR = (
     "zenoh:<swarm>[?mode=peer|client&connect=<endpoint>[,...]&listen=<endpoint>[,...]&config=<zenoh json5 file>"
-    "&stigmergy=N&scout=0|1]",
+    "&stigmergy=N&scout=0|1&max_sample=<bytes>&echo=1]",
 )
 EXAMPLES = {
     "zenoh": ("zenoh:lab", "zenoh:lab?listen=tcp/0.0.0.0:7447&config=lab.json5",
@@ -51,9 +52,13 @@ EXAMPLES = {
 NOTES = {
     "zenoh": "zenoh: gateways on many PCs as one swarm (key vstig/<swarm>/<stigmergy>/<gateway id>). Closed by "
              "default: listens on a free loopback port (printed once open), no multicast scouting; listen=, connect= "
-             "or scout=1 open it, config= passes a Zenoh config file (TLS, user/password, routers) through.",
+             "or scout=1 open it, config= passes a Zenoh config file (TLS, user/password, routers) through. A sample "
+             f"above max_sample= bytes (default {MAX_SAMPLE}) is refused unread and counted (rx_oversize). One "
+             "broadcast domain: a PUT heard on zenoh is not published back onto it; echo=1 does (peers that do not "
+             "all reach each other, with no router).",
 }
 _EXAMPLE = EXAMPLES["zenoh"][0]
+_MAX_SAMPLE_CEILING = 64 * 1024 * 1024  # max_sample= above this would let one peer take the PC's memory
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,6 +72,8 @@ class ZenohSpec:
     scout: bool | None = None  # None: the config file's, else off
     block: bool = False  # Zenoh congestion control BLOCK instead of DROP: set by commands that must not lose a sample
     peer_wait: float | None = None  # seconds opening may wait for a peer it connects to (None: 3); one-shot commands
+    max_sample: int = MAX_SAMPLE  # payload bytes: a bigger sample is refused before it is decoded
+    echo: bool = False  # True: a PUT heard on zenoh is published back onto it (Link.one_domain off)
 
     @property
     def kind(self) -> str:
@@ -102,7 +109,8 @@ def _spec_endpoints(spec: str, key: str, text: str) -> tuple[str, ...]:
 
 def parse_zenoh(spec: str, body: str) -> ZenohSpec:
     """`body` is the spec after `zenoh:`; the key space (framing.zenoh) judges the swarm name."""
-    swarm, params = split_query(spec, body, _EXAMPLE, ("mode", "connect", "listen", "config", "stigmergy", "scout"),
+    swarm, params = split_query(spec, body, _EXAMPLE, ("mode", "connect", "listen", "config", "stigmergy", "scout",
+                                                                "max_sample", "echo"),
                                 False)
     try:
         check_swarm(swarm)
@@ -129,6 +137,9 @@ def parse_zenoh(spec: str, body: str) -> ZenohSpec:
         stigmergy=integer(spec, _EXAMPLE, "stigmergy", params["stigmergy"], 0, MAX_STIGMERGY)
         if "stigmergy" in params else 0,
         scout=flag(spec, _EXAMPLE, "scout", params["scout"]) if "scout" in params else None,
+        max_sample=integer(spec, _EXAMPLE, "max_sample", params["max_sample"], MESSAGE_SIZE, _MAX_SAMPLE_CEILING)
+        if "max_sample" in params else MAX_SAMPLE,
+        echo=flag(spec, _EXAMPLE, "echo", params["echo"]) if "echo" in params else False,
     )
 
 
@@ -289,5 +300,8 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
     transport = ZenohTransport(make_config, space.subscription, name=name, block=spec.block,
                                expects_peer=bool(connecting) or _mode(first) == "client",
                                listening=tuple(_endpoints(first, "listen/endpoints")), reaches=reaches,
-                               rebind=fresh_listener if ours else None, peer_wait=spec.peer_wait)
-    return Link(name, transport, framing)
+                               rebind=fresh_listener if ours else None, peer_wait=spec.peer_wait,
+                               max_sample=spec.max_sample)
+    # Every gateway of the swarm hears every sample: a PUT heard here is not published back here (unless echo=1:
+    # peers that do not all reach each other, and no router, where a gateway's re-broadcast carries it a hop on).
+    return Link(name, transport, framing, one_domain=not spec.echo)

@@ -10,7 +10,9 @@ only hear each other through it, so a relay that stops relaying splits the swarm
 This transport does the same, with every frame also handed to `read` (the unit is
 one whole frame), and `write` sends the gateway's own frames to every robot. It
 never interprets a frame. A robot that hangs up is logged once, counted, and
-dialled again with backoff while the others carry on.
+dialled again with backoff while the others carry on. So is a robot that takes no
+frame for `send_timeout` seconds (`robot_stalled`): one robot that stops reading
+must not stop the relay between the others.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import contextlib
 import logging
 import queue
 import socket
+import struct
 import threading
 import time
 
@@ -28,6 +31,8 @@ from .base import TransportError, one_line
 __all__ = ["BlabbermouthTransport"]
 
 log = logging.getLogger(__name__)
+
+SEND_TIMEOUT = 1.0  # seconds a robot may take no frame before we hang up on it (and dial it again)
 
 
 class _Robot:
@@ -48,6 +53,9 @@ class _Robot:
                                  "and listening on that port?)") from None
         sock.settimeout(None)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        seconds = self.owner.send_timeout  # a send waits this long at most (reads stay blocking)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO,
+                        struct.pack("ll", int(seconds), int(seconds % 1 * 1_000_000)))
         self.sock = sock
         self.thread = threading.Thread(target=self._read_frames, name=f"blabbermouth {self.name}", daemon=True)
         self.thread.start()
@@ -77,7 +85,12 @@ class _Robot:
         try:
             with self.send_lock:
                 sock.sendall(data)
-        except OSError:
+        except OSError as error:
+            if isinstance(error, BlockingIOError):  # SO_SNDTIMEO ran out: the robot stopped reading
+                self.owner.counters["robot_stalled"] += 1
+                log.warning("blabbermouth robot %s took no frame for %g s; hanging up on it so the others' "
+                            "frames go on", self.name, self.owner.send_timeout)
+            self.close()  # part of a frame may have gone: its stream is out of step, so it is dialled again
             return False
         return True
 
@@ -93,7 +106,7 @@ class BlabbermouthTransport:
     """Transport[bytes]: one unit is one fixed-size frame from any robot."""
 
     def __init__(self, robots: list[tuple[str, int]], frame_size: int, *, name: str | None = None,
-                 connect_timeout: float = 5.0, backoff_max: float = 2.0) -> None:
+                 connect_timeout: float = 5.0, backoff_max: float = 2.0, send_timeout: float = SEND_TIMEOUT) -> None:
         if frame_size < 5:
             raise ValueError(f"a BuzzKH4 frame holds at least a robot id and one message, got size {frame_size}")
         if not robots:
@@ -102,6 +115,7 @@ class BlabbermouthTransport:
         self.name = name or ",".join(f"{h}:{p}" for h, p in robots)
         self.counters = Counters()
         self.connect_timeout = connect_timeout
+        self.send_timeout = send_timeout
         self.backoff_max = backoff_max
         self._robots = [_Robot(self, host, port) for host, port in robots]
         self._frames: queue.Queue[bytes] = queue.Queue()

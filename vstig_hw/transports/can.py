@@ -41,6 +41,8 @@ _DRAIN_LIMIT = 512  # frames taken per read() after the first, so one busy bus c
 _STATE_POLL_S = 1.0  # how often to ask interfaces that report it (pcan, kvaser...) for bus-off
 # Send failures that mean "the bus is busy", not "the device is gone".
 _TRANSIENT_ERRNOS = frozenset({errno.ENOBUFS, errno.EAGAIN})
+# Interfaces whose send(timeout=0) returns at once (queue full: an error), so the gateway's loop may call it.
+_NONBLOCKING_SEND = frozenset({"socketcan", "virtual"})
 
 
 class CanTransport:
@@ -153,21 +155,36 @@ class CanTransport:
         return frames
 
     def write(self, unit: can.Message) -> None:
+        """Send, waiting up to `send_timeout` for room in the TX queue; a frame still not taken is dropped."""
+        self._send(unit, self.send_timeout, drop_when_busy=True)
+
+    def write_nowait(self, unit: can.Message) -> can.Message | None:
+        """Send only if the TX queue has room now (interfaces whose send cannot block); else the frame, to wait."""
+        if self.interface not in _NONBLOCKING_SEND:
+            return unit
+        return None if self._send(unit, 0.0, drop_when_busy=False) else unit
+
+    def _send(self, unit: can.Message, timeout: float, *, drop_when_busy: bool) -> bool:
+        """False if the bus was busy and the frame is still ours to send; True when sent or dropped (counted)."""
         bus = self._bus or self._reconnect(0.0)
         if bus is None:
             self.counters["tx_dropped"] += 1
-            return
+            return True
         try:
-            bus.send(unit, timeout=self.send_timeout)
+            bus.send(unit, timeout=timeout)
         except (can.CanError, OSError) as exc:
+            busy = errno_of(exc) in _TRANSIENT_ERRNOS or "buffer full" in str(exc).lower()
+            if busy and not drop_when_busy:
+                return False
             self.counters["tx_dropped"] += 1
             self.counters["bus_errors"] += 1
-            if errno_of(exc) not in _TRANSIENT_ERRNOS and "buffer full" not in str(exc).lower():
+            if not busy:
                 self._lost(one_line(exc))
-            return
+            return True
         if self._outage:
             self._recovered()
         self.counters["tx"] += 1
+        return True
 
     # -- errors and reconnection ---------------------------------------------
     def _error_frame(self, frame: can.Message) -> None:

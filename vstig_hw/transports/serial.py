@@ -9,6 +9,12 @@ logged once, `read` returns nothing and `write` drops and counts, while the port
 is retried with exponential backoff; when it comes back, traffic resumes and
 `reconnects` counts it.
 
+Reads and writes go straight to the port's non-blocking file descriptor where it
+has one (a device or pty): a read is one select and one read, a write one write; only a device that does not take a
+whole write at once is waited for, up to `write_timeout`, then the rest of that
+write is dropped (`tx_timeout`). `write_nowait` never waits: the gateway's loop
+writes through it while the device keeps up (see gateway/writer.py).
+
 A `preamble` (the framing's: 0x00 for COBS framings) goes out ahead of the first
 write after every open and reconnect, so a receiver that holds half a frame from
 before drops it at once instead of losing our first frame too (SPEC 6.0.3).
@@ -19,6 +25,8 @@ from __future__ import annotations
 import contextlib
 import errno
 import logging
+import os
+import select
 import time
 from typing import Any
 
@@ -34,6 +42,7 @@ log = logging.getLogger(__name__)
 _MISSING = {errno.ENOENT, errno.ENODEV, errno.ENXIO}
 _DENIED = {errno.EACCES, errno.EPERM}
 _BUSY = {errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK}
+_READ_SIZE = 65536  # bytes one read takes at most: all a pty or a USB adapter holds
 
 
 def open_error(port: str, exc: BaseException) -> TransportError:
@@ -77,6 +86,7 @@ class SerialTransport:
         self._retry_at = 0.0
         self._lost_at = 0.0
         self._fresh = False  # the port was (re)opened and nothing written since: the preamble goes first
+        self._fd: int | None = None  # the open port's file descriptor, where it has one: written directly
 
     @property
     def connected(self) -> bool:
@@ -98,14 +108,18 @@ class SerialTransport:
             self._reconnect_within(timeout)
             return []
         try:
-            if self._timeout != timeout:
-                port.timeout = self._timeout = timeout
-            waiting = port.in_waiting
-            data = port.read(waiting) if waiting else port.read(1)
-            if data and not waiting:
-                more = port.in_waiting
-                if more:
-                    data += port.read(more)
+            fd = self._fd
+            if fd is not None:
+                data = self._read_fd(fd, timeout)
+            else:
+                if self._timeout != timeout:
+                    port.timeout = self._timeout = timeout
+                waiting = port.in_waiting
+                data = port.read(waiting) if waiting else port.read(1)
+                if data and not waiting:
+                    more = port.in_waiting
+                    if more:
+                        data += port.read(more)
         except (serial.SerialException, OSError) as exc:
             self._lose(exc)
             return []
@@ -115,28 +129,100 @@ class SerialTransport:
         self.counters["rx_bytes"] += len(data)
         return [bytes(data)]
 
+    @staticmethod
+    def _read_fd(fd: int, timeout: float) -> bytes:
+        """Whatever the device holds once it has something (one select, one read), or b"" after `timeout`."""
+        if not select.select([fd], [], [], timeout)[0]:
+            return b""
+        try:
+            data = os.read(fd, _READ_SIZE)
+        except BlockingIOError:  # another reader took it
+            return b""
+        if not data:  # what pyserial reports too: readable, yet nothing to read
+            raise serial.SerialException("device reports readiness to read but returned no data (disconnected?)")
+        return data
+
     def write(self, unit: bytes) -> None:
+        """Send `unit`, waiting up to `write_timeout` for the device to take it; the rest is dropped and counted."""
+        port = self._port_for_write()
+        if port is None:
+            return
+        unit = self._with_preamble(unit)
+        fd = self._fd
+        if fd is None:  # socket://, rfc2217://, loop://: pyserial's own write
+            try:
+                port.write(unit)
+            except serial.SerialTimeoutException:
+                self.counters["tx_timeout"] += 1  # flow control held us off: drop, the line stays ours
+                self._fresh = bool(self.preamble)  # maybe half a frame went: the next one starts clean
+                return
+            except (serial.SerialException, OSError) as exc:
+                self._lose(exc)
+                self.counters["tx_dropped"] += 1
+                return
+            self._sent(len(unit))
+            return
+        limit = self.settings["write_timeout"]  # None: as long as it takes (pyserial's meaning)
+        deadline = None if limit is None else time.monotonic() + limit
+        while unit:
+            rest = self._write_fd(fd, unit)
+            if rest is None or self._fd != fd:  # sent, or the port was lost meanwhile (counted there)
+                return
+            unit = rest
+            left = None if deadline is None else deadline - time.monotonic()
+            if (left is not None and left <= 0) or not select.select([], [fd], [], left)[1]:
+                self.counters["tx_timeout"] += 1  # flow control or a deaf device held us off: drop the rest
+                self._fresh = bool(self.preamble)  # half a frame went: the next one starts clean
+                return
+
+    def write_nowait(self, unit: bytes) -> bytes | None:
+        """Write what the device takes now, straight to the fd (no select); the rest, for `write`, or None.
+
+        None also when the unit was dropped (the device is gone: counted as in `write`).
+        Ports with no fd (socket://...) take nothing here: the whole unit is returned.
+        """
+        port = self._port_for_write()
+        if port is None:
+            return None
+        fd = self._fd
+        if fd is None:
+            return unit
+        return self._write_fd(fd, self._with_preamble(unit))
+
+    def _write_fd(self, fd: int, data: bytes) -> bytes | None:
+        """One os.write on the non-blocking fd: the part not taken (None: all of it went, or the port was lost)."""
+        try:
+            written = os.write(fd, data)
+        except BlockingIOError:
+            return data
+        except OSError as exc:
+            self._lose(exc)
+            self.counters["tx_dropped"] += 1
+            return None
+        if written < len(data):
+            self.counters["tx_bytes"] += written
+            return data[written:]
+        self._sent(written)
+        return None
+
+    def _sent(self, size: int) -> None:
+        self.counters["tx"] += 1
+        self.counters["tx_bytes"] += size
+
+    def _port_for_write(self) -> serial.Serial | None:
         port = self._serial
         if port is None:
             self._require_open()
             port = self._reconnect_now()
             if port is None:
                 self.counters["tx_dropped"] += 1
-                return
+        return port
+
+    def _with_preamble(self, unit: bytes) -> bytes:
         if self._fresh:
-            unit = self.preamble + unit
             self._fresh = False
-        try:
-            port.write(unit)
-        except serial.SerialTimeoutException:
-            self.counters["tx_timeout"] += 1  # flow control held us off: drop, the line stays ours
-            return
-        except (serial.SerialException, OSError) as exc:
-            self._lose(exc)
-            self.counters["tx_dropped"] += 1
-            return
-        self.counters["tx"] += 1
-        self.counters["tx_bytes"] += len(unit)
+            return self.preamble + unit
+        return unit
 
     def __enter__(self) -> SerialTransport:
         self.open()
@@ -155,6 +241,12 @@ class SerialTransport:
         except (serial.SerialException, OSError, ValueError) as exc:
             raise open_error(self.port, exc) from None
         self._fresh = bool(self.preamble)
+        fd = getattr(port, "fd", None)  # a POSIX device: pyserial opened it O_NONBLOCK; make sure of it
+        if isinstance(fd, int):
+            os.set_blocking(fd, False)
+            self._fd = fd
+        else:
+            self._fd = None
         return port
 
     def _require_open(self) -> None:
@@ -163,6 +255,7 @@ class SerialTransport:
 
     def _drop_port(self) -> None:
         port, self._serial = self._serial, None
+        self._fd = None
         if port is not None:
             with contextlib.suppress(serial.SerialException, OSError):  # the device may be gone already
                 port.close()

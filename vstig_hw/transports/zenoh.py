@@ -19,8 +19,13 @@ Congestion control is chosen by the caller: BLOCK where losing a sample loses
 data (replay, put), DROP for the gateway, whose protocol repairs losses and whose
 other links must not stall behind a slow network (docs/how-to/many-pcs.md).
 
+Bounded input: a sample whose payload is above `max_sample` bytes (MAX_SAMPLE,
+64 KiB, by default) is refused in Zenoh's callback before it is copied or decoded
+(`rx_oversize`, logged once); samples heard and not yet read hold at most
+INBOX_LIMIT bytes, beyond which a flooding peer's samples are dropped (`rx_overflow`).
+
 Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session subscribed),
-`tx_dropped`, `lost`, `unreachable`, `reconnects`.
+`tx_dropped`, `rx_oversize`, `rx_overflow`, `lost`, `unreachable`, `reconnects`.
 """
 
 from __future__ import annotations
@@ -35,7 +40,8 @@ from typing import Any
 import zenoh
 
 from ..counters import Counters
-from ..framing.zenoh import ZenohSample
+from ..framing.zenoh import MAX_SAMPLE, ZenohSample
+from ..wire import MESSAGE_SIZE
 from .base import TransportError, one_line
 
 __all__ = ["ZenohTransport"]
@@ -43,6 +49,8 @@ __all__ = ["ZenohTransport"]
 log = logging.getLogger(__name__)
 
 _DRAIN_LIMIT = 512  # samples taken per read() after the first, so a busy swarm cannot starve the loop
+_DRAIN_BYTES = 4 * 1024  # payload bytes taken per read() (at least one sample): ~512 messages of loop work
+INBOX_LIMIT = 1024 * 1024  # payload bytes heard and not yet read; beyond, a sample is dropped (rx_overflow)
 _PEER_POLL_S = 1.0  # how often to ask the session whether any peer or router is connected
 _UNREACHABLE_AFTER_S = 3.0  # a session told to connect that has found nobody by then is reported
 _FIRST_PEER_WAIT_S = 3.0  # open() waits this long for a peer it was told to connect to, so a first put is heard
@@ -67,8 +75,12 @@ class ZenohTransport:
         rebind: Callable[[], tuple[str, ...]] | None = None,
         backoff: tuple[float, float] = (0.5, 10.0),
         peer_wait: float | None = None,
+        max_sample: int = MAX_SAMPLE,
     ) -> None:
+        if max_sample < MESSAGE_SIZE:
+            raise ValueError(f"max_sample must allow one {MESSAGE_SIZE}-byte message, got {max_sample}")
         self.name = name
+        self.max_sample = max_sample  # payload bytes: a bigger sample is refused before it is copied or decoded
         self.listening = listening  # the endpoints it listens on (a free loopback port by default)
         self._reaches = reaches  # where else it reaches (connects, scouts), for the start line
         self._rebind = rebind  # new endpoints to listen on, when those picked for us were taken
@@ -88,6 +100,9 @@ class ZenohTransport:
         self._subscriber: Any = None
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._inbox: queue.SimpleQueue[ZenohSample] = queue.SimpleQueue()
+        self._inbox_bytes = 0  # payload bytes in _inbox
+        self._inbox_lock = threading.Lock()
+        self._told_oversize = False
         self._opened = False
         self._opened_at = 0.0
         self._next_poll = 0.0
@@ -189,6 +204,19 @@ class ZenohTransport:
 
     def _heard(self, sample: zenoh.Sample) -> None:
         """Zenoh's callback thread: hand the sample to `read` (nothing else runs here)."""
+        size = len(sample.payload)
+        if size > self.max_sample:  # refused before a byte of it is copied or decoded
+            self.counters["rx_oversize"] += 1
+            if not self._told_oversize:
+                self._told_oversize = True
+                log.warning("%s: refused a %d-byte sample on %s (the limit is %d bytes: max_sample=); counting "
+                            "others as rx_oversize", self.name, size, sample.key_expr, self.max_sample)
+            return
+        with self._inbox_lock:
+            if self._inbox_bytes + size > INBOX_LIMIT:  # the loop is behind: a flood waits no further
+                self.counters["rx_overflow"] += 1
+                return
+            self._inbox_bytes += size
         stamp = sample.timestamp  # the publishing session's id, where it stamps (ours do: vstig_hw.links.zenoh)
         self._inbox.put(ZenohSample(str(sample.key_expr), sample.payload.to_bytes(),
                                     None if stamp is None else str(stamp.get_id())))
@@ -198,15 +226,28 @@ class ZenohTransport:
         if self._session is None and not self._reopen(timeout):
             return []
         samples: list[ZenohSample] = []
+        taken = 0
         try:
             samples.append(self._inbox.get(timeout=timeout) if timeout > 0 else self._inbox.get_nowait())
-            while len(samples) <= _DRAIN_LIMIT:
+            taken = len(samples[0].payload)
+            while len(samples) <= _DRAIN_LIMIT and taken < _DRAIN_BYTES:
                 samples.append(self._inbox.get_nowait())
+                taken += len(samples[-1].payload)
         except queue.Empty:
             pass
+        if taken:
+            with self._inbox_lock:
+                self._inbox_bytes -= taken
         self.counters["rx"] += len(samples)
         self._watch_peers()
         return samples
+
+    def write_nowait(self, unit: ZenohSample) -> ZenohSample | None:
+        """Publish now if congestion control drops rather than blocks (a gateway's); else the sample, to wait."""
+        if self.congestion != zenoh.CongestionControl.DROP:
+            return unit
+        self.write(unit)
+        return None
 
     def write(self, unit: ZenohSample) -> None:
         with self._lock:

@@ -1,0 +1,400 @@
+"""The data path (issue 25): a relay's cost and isolation, each beside an anchor measured in the same run.
+
+* CPU and context switches per message of a `vstig bridge` process relaying pty -> pty
+  (raw and engine mode), from the process's own accounting (/proc: utime+stime of
+  every thread, voluntary+involuntary switches of every thread), beside a bare pty hop:
+  a Python process that reads one pty and writes what it read to the other.
+* The healthy link's p50 delay in a three-radio engine bridge where one radio is
+  never read, beside the same bridge without that radio; and how many it lost.
+* Zenoh samples the bridge publishes per message it relays onto zenoh, with a peer
+  also publishing (an echo would add one sample per message heard from zenoh).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import subprocess
+import sys
+import threading
+import time
+import tty
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+from vstig_hw import Message, Op, encode
+from vstig_hw.framing import make_serial_framing
+from vstig_hw.wire import decode
+
+from .bench_cli import _sleep_paced
+from .registry import Result, benchmark
+
+VSTIG = str(Path(sys.executable).with_name("vstig"))
+_TICK = os.sysconf("SC_CLK_TCK")
+RATE_HZ = 2000
+COUNT = 10_000  # 5 s at RATE_HZ: enough CPU ticks (10 ms each) for a figure per message
+
+
+class _Pty:
+    def __init__(self) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.master)
+        tty.setraw(self.slave)
+        self.path = os.ttyname(self.slave)
+
+    def close(self) -> None:
+        os.close(self.master)
+        os.close(self.slave)
+
+
+class _Arrivals:
+    """Reads a pty's far end in a thread: the perf_counter time each message (by key) first arrived."""
+
+    def __init__(self, pty: _Pty, record: bool = True) -> None:
+        self.pty, self.record = pty, record
+        self.arrived: dict[int, float] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        framing = make_serial_framing("cobs8")
+        while not self._stop.is_set():
+            if not select.select([self.pty.master], [], [], 0.05)[0]:
+                continue
+            data = os.read(self.pty.master, 65536)
+            stamp = time.perf_counter()
+            if self.record:
+                for msg in framing.feed(data):
+                    self.arrived.setdefault(msg.key, stamp)
+
+    def wait(self, count: int, seconds: float = 10.0) -> None:
+        end = time.monotonic() + seconds
+        while len(self.arrived) < count and time.monotonic() < end:
+            time.sleep(0.05)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+def _frames(count: int) -> list[bytes]:
+    cobs8 = make_serial_framing("cobs8")
+    return [cobs8.encode(Message(Op.PUT, i, i, 1, 7))[0] for i in range(count)]
+
+
+def _paced(write: Callable[[bytes], object], frames: list[bytes], rate_hz: int = RATE_HZ) -> list[float]:
+    return _sleep_paced(len(frames), rate_hz, lambda i: write(frames[i]))
+
+
+def _usage(pid: int) -> tuple[float, int]:
+    """(CPU seconds, context switches) of every thread of process `pid` so far."""
+    with open(f"/proc/{pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    cpu = (int(fields[11]) + int(fields[12])) / _TICK  # utime, stime: the whole thread group
+    switches = 0
+    for task in os.listdir(f"/proc/{pid}/task"):
+        try:
+            with open(f"/proc/{pid}/task/{task}/status") as status:
+                switches += sum(int(line.split()[1]) for line in status if "ctxt_switches" in line)
+        except FileNotFoundError:  # a thread that ended meanwhile
+            continue
+    return cpu, switches
+
+
+def _threads_usage(threads: list[threading.Thread]) -> tuple[float, int]:
+    """(CPU seconds, context switches) of these threads of this process so far (Linux: /proc/self/task)."""
+    cpu, switches = 0.0, 0
+    for thread in threads:
+        task = f"/proc/self/task/{thread.native_id}"
+        try:
+            with open(f"{task}/stat") as stat:
+                fields = stat.read().rsplit(")", 1)[1].split()
+            with open(f"{task}/status") as status:
+                switches += sum(int(line.split()[1]) for line in status if "ctxt_switches" in line)
+        except FileNotFoundError:
+            continue
+        cpu += (int(fields[11]) + int(fields[12])) / _TICK
+    return cpu, switches
+
+
+def _p50(values: list[float]) -> float:
+    return sorted(values)[len(values) // 2] if values else float("nan")
+
+
+_BARE_HOP = """
+import os, select, sys
+a, b = (os.open(path, os.O_RDWR | os.O_NOCTTY) for path in sys.argv[1:3])
+print("ready", flush=True)
+while True:
+    select.select([a], [], [])
+    os.write(b, os.read(a, 65536))
+"""
+
+
+def _await(into: _Pty, out: _Arrivals, probe_key: int = 32767) -> None:
+    cobs8 = make_serial_framing("cobs8")
+    for stamp in range(1, 300):
+        os.write(into.master, cobs8.encode(Message(Op.PUT, probe_key, 1, stamp, 7))[0])
+        time.sleep(0.1)
+        if probe_key in out.arrived:
+            return
+    raise RuntimeError("the relay never came up")
+
+
+def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool) -> tuple[float, float, float, int]:
+    """(CPU s per message, switches per message, p50 delay s, delivered) of a process relaying pty A -> pty B."""
+    a, b = _Pty(), _Pty()
+    process = subprocess.Popen(argv(a.path, b.path), stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    out = _Arrivals(b)
+    echo = _Arrivals(a, record=False) if echo_back else None  # an engine re-broadcasts onto A too: read it
+    try:
+        _await(a, out)
+        frames = _frames(COUNT)
+        cpu0, sw0 = _usage(process.pid)
+        sent = _paced(lambda f: os.write(a.master, f), frames)
+        out.wait(COUNT + 1)
+        cpu1, sw1 = _usage(process.pid)
+    finally:
+        process.terminate()
+        process.wait(timeout=20)
+        out.close()
+        if echo is not None:
+            echo.close()
+        a.close()
+        b.close()
+    delays = [out.arrived[i] - sent[i] for i in range(COUNT) if i in out.arrived]
+    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, _p50(delays), len(delays)
+
+
+@benchmark("datapath")
+def relay_cost() -> Iterator[Result]:
+    bare = _relay_run(lambda a, b: [sys.executable, "-c", _BARE_HOP, a, b], echo_back=False)
+    raw = _relay_run(lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8",
+                                   "--raw"], echo_back=False)
+    engine = _relay_run(lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8",
+                                      "--robot-id", "200", "--budget", "2000", "--no-refresh"], echo_back=True)
+    for name, run in (("raw", raw), ("engine", engine)):
+        yield Result(f"datapath.relay_{name}_cpu_per_msg", run[0] * 1e6, "us", "bare pty hop CPU/msg", bare[0] * 1e6)
+        yield Result(f"datapath.relay_{name}_switches_per_msg", run[1], "switches", "bare pty hop switches/msg",
+                     bare[1])
+        yield Result(f"datapath.relay_{name}_p50", run[2] * 1e3, "ms", "bare pty hop p50", bare[2] * 1e3)
+        yield Result(f"datapath.relay_{name}_delivered", run[3] / COUNT * 100, "%", "offered", 100.0)
+
+
+def _healthy_delay(deaf: bool) -> tuple[float, int]:
+    """(p50 delay, delivered) from radio A to radio B of an engine bridge, beside a radio never read if `deaf`."""
+    source, healthy, stuck = _Pty(), _Pty(), _Pty()
+    radios = [source, healthy, stuck] if deaf else [source, healthy]
+    process = subprocess.Popen([VSTIG, "bridge", *(f"serial:{r.path}?framing=cobs8" for r in radios),
+                                "--robot-id", "200", "--budget", "2000", "--no-refresh"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    out, echo = _Arrivals(healthy), _Arrivals(source, record=False)
+    count = 5000
+    try:
+        _await(source, out)
+        sent = _paced(lambda f: os.write(source.master, f), _frames(count), rate_hz=500)
+        out.wait(count + 1)
+    finally:
+        process.terminate()
+        process.wait(timeout=20)
+        out.close()
+        echo.close()
+        for radio in (source, healthy, stuck):
+            radio.close()
+    delays = [out.arrived[i] - sent[i] for i in range(count) if i in out.arrived]
+    return _p50(delays), len(delays)
+
+
+@benchmark("datapath")
+def deaf_radio() -> Iterator[Result]:
+    alone, alone_got = _healthy_delay(deaf=False)
+    beside, beside_got = _healthy_delay(deaf=True)
+    yield Result("datapath.healthy_p50_beside_deaf_radio", beside * 1e3, "ms", "same bridge, no deaf radio",
+                 alone * 1e3)
+    yield Result("datapath.healthy_delivered_beside_deaf_radio", beside_got, "messages", "same bridge, no deaf radio",
+                 alone_got)
+
+
+def _zenoh_session(endpoint: str) -> Any:
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(config)
+
+
+@benchmark("datapath")
+def zenoh_samples_per_relayed_message() -> Iterator[Result]:
+    from .zenoh_peer import free_port
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    radio = _Pty()
+    process = subprocess.Popen([VSTIG, "bridge", f"zenoh:lab?listen={endpoint}", f"serial:{radio.path}?framing=cobs8",
+                                "--robot-id", "200", "--no-refresh"], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    out = _Arrivals(radio)
+    peer = None
+    samples = messages = 0
+    lock = threading.Lock()
+
+    def heard(sample: Any) -> None:
+        nonlocal samples, messages
+        with lock:
+            samples += 1
+            messages += len(sample.payload) // 8
+
+    count = 500
+    try:
+        time.sleep(0.5)
+        peer = _zenoh_session(endpoint)
+        subscriber = peer.declare_subscriber("vstig/lab/0/200", heard)
+        for stamp in range(1, 300):  # until the bridge hears this session
+            peer.put("vstig/lab/0/301", encode(Message(Op.PUT, 32767, 1, stamp, 301)))
+            time.sleep(0.1)
+            if 32767 in out.arrived:
+                break
+        time.sleep(0.5)
+        with lock:
+            samples = messages = 0
+        cobs8 = make_serial_framing("cobs8")
+        for i in range(count):  # one message from zenoh, one from the radio, every 4 ms
+            peer.put("vstig/lab/0/301", encode(Message(Op.PUT, i, i, 1, 301)))
+            os.write(radio.master, cobs8.encode(Message(Op.PUT, 10_000 + i, i, 1, 7))[0])
+            time.sleep(0.004)
+        time.sleep(1.0)
+        subscriber.undeclare()
+    finally:
+        if peer is not None:
+            peer.close()
+        process.terminate()
+        process.wait(timeout=20)
+        out.close()
+        radio.close()
+    yield Result("datapath.zenoh_samples_per_relayed_msg", samples / count, "samples/msg",
+                 "one per message relayed onto zenoh", 1.0)
+    yield Result("datapath.zenoh_msgs_published_per_relayed_msg", messages / count, "msgs/msg",
+                 "no echo of what zenoh carried", 1.0)
+
+
+def _can_to_pty(relay: str) -> tuple[float, float, int]:
+    """(CPU s per message, switches per message, delivered) of the relay's own threads, in this process: a robot
+    on a python-can virtual bus, a relay to a cobs8 pty radio (our gateway's loop, reader and writer threads, or a
+    bare recv -> encode -> os.write thread), the radio's far end read here."""
+    import can
+
+    from vstig_hw.framing.can import can_framing_for
+    from vstig_hw.gateway import Node
+    from vstig_hw.links import parse
+
+    channel = f"bench-datapath-{os.getpid()}-{relay}"
+    robot = can.Bus(interface="virtual", channel=channel)
+    radio = _Pty()
+    out = _Arrivals(radio)
+    codec = can_framing_for(7)
+    frames = [codec.encode(Message(Op.PUT, i, i, 1, 7))[0] for i in range(COUNT)]
+    probe = codec.encode(Message(Op.PUT, 32767, 1, 1, 7))[0]
+    stop = threading.Event()
+    cobs8 = make_serial_framing("cobs8")
+    if relay == "bare":
+        bus = can.Bus(interface="virtual", channel=channel)
+
+        def bare() -> None:
+            while not stop.is_set():
+                frame = bus.recv(0.05)
+                if frame is not None:
+                    os.write(radio.slave, cobs8.encode(decode(bytes(frame.data)))[0])
+
+        worker = threading.Thread(target=bare, daemon=True)
+        node = None
+    else:
+        links = [parse(f"can:virtual:{channel}").build("bus", robot_id=200),
+                 parse(f"serial:{radio.path}?framing=cobs8").build("radio", robot_id=200)]
+        node = Node(links, 200, budget=20_000)
+        node.open()
+        worker = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
+    worker.start()
+    try:
+        for _ in range(100):
+            robot.send(probe)
+            time.sleep(0.05)
+            if 32767 in out.arrived:
+                break
+        relay_threads = [worker] if node is None else [worker, *node._readers._threads]  # the loop, the readers
+        cpu0, sw0 = _threads_usage(relay_threads)
+        _paced(robot.send, frames)  # type: ignore[arg-type]
+        out.wait(COUNT + 1)
+        if node is not None:  # a writer thread starts only when a device is slow: count it if it did
+            relay_threads += [t for t in (o.writer._thread for o in node.outlets) if t is not None]
+        cpu1, sw1 = _threads_usage(relay_threads)
+    finally:
+        stop.set()
+        worker.join(timeout=5)
+        if node is not None:
+            node.close()
+        else:
+            bus.shutdown()
+        robot.shutdown()
+        out.close()
+        radio.close()
+    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, sum(1 for i in range(COUNT) if i in out.arrived)
+
+
+@benchmark("datapath")
+def can_to_pty_cost() -> Iterator[Result]:
+    bare = _can_to_pty("bare")
+    ours = _can_to_pty("gateway")
+    yield Result("datapath.relay_can_pty_cpu_per_msg", ours[0] * 1e6, "us",
+                 "bare virtual bus -> pty hop thread CPU/msg", bare[0] * 1e6)
+    yield Result("datapath.relay_can_pty_switches_per_msg", ours[1], "switches",
+                 "bare virtual bus -> pty hop switches/msg", bare[1])
+    yield Result("datapath.relay_can_pty_delivered", ours[2] / COUNT * 100, "%", "offered", 100.0)
+
+
+FD_BUS_MSGS_PER_S = 47_400  # a saturated CAN FD bus, 5 Mbit/s data phase, 8 messages (64 bytes) per frame
+
+
+@benchmark("datapath")
+def canfd_relay_capacity() -> Iterator[Result]:
+    """Messages a raw bridge relays CAN FD -> CAN FD (python-can virtual buses, in this process), offered at the
+    rate of a saturated 5 Mbit/s FD bus, per second of its own threads' CPU: what one core would carry."""
+    import can
+
+    from vstig_hw.framing.can import CanFraming, CanIdScheme
+    from vstig_hw.gateway import Mode, Node
+    from vstig_hw.links import parse
+
+    tag = f"{os.getpid()}"
+    robot = can.Bus(interface="virtual", channel=f"fd-in-{tag}")
+    sink = can.Bus(interface="virtual", channel=f"fd-out-{tag}")  # a receiver on the far bus (never read)
+    codec = CanFraming(CanIdScheme(), sender=7, fd=True)
+    frames = codec.encode_batch([Message(Op.PUT, i % 32768, i // 32768, 1, 7) for i in range(8 * 20_000)])
+    links = [parse(f"can:virtual:fd-in-{tag}?fd=1").build("in", robot_id=200),
+             parse(f"can:virtual:fd-out-{tag}?fd=1").build("out", robot_id=200)]
+    node = Node(links, 200, mode=Mode.RAW, budget=None)
+    stop = threading.Event()
+    node.open()
+    loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
+    loop.start()
+    try:
+        threads = [loop, *node._readers._threads]
+        cpu0, _ = _threads_usage(threads)
+        _sleep_paced(len(frames), FD_BUS_MSGS_PER_S // 8, lambda i: robot.send(frames[i]))  # a saturated FD bus
+        end = time.monotonic() + 20
+        while links[1].counters["out"] < 8 * len(frames) and time.monotonic() < end:
+            time.sleep(0.05)
+        threads += [t for t in (o.writer._thread for o in node.outlets) if t is not None]
+        cpu1, _ = _threads_usage(threads)
+        relayed = links[1].counters["out"]
+    finally:
+        stop.set()
+        loop.join(timeout=5)
+        node.close()
+        robot.shutdown()
+        sink.shutdown()
+    yield Result("datapath.canfd_relay_msgs_per_cpu_s", relayed / max(cpu1 - cpu0, 1e-9), "msg/s of a core",
+                 "saturated 5 Mbit/s CAN FD bus", FD_BUS_MSGS_PER_S)
+    yield Result("datapath.canfd_relay_delivered", relayed / (8 * len(frames)) * 100, "%", "offered", 100.0)

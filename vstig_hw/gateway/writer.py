@@ -1,0 +1,155 @@
+"""One link's writer: the gateway's loop hands units over and never waits on a device.
+
+A radio nobody reads, a CAN adapter whose queue is full, a TCP peer that stopped
+reading: each would hold a blocking write, and with it the loop every other link
+depends on. So each link gets its own bounded queue and writer thread:
+
+* While the device takes what we send, the loop writes it at once itself
+  (`write_nowait`, where the transport has one: a serial port's fd, a Zenoh
+  publisher that drops under congestion), with no hand-off to another thread.
+* What the device does not take at once waits in this link's queue, and this
+  link's thread alone waits for the device (its transport's blocking `write`).
+* The queue holds at most `limit` messages. When it is full the oldest queued
+  units are dropped and counted as `tx_overflow` (what is newest matters most to
+  a stigmergy), logged once when an episode starts and once when it ends.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from typing import Any
+
+from ..links.link import Link
+
+__all__ = ["TX_QUEUE_LIMIT", "LinkWriter"]
+
+log = logging.getLogger(__name__)
+
+TX_QUEUE_LIMIT = 1024  # messages waiting per link: ~1 s of a 115200-baud cobs8 radio
+CLOSE_WAIT = 1.0  # seconds close() gives the device to take what is queued
+
+
+class LinkWriter:
+    def __init__(self, link: Link[Any], limit: int = TX_QUEUE_LIMIT) -> None:
+        if limit < 1:
+            raise ValueError(f"a link's send queue holds at least 1 message, got {limit}")
+        self.link = link
+        self.limit = limit
+        self._write = link.transport.write
+        self._write_nowait = getattr(link.transport, "write_nowait", None)
+        self._queue: deque[tuple[Any, int]] = deque()  # (unit, messages it carries)
+        self._queued = 0  # messages in _queue
+        self._rest: tuple[Any, int] | None = None  # the tail of a unit the loop began
+        self._busy = False  # the thread is in a device write
+        self._closing = False
+        self._dropped_in_episode = 0
+        self._cond = threading.Condition()
+        self._thread: threading.Thread | None = None
+
+    def __len__(self) -> int:
+        return self._queued
+
+    def submit(self, units: list[Any], messages: int) -> None:
+        """Send `units` (carrying `messages` in all): now if the device takes them, else through the queue.
+
+        `out` counts a message once the device took the unit carrying it.
+        """
+        if not units:
+            return
+        base, extra = divmod(messages, len(units))  # a frame packing several messages carries each
+        carried = [base + (i < extra) for i in range(len(units))]
+        with self._cond:
+            done = 0
+            if self._write_nowait is not None and not (self._busy or self._queue or self._rest is not None):
+                sent = 0
+                for unit, count in zip(units, carried, strict=True):
+                    done += 1
+                    try:
+                        rest = self._write_nowait(unit)
+                    except Exception:  # a transport that broke its promise not to raise: count, carry on
+                        self.link.counters["drop_write_error"] += count
+                        continue
+                    if rest is not None:  # the device is full: the rest of this unit waits, then the others
+                        self._rest = (rest, count)
+                        break
+                    sent += count
+                self.link.counters["out"] += sent
+            if done == len(units) and self._rest is None:
+                return
+            self._enqueue(units[done:], carried[done:])
+            self._start()
+            self._cond.notify()
+
+    def _enqueue(self, units: list[Any], carried: list[int]) -> None:
+        queue = self._queue
+        for entry in zip(units, carried, strict=True):
+            queue.append(entry)
+            self._queued += entry[1]
+        dropped = 0
+        while self._queued > self.limit and len(queue) > 1:
+            _unit, count = queue.popleft()
+            self._queued -= count
+            dropped += count
+        if dropped:
+            self.link.counters["tx_overflow"] += dropped
+            if not self._dropped_in_episode:
+                log.warning("%s: the device does not take what we send; dropping the oldest queued messages "
+                            "(tx_overflow) while the other links carry on", self.link.name)
+            self._dropped_in_episode += dropped
+
+    def _start(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._drain, name=f"write-{self.link.name}", daemon=True)
+            self._thread.start()
+
+    def _drain(self) -> None:
+        cond = self._cond
+        while True:
+            with cond:
+                while not self._queue and self._rest is None and not self._closing:
+                    cond.wait()
+                if self._rest is not None:
+                    (unit, count), self._rest = self._rest, None
+                elif self._queue:
+                    unit, count = self._queue.popleft()
+                    self._queued -= count
+                else:
+                    return  # closing, and nothing left
+                self._busy = True
+            try:
+                self._write(unit)  # one unit at a time: the oldest stays droppable while the device is stuck
+            except Exception:  # a transport that broke its promise not to raise: count, keep the thread alive
+                self.link.counters["drop_write_error"] += count
+            else:
+                self.link.counters["out"] += count
+            with cond:
+                self._busy = False
+                if not self._queue and self._rest is None:
+                    if self._dropped_in_episode:
+                        log.warning("%s: the device takes what we send again (%d messages dropped meanwhile)",
+                                    self.link.name, self._dropped_in_episode)
+                        self._dropped_in_episode = 0
+                    cond.notify_all()
+
+    def close(self, wait: float = CLOSE_WAIT) -> None:
+        """Give the device up to `wait` seconds to take what is queued, then stop; what is left is counted."""
+        deadline = time.monotonic() + wait
+        with self._cond:
+            while (self._queue or self._rest is not None or self._busy) and self._thread is not None:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    break
+                self._cond.wait(left)
+            if self._queued:
+                self.link.counters["unsent_at_close"] += self._queued
+            self._queue.clear()
+            self._queued = 0
+            self._rest = None
+            self._closing = True
+            self._cond.notify_all()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(timeout=wait)
