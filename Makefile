@@ -37,7 +37,16 @@ typecheck: $(STAMP)
 layers: $(STAMP)
 	$(BIN)/lint-imports
 
-pytest: $(STAMP) sysdeps
+# Foxglove's own WebSocket client and decoders from npm, for the live view's tests (tests/live, gitignored).
+NODE_STAMP := tests/live/node_modules/.installed
+
+$(NODE_STAMP): tests/live/package.json | sysdeps
+	@if command -v npm >/dev/null; then \
+	  (cd tests/live && npm install --silent --no-audit --no-fund --no-package-lock && touch node_modules/.installed) \
+	    || echo "npm install in tests/live failed: the live view's client tests will skip"; \
+	else echo "npm is missing: the live view's client tests will skip"; fi
+
+pytest: $(STAMP) sysdeps $(NODE_STAMP)
 	$(BIN)/pytest
 
 # The docs site, strict: a broken link, anchor or API reference fails. Browse it from site/index.html.

@@ -10,6 +10,8 @@ command -v modprobe >/dev/null || [ -x /sbin/modprobe ] || want+=(kmod)
 command -v cansend >/dev/null || want+=(can-utils)
 command -v tshark >/dev/null || want+=(tshark)
 command -v ip >/dev/null || want+=(iproute2)  # network namespaces for the zenoh federation tests
+command -v node >/dev/null || want+=(nodejs)  # Foxglove's WebSocket client, the live view's viewer in tests
+command -v npm >/dev/null || want+=(npm)
 command -v chromium >/dev/null || want+=(chromium)  # the docs site looked at in a real browser (tests/docs)
 [ ${#want[@]} -eq 0 ] && exit 0
 if [ "$(id -u)" -ne 0 ]; then

@@ -20,6 +20,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "sim": ("numpy", "numba", "matplotlib"),
     "analyze": ("numpy", "matplotlib"),
     "mcap": ("mcap", "rosbags"),
+    "live": ("foxglove",),
 }
 
 

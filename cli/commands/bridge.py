@@ -10,6 +10,7 @@ from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency
 from vstig_hw.links import LinkSpec
 
+from ..live import Address, foxglove_option, live_view
 from ..options import Finite, GuardChoice, guard_options, take_warnings
 from ..running import LINK, build_links, describe_links, print_counters, reports_errors, run_until_stopped
 
@@ -35,10 +36,12 @@ def _raw_note(robot_id: int | None) -> str:
               help="GET one key of the table per tick, round-robin, as a robot's program would: repairs gateways "
                    "that were apart (network partition, restart) without waiting for the next write.")
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
+@foxglove_option
 @guard_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
-            larger: bool, refresh: bool, duration: float | None, guard: GuardChoice) -> None:
+            larger: bool, refresh: bool, duration: float | None, foxglove: Address | None,
+            guard: GuardChoice) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
     The status line and the counters printed on exit have each link's counters
@@ -55,6 +58,8 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     \b
     Many PCs: add a zenoh link on each (vstig links lists its options), e.g.
     vstig bridge can:socketcan:can0 zenoh:lab?connect=tcp/10.0.0.5:7447 --robot-id 201
+
+    --foxglove 8765 shows the swarm live in Foxglove (docs/how-to/live-view.md).
     """
     if robot_id is None and not raw:
         raise click.UsageError("--robot-id is required (the PC's id in the swarm), or use --raw")
@@ -77,7 +82,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
         if live:
             click.echo(f"\r\x1b[K{line}", nl=False, err=True)
 
-    with node:
+    with live_view(node, foxglove, larger_value_wins=larger), node:
         click.echo(f"bridging {', '.join(link.name for link in node.links)} "
                    f"({_raw_note(robot_id) if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
         describe_links(node)

@@ -1,4 +1,4 @@
-"""`vstig sniff LINK`: watch the swarm's traffic, decoded; never transmits."""
+"""`vstig sniff LINK...`: watch the swarm's traffic, decoded; never transmits."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
+from ..live import Address, foxglove_option, live_view
 from ..options import VALUE_TYPE_HELP, Finite, GuardChoice, filter_options, guard_options, take_warnings
 from ..running import LINK, build_links, describe_links, must_hear, print_counters, reports_errors, run_until_stopped
 
@@ -49,7 +50,7 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 
 
 @click.command()
-@click.argument("link", type=LINK)
+@click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
               help=VALUE_TYPE_HELP)
@@ -59,12 +60,13 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @click.option("--hide-refused", is_flag=True,
               help="Leave out what the guard options would refuse (it is still counted under the table).")
+@foxglove_option
 @filter_options
 @guard_options
 @reports_errors
-def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
-            hide_refused: bool, keep: Filter, guard: GuardChoice) -> None:
-    """Decode LINK's traffic live, per key; passive: never transmits.
+def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
+            hide_refused: bool, foxglove: Address | None, keep: Filter, guard: GuardChoice) -> None:
+    """Decode what each LINK hears live, per key; passive: never transmits.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
     what is shown; --since and --until count from the first message heard.
@@ -79,10 +81,14 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
     with the reason (the "refused" column; "refused" in --jsonl, null for what passes), never
     changes a key's entry, and is counted under the table (drop_jump, drop_rate...).
     --hide-refused leaves it out.
+
+    --foxglove 8765 serves the same live, to Foxglove (docs/how-to/live-view.md): every
+    message, the table, each write's spread and the counters.
     """
-    must_hear(link, "sniff")
+    for link in links:
+        must_hear(link, "sniff")
     rule = larger_value_wins if larger else None
-    built = build_links([link], listen_only=True)
+    built = build_links(links, listen_only=True)
     firewall = guard.build(built)
     # The engine never transmits: it counts what each message would do to a robot that heard them all.
     node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule)
@@ -122,7 +128,7 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
 
         listeners.append(emit)
         node.on_tick.append(lambda _node: _warn(firewall))
-        with node:
+        with live_view(node, foxglove, value_type=value_type, larger_value_wins=larger), node:
             describe_links(node)
             run_until_stopped(node, duration=duration)
         _warn(firewall)
@@ -130,7 +136,8 @@ def command(link: LinkSpec, jsonl: bool, value_type: ValueType, larger: bool, du
         return
     from rich.live import Live
 
-    with node:  # opened first: a port that cannot open is the one line said, with no note before it
+    # The live view first, then the node: a port that cannot be bound or opened is the one line said
+    with live_view(node, foxglove, value_type=value_type, larger_value_wins=larger), node:
         if not sys.stdout.isatty():
             click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
                        "(--jsonl streams every message instead)", err=True)

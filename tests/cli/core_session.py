@@ -29,7 +29,7 @@ from vstig_cli.main import run
 from vstig_hw.framing.can import CanFraming, CanIdScheme
 from vstig_hw.wire import Message
 
-EXTRAS_LIBRARIES = ("numpy", "numba", "llvmlite", "matplotlib", "zenoh", "mcap", "rosbags")
+EXTRAS_LIBRARIES = ("numpy", "numba", "llvmlite", "matplotlib", "zenoh", "mcap", "rosbags", "foxglove")
 STEP = 0.02  # the robots' control period in seconds
 
 

@@ -106,6 +106,15 @@ def wait_for(done: Callable[[], bool], deadline: float = 20.0, step: Callable[[]
             time.sleep(0.01)
 
 
+def has_open(pid: int, path: str) -> bool:
+    """Whether process `pid` has `path` open (a passive listener shows no other sign of being ready)."""
+    fds = Path(f"/proc/{pid}/fd")
+    try:
+        return any(os.path.realpath(fd) == path for fd in fds.iterdir())
+    except OSError:  # a descriptor closed while we looked
+        return False
+
+
 def stop(process: subprocess.Popen[str], timeout: float = 10) -> tuple[str, str]:
     """SIGTERM, as Ctrl-C would, and collect the output."""
     process.terminate()

@@ -93,7 +93,9 @@ def test_vstig_help_in_the_core_install_lists_every_command(core_python: Path) -
     (["record", "can:virtual:lab", "-o", "OUT.mcap", "--for", "1"],
      "vstig record -o OUT.mcap needs the mcap extra: pip install 'vstig-hw[mcap]'"),
     (["demo", "--gateways", "2"], "vstig demo --gateways 2 needs the zenoh extra: pip install 'vstig-hw[zenoh]'"),
-], ids=["sim", "analyze", "zenoh-link", "record-mcap", "demo-zenoh"])
+    (["sniff", "can:virtual:lab", "--foxglove", "0", "--for", "1"],
+     "--foxglove needs the live extra: pip install 'vstig-hw[live]'"),
+], ids=["sim", "analyze", "zenoh-link", "record-mcap", "demo-zenoh", "sniff-foxglove"])
 def test_a_command_beyond_the_core_names_its_extra_in_one_line(core_python: Path, tmp_path: Path, args: list[str],
                                                                 line: str) -> None:
     capture = tmp_path / "bus.log"

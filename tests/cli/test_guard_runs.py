@@ -14,10 +14,9 @@ from __future__ import annotations
 import json
 import os
 import time
-from pathlib import Path
 
 import pytest
-from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, stop, wait_for
+from peers import PtyPeer, SlcanAdapter, has_open, run_vstig, start_vstig, stop, wait_for
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.engine import larger_value_wins
@@ -193,14 +192,6 @@ def test_bad_guard_options_are_one_line_usage_errors(args: list[str], message: s
         done = run_vstig(*command, *args)
         assert done.returncode == 2, done.stderr
         assert message in done.stderr and "Traceback" not in done.stderr
-
-
-def has_open(pid: int, path: str) -> bool:
-    fds = Path(f"/proc/{pid}/fd")
-    try:
-        return any(os.path.realpath(fd) == path for fd in fds.iterdir())
-    except OSError:  # a descriptor closed while we looked
-        return False
 
 
 def sniff_a_radio(heard: list[Message], *options: str) -> tuple[str, str]:

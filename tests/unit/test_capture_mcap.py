@@ -8,10 +8,12 @@ from pathlib import Path
 import can
 import pytest
 from click.testing import CliRunner
+from hypothesis import given
+from hypothesis import strategies as st
 
 from vstig_cli.main import cli
 from vstig_hw.capture.records import CAN_FRAMING, CaptureError, Record, read_capture
-from vstig_hw.capture.rosbag import TYPE_NAME, McapCaptureWriter, topic_for
+from vstig_hw.capture.rosbag import TYPE_NAME, McapCaptureWriter, cdr_message, topic_for
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.wire import Message, Op, encode
 
@@ -141,3 +143,18 @@ def test_topics_are_valid_ros_names() -> None:
     assert topic_for("can0") == "/vstig/can0"
     assert topic_for("3") == "/vstig/link_3"
     assert topic_for("ttyUSB0.radio-1") == "/vstig/ttyUSB0_radio_1"
+
+
+@given(op=st.sampled_from(list(Op)), key=st.integers(0, 0x7FFF), value=st.integers(0, 0xFFFF),
+       timestamp=st.integers(0, 0xFFFF), robot=st.integers(0, 0xFFFF),
+       sender=st.none() | st.integers(0, 0x7FFFFFFF))
+def test_cdr_message_is_what_rosbags_serializes(op: Op, key: int, value: int, timestamp: int, robot: int,
+                                                 sender: int | None) -> None:
+    """The struct-packed CDR (MCAP captures and the live view) is byte for byte rosbags' encoding of MSGDEF."""
+    from vstig_hw.capture.rosbag import _our_typestore
+
+    store = _our_typestore()
+    expected = store.serialize_cdr(store.types[TYPE_NAME](op=int(op), key=key, value=value, timestamp=timestamp,
+                                                          robot=robot, sender=-1 if sender is None else sender),
+                                   TYPE_NAME)
+    assert cdr_message(Message(op, key, value, timestamp, robot), sender) == bytes(expected)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import re
+import struct
 from collections.abc import Callable, Iterator
 from typing import IO, Any
 
@@ -23,7 +24,8 @@ from ..wire import Message, Op
 from .decoded import Decoder
 from .records import MESSAGE_FRAMING, CaptureError, Record, cut_short
 
-__all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "McapCaptureWriter", "read_mcap", "topic_for"]
+__all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "McapCaptureWriter", "cdr_message", "read_mcap",
+           "topic_for"]
 
 TYPE_NAME = "vstig_msgs/msg/Message"
 MSGDEF = """\
@@ -41,6 +43,17 @@ TOPIC_PREFIX = "/vstig/"
 NO_SENDER = -1
 _MAGIC = b"\x89MCAP0\r\n"  # an MCAP file starts and, once closed, ends with it
 _TOPIC_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
+# MSGDEF in CDR, little-endian: the encapsulation header, then each field at its natural alignment
+# (a pad byte after `op`, two before `sender`). Packed by struct: the live view sends one per message
+# heard, and it needs no rosbags; tests/unit hold it equal to rosbags' serialize_cdr.
+_CDR = struct.Struct("<4sBxHHHHxxi")
+_CDR_LE = b"\x00\x01\x00\x00"
+
+
+def cdr_message(message: Message, sender: int | None) -> bytes:
+    """`message` as a CDR-encoded `vstig_msgs/msg/Message` (sender -1 where the medium names none)."""
+    return _CDR.pack(_CDR_LE, message[0] >> 15, message[0] & 0x7FFF, message[1], message[2], message[3],
+                     NO_SENDER if sender is None else sender)
 
 
 def _needs_extra(path: str) -> CaptureError:
@@ -79,8 +92,6 @@ class McapCaptureWriter:
         except ImportError:
             raise _needs_extra(path) from None
         self.path = path
-        self._store = _typestore(path)
-        self._type = self._store.types[TYPE_NAME]
         self._file: IO[bytes] = open(path, "wb")  # noqa: SIM115 - closed in close()
         self._writer = Writer(self._file)
         self._writer.start(profile="ros2", library="vstig-hw")
@@ -105,12 +116,8 @@ class McapCaptureWriter:
                 metadata={"link": record.link})
         stamp = round(record.t * 1e9)
         for d in decoded:
-            m = d.message
-            data = self._store.serialize_cdr(
-                self._type(op=int(m.op), key=m.key, value=m.value, timestamp=m.timestamp, robot=m.robot,
-                           sender=NO_SENDER if sender is None else sender), TYPE_NAME)
-            self._writer.add_message(channel, log_time=stamp, data=bytes(data), publish_time=stamp,
-                                     sequence=self.messages)
+            self._writer.add_message(channel, log_time=stamp, data=cdr_message(d.message, sender),
+                                     publish_time=stamp, sequence=self.messages)
             self.messages += 1
 
     def write_message(self, t: float, link: str, sender: int | None, message: Message) -> None:

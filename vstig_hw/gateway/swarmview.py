@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from ..engine import ConflictResolver, Entry, higher_robot_wins
 from ..links.link import Heard
 from ..timestamps import is_newer
-from ..wire import Op
+from ..wire import Message, Op
 
 __all__ = ["KeyView", "SwarmView"]
 
@@ -51,14 +51,17 @@ class SwarmView:
         self.onconflict = onconflict
 
     def add(self, heard: Heard) -> None:
-        msg = heard.message
-        view = self._seen(heard)
+        self.add_message(heard.message, heard.t, heard.sender)
+
+    def add_message(self, msg: Message, t: float, sender: int | None) -> None:
+        """`add` without a `Heard` to build: the live view's path, per message of a busy gateway."""
+        view = self._seen(msg.key, t)
         if msg.op is Op.PUT:
             view.puts += 1
         else:
             view.gets += 1
-        if heard.sender is not None:
-            view.sender_ts[heard.sender] = msg.timestamp
+        if sender is not None:
+            view.sender_ts[sender] = msg.timestamp
         if msg.timestamp == 0:
             return  # an empty GET: says nothing about the entry
         if is_newer(msg.timestamp, view.timestamp):
@@ -75,14 +78,14 @@ class SwarmView:
     def refuse(self, heard: Heard, reason: str) -> None:
         """A message a guard refused (`reason` its drop counter): counted and described, the entry unchanged."""
         msg = heard.message
-        view = self._seen(heard)
+        view = self._seen(msg.key, heard.t)
         view.refused += 1
         view.last_refused = f"{reason.removeprefix('drop_')}: {msg.op.name} ts {msg.timestamp} robot {msg.robot}"
 
-    def _seen(self, heard: Heard) -> KeyView:
-        view = self.keys.get(heard.message.key)
+    def _seen(self, key: int, t: float) -> KeyView:
+        view = self.keys.get(key)
         if view is None:
-            view = self.keys[heard.message.key] = KeyView()
+            view = self.keys[key] = KeyView()
         self.messages += 1
-        view.last_seen = heard.t
+        view.last_seen = t
         return view
