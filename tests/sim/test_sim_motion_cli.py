@@ -51,7 +51,7 @@ def test_snapshot_needs_the_motion_topology_and_a_writable_path(tmp_path: Path) 
 
 def test_bad_motion_options_are_usage_errors_naming_them() -> None:
     for args, named in ((["--speed", "-1"], "--speed"), (["--control-step", "0"], "--control-step"),
-                        (["--turn-noise", "nan"], "turn_noise")):
+                        (["--turn-noise", "nan"], "--turn-noise")):
         result = CliRunner().invoke(cli, ["sim", "--topology", "motion", "--runs", "1", *args])
         assert result.exit_code == 2, result.output
         assert named in result.output and "Traceback" not in result.output
