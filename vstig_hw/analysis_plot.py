@@ -80,19 +80,29 @@ def draw(report: Report, key: int | None = None) -> Figure:
     return fig
 
 
-# -- (a) -------------------------------------------------------------------------------------------------------------
-def _spread_panel(ax: Any, report: Report, key: int | None) -> None:
+def _share_axes(ax: Any, title: str, xlabel: str, ylabel: str) -> None:
+    """A panel whose y axis is a share (0-100%) of senders or writes."""
     from matplotlib.ticker import PercentFormatter
 
-    writes = sorted((w for w in report.writes if w.key == key and w.senders_total), key=lambda w: w.rank)
-    ax.set_title(f"(a) key {key}: {len(writes)} write{'s' * (len(writes) != 1)} spreading")
-    ax.set_xlabel("time since the write first appeared (s)")
-    ax.set_ylabel("active senders\nholding it or newer")
+    ax.set_title(title)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
     ax.yaxis.set_major_formatter(PercentFormatter(1.0))
     ax.set_ylim(0, 1.04)
+
+
+def _say(ax: Any, text: str) -> None:
+    """A panel with nothing to draw says why, in its middle."""
+    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes)
+
+
+# -- (a) -------------------------------------------------------------------------------------------------------------
+def _spread_panel(ax: Any, report: Report, key: int | None) -> None:
+    writes = sorted((w for w in report.writes if w.key == key and w.senders_total), key=lambda w: w.rank)
+    _share_axes(ax, f"(a) key {key}: {len(writes)} write{'s' * (len(writes) != 1)} spreading",
+                "time since the write first appeared (s)", "active senders\nholding it or newer")
     if not writes:
-        ax.text(0.5, 0.5, f"no write of key {key} with a named sender", ha="center", va="center",
-                transform=ax.transAxes)
+        _say(ax, f"no write of key {key} with a named sender")
         return
     end = max((w.caught_up_after[-1] for w in writes if w.caught_up_after), default=0.0) or TIMELINE_STEP
     ax.set_xlim(0, end * 1.03)
@@ -130,17 +140,12 @@ def _steps(write: WriteReport, end: float) -> tuple[list[float], list[float]]:
 
 # -- (b) -------------------------------------------------------------------------------------------------------------
 def _convergence_panel(ax: Any, report: Report) -> None:
-    from matplotlib.ticker import PercentFormatter
-
     measured = [w for w in report.writes if w.senders_total]
     times = sorted(t for w in measured if (t := w.converged_after) is not None)
-    ax.set_title(f"(b) convergence: {len(times)} of {len(measured)} writes")
-    ax.set_xlabel("time to reach every active sender (s)")
-    ax.set_ylabel("writes that reached\nevery active sender")
-    ax.yaxis.set_major_formatter(PercentFormatter(1.0))
-    ax.set_ylim(0, 1.04)
+    _share_axes(ax, f"(b) convergence: {len(times)} of {len(measured)} writes",
+                "time to reach every active sender (s)", "writes that reached\nevery active sender")
     if not times:
-        ax.text(0.5, 0.5, "no write reached every active sender", ha="center", va="center", transform=ax.transAxes)
+        _say(ax, "no write reached every active sender")
         return
     # As far as any write took to reach a sender, so the writes that never converge show as the gap below 100%.
     end = max((w.caught_up_after[-1] for w in measured if w.caught_up_after), default=0.0) or TIMELINE_STEP
