@@ -106,6 +106,7 @@ class DeviceTransport(Generic[Unit, Device]):
     device_word: ClassVar[str] = "device"  # what the device is called in the lost/back lines
     lost_counter: ClassVar[str] = "lost"  # the counter an outage adds to
     back_on_open: ClassVar[bool] = True
+    reopen_on_write: ClassVar[bool] = True  # False: a write never tries the device (opening it may take long)
     device_errors: ClassVar[tuple[type[BaseException], ...]] = (OSError,)  # a device call failing this way: lost
 
     def __init__(self, name: str, backoff: tuple[float, float]) -> None:
@@ -208,7 +209,9 @@ class DeviceTransport(Generic[Unit, Device]):
 
     def _device_for_write(self) -> Device | None:
         """The device, or None (the unit dropped and counted) while it stays away; a write never waits."""
-        device = self._device or self._reconnect(0.0)
+        device = self._device
+        if device is None and (self.reopen_on_write or not self._was_opened):
+            device = self._reconnect(0.0)
         if device is None:
             self.counters["tx_dropped"] += 1
         return device
@@ -220,8 +223,10 @@ class DeviceTransport(Generic[Unit, Device]):
         self._lost_at = now = time.monotonic()
         self._backoff.start(now)
         self.counters[counter] += 1
-        self._log.warning("%s: %s %s (%s); reconnecting with backoff", self.name, self.device_word,
-                          "unreachable" if counter == "unreachable" else "lost", reason)
+        if counter == "unreachable":  # never opened yet: the reason says it all ("no Zenoh router reachable...")
+            self._log.warning("%s: %s; retrying with backoff", self.name, reason)
+        else:
+            self._log.warning("%s: %s lost (%s); reconnecting with backoff", self.name, self.device_word, reason)
 
     def _retry_later(self, reason: str) -> None:
         self._backoff.failed(time.monotonic())
