@@ -79,10 +79,10 @@ class Backoff:
         self.delay = initial
         self.next_at = 0.0  # monotonic time of the next try
 
-    def start(self, now: float) -> None:
-        """The device was just lost: the first try comes `initial` seconds from now."""
-        self.delay = self.initial
-        self.next_at = now + self.delay
+    def start(self, now: float, *, at_once: bool = False) -> None:
+        """The device was just lost: the first try comes `initial` seconds from now (`at_once`: now, then so)."""
+        self.delay = self.initial / 2 if at_once else self.initial
+        self.next_at = now if at_once else now + self.delay
 
     def failed(self, now: float) -> None:
         """A try failed: wait twice as long (at most `maximum`) before the next."""
