@@ -160,9 +160,11 @@ class DeviceTransport(Generic[Unit, Device]):
         self._drop_device()
 
     def read(self, timeout: float) -> list[Unit]:
-        device = self._device or self._reconnect(timeout)
+        device = self._device
         if device is None:
-            return []
+            device = self._reconnect(timeout)
+            if device is None:
+                return []
         try:
             units = self._read_device(device, timeout)
         except self.device_errors as exc:
