@@ -177,9 +177,11 @@ class DeviceTransport(Generic[Unit, Device]):
         return units
 
     def write(self, unit: Unit) -> None:
-        device = self._device_for_write()
+        device = self._device
         if device is None:
-            return
+            device = self._device_for_write()
+            if device is None:
+                return
         try:
             self._write_device(device, unit)
         except self.device_errors as exc:

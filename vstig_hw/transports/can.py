@@ -142,9 +142,11 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
         """Send only if the TX queue has room now (interfaces whose send cannot block); else the frame, to wait."""
         if self.interface not in _NONBLOCKING_SEND:
             return unit
-        device = self._device_for_write()
+        device = self._device
         if device is None:
-            return None
+            device = self._device_for_write()
+            if device is None:
+                return None
         return None if self._send(device, unit, 0.0, drop_when_busy=False) else unit
 
     def _send(self, device: can.BusABC, unit: can.Message, timeout: float, *, drop_when_busy: bool) -> bool:

@@ -142,7 +142,8 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
                 self.counters["tx_timeout"] += 1  # flow control held us off: drop, the line stays ours
                 self._fresh = bool(self.preamble)  # maybe half a frame went: the next one starts clean
                 return
-            self._sent_bytes(len(unit))
+            self._sent()
+            self.counters["tx_bytes"] += len(unit)
             return
         limit = self.settings["write_timeout"]  # None: as long as it takes (pyserial's meaning)
         deadline = None if limit is None else time.monotonic() + limit
@@ -164,7 +165,7 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
         None also when the unit was dropped (the device is gone: counted as in `write`).
         Ports with no fd (socket://...) take nothing here: the whole unit is returned.
         """
-        if self._device_for_write() is None:
+        if self._device is None and self._device_for_write() is None:
             return None
         fd = self._fd
         if fd is None:
@@ -184,12 +185,9 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
         if written < len(data):
             self.counters["tx_bytes"] += written
             return data[written:]
-        self._sent_bytes(written)
-        return None
-
-    def _sent_bytes(self, size: int) -> None:
         self._sent()
-        self.counters["tx_bytes"] += size
+        self.counters["tx_bytes"] += written
+        return None
 
     def _with_preamble(self, unit: bytes) -> bytes:
         if self._fresh:
