@@ -1,18 +1,27 @@
-"""The transport contract: a device that moves raw units, and nothing more.
+"""The transport contract, and the one base that keeps a device alive.
 
-A transport owns one device (a pyserial port, a python-can bus). It never
-interprets payloads. It survives the device vanishing: `read` and `write`
-reconnect with backoff and report the loss once (see `state`), instead of
+A transport owns one device (a pyserial port, a python-can bus, a Zenoh
+session). It never interprets payloads. It survives the device vanishing:
+`read` and `write` reconnect with backoff and report the loss once, instead of
 raising into the caller's loop.
+
+`DeviceTransport` does that policy once (python-can's `BusABC` is the model:
+the base owns open/read/write, the outage, the backoff and the counters; a
+transport implements only its device calls, `_open_device`, `_read_device`,
+`_write_device` and `_close_device`).
 """
 
 from __future__ import annotations
 
-from typing import Generic, Protocol, TypeVar
+import logging
+import threading
+import time
+from typing import ClassVar, Generic, Protocol, TypeVar
 
 from ..counters import Counters
 
 Unit = TypeVar("Unit")
+Device = TypeVar("Device")
 
 
 def errno_of(exc: BaseException) -> int | None:
@@ -36,6 +45,10 @@ class TransportError(Exception):
     """A device problem the user must fix; the message is one clear line naming the device."""
 
 
+class DeviceUnreachable(TransportError):
+    """The device cannot be opened yet but may come (a router not up): `open` returns and `read` retries it."""
+
+
 class Transport(Protocol, Generic[Unit]):
     name: str  # how the user named the device, for messages and counters
     counters: Counters  # rx/tx units, reconnects, bus errors...
@@ -56,3 +69,220 @@ class Transport(Protocol, Generic[Unit]):
 
     @property
     def connected(self) -> bool: ...
+
+
+class Backoff:
+    """When to try a lost device again: after `initial` seconds, doubling per failed try up to `maximum`."""
+
+    def __init__(self, initial: float, maximum: float) -> None:
+        self.initial, self.maximum = initial, maximum
+        self.delay = initial
+        self.next_at = 0.0  # monotonic time of the next try
+
+    def start(self, now: float, *, at_once: bool = False) -> None:
+        """The device was just lost: the first try comes `initial` seconds from now (`at_once`: now, then so)."""
+        self.delay = self.initial / 2 if at_once else self.initial
+        self.next_at = now if at_once else now + self.delay
+
+    def failed(self, now: float) -> None:
+        """A try failed: wait twice as long (at most `maximum`) before the next."""
+        self.delay = min(self.delay * 2, self.maximum)
+        self.next_at = now + self.delay
+
+
+class DeviceTransport(Generic[Unit, Device]):
+    """A Transport over one device that may vanish: the outage, backoff and counters, once.
+
+    An outage starts when a device call fails (the transport calls `_lose`, or its
+    `_read_device`/`_write_device` raises one of `device_errors`): it is logged once
+    and counted (`lost_counter`); the device is reopened with backoff from `read`
+    (which waits, up to its timeout) and `write` (which never waits; the unit is
+    dropped and counted `tx_dropped` meanwhile). The outage ends, counted as
+    `reconnects` and logged once, when the device reopens, or where opening proves
+    nothing (`back_on_open = False`: a SocketCAN bus binds to an interface that is
+    down) when a call on the reopened device has worked (`_sent`, or a read).
+    """
+
+    device_word: ClassVar[str] = "device"  # what the device is called in the lost/back lines
+    lost_counter: ClassVar[str] = "lost"  # the counter an outage adds to
+    back_on_open: ClassVar[bool] = True
+    reopen_on_write: ClassVar[bool] = True  # False: a write never tries the device (opening it may take long)
+    device_errors: ClassVar[tuple[type[BaseException], ...]] = (OSError,)  # a device call failing this way: lost
+
+    def __init__(self, name: str, backoff: tuple[float, float]) -> None:
+        self.name = name
+        self.counters = Counters()
+        self.last_error: str | None = None  # why the device is away, while it is
+        self._log = logging.getLogger(type(self).__module__)
+        self._device: Device | None = None
+        self._wanted = False  # open() was called and close() was not
+        self._was_opened = False
+        self._outage = False  # from a loss until the device is back
+        self._lost_at = 0.0
+        self._backoff = Backoff(*backoff)
+        self._retrying = threading.Lock()  # one thread reopens at a time (the reader and a writer may both try)
+
+    # -- the device calls: all a transport implements ----------------------------
+    def _open_device(self) -> Device:
+        """Open the device, or raise TransportError (DeviceUnreachable: not yet) with one line naming it."""
+        raise NotImplementedError
+
+    def _close_device(self, device: Device) -> None:
+        """Release the device; it may be gone already, so this does not raise."""
+        raise NotImplementedError
+
+    def _read_device(self, device: Device, timeout: float) -> list[Unit]:
+        """Units that arrived within `timeout` (maybe none)."""
+        raise NotImplementedError
+
+    def _write_device(self, device: Device, unit: Unit) -> None:
+        """Send one unit; call `_sent` once it went (a transport counts its own partial or busy cases)."""
+        raise NotImplementedError
+
+    # -- the contract ------------------------------------------------------------
+    @property
+    def connected(self) -> bool:
+        return self._device is not None
+
+    def open(self) -> None:
+        """Open the device now; TransportError (one line naming it) if it cannot be. Unreachable: retried later."""
+        try:
+            self._device = self._open_device()
+        except DeviceUnreachable as exc:
+            self._wanted = self._was_opened = True
+            self._begin_outage(str(exc), "unreachable")
+            return
+        self._wanted = self._was_opened = True
+        self.last_error = None
+
+    def close(self) -> None:
+        self._wanted = False
+        self._drop_device()
+
+    def read(self, timeout: float) -> list[Unit]:
+        device = self._device
+        if device is None:
+            device = self._reconnect(timeout)
+            if device is None:
+                return []
+        try:
+            units = self._read_device(device, timeout)
+        except self.device_errors as exc:
+            self._lose(one_line(exc))
+            return []
+        if units:
+            self.counters["rx"] += len(units)
+        if self._outage and self._device is device:  # the reopened device worked
+            self._recovered()
+        return units
+
+    def write(self, unit: Unit) -> None:
+        device = self._device
+        if device is None:
+            device = self._device_for_write()
+            if device is None:
+                return
+        try:
+            self._write_device(device, unit)
+        except self.device_errors as exc:
+            self._lose(one_line(exc))
+            self.counters["tx_dropped"] += 1
+
+    def __enter__(self) -> DeviceTransport[Unit, Device]:
+        self.open()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- for the device calls ------------------------------------------------------
+    def _sent(self, units: int = 1) -> None:
+        """`units` went out: counted, and proof that a reopened device works."""
+        self.counters["tx"] += units
+        if self._outage and self._device is not None:
+            self._recovered()
+
+    def _lose(self, reason: str) -> None:
+        """The device failed: drop it; report the outage once, then reopen it with backoff from read/write."""
+        self._drop_device()
+        if self._outage:  # the reopened device failed at once: still the same outage
+            self.last_error = reason
+            self._retry_later(reason)
+            return
+        self._begin_outage(reason, self.lost_counter)
+
+    def _device_for_write(self) -> Device | None:
+        """The device, or None (the unit dropped and counted) while it stays away; a write never waits."""
+        device = self._device
+        if device is None and (self.reopen_on_write or not self._was_opened):
+            device = self._reconnect(0.0)
+        if device is None:
+            self.counters["tx_dropped"] += 1
+        return device
+
+    # -- the state machine -------------------------------------------------------
+    def _begin_outage(self, reason: str, counter: str) -> None:
+        self._outage = True
+        self.last_error = reason
+        self._lost_at = now = time.monotonic()
+        self._backoff.start(now)
+        self.counters[counter] += 1
+        if counter == "unreachable":  # never opened yet: the reason says it all ("no Zenoh router reachable...")
+            self._log.warning("%s: %s; retrying with backoff", self.name, reason)
+        else:
+            self._log.warning("%s: %s lost (%s); reconnecting with backoff", self.name, self.device_word, reason)
+
+    def _retry_later(self, reason: str) -> None:
+        self._backoff.failed(time.monotonic())
+        self._log.debug("%s: still lost (%s); next try in %.1f s", self.name, reason, self._backoff.delay)
+
+    def _recovered(self) -> None:
+        self._outage = False
+        self.last_error = None
+        self.counters["reconnects"] += 1
+        self._log.warning("%s: %s back after %.1f s", self.name, self.device_word, time.monotonic() - self._lost_at)
+
+    def _drop_device(self) -> None:
+        device, self._device = self._device, None
+        if device is not None:
+            self._close_device(device)
+
+    def _reconnect(self, timeout: float) -> Device | None:
+        """Reopen the device when the backoff allows, within `timeout` seconds (sleeping, not spinning)."""
+        if not self._wanted:
+            if not self._was_opened:
+                raise TransportError(f"{self.device_word} {self.name}: not open (call open() first)")
+            time.sleep(max(timeout, 0.0))  # closed: nothing will arrive
+            return None
+        deadline = time.monotonic() + timeout
+        while True:
+            now = time.monotonic()
+            wait = self._backoff.next_at - now
+            if wait > deadline - now:
+                time.sleep(max(deadline - now, 0.0))
+                return None
+            if wait > 0:
+                time.sleep(wait)
+            if self._try_reopen(deadline - time.monotonic()):
+                return self._device
+            if time.monotonic() >= deadline:
+                return None
+
+    def _try_reopen(self, patience: float) -> bool:
+        """One try to reopen the device; `patience` seconds to wait while another thread is trying."""
+        if not self._retrying.acquire(timeout=patience) if patience > 0 else not self._retrying.acquire(False):
+            return False
+        try:
+            if self._device is not None:  # the other thread got it back
+                return True
+            try:
+                self._device = self._open_device()
+            except TransportError as exc:
+                self.last_error = str(exc)
+                self._retry_later(str(exc))
+                return False
+            if self.back_on_open:
+                self._recovered()
+            return True
+        finally:
+            self._retrying.release()

@@ -26,12 +26,13 @@ import threading
 import time
 
 from ..counters import Counters
-from .base import TransportError, one_line
+from .base import Backoff, TransportError, one_line
 
 __all__ = ["BlabbermouthTransport"]
 
 log = logging.getLogger(__name__)
 
+REDIAL_AFTER = 0.1  # seconds between the first redials of a robot that hung up (then doubling)
 SEND_TIMEOUT = 1.0  # seconds a robot may take no frame before we hang up on it (and dial it again)
 
 
@@ -120,7 +121,7 @@ class BlabbermouthTransport:
         self._robots = [_Robot(self, host, port) for host, port in robots]
         self._frames: queue.Queue[bytes] = queue.Queue()
         self._lock = threading.Lock()
-        self._retry: dict[_Robot, tuple[float, float]] = {}  # lost robot -> (next attempt, backoff)
+        self._retry: dict[_Robot, Backoff] = {}  # lost robot -> when to dial it again
         self._open = False
 
     @property
@@ -156,19 +157,20 @@ class BlabbermouthTransport:
             return
         log.warning("blabbermouth robot %s hung up; dialling it again", robot.name)
         self.counters["robot_lost"] += 1
+        backoff = Backoff(REDIAL_AFTER, self.backoff_max)
+        backoff.start(time.monotonic(), at_once=True)  # the first redial at once, then REDIAL_AFTER doubling
         with self._lock:
-            self._retry[robot] = (time.monotonic(), 0.1)
+            self._retry[robot] = backoff
 
     def _redial(self) -> None:
         now = time.monotonic()
         with self._lock:
-            due = [(robot, backoff) for robot, (when, backoff) in self._retry.items() if when <= now]
+            due = [(robot, backoff) for robot, backoff in self._retry.items() if backoff.next_at <= now]
         for robot, backoff in due:
             try:
                 robot.connect(self.connect_timeout)
             except TransportError:
-                with self._lock:
-                    self._retry[robot] = (now + backoff, min(backoff * 2, self.backoff_max))
+                backoff.failed(time.monotonic())
                 continue
             with self._lock:
                 del self._retry[robot]

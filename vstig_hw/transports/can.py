@@ -26,8 +26,7 @@ from typing import Any
 
 import can
 
-from ..counters import Counters
-from .base import TransportError, errno_of, one_line
+from .base import DeviceTransport, TransportError, errno_of, one_line
 from .socketcan_drops import count_kernel_drops
 
 __all__ = ["CanTransport"]
@@ -45,8 +44,12 @@ _TRANSIENT_ERRNOS = frozenset({errno.ENOBUFS, errno.EAGAIN})
 _NONBLOCKING_SEND = frozenset({"socketcan", "virtual"})
 
 
-class CanTransport:
+class CanTransport(DeviceTransport[can.Message, can.BusABC]):
     """A python-can bus as a Transport[can.Message]."""
+
+    device_word = "CAN device"
+    back_on_open = False  # SocketCAN binds to an interface that is down: back once a call on it works
+    device_errors = (can.CanError, OSError)
 
     def __init__(
         self,
@@ -61,11 +64,9 @@ class CanTransport:
         send_timeout: float = 0.1,
         **options: Any,
     ) -> None:
+        super().__init__(name or f"{interface}:{channel}", backoff)
         self.interface = interface
         self.channel = channel
-        self.name = name or f"{interface}:{channel}"
-        self.counters = Counters()
-        self.last_error: str | None = None
         self.send_timeout = send_timeout
         self._bus_kwargs: dict[str, Any] = {"interface": interface, "channel": channel, **options}
         if bitrate is not None:
@@ -74,34 +75,15 @@ class CanTransport:
             self._bus_kwargs["fd"] = True
         if can_filters is not None:
             self._bus_kwargs["can_filters"] = can_filters
-        self._backoff_min, self._backoff_max = backoff
-        self._bus: can.BusABC | None = None
-        self._opened = False
-        self._outage = False  # from a loss until a reopened bus has worked once
-        self._delay = self._backoff_min
-        self._next_try = 0.0
         self._next_state_poll = 0.0
-
-    # -- lifecycle -----------------------------------------------------------
-    def open(self) -> None:
-        self._bus = self._make_bus()
-        self._opened = True
-        self.last_error = None
-
-    def close(self) -> None:
-        self._opened = False
-        self._drop_bus()
-
-    @property
-    def connected(self) -> bool:
-        return self._bus is not None
 
     @property
     def bus(self) -> can.BusABC | None:
         """The python-can bus while connected (for captures and diagnostics)."""
-        return self._bus
+        return self._device
 
-    def _make_bus(self) -> can.BusABC:
+    # -- the device calls ------------------------------------------------------
+    def _open_device(self) -> can.BusABC:
         try:
             return count_kernel_drops(can.Bus(**self._bus_kwargs), self.counters)
         except can.CanInterfaceNotImplementedError as exc:
@@ -129,69 +111,66 @@ class CanTransport:
             return f"CAN interface {channel} is down: bring it up with `ip link set up {channel}`"
         return f"cannot open CAN {self.interface} channel {channel}: {one_line(exc)}"
 
-    # -- moving frames -------------------------------------------------------
-    def read(self, timeout: float) -> list[can.Message]:
-        bus = self._bus or self._reconnect(timeout)
-        if bus is None:
-            return []
+    def _close_device(self, device: can.BusABC) -> None:
+        try:
+            device.shutdown()
+        except Exception as exc:  # a half-dead adapter may fail any way while closing
+            log.debug("%s: error while closing: %s", self.name, exc)
+
+    def _read_device(self, device: can.BusABC, timeout: float) -> list[can.Message]:
         frames: list[can.Message] = []
         try:
-            frame = bus.recv(timeout)
+            frame = device.recv(timeout)
             while frame is not None:
                 frames.append(frame)
                 if frame.is_error_frame:
                     self._error_frame(frame)
-                if len(frames) > _DRAIN_LIMIT or self._bus is None:
+                if len(frames) > _DRAIN_LIMIT or self._device is None:
                     break
-                frame = bus.recv(0)
-            if self._bus is not None:
-                self._poll_state(bus)
-        except (can.CanError, OSError) as exc:
-            self._lost(one_line(exc))
-        else:
-            if self._outage and self._bus is not None:
-                self._recovered()
-        self.counters["rx"] += len(frames)
+                frame = device.recv(0)
+            if self._device is not None:
+                self._poll_state(device)
+        except self.device_errors as exc:  # the frames before the failure are still passed up
+            self._lose(one_line(exc))
         return frames
 
-    def write(self, unit: can.Message) -> None:
+    def _write_device(self, device: can.BusABC, unit: can.Message) -> None:
         """Send, waiting up to `send_timeout` for room in the TX queue; a frame still not taken is dropped."""
-        self._send(unit, self.send_timeout, drop_when_busy=True)
+        self._send(device, unit, self.send_timeout, drop_when_busy=True)
 
     def write_nowait(self, unit: can.Message) -> can.Message | None:
         """Send only if the TX queue has room now (interfaces whose send cannot block); else the frame, to wait."""
         if self.interface not in _NONBLOCKING_SEND:
             return unit
-        return None if self._send(unit, 0.0, drop_when_busy=False) else unit
+        device = self._device
+        if device is None:
+            device = self._device_for_write()
+            if device is None:
+                return None
+        return None if self._send(device, unit, 0.0, drop_when_busy=False) else unit
 
-    def _send(self, unit: can.Message, timeout: float, *, drop_when_busy: bool) -> bool:
+    def _send(self, device: can.BusABC, unit: can.Message, timeout: float, *, drop_when_busy: bool) -> bool:
         """False if the bus was busy and the frame is still ours to send; True when sent or dropped (counted)."""
-        bus = self._bus or self._reconnect(0.0)
-        if bus is None:
-            self.counters["tx_dropped"] += 1
-            return True
         try:
-            bus.send(unit, timeout=timeout)
-        except (can.CanError, OSError) as exc:
+            device.send(unit, timeout=timeout)
+        except self.device_errors as exc:
             busy = errno_of(exc) in _TRANSIENT_ERRNOS or "buffer full" in str(exc).lower()
             if busy and not drop_when_busy:
                 return False
             self.counters["tx_dropped"] += 1
             self.counters["bus_errors"] += 1
             if not busy:
-                self._lost(one_line(exc))
+                self._lose(one_line(exc))
             return True
-        if self._outage:
-            self._recovered()
-        self.counters["tx"] += 1
+        self._sent()
         return True
 
-    # -- errors and reconnection ---------------------------------------------
+    # -- the bus's own reports -----------------------------------------------
     def _error_frame(self, frame: can.Message) -> None:
         self.counters["bus_errors"] += 1
         if self.interface == "socketcan" and frame.arbitration_id & _CAN_ERR_BUSOFF:
             self.counters["bus_off"] += 1
-            self._lost("bus-off")
+            self._lose("bus-off")
 
     def _poll_state(self, bus: can.BusABC) -> None:
         now = time.monotonic()
@@ -204,54 +183,4 @@ class CanTransport:
             return
         if state is can.BusState.ERROR:
             self.counters["bus_off"] += 1
-            self._lost("bus-off")
-
-    def _drop_bus(self) -> None:
-        bus, self._bus = self._bus, None
-        if bus is not None:
-            try:
-                bus.shutdown()
-            except Exception as exc:  # a half-dead adapter may fail any way while closing
-                log.debug("%s: error while closing: %s", self.name, exc)
-
-    def _lost(self, reason: str) -> None:
-        """The device failed: report once per outage, then reopen it with backoff from read/write."""
-        self._drop_bus()
-        self.last_error = reason
-        if self._outage:  # the reopened bus failed at once: still the same outage
-            self._retry_later(reason)
-            return
-        self._outage = True
-        self.counters["lost"] += 1
-        log.warning("%s: CAN device lost (%s); reconnecting with backoff", self.name, reason)
-        self._delay = self._backoff_min
-        self._next_try = time.monotonic() + self._delay
-
-    def _retry_later(self, reason: str) -> None:
-        self._delay = min(self._delay * 2, self._backoff_max)
-        self._next_try = time.monotonic() + self._delay
-        log.debug("%s: still lost (%s); next try in %.1f s", self.name, reason, self._delay)
-
-    def _recovered(self) -> None:
-        """A reopened bus worked (a read or a send without error): the outage is over."""
-        self._outage = False
-        self.counters["reconnects"] += 1
-        self.last_error = None
-        log.warning("%s: CAN device back", self.name)
-
-    def _reconnect(self, timeout: float) -> can.BusABC | None:
-        if not self._opened:
-            return None
-        wait = self._next_try - time.monotonic()
-        if wait > timeout:
-            time.sleep(max(timeout, 0.0))  # nothing can arrive while the device is gone
-            return None
-        if wait > 0:
-            time.sleep(wait)
-        try:
-            self._bus = self._make_bus()
-        except TransportError as exc:
-            self.last_error = str(exc)
-            self._retry_later(str(exc))
-            return None
-        return self._bus  # not back yet: `_recovered` once a call on it has worked
+            self._lose("bus-off")

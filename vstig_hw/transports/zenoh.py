@@ -39,10 +39,9 @@ from typing import Any
 
 import zenoh
 
-from ..counters import Counters
 from ..framing.zenoh import MAX_SAMPLE, ZenohSample
 from ..wire import MESSAGE_SIZE
-from .base import TransportError, one_line
+from .base import DeviceTransport, DeviceUnreachable, TransportError, one_line
 
 __all__ = ["ZenohTransport"]
 
@@ -59,8 +58,11 @@ _IN_USE_MARKS = ("Address already in use", "os error 10048")  # a listener's por
 _REBIND_TRIES = 5  # fresh ports tried after the picked one was taken, before giving up
 
 
-class ZenohTransport:
+class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
     """A Zenoh session as a Transport[ZenohSample]."""
+
+    device_word = "Zenoh session"
+    reopen_on_write = False  # opening a session may take seconds: only `read` retries it
 
     def __init__(
         self,
@@ -79,31 +81,24 @@ class ZenohTransport:
     ) -> None:
         if max_sample < MESSAGE_SIZE:
             raise ValueError(f"max_sample must allow one {MESSAGE_SIZE}-byte message, got {max_sample}")
-        self.name = name
+        super().__init__(name, backoff)
         self.max_sample = max_sample  # payload bytes: a bigger sample is refused before it is copied or decoded
         self.listening = listening  # the endpoints it listens on (a free loopback port by default)
         self._reaches = reaches  # where else it reaches (connects, scouts), for the start line
         self._rebind = rebind  # new endpoints to listen on, when those picked for us were taken
-        self.counters = Counters()
-        self.last_error: str | None = None
         self.subscription = subscription
         self.congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self._make_config = make_config
         self._expects_peer = expects_peer  # told to connect somewhere: finding nobody is worth a line
         # How long open() may take in all while it waits for that peer (a one-shot command's budget bounds it).
         self._peer_wait = _FIRST_PEER_WAIT_S if peer_wait is None else peer_wait
-        self._backoff_min, self._backoff_max = backoff
-        self._delay = self._backoff_min
-        self._next_try = 0.0
         self._lock = threading.Lock()  # session changes (read thread) against publishing (loop thread)
-        self._session: zenoh.Session | None = None
         self._subscriber: Any = None
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._inbox: queue.SimpleQueue[ZenohSample] = queue.SimpleQueue()
         self._inbox_bytes = 0  # payload bytes in _inbox
         self._inbox_lock = threading.Lock()
         self._told_oversize = False
-        self._opened = False
         self._opened_at = 0.0
         self._next_poll = 0.0
         self._had_peer = False
@@ -113,21 +108,14 @@ class ZenohTransport:
     # -- lifecycle -----------------------------------------------------------
     def open(self) -> None:
         """Open the session; a bad configuration raises TransportError, an unreachable router is retried."""
-        self._opened = True
         self._opened_at = time.monotonic()
-        try:
-            self._start()
-        except _Unreachable as exc:
-            self.counters["unreachable"] += 1
-            self._retry_later(str(exc))
-            log.warning("%s: %s; retrying with backoff", self.name, exc)
-            return
-        if self._expects_peer:
+        super().open()
+        if self._expects_peer and self.connected:
             self._await_peer(self._opened_at + self._peer_wait - time.monotonic())
 
     def _await_peer(self, seconds: float) -> None:
         """Wait (briefly) for the peer or router we connect to, so what we send first is not sent to nobody."""
-        session, end = self._session, time.monotonic() + seconds
+        session, end = self._device, time.monotonic() + seconds
         while session is not None and time.monotonic() < end:
             info = session.info
             if info.peers_zid() or info.routers_zid():
@@ -136,11 +124,6 @@ class ZenohTransport:
                 return
             time.sleep(0.02)
 
-    def close(self) -> None:
-        self._opened = False
-        with self._lock:
-            self._stop()
-
     @property
     def about(self) -> str:
         """Where it listens and connects, for the start line (print it after open: the port may change then)."""
@@ -148,15 +131,12 @@ class ZenohTransport:
         return "; ".join(filter(None, (listening, self._reaches)))
 
     @property
-    def connected(self) -> bool:
-        return self._session is not None
-
-    @property
     def session(self) -> zenoh.Session | None:
         """The Zenoh session while open (for diagnostics and tests)."""
-        return self._session
+        return self._device
 
-    def _start(self) -> None:
+    # -- the device calls ------------------------------------------------------
+    def _open_device(self) -> zenoh.Session:
         tries = 1 + (_REBIND_TRIES if self._rebind else 0)
         session = None
         for attempt in range(tries):
@@ -170,9 +150,8 @@ class ZenohTransport:
         except zenoh.ZError as exc:
             session.close()  # type: ignore[no-untyped-call]  # zenoh's stub leaves close() untyped
             raise TransportError(f"{self.name}: cannot subscribe to {self.subscription}: {one_line(exc)}") from None
-        with self._lock:
-            self._session, self._subscriber = session, subscriber
-        self.last_error = None
+        self._subscriber = subscriber
+        return session
 
     def _open_session(self, *, may_rebind: bool) -> zenoh.Session | None:
         """A new session; None if the listener port picked for us was taken (`listening` is then a fresh one)."""
@@ -181,7 +160,7 @@ class ZenohTransport:
         except zenoh.ZError as exc:
             reason = one_line(exc).split(" at /", 1)[0]  # Zenoh appends its source location
             if _UNREACHABLE_MARK in reason:
-                raise _Unreachable(f"no Zenoh router reachable ({reason}): is it up, and does it accept our "
+                raise DeviceUnreachable(f"no Zenoh router reachable ({reason}): is it up, and does it accept our "
                                    "certificates and credentials?") from None
             if may_rebind and self._rebind is not None and any(mark in reason for mark in _IN_USE_MARKS):
                 taken, self.listening = self.listening, self._rebind()
@@ -192,13 +171,12 @@ class ZenohTransport:
                 return None
             raise TransportError(f"{self.name}: cannot open a Zenoh session: {reason}") from None
 
-    def _stop(self) -> None:
-        session, self._session = self._session, None
-        self._subscriber = None
-        self._publishers.clear()
-        if session is not None:
+    def _close_device(self, device: zenoh.Session) -> None:
+        with self._lock:  # not while the loop thread publishes
+            self._subscriber = None
+            self._publishers.clear()
             try:
-                session.close()  # type: ignore[no-untyped-call]  # zenoh's stub leaves close() untyped
+                device.close()  # type: ignore[no-untyped-call]  # zenoh's stub leaves close() untyped
             except zenoh.ZError as exc:  # closing a session whose network is gone may complain
                 log.debug("%s: error while closing: %s", self.name, exc)
 
@@ -222,9 +200,7 @@ class ZenohTransport:
                                     None if stamp is None else str(stamp.get_id())))
 
     # -- moving samples ------------------------------------------------------
-    def read(self, timeout: float) -> list[ZenohSample]:
-        if self._session is None and not self._reopen(timeout):
-            return []
+    def _read_device(self, device: zenoh.Session, timeout: float) -> list[ZenohSample]:
         samples: list[ZenohSample] = []
         taken = 0
         try:
@@ -238,8 +214,7 @@ class ZenohTransport:
         if taken:
             with self._inbox_lock:
                 self._inbox_bytes -= taken
-        self.counters["rx"] += len(samples)
-        self._watch_peers()
+        self._watch_peers(device)
         return samples
 
     def write_nowait(self, unit: ZenohSample) -> ZenohSample | None:
@@ -249,10 +224,10 @@ class ZenohTransport:
         self.write(unit)
         return None
 
-    def write(self, unit: ZenohSample) -> None:
+    def _write_device(self, device: zenoh.Session, unit: ZenohSample) -> None:
         with self._lock:
-            session = self._session
-            if session is None:
+            session = self._device
+            if session is None:  # closed meanwhile
                 self.counters["tx_dropped"] += 1
                 return
             publisher = self._publishers.get(unit.key)
@@ -270,13 +245,12 @@ class ZenohTransport:
                     self.last_error = one_line(exc)
                     log.warning("%s: cannot publish on %s: %s", self.name, unit.key, self.last_error)
                 return
-        self.counters["tx"] += 1
+            self._sent()
 
     # -- the network coming and going -----------------------------------------
-    def _watch_peers(self) -> None:
+    def _watch_peers(self, session: zenoh.Session) -> None:
         now = time.monotonic()
-        session = self._session
-        if session is None or now < self._next_poll:
+        if now < self._next_poll:
             return
         self._next_poll = now + _PEER_POLL_S
         try:
@@ -301,36 +275,3 @@ class ZenohTransport:
             self.counters["unreachable"] += 1
             log.warning("%s: no Zenoh peer reachable yet (are they up, and do they accept our certificates and "
                         "credentials?); Zenoh keeps retrying with backoff", self.name)
-
-    def _retry_later(self, reason: str) -> None:
-        self.last_error = reason
-        self._next_try = time.monotonic() + self._delay
-        self._delay = min(self._delay * 2, self._backoff_max)
-
-    def _reopen(self, timeout: float) -> bool:
-        """Reopen a session that could not open (a client with no router), under backoff."""
-        if not self._opened:
-            time.sleep(max(timeout, 0.0))
-            return False
-        wait = self._next_try - time.monotonic()
-        if wait > timeout:
-            time.sleep(max(timeout, 0.0))
-            return False
-        if wait > 0:
-            time.sleep(wait)
-        try:
-            self._start()
-        except _Unreachable as exc:
-            self._retry_later(str(exc))
-            return False
-        except TransportError as exc:  # the configuration broke since (a certificate file removed...)
-            self._retry_later(str(exc))
-            return False
-        self.counters["reconnects"] += 1
-        self._delay = self._backoff_min
-        log.warning("%s: Zenoh session open", self.name)
-        return True
-
-
-class _Unreachable(Exception):
-    """No router answered: worth retrying, unlike a bad configuration."""
