@@ -143,6 +143,7 @@ class Node:
         self._opened: list[Link[Any]] = []
         # key -> (the PUT just stored, index of the one-domain link it came from), until the next drain
         self._heard_from: dict[int, tuple[Message, int]] = {}
+        self._flush_order: dict[int, list[Outlet]] = {}  # heard_on -> the outlets in `_spread`'s order
 
     # -- lifetime --------------------------------------------------------------
     def open(self) -> None:
@@ -446,26 +447,44 @@ class Node:
         medium every robot there heard those frames when we did, so what they caused is
         news on the other links first, and a slow echo must not hold up the crossing.
         """
-        if self.engine is not None and self.engine.pending():
-            outgoing = self.engine.drain()
+        engine = self.engine
+        if engine is not None and engine.pending():
+            outgoing = engine.drain()
             confined_to = self.guard.confined_to if self.guard is not None and self.guard.confines else None
-            origins = self._origins(outgoing)
-            for i, outlet in enumerate(self.outlets):
-                name = outlet.link.name
-                for msg, origin in zip(outgoing, origins, strict=True):
-                    if origin == i:  # every robot on that link heard it already
-                        outlet.link.counters["not_echoed"] += 1
-                    elif confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay
-                        outlet.push(msg)
+            if confined_to is None and not self._heard_from:  # the common case: every message to every link
+                for outlet in self.outlets:
+                    push = outlet.push
+                    for msg in outgoing:
+                        push(msg)
+            else:
+                self._push_where_due(outgoing, confined_to)
         outlets = self.outlets  # outlets[i] belongs to links[i]
-        if heard_on:  # a stable sort: those links move to the end, the others keep their order
-            outlets = [outlets[i] for i in sorted(range(len(outlets)), key=lambda i: heard_on >> i & 1)]
+        if heard_on:
+            outlets = self._flush_order.get(heard_on) or self._order_for(heard_on)
         retry = None
         for outlet in outlets:
             again = outlet.flush(now)
             if again is not None and (retry is None or again < retry):
                 retry = again
         self._retry_at = retry
+
+    def _push_where_due(self, outgoing: list[Message], confined_to: Callable[[Message], str | None] | None) -> None:
+        """Queue each message on every link but the one-domain link it came from and those a guard keeps it off."""
+        origins = self._origins(outgoing)
+        for i, outlet in enumerate(self.outlets):
+            name = outlet.link.name
+            for msg, origin in zip(outgoing, origins, strict=True):
+                if origin == i:  # every robot on that link heard it already
+                    outlet.link.counters["not_echoed"] += 1
+                elif confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay
+                    outlet.push(msg)
+
+    def _order_for(self, heard_on: int) -> list[Outlet]:
+        """The outlets with those of links in `heard_on` last, the others in their order (a stable sort)."""
+        outlets = self.outlets
+        order = [outlets[i] for i in sorted(range(len(outlets)), key=lambda i: heard_on >> i & 1)]
+        self._flush_order[heard_on] = order
+        return order
 
     def _origins(self, outgoing: list[Message]) -> list[int]:
         """Per message, the one-domain link it was heard on (-1: none), and forget the notes."""
