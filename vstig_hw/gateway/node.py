@@ -283,7 +283,7 @@ class Node:
         messages back sooner than it would look by itself, or `run` has an `until`.
         """
         lock = self.lock
-        while not lock.acquire(timeout=READ_TIMEOUT):
+        while not (lock.acquire(False) or lock.acquire(True, READ_TIMEOUT)):  # the first try parses no keywords
             if self._readers.stopping:  # the closer may hold the lock: it hands this batch on
                 self._leftover.append((index, t, units))
                 return
@@ -500,13 +500,17 @@ class Node:
 
     # -- what happened ------------------------------------------------------------
     def stats(self) -> dict[str, Counters]:
-        """Per link: in/out, queued, and every drop by reason; then the engine's outcomes, if it has one."""
-        out = {link.name: link.stats() for link in self.links}
-        for outlet in self.outlets:
-            if len(outlet) or len(outlet.writer):
-                out[outlet.link.name]["queued"] = len(outlet) + len(outlet.writer)
-        if self.engine is not None:
-            out[ENGINE_STATS] = Counters({outcome.name.lower(): n for outcome, n in self.engine.counts.items()})
+        """Per link: in/out, queued, and every drop by reason; then the engine's outcomes, if it has one.
+
+        Taken under `lock`: reader threads count as they work, and a counter dict must not grow while copied.
+        """
+        with self.lock:
+            out = {link.name: link.stats() for link in self.links}
+            for outlet in self.outlets:
+                if len(outlet) or len(outlet.writer):
+                    out[outlet.link.name]["queued"] = len(outlet) + len(outlet.writer)
+            if self.engine is not None:
+                out[ENGINE_STATS] = Counters({outcome.name.lower(): n for outcome, n in self.engine.counts.items()})
         return out
 
     def summary(self) -> str:
