@@ -56,7 +56,10 @@ class SendWindow:
 
     def record(self, now: float, count: int) -> None:
         if self.budget is not None:
-            self._sent.extend([now] * min(count, self.budget))
+            if count == 1:
+                self._sent.append(now)
+            else:
+                self._sent.extend([now] * min(count, self.budget))
 
     def next_free(self) -> float | None:
         """When the window next opens, if it is full now."""
