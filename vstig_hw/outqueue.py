@@ -54,7 +54,7 @@ class OutQueue:
 
     def drain(self, budget: int | None = None) -> list[Message]:
         """Up to `budget` messages (all if None), PUTs before GETs, oldest first."""
-        if budget is None:
+        if budget is None or budget >= len(self._puts) + len(self._gets):  # all of it (the common case)
             out = [*self._puts.values(), *self._gets.values()]
             self._puts.clear()
             self._gets.clear()

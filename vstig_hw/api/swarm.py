@@ -126,7 +126,7 @@ class Swarm:
         thread = self._thread
         if thread is not None and thread.is_alive():
             self._node.call_soon(_nothing)  # wake the loop now rather than at its next tick
-            if thread is not threading.current_thread():  # on it (a hook closing the swarm), it ends by itself
+            if not self._on_gateway_thread():  # on it (a hook closing the swarm), it ends by itself
                 thread.join(CLOSE_DRAIN + 2.0)  # it sends what is queued, then closes the links
         self._hub.close()
         for callback in self._callbacks:
@@ -235,9 +235,9 @@ class Swarm:
     def onconflict(self, rule: ConflictResolver) -> ConflictResolver:
         """Set the conflict rule: `rule(key, local, remote)` returns the winning Entry (Buzz's onconflict).
 
-        It runs on the gateway thread: keep it quick; it may call `put` (not
-        confirmed). One that raises is logged and counted (hook_error), and the
-        higher robot id wins. Usable as a decorator.
+        It runs inside the gateway (a link's reader thread, holding `Node.lock`): keep it
+        quick; it may call `put` (not confirmed). One that raises is logged and counted
+        (hook_error), and the higher robot id wins. Usable as a decorator.
         """
         if not callable(rule):
             raise TypeError(f"onconflict needs a function (key, local, remote) -> Entry, got {rule!r}")
@@ -247,7 +247,7 @@ class Swarm:
     def onconflictlost(self, hook: ConflictLost | None) -> ConflictLost | None:
         """Set `hook(key, our_lost_entry)`, called once when a conflict took one of our writes (Buzz's name).
 
-        Runs on the gateway thread, as `onconflict`. Usable as a decorator; None removes it.
+        Runs inside the gateway, as `onconflict`. Usable as a decorator; None removes it.
         """
         if hook is not None and not callable(hook):
             raise TypeError(f"onconflictlost needs a function (key, entry) or None, got {hook!r}")
@@ -456,7 +456,8 @@ class Swarm:
                               f"{self._closed_because}")
 
     def _on_gateway_thread(self) -> bool:
-        return threading.current_thread() is self._thread
+        """On the gateway thread, or on a link's reader thread in a hook (the Node works on both)."""
+        return threading.current_thread() is self._thread or self._node.on_node_thread()
 
     def _forget(self, future: concurrent.futures.Future[Any]) -> None:
         with self._lock:

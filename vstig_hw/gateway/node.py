@@ -18,13 +18,15 @@ Modes:
 conflict, unknown, invalid: firmware_spec/SPEC.md section 4) beside the links'
 counters, under ENGINE_STATS.
 
-One event loop: `run` (or `poll`, one step of it) drains the reader threads'
-queue, ticks every `period`, and flushes the outlets whenever their budget
-window allows. It never waits on a device: each link reads in its own thread,
-a few batches ahead at most (a flooding link waits its turn), and writes through
-its own bounded queue (`writer`), so a link that cannot take what we send delays
-no other. An optional `guard` (see `guard`) sees what each link heard
-before the engine, a raw relay or a listener does.
+No hand-offs on the data path: each link reads in its own thread, and that
+thread frames, guards, judges and sends everything one read returned, under
+`lock`, before it reads again (`_deliver`); a frame is never queued for another
+thread on its way from one device to another. The loop (`run`, or `poll`, one
+step of it) only ticks every `period`, runs `call_soon`'s calls and sends what a
+budget window held back once the window opens. Nothing waits on a device under
+the lock: each link writes through its own bounded queue (`writer`), so a link
+that cannot take what we send delays no other. An optional `guard` (see `guard`)
+sees what each link heard before the engine, a raw relay or a listener does.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from ..timestamps import TS_NONE
 from ..wire import GET_BIT, KEY_MAX, Message, Op
 from .guard import Guard
 from .outlet import Outlet
-from .readers import LinkReaders
+from .readers import READ_TIMEOUT, LinkReaders
 
 __all__ = ["DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "favour_latency"]
 
@@ -55,15 +57,15 @@ DEFAULT_PERIOD = 0.1  # the paper's control step
 DEFAULT_BUDGET = 64  # messages per link per tick: ~8 kB/s of cobs8, within a 115200-baud radio
 
 
-SWITCH_INTERVAL = 0.0005  # seconds: how soon a reader thread with a frame gets the GIL from the loop
+SWITCH_INTERVAL = 0.0005  # seconds: how soon a reader thread with a frame gets the GIL from another thread
 
 
 def favour_latency() -> None:
     """Tune this process for relaying frames promptly; call it once everything is imported and built.
 
     * Hand the GIL between threads every 0.5 ms instead of CPython's 5 ms, so a
-      frame a reader thread has just read does not wait up to 5 ms while the
-      loop runs Python.
+      frame a reader thread has just read does not wait up to 5 ms while
+      another thread runs Python.
     * Freeze what exists now (modules, links) out of the garbage collector's
       sight (`gc.freeze`). A full collection stops every thread while it walks
       the heap: with the CLI's imports that took 23-32 ms, every few seconds at
@@ -131,13 +133,21 @@ class Node:
         self.on_change: list[ChangeListener] = []  # the table changed (Python API's watch); see `_receive_telling`
         self.ticks = 0
         self._calls: collections.deque[Callable[[], None]] = collections.deque()  # `call_soon`'s, for the loop
-        self.lock = threading.RLock()  # `poll` works under it; another thread holding it may call put/get
-        self._readers = LinkReaders(self.links)
+        self.lock = threading.RLock()  # whoever works on the Node holds it: a reader thread, the loop, a caller
+        self._readers = LinkReaders(self.links, self._deliver)
+        self._wake: queue.SimpleQueue[None] = queue.SimpleQueue()  # one token wakes the waiting loop
+        self._sleep_until = 0.0  # when the waiting loop looks again by itself (0: it is not waiting)
+        self._wake_on_arrival = False  # the loop has an `until` to check after every batch
+        self._loop_thread = 0  # ident of the thread in `run`, of the reader handling a batch (0: none)
+        self._reader_thread = 0
+        self._failure: BaseException | None = None  # what a listener raised on a reader thread, for `run`
+        self._leftover: list[tuple[int, float, list[Any]]] = []  # batches read while closing, for `close`
         self._next_tick = 0.0
         self._retry_at: float | None = None
         self._opened: list[Link[Any]] = []
         # key -> (the PUT just stored, index of the one-domain link it came from), until the next drain
         self._heard_from: dict[int, tuple[Message, int]] = {}
+        self._flush_order: dict[int, list[Outlet]] = {}  # heard_on -> the outlets in `_spread`'s order
 
     # -- lifetime --------------------------------------------------------------
     def open(self) -> None:
@@ -155,10 +165,9 @@ class Node:
     def close(self) -> None:
         """Stop reading, hand every unit already read to the listeners (no frame lost), close the links."""
         self._readers.stop()
-        arrivals = self._readers.arrivals
-        while not arrivals.empty():
-            item = arrivals.get_nowait()
-            if item is not None:
+        with self.lock:
+            leftover, self._leftover = self._leftover, []
+            for item in leftover:
                 self._arrive(*item)
         for outlet in self.outlets:  # what the devices take within a moment still goes out
             outlet.close()
@@ -177,19 +186,22 @@ class Node:
         self.close()
 
     # -- the robot's program (ENGINE mode) --------------------------------------
+    # put, get and ask take `lock` themselves: any thread may call them.
     def put(self, key: int, value: int) -> None:
-        engine = self._engine()
-        old = engine.entry(key) if self.on_change else None
-        engine.put(key, value)
-        if self.on_change:
-            self._tell(key, old, None, engine.robot_id)
-        self._spread(time.monotonic())
+        with self.lock:
+            engine = self._engine()
+            old = engine.entry(key) if self.on_change else None
+            engine.put(key, value)
+            if self.on_change:
+                self._tell(key, old, None, engine.robot_id)
+            self._spread_and_wake()
 
     def get(self, key: int) -> int | None:
-        value = self._engine().get(key)
-        self._heard_from.pop(key, None)  # the GET may have merged into the key's pending PUT: send that everywhere
-        self._spread(time.monotonic())
-        return value
+        with self.lock:
+            value = self._engine().get(key)
+            self._heard_from.pop(key, None)  # the GET may have merged into the key's pending PUT: send it everywhere
+            self._spread_and_wake()
+            return value
 
     def ask(self, key: int) -> None:
         """Broadcast an empty GET for `key` (timestamp 0): every neighbour holding it answers with its entry.
@@ -197,10 +209,11 @@ class Node:
         `get` carries our view of the key, which only holders of a newer entry
         answer; this asks everyone, whatever we hold (SPEC section 4, row 5).
         """
-        ask = Message(Op.GET, key, 0, TS_NONE, self._engine().robot_id)
-        for outlet in self.outlets:
-            outlet.push(ask)  # a PUT already queued for the key says more and stays (SPEC section 5)
-        self._spread(time.monotonic())
+        with self.lock:
+            ask = Message(Op.GET, key, 0, TS_NONE, self._engine().robot_id)
+            for outlet in self.outlets:
+                outlet.push(ask)  # a PUT already queued for the key says more and stays (SPEC section 5)
+            self._spread_and_wake()
 
     def _engine(self) -> Stigmergy:
         if self.engine is None or self.mode is not Mode.ENGINE:
@@ -210,48 +223,89 @@ class Node:
     # -- the loop ----------------------------------------------------------------
     def run(self, stop: threading.Event | None = None, until: Callable[[], bool] | None = None,
             duration: float | None = None) -> None:
-        """Loop until `stop` is set, `until()` is true, or `duration` seconds pass."""
+        """Loop until `stop` is set, `until()` is true, or `duration` seconds pass.
+
+        `until` runs on this thread under `lock`, after every batch a link delivers
+        (and at every tick): the loop is woken for it, which a plain relay is not.
+        """
         deadline = None if duration is None else time.monotonic() + duration
-        while not (stop is not None and stop.is_set()) and not (until is not None and until()):
-            now = time.monotonic()
-            if deadline is not None and now >= deadline:
-                return
-            wait = self._next_tick - now
-            if self._retry_at is not None:
-                wait = min(wait, self._retry_at - now)
-            if deadline is not None:
-                wait = min(wait, deadline - now)
-            self.poll(max(0.0, min(wait, 0.25)))
+        self._wake_on_arrival = until is not None
+        self._loop_thread = threading.get_ident()
+        try:
+            while not (stop is not None and stop.is_set()) and not (until is not None and self._holds(until)):
+                now = time.monotonic()
+                if deadline is not None and now >= deadline:
+                    return
+                wait = self._next_tick - now
+                if deadline is not None:
+                    wait = min(wait, deadline - now)
+                self.poll(max(0.0, min(wait, 0.25)))
+        finally:
+            self._wake_on_arrival = False
+            self._loop_thread = 0
+
+    def _holds(self, until: Callable[[], bool]) -> bool:
+        with self.lock:
+            return until()
 
     def poll(self, timeout: float) -> None:
-        """Handle what arrives within `timeout` seconds, then tick if a tick is due."""
-        arrivals = self._readers.arrivals
+        """Wait up to `timeout` seconds for a wake-up (a call, a budget window opening), then tick if due.
+
+        The links' frames are handled on their reader threads as they arrive
+        (`_deliver`), not here; a listener's exception from there is raised here.
+        """
+        wake = self._wake
+        self._sleep_until = time.monotonic() + timeout  # set before reading _retry_at: see `_deliver`
+        retry = self._retry_at
+        if retry is not None:
+            timeout = min(timeout, retry - time.monotonic())
         try:
-            item = arrivals.get(timeout=timeout) if timeout > 0 else arrivals.get_nowait()
+            if timeout > 0:
+                wake.get(timeout=timeout)
+            while True:  # wake-ups that came together are one
+                wake.get_nowait()
         except queue.Empty:
-            item = None
+            pass
+        self._sleep_until = 0.0
         with self.lock:  # held while working, never while waiting: other threads may call in between
-            heard_on = 0  # bit i: link i delivered in this poll
-            handled = 0
-            done = self._readers.done
-            while item is not None:
-                self._arrive(*item)
-                done(item[0])
-                heard_on |= 1 << item[0]
-                handled += 1
-                if handled >= self._readers.per_poll:  # a flooding link cannot keep the loop from sending
-                    break
-                try:
-                    item = arrivals.get_nowait()
-                except queue.Empty:
-                    item = None
+            failure, self._failure = self._failure, None
+            if failure is not None:
+                raise failure
             calls = self._calls
             while calls:
                 calls.popleft()()
             now = time.monotonic()
             if now >= self._next_tick:
                 self._tick(now)
-            self._spread(now, heard_on)
+            self._spread(now)
+
+    def _deliver(self, index: int, t: float, units: list[Any]) -> None:
+        """On link `index`'s reader thread: handle what one read returned, and send what it caused, at once.
+
+        Everything the read returned is heard before anything is sent (one batch per
+        write). The loop is woken only when it must look: a budget window holds
+        messages back sooner than it would look by itself, or `run` has an `until`.
+        """
+        lock = self.lock
+        while not (lock.acquire(False) or lock.acquire(True, READ_TIMEOUT)):  # the first try parses no keywords
+            if self._readers.stopping:  # the closer may hold the lock: it hands this batch on
+                self._leftover.append((index, t, units))
+                return
+        self._reader_thread = threading.get_ident()
+        try:
+            self._arrive(index, t, units)
+            self._spread(time.monotonic(), 1 << index)
+        except BaseException as failure:  # a listener broke: `run` raises it on the loop's thread, as before
+            if self._failure is None:
+                self._failure = failure
+            self._wake.put(None)
+            return
+        finally:
+            self._reader_thread = 0
+            lock.release()
+        retry = self._retry_at  # read after _spread set it; the loop sets _sleep_until before reading it
+        if self._wake_on_arrival or (retry is not None and retry < self._sleep_until):
+            self._wake.put(None)
 
     def _arrive(self, index: int, t: float, units: list[Any]) -> None:
         link = self.links[index]
@@ -342,8 +396,15 @@ class Node:
                     del heard_from[msg[0] & KEY_MAX]
 
     # -- other threads and watchers (the Python API, vstig_hw.api) ----------------
-    # A Node is single-threaded, with two ways in for another thread: hold `lock` (an RLock `poll`
-    # holds only while it works, never while it waits) around put/get/ask, or hand a call to the loop.
+    # Whoever works on the Node holds `lock` (an RLock nobody holds while waiting): a reader thread with a
+    # batch, the loop, a caller of put/get/ask. Another thread holds it around several calls, or hands a call
+    # to the loop. Listeners (on_unit, on_heard, on_change...) run under it, on whichever thread did the work.
+    def on_node_thread(self) -> bool:
+        """Whether the calling thread is working for the Node: its loop in `run`, or a reader thread handling
+        a batch (a listener or a conflict rule it calls). Such a thread must not wait for the loop."""
+        me = threading.get_ident()
+        return me == self._loop_thread or me == self._reader_thread
+
     def call_soon(self, call: Callable[[], None]) -> None:
         """Run `call` on the loop's thread at its next poll, waking a loop that waits; safe from any thread.
 
@@ -351,7 +412,7 @@ class Node:
         it raises ends `run`, so a caller wraps what may fail.
         """
         self._calls.append(call)  # deque.append is atomic: no lock shared with the loop
-        self._readers.arrivals.put(None)  # the wake-up: poll's drain stops at None, harmlessly
+        self._wake.put(None)
 
     def _receive_telling(self, engine: Stigmergy, index: int, messages: list[Message], sender: int | None) -> None:
         """Receive as `_arrive` does, one message at a time, telling `on_change` of every entry that changed."""
@@ -380,6 +441,13 @@ class Node:
         for listener in self.on_tick:
             listener(self)
 
+    def _spread_and_wake(self) -> None:
+        """`_spread` for a caller's put/get/ask: a waiting loop must look again if a budget held some back."""
+        self._spread(time.monotonic())
+        retry = self._retry_at
+        if retry is not None and retry < self._sleep_until:
+            self._wake.put(None)
+
     def _spread(self, now: float, heard_on: int = 0) -> None:
         """Copy the engine's outbox into every link's queue, then send what budgets allow.
 
@@ -387,26 +455,44 @@ class Node:
         medium every robot there heard those frames when we did, so what they caused is
         news on the other links first, and a slow echo must not hold up the crossing.
         """
-        if self.engine is not None and self.engine.pending():
-            outgoing = self.engine.drain()
+        engine = self.engine
+        if engine is not None and engine.pending():
+            outgoing = engine.drain()
             confined_to = self.guard.confined_to if self.guard is not None and self.guard.confines else None
-            origins = self._origins(outgoing)
-            for i, outlet in enumerate(self.outlets):
-                name = outlet.link.name
-                for msg, origin in zip(outgoing, origins, strict=True):
-                    if origin == i:  # every robot on that link heard it already
-                        outlet.link.counters["not_echoed"] += 1
-                    elif confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay
-                        outlet.push(msg)
+            if confined_to is None and not self._heard_from:  # the common case: every message to every link
+                for outlet in self.outlets:
+                    push = outlet.push
+                    for msg in outgoing:
+                        push(msg)
+            else:
+                self._push_where_due(outgoing, confined_to)
         outlets = self.outlets  # outlets[i] belongs to links[i]
-        if heard_on:  # a stable sort: those links move to the end, the others keep their order
-            outlets = [outlets[i] for i in sorted(range(len(outlets)), key=lambda i: heard_on >> i & 1)]
+        if heard_on:
+            outlets = self._flush_order.get(heard_on) or self._order_for(heard_on)
         retry = None
         for outlet in outlets:
             again = outlet.flush(now)
             if again is not None and (retry is None or again < retry):
                 retry = again
         self._retry_at = retry
+
+    def _push_where_due(self, outgoing: list[Message], confined_to: Callable[[Message], str | None] | None) -> None:
+        """Queue each message on every link but the one-domain link it came from and those a guard keeps it off."""
+        origins = self._origins(outgoing)
+        for i, outlet in enumerate(self.outlets):
+            name = outlet.link.name
+            for msg, origin in zip(outgoing, origins, strict=True):
+                if origin == i:  # every robot on that link heard it already
+                    outlet.link.counters["not_echoed"] += 1
+                elif confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay
+                    outlet.push(msg)
+
+    def _order_for(self, heard_on: int) -> list[Outlet]:
+        """The outlets with those of links in `heard_on` last, the others in their order (a stable sort)."""
+        outlets = self.outlets
+        order = [outlets[i] for i in sorted(range(len(outlets)), key=lambda i: heard_on >> i & 1)]
+        self._flush_order[heard_on] = order
+        return order
 
     def _origins(self, outgoing: list[Message]) -> list[int]:
         """Per message, the one-domain link it was heard on (-1: none), and forget the notes."""
@@ -422,13 +508,17 @@ class Node:
 
     # -- what happened ------------------------------------------------------------
     def stats(self) -> dict[str, Counters]:
-        """Per link: in/out, queued, and every drop by reason; then the engine's outcomes, if it has one."""
-        out = {link.name: link.stats() for link in self.links}
-        for outlet in self.outlets:
-            if len(outlet) or len(outlet.writer):
-                out[outlet.link.name]["queued"] = len(outlet) + len(outlet.writer)
-        if self.engine is not None:
-            out[ENGINE_STATS] = Counters({outcome.name.lower(): n for outcome, n in self.engine.counts.items()})
+        """Per link: in/out, queued, and every drop by reason; then the engine's outcomes, if it has one.
+
+        Taken under `lock`: reader threads count as they work, and a counter dict must not grow while copied.
+        """
+        with self.lock:
+            out = {link.name: link.stats() for link in self.links}
+            for outlet in self.outlets:
+                if len(outlet) or len(outlet.writer):
+                    out[outlet.link.name]["queued"] = len(outlet) + len(outlet.writer)
+            if self.engine is not None:
+                out[ENGINE_STATS] = Counters({outcome.name.lower(): n for outcome, n in self.engine.counts.items()})
         return out
 
     def summary(self) -> str:

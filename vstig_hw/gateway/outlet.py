@@ -56,7 +56,10 @@ class SendWindow:
 
     def record(self, now: float, count: int) -> None:
         if self.budget is not None:
-            self._sent.extend([now] * min(count, self.budget))
+            if count == 1:
+                self._sent.append(now)
+            else:
+                self._sent.extend([now] * min(count, self.budget))
 
     def next_free(self) -> float | None:
         """When the window next opens, if it is full now."""
@@ -96,22 +99,31 @@ class Outlet:
 
     def flush(self, now: float) -> float | None:
         """Send what the window allows; returns when to try again if messages wait."""
-        if not len(self):
+        waiting = self._fifo if self.keep_all else self._newest
+        if not waiting:
             return None
-        allowed = self.window.allowance(now)
-        if allowed <= 0:
-            return self.window.next_free()
-        if self.keep_all:
-            fifo = self._fifo
-            batch = [fifo.popleft() for _ in range(min(allowed, len(fifo)))]
+        window = self.window
+        if window.budget is None:  # no budget: everything, at once (a raw bridge's hot path)
+            if self.keep_all:
+                batch = list(self._fifo)
+                self._fifo.clear()
+            else:
+                batch = self._newest.drain()
         else:
-            batch = self._newest.drain(allowed)
-        self.window.record(now, len(batch))
+            allowed = window.allowance(now)
+            if allowed <= 0:
+                return window.next_free()
+            if self.keep_all:
+                fifo = self._fifo
+                batch = [fifo.popleft() for _ in range(min(allowed, len(fifo)))]
+            else:
+                batch = self._newest.drain(allowed)
+            window.record(now, len(batch))
         try:
             self.writer.submit(self.link.units_of(batch), len(batch))  # one unit for the batch on a byte stream
         except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
             self.counters["drop_write_error"] += len(batch)
-        return self.window.next_free() if len(self) else None
+        return window.next_free() if waiting else None
 
     def close(self) -> None:
         """Let the device take what is queued (briefly), then stop the writer."""

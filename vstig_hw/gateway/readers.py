@@ -1,19 +1,21 @@
-"""Reader threads: one per link, all feeding one queue that the event loop drains.
+"""Reader threads: one per link, each handing what its device returned straight to a `deliver` callback.
 
-Only the blocking device read runs on these threads (as python-can's Notifier
-does); framing, engine and sending stay on the loop's thread, so none of them
-needs a lock. Each batch is stamped with the wall-clock time it was read.
+Only the blocking device read waits here, one thread per link (as python-can's
+Notifier does). What a read returned is handed over in the same thread, with
+no queue and no wake-up of another thread: the Node then frames, guards, judges
+and sends the whole batch under its lock before this thread reads again (see
+`Node._deliver`). Each batch is stamped with the wall-clock time it was read.
 
-Each link may be at most `READ_AHEAD` batches ahead of the loop: a link that
-floods then waits (its device buffers, or its transport drops and counts), so
-its batches never pile up in memory nor queue far ahead of another link's.
+A link that floods therefore waits for its own batch to be handled before it
+reads more (its device buffers, or its transport drops and counts), and the
+Node's lock, taken per batch, lets every other link in between.
 """
 
 from __future__ import annotations
 
-import queue
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from ..links.link import Link
@@ -22,27 +24,25 @@ __all__ = ["Arrival", "LinkReaders"]
 
 READ_TIMEOUT = 0.05  # how long a read blocks: bounds how long stop() waits for a thread
 ERROR_BACKOFF = 0.2
-READ_AHEAD = 2  # batches a link may have waiting for the loop
 
 Arrival = tuple[int, float, list[Any]]  # (link index, wall-clock time, units)
+Deliver = Callable[[int, float, list[Any]], None]
 
 
 class LinkReaders:
-    def __init__(self, links: list[Link[Any]]) -> None:
+    def __init__(self, links: list[Link[Any]], deliver: Deliver) -> None:
         self.links = links
-        self.arrivals: queue.SimpleQueue[Arrival | None] = queue.SimpleQueue()
+        self.deliver = deliver
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
-        self._slots = [threading.Semaphore(READ_AHEAD) for _ in links]
-        self.per_poll = READ_AHEAD * len(links)  # batches the loop handles before it sends again
 
-    def done(self, index: int) -> None:
-        """The loop handled a batch of link `index`: its reader may read one more."""
-        self._slots[index].release()
+    @property
+    def stopping(self) -> bool:
+        """stop() was called: a batch not yet handled is left for the closer, not waited on."""
+        return self._stop.is_set()
 
     def start(self) -> None:
         self._stop.clear()
-        self._slots[:] = [threading.Semaphore(READ_AHEAD) for _ in self.links]
         for index, link in enumerate(self.links):
             thread = threading.Thread(target=self._read, args=(index, link), name=f"read-{link.name}", daemon=True)
             thread.start()
@@ -50,26 +50,19 @@ class LinkReaders:
 
     def _read(self, index: int, link: Link[Any]) -> None:
         read = link.transport.read
-        put = self.arrivals.put
-        slot = self._slots[index]
+        deliver = self.deliver
         while not self._stop.is_set():
-            if not slot.acquire(timeout=READ_TIMEOUT):
-                continue
             try:
                 units = read(READ_TIMEOUT)
             except Exception:  # transports promise to reconnect quietly; one that raises is counted and retried
                 link.counters["read_error"] += 1
-                slot.release()
                 self._stop.wait(ERROR_BACKOFF)
                 continue
             if units:
-                put((index, time.time(), units))
-            else:
-                slot.release()
+                deliver(index, time.time(), units)
 
     def stop(self) -> None:
         self._stop.set()
-        self.arrivals.put(None)  # wake the loop if it is waiting
         for thread in self._threads:
             thread.join(timeout=2.0)
         self._threads.clear()

@@ -46,7 +46,8 @@ class LinkWriter:
         self._busy = False  # the thread is in a device write
         self._closing = False
         self._dropped_in_episode = 0
-        self._cond = threading.Condition()
+        self._lock = threading.Lock()  # entered directly on the hot path (a Condition's `with` is Python code)
+        self._cond = threading.Condition(self._lock)
         self._thread: threading.Thread | None = None
 
     def __len__(self) -> int:
@@ -59,16 +60,17 @@ class LinkWriter:
         """
         if not units:
             return
-        base, extra = divmod(messages, len(units))  # a frame packing several messages carries each
-        carried = [base + (i < extra) for i in range(len(units))]
-        with self._cond:
+        base, extra = divmod(messages, len(units))  # a frame packing several messages carries each: unit i
+        with self._lock:                             # carries base + (i < extra)
             done = 0
-            if self._write_nowait is not None and not (self._busy or self._queue or self._rest is not None):
+            write_nowait = self._write_nowait
+            if write_nowait is not None and not (self._busy or self._queue or self._rest is not None):
                 sent = 0
-                for unit, count in zip(units, carried, strict=True):
+                for unit in units:
+                    count = base + (done < extra)
                     done += 1
                     try:
-                        rest = self._write_nowait(unit)
+                        rest = write_nowait(unit)
                     except Exception:  # a transport that broke its promise not to raise: count, carry on
                         self.link.counters["drop_write_error"] += count
                         continue
@@ -79,7 +81,7 @@ class LinkWriter:
                 self.link.counters["out"] += sent
             if done == len(units) and self._rest is None:
                 return
-            self._enqueue(units[done:], carried[done:])
+            self._enqueue(units[done:], [base + (i < extra) for i in range(done, len(units))])
             self._start()
             self._cond.notify()
 

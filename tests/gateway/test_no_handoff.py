@@ -1,0 +1,94 @@
+"""The data path without hand-offs: a link's reader thread handles what it read, under `Node.lock`, with no loop
+in between; what it raises still ends `run`; a closer holding the lock loses no frame. Real python-can virtual buses."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import can
+import pytest
+
+from vstig_hw import Message, Op
+from vstig_hw.framing.can import can_framing_for
+from vstig_hw.gateway import Mode, Node
+from vstig_hw.links import Heard, parse
+
+
+def _channels() -> tuple[str, str]:
+    stamp = time.monotonic_ns()
+    return f"nohandoff-a-{stamp}", f"nohandoff-b-{stamp}"
+
+
+def _recv_all(bus: can.BusABC, count: int, seconds: float = 5.0) -> list[can.Message]:
+    frames: list[can.Message] = []
+    end = time.monotonic() + seconds
+    while len(frames) < count and time.monotonic() < end:
+        frame = bus.recv(0.05)
+        if frame is not None:
+            frames.append(frame)
+    return frames
+
+
+@pytest.mark.parametrize("mode", [Mode.RAW, Mode.ENGINE])
+def test_a_frame_crosses_on_its_reader_thread_with_no_loop_running(mode: Mode) -> None:
+    a, b = _channels()
+    robot, far = can.Bus(interface="virtual", channel=a), can.Bus(interface="virtual", channel=b)
+    links = [parse(f"can:virtual:{channel}").build(name, robot_id=100) for name, channel in (("a", a), ("b", b))]
+    node = Node(links, 100, mode=mode)
+    threads: list[str] = []
+    node.on_heard.append(lambda heard: threads.append(threading.current_thread().name))
+    put = Message(Op.PUT, 5, 55, 1, 7)
+    try:
+        with node:  # open, and nobody calls run or poll
+            robot.send(can_framing_for(7).encode(put)[0])
+            crossed = _recv_all(far, 1)
+    finally:
+        robot.shutdown()
+        far.shutdown()
+    assert [m for f in crossed for m in can_framing_for(100).feed(f)] == [put]
+    assert threads == ["read-a"]  # heard, judged and sent by the thread that read it
+
+
+def test_a_listener_raising_on_a_reader_thread_ends_run_at_once_with_its_error() -> None:
+    (a, _b) = _channels()
+    robot = can.Bus(interface="virtual", channel=a)
+    node = Node([parse(f"can:virtual:{a}").build("a", robot_id=100)], 100, mode=Mode.LISTEN, period=10.0)
+
+    def broken(heard: Heard) -> None:
+        raise ValueError("the capture disk is full")
+
+    node.on_heard.append(broken)
+    try:
+        with node:
+            robot.send(can_framing_for(7).encode(Message(Op.PUT, 1, 1, 1, 7))[0])
+            started = time.monotonic()
+            with pytest.raises(ValueError, match="disk is full"):
+                node.run(duration=5.0)
+            assert time.monotonic() - started < 1.0  # woken for it, not at the end of its wait
+    finally:
+        robot.shutdown()
+
+
+def test_close_by_a_thread_holding_the_lock_hands_over_what_was_read_and_does_not_wait() -> None:
+    """As the Python API closes: under `Node.lock`. A reader waiting for the lock leaves its batch to the closer."""
+    (a, _b) = _channels()
+    robot = can.Bus(interface="virtual", channel=a)
+    node = Node([parse(f"can:virtual:{a}").build("a", robot_id=100)], 100, mode=Mode.LISTEN)
+    heard: list[Message] = []
+    node.on_heard.append(lambda h: heard.append(h.message))
+    sent = [Message(Op.PUT, key, key, 1, 7) for key in range(3)]
+    try:
+        node.open()
+        with node.lock:
+            for msg in sent:
+                robot.send(can_framing_for(7).encode(msg)[0])
+            time.sleep(0.3)  # the reader has read them and waits for the lock
+            assert heard == []
+            started = time.monotonic()
+            node.close()
+            took = time.monotonic() - started
+    finally:
+        robot.shutdown()
+    assert heard == sent
+    assert took < 1.0
