@@ -282,7 +282,8 @@ def test_a_conflict_rule_that_returns_nonsense_never_stops_the_gateway(swarm: Sw
     scripted.put(500, 2, 1)
     scripted.close()
     assert wait_for(lambda: swarm.entry(500) == Entry(2, 1, 203))  # the higher robot id won instead
-    assert swarm.stats()["api"]["hook_error"] == 1
+    # Counted each time the conflict is met: the robots may re-broadcast the two writes before the swarm settles.
+    assert swarm.stats()["api"]["hook_error"] >= 1
     assert swarm.put(501, 1, confirm=True) == Entry(1, 1, ME)  # and the gateway still runs
 
 
