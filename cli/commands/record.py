@@ -40,6 +40,7 @@ from ..running import (
     run_until_stopped,
 )
 
+EARLY_UNITS = 1 << 16  # units heard before the file opened (a file opens in milliseconds: ~7 s of a full CAN bus)
 
 def _medium(spec: LinkSpec) -> str:
     """The capture format a link's units go into without .mcap."""
@@ -110,9 +111,15 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
     deployment = next((d for spec in links if (d := getattr(spec, "deployment", None))), None)
     passing = RecordFilter(keep, Decoder(default_framings(deployment=deployment)))
     captures: list[RotatingCapture] = []  # opened once the links are: a dead link leaves the file alone
+    # What the links hear between opening and the file opening (their readers deliver at once) waits here.
+    early: list[tuple[Link[Any], float, Any]] = []
 
     def write(source: Link[Any], t: float, unit: Any) -> None:
-        if not captures:  # units handed over while a failed file open closes the node have nowhere to go
+        if not captures:
+            if len(early) < EARLY_UNITS:
+                early.append((source, t, unit))
+            else:
+                source.counters["drop_before_file"] += 1
             return
         framing = CAN_FRAMING if isinstance(source.framing, CanFraming) else source.framing.name
         record = Record(t, source.name, framing, unit)
@@ -120,6 +127,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
             captures[0].write(kept)
 
     node.on_unit.append(write)
+
     def flush(_: Node) -> None:  # every tick: what a kill leaves behind is at most one tick's frames
         if captures:
             captures[0].flush()
@@ -127,8 +135,13 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
     node.on_tick.append(flush)
     try:
         with node:
-            captures.append(RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
-                                            append=append))
+            capture = RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
+                                      append=append)
+            with node.lock:  # the readers write under it: the early units go first, in order
+                captures.append(capture)
+                for unit in early:
+                    write(*unit)
+                early.clear()
             click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
                        err=True)
             if medium == "can" and link_names_lost(path):
