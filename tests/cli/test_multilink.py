@@ -120,7 +120,9 @@ def test_record_can_and_a_radio_into_one_mcap(tmp_path: Path) -> None:
                            "-o", str(capture))
     try:
         wait_for(lambda: "O" in bus.commands, 30)
-        time.sleep(0.5)
+        assert recorder.stderr is not None
+        started = recorder.stderr.readline()  # said once both links and the file are open
+        assert started.startswith("recording "), started
         bus.inject(can.Message(arbitration_id=0x600 | 7, data=encode(on_bus), is_extended_id=False))
         time.sleep(0.1)
         radio.write(b"".join(cobs8.encode(on_radio)))
