@@ -1,18 +1,16 @@
 """The PC's seat in the swarm: one engine attached to any number of links.
 
-Modes:
+Modes (each picks the part that handles what links heard, see `parts`):
 
-* ENGINE: the Node is a robot. What any link hears goes into its engine; what
-  the engine queues goes out on every link (its own queue per link, see
-  `outlet`). Data crosses media because the protocol re-broadcasts what is new
-  and answers stale GETs, not because the gateway relays. A PUT it stores is not
-  echoed onto the link it came from when that link is one broadcast domain
-  (`Link.one_domain`): every robot there heard the original.
-* RAW: a transparent bridge. Every message heard on one link is re-encoded in
-  each other link's framing and sent as is: no engine, no merging.
+* ENGINE: the Node is a robot (a `Seat`). What any link hears goes into its
+  engine; what the engine queues goes out on every link (its own queue per link,
+  see `outlet`). Data crosses media because the protocol re-broadcasts what is new
+  and answers stale GETs, not because the gateway relays.
+* RAW: a transparent bridge (a `RawRelay`). Every message heard on one link is
+  re-encoded in each other link's framing and sent as is: no engine, no merging.
 * LISTEN: a sniffer or recorder. Nothing is ever written to any link. With
-  `count_outcomes` an engine that never transmits still hears everything, so
-  `stats()` tells what the traffic would do to a robot (sniff shows it).
+  `count_outcomes` a `Seat` with no outlets still judges everything, so `stats()`
+  tells what the traffic would do to a robot (sniff shows it).
 
 `stats()` has the engine's receive outcomes (stored, answered, stale, same,
 conflict, unknown, invalid: firmware_spec/SPEC.md section 4) beside the links'
@@ -42,13 +40,13 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from ..counters import ENGINE_STATS, Counters
-from ..engine import ConflictResolver, Entry, Outcome, Stigmergy
+from ..engine import ConflictResolver, Stigmergy
 from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
-from ..timestamps import TS_NONE
-from ..wire import GET_BIT, KEY_MAX, Message, Op
+from ..wire import Message
 from .guard import Guard
 from .outlet import Outlet
+from .parts import ChangeListener, RawRelay, Seat
 from .readers import READ_TIMEOUT, LinkReaders
 
 __all__ = ["DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "favour_latency"]
@@ -92,8 +90,6 @@ TickListener = Callable[["Node"], None]
 # What one unit carried, after the guard: link name, time heard, sender (None: the medium names none), messages.
 # Cheaper than on_heard on a busy gateway: one call per unit and no `Heard` built (the live view uses it).
 MessagesListener = Callable[[str, float, "int | None", list[Message]], None]
-# key, entry before (None: new key), entry after, link it came from (None: our own put), sender (None: unnamed)
-ChangeListener = Callable[[int, Entry | None, Entry, str | None, int | None], None]
 
 
 class Node:
@@ -120,8 +116,6 @@ class Node:
         self.mode = mode
         self.period = period
         self.guard = guard  # what links hear passes it before the engine, a relay or a listener sees it
-        judge = mode is Mode.ENGINE or (count_outcomes and mode is Mode.LISTEN)
-        self.engine = Stigmergy(robot_id, onconflict=onconflict) if judge else None
         self.outlets = [] if mode is Mode.LISTEN else [
             Outlet(link, budget, period, keep_all=mode is Mode.RAW) for link in self.links
         ]
@@ -130,7 +124,15 @@ class Node:
         self.on_refused: list[RefusedListener] = []  # what the guard refused (a sniffer shows it too)
         self.on_tick: list[TickListener] = []
         self.on_messages: list[MessagesListener] = []
-        self.on_change: list[ChangeListener] = []  # the table changed (Python API's watch); see `_receive_telling`
+        self.on_change: list[ChangeListener] = []  # the table changed (Python API's watch); see `Seat`
+        self.engine: Stigmergy | None = None
+        self.seat: Seat | None = None  # the engine's part: ENGINE, or LISTEN with count_outcomes
+        self.part: Seat | RawRelay | None = None  # what handles the messages links heard (None: nothing)
+        if mode is Mode.RAW:
+            self.part = RawRelay(self.outlets, guard)
+        elif mode is Mode.ENGINE or count_outcomes:
+            self.engine = Stigmergy(robot_id, onconflict=onconflict)
+            self.part = self.seat = Seat(self.engine, self.links, self.outlets, guard, self.on_change)
         self.ticks = 0
         self._calls: collections.deque[Callable[[], None]] = collections.deque()  # `call_soon`'s, for the loop
         self.lock = threading.RLock()  # whoever works on the Node holds it: a reader thread, the loop, a caller
@@ -145,8 +147,6 @@ class Node:
         self._next_tick = 0.0
         self._retry_at: float | None = None
         self._opened: list[Link[Any]] = []
-        # key -> (the PUT just stored, index of the one-domain link it came from), until the next drain
-        self._heard_from: dict[int, tuple[Message, int]] = {}
         self._flush_order: dict[int, list[Outlet]] = {}  # heard_on -> the outlets in `_spread`'s order
 
     # -- lifetime --------------------------------------------------------------
@@ -189,17 +189,12 @@ class Node:
     # put, get and ask take `lock` themselves: any thread may call them.
     def put(self, key: int, value: int) -> None:
         with self.lock:
-            engine = self._engine()
-            old = engine.entry(key) if self.on_change else None
-            engine.put(key, value)
-            if self.on_change:
-                self._tell(key, old, None, engine.robot_id)
+            self._seat().put(key, value)
             self._spread_and_wake()
 
     def get(self, key: int) -> int | None:
         with self.lock:
-            value = self._engine().get(key)
-            self._heard_from.pop(key, None)  # the GET may have merged into the key's pending PUT: send it everywhere
+            value = self._seat().get(key)
             self._spread_and_wake()
             return value
 
@@ -210,15 +205,13 @@ class Node:
         answer; this asks everyone, whatever we hold (SPEC section 4, row 5).
         """
         with self.lock:
-            ask = Message(Op.GET, key, 0, TS_NONE, self._engine().robot_id)
-            for outlet in self.outlets:
-                outlet.push(ask)  # a PUT already queued for the key says more and stays (SPEC section 5)
+            self._seat().ask(key)
             self._spread_and_wake()
 
-    def _engine(self) -> Stigmergy:
-        if self.engine is None or self.mode is not Mode.ENGINE:
+    def _seat(self) -> Seat:
+        if self.seat is None or self.mode is not Mode.ENGINE:
             raise RuntimeError(f"a {self.mode.value} node cannot put, get or ask: only an engine node transmits")
-        return self.engine
+        return self.seat
 
     # -- the loop ----------------------------------------------------------------
     def run(self, stop: threading.Event | None = None, until: Callable[[], bool] | None = None,
@@ -312,10 +305,8 @@ class Node:
         feed = link.framing.feed
         sender_of = link.sender_of
         source_of = getattr(link.framing, "source_of", None)  # who really sent it, where more than the link
-        engine = self.engine
-        outlets = self.outlets
+        part = self.part
         guard = self.guard
-        relays = guard is None or not guard.read_only(link.name)
         heard_count = 0
         for unit in units:
             for listener in self.on_unit:
@@ -345,19 +336,8 @@ class Node:
             if messages:
                 for m_listener in self.on_messages:
                     m_listener(link.name, t, sender, messages)
-            if engine is not None:
-                if self.on_change:
-                    self._receive_telling(engine, index, messages, sender)
-                elif link.one_domain and outlets:
-                    self._receive_from_domain(engine, index, messages)
-                else:
-                    for msg in messages:
-                        engine.receive(msg)
-            elif self.mode is Mode.RAW and relays:
-                for outlet in outlets:
-                    if outlet.link is not link:
-                        for msg in messages:
-                            outlet.push(msg)
+            if part is not None and messages:
+                part.take(index, messages, sender)
         link.counters["in"] += heard_count
 
     def _judge_and_tell(self, guard: Guard, link: Link[Any], sender: int | None, source: str | None,
@@ -378,23 +358,6 @@ class Node:
                     r_listener(heard, reason)
         return kept
 
-    def _receive_from_domain(self, engine: Stigmergy, index: int, messages: list[Message]) -> None:
-        """Receive what link `index` (one broadcast domain) heard, noting each PUT stored from it.
-
-        Every robot on that link heard the PUT when we did, so `_spread` keeps its
-        re-broadcast off that link. An answer for the key to that link undoes the note:
-        the answer may be that very entry, merged into the pending re-broadcast.
-        """
-        heard_from = self._heard_from
-        for msg in messages:
-            outcome = engine.receive(msg)
-            if outcome is Outcome.STORED and not msg[0] & GET_BIT:  # stored as is: the outbox holds `msg`
-                heard_from[msg[0]] = (msg, index)
-            elif outcome is Outcome.ANSWERED:
-                noted = heard_from.get(msg[0] & KEY_MAX)
-                if noted is not None and noted[1] == index:
-                    del heard_from[msg[0] & KEY_MAX]
-
     # -- other threads and watchers (the Python API, vstig_hw.api) ----------------
     # Whoever works on the Node holds `lock` (an RLock nobody holds while waiting): a reader thread with a
     # batch, the loop, a caller of put/get/ask. Another thread holds it around several calls, or hands a call
@@ -414,25 +377,6 @@ class Node:
         self._calls.append(call)  # deque.append is atomic: no lock shared with the loop
         self._wake.put(None)
 
-    def _receive_telling(self, engine: Stigmergy, index: int, messages: list[Message], sender: int | None) -> None:
-        """Receive as `_arrive` does, one message at a time, telling `on_change` of every entry that changed."""
-        link = self.links[index]
-        domain = link.one_domain and self.outlets
-        for msg in messages:
-            key = msg[0] & KEY_MAX
-            old = engine.entry(key)
-            if domain:
-                self._receive_from_domain(engine, index, [msg])
-            else:
-                engine.receive(msg)
-            self._tell(key, old, link.name, sender)
-
-    def _tell(self, key: int, old: Entry | None, link: str | None, sender: int | None) -> None:
-        new = self.engine.entry(key) if self.engine is not None else None
-        if new is not None and new != old:
-            for listener in self.on_change:
-                listener(key, old, new, link, sender)
-
     def _tick(self, now: float) -> None:
         self.ticks += 1
         self._next_tick = max(self._next_tick + self.period, now)  # no catch-up burst after a stall
@@ -449,23 +393,14 @@ class Node:
             self._wake.put(None)
 
     def _spread(self, now: float, heard_on: int = 0) -> None:
-        """Copy the engine's outbox into every link's queue, then send what budgets allow.
+        """Queue the engine's outbox on the links (`Seat.queue_out`), then send what budgets allow.
 
         Links that just delivered (bits of `heard_on`) are flushed last: on a broadcast
         medium every robot there heard those frames when we did, so what they caused is
         news on the other links first, and a slow echo must not hold up the crossing.
         """
-        engine = self.engine
-        if engine is not None and engine.pending():
-            outgoing = engine.drain()
-            confined_to = self.guard.confined_to if self.guard is not None and self.guard.confines else None
-            if confined_to is None and not self._heard_from:  # the common case: every message to every link
-                for outlet in self.outlets:
-                    push = outlet.push
-                    for msg in outgoing:
-                        push(msg)
-            else:
-                self._push_where_due(outgoing, confined_to)
+        if self.seat is not None:
+            self.seat.queue_out()
         outlets = self.outlets  # outlets[i] belongs to links[i]
         if heard_on:
             outlets = self._flush_order.get(heard_on) or self._order_for(heard_on)
@@ -476,35 +411,12 @@ class Node:
                 retry = again
         self._retry_at = retry
 
-    def _push_where_due(self, outgoing: list[Message], confined_to: Callable[[Message], str | None] | None) -> None:
-        """Queue each message on every link but the one-domain link it came from and those a guard keeps it off."""
-        origins = self._origins(outgoing)
-        for i, outlet in enumerate(self.outlets):
-            name = outlet.link.name
-            for msg, origin in zip(outgoing, origins, strict=True):
-                if origin == i:  # every robot on that link heard it already
-                    outlet.link.counters["not_echoed"] += 1
-                elif confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay
-                    outlet.push(msg)
-
     def _order_for(self, heard_on: int) -> list[Outlet]:
         """The outlets with those of links in `heard_on` last, the others in their order (a stable sort)."""
         outlets = self.outlets
         order = [outlets[i] for i in sorted(range(len(outlets)), key=lambda i: heard_on >> i & 1)]
         self._flush_order[heard_on] = order
         return order
-
-    def _origins(self, outgoing: list[Message]) -> list[int]:
-        """Per message, the one-domain link it was heard on (-1: none), and forget the notes."""
-        heard_from = self._heard_from
-        if not heard_from:
-            return [-1] * len(outgoing)
-        origins = []
-        for msg in outgoing:
-            noted = heard_from.get(msg[0])  # a PUT's head is its key
-            origins.append(noted[1] if noted is not None and noted[0] is msg else -1)
-        heard_from.clear()
-        return origins
 
     # -- what happened ------------------------------------------------------------
     def stats(self) -> dict[str, Counters]:

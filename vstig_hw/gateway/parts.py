@@ -1,0 +1,180 @@
+"""What a Node does with the messages its links heard: one part per job, chosen by the Node's `Mode`.
+
+The Node (node.py) reads the links, frames, guards and tells the listeners; then
+it hands each batch of messages to its part (python-can's `Notifier` hands
+messages to a `Listener` the same way):
+
+* `Seat`: the PC as a robot. Its engine judges what links heard; what the engine
+  queues goes out on every link (ENGINE mode). With no outlets it only judges
+  and never transmits: a sniffer's outcome counts (LISTEN with count_outcomes).
+* `RawRelay`: a transparent bridge. Every message heard on one link is queued on
+  every other link as is: no engine, no merging (RAW mode).
+* A listening Node has no part at all: nothing is judged or sent.
+
+A part runs under `Node.lock`, on whichever thread handed it the batch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from ..engine import Entry, Outcome, Stigmergy
+from ..links.link import Link
+from ..timestamps import TS_NONE
+from ..wire import GET_BIT, KEY_MAX, Message, Op
+from .guard import Guard
+from .outlet import Outlet
+
+__all__ = ["ChangeListener", "RawRelay", "Seat"]
+
+# key, entry before (None: new key), entry after, link it came from (None: our own put), sender (None: unnamed)
+ChangeListener = Callable[[int, Entry | None, Entry, str | None, int | None], None]
+
+
+class RawRelay:
+    """Queues what one link heard on every other link's outlet (outlets[i] belongs to links[i])."""
+
+    def __init__(self, outlets: list[Outlet], guard: Guard | None) -> None:
+        self.guard = guard
+        # per link: the other links' outlets (what it heard goes there)
+        self._others = [[other for other in outlets if other is not outlet] for outlet in outlets]
+        self._names = [outlet.link.name for outlet in outlets]
+
+    def take(self, index: int, messages: list[Message], sender: int | None) -> None:
+        guard = self.guard
+        if guard is not None and guard.read_only(self._names[index]):  # heard, never passed on
+            return
+        for outlet in self._others[index]:
+            push = outlet.push
+            for msg in messages:
+                push(msg)
+
+    def queue_out(self) -> None:
+        """Nothing of its own to send: `take` queued every message already."""
+
+
+class Seat:
+    """An engine with a seat in the swarm: judges what links heard, puts its outbox on every outlet.
+
+    A PUT it stores is not echoed onto the link it came from when that link is one
+    broadcast domain (`Link.one_domain`): every robot there heard the original.
+    `on_change` (the Node's list, shared) hears of every entry that changed.
+    """
+
+    def __init__(self, engine: Stigmergy, links: list[Link[Any]], outlets: list[Outlet], guard: Guard | None,
+                 on_change: list[ChangeListener]) -> None:
+        self.engine = engine
+        self.links = links
+        self.outlets = outlets  # outlets[i] belongs to links[i]; none: the seat only judges
+        self.guard = guard
+        self.on_change = on_change
+        # key -> (the PUT just stored, index of the one-domain link it came from), until the next queue_out
+        self._heard_from: dict[int, tuple[Message, int]] = {}
+
+    # -- the robot's program ---------------------------------------------------------
+    def put(self, key: int, value: int) -> None:
+        engine = self.engine
+        old = engine.entry(key) if self.on_change else None
+        engine.put(key, value)
+        if self.on_change:
+            self._tell(key, old, None, engine.robot_id)
+
+    def get(self, key: int) -> int | None:
+        value = self.engine.get(key)
+        self._heard_from.pop(key, None)  # the GET may have merged into the key's pending PUT: send it everywhere
+        return value
+
+    def ask(self, key: int) -> None:
+        """Queue an empty GET for `key` (timestamp 0) on every link: every neighbour holding it answers."""
+        ask = Message(Op.GET, key, 0, TS_NONE, self.engine.robot_id)
+        for outlet in self.outlets:
+            outlet.push(ask)  # a PUT already queued for the key says more and stays (SPEC section 5)
+
+    # -- what links heard ------------------------------------------------------------
+    def take(self, index: int, messages: list[Message], sender: int | None) -> None:
+        engine = self.engine
+        if self.on_change:
+            self._receive_telling(index, messages, sender)
+        elif self.outlets and self.links[index].one_domain:
+            self._receive_from_domain(index, messages)
+        else:
+            for msg in messages:
+                engine.receive(msg)
+
+    def _receive_from_domain(self, index: int, messages: list[Message]) -> None:
+        """Receive what link `index` (one broadcast domain) heard, noting each PUT stored from it.
+
+        Every robot on that link heard the PUT when we did, so `queue_out` keeps its
+        re-broadcast off that link. An answer for the key to that link undoes the note:
+        the answer may be that very entry, merged into the pending re-broadcast.
+        """
+        engine, heard_from = self.engine, self._heard_from
+        for msg in messages:
+            outcome = engine.receive(msg)
+            if outcome is Outcome.STORED and not msg[0] & GET_BIT:  # stored as is: the outbox holds `msg`
+                heard_from[msg[0]] = (msg, index)
+            elif outcome is Outcome.ANSWERED:
+                noted = heard_from.get(msg[0] & KEY_MAX)
+                if noted is not None and noted[1] == index:
+                    del heard_from[msg[0] & KEY_MAX]
+
+    def _receive_telling(self, index: int, messages: list[Message], sender: int | None) -> None:
+        """Receive as `take` does, one message at a time, telling `on_change` of every entry that changed."""
+        engine = self.engine
+        link = self.links[index]
+        domain = link.one_domain and self.outlets
+        for msg in messages:
+            key = msg[0] & KEY_MAX
+            old = engine.entry(key)
+            if domain:
+                self._receive_from_domain(index, [msg])
+            else:
+                engine.receive(msg)
+            self._tell(key, old, link.name, sender)
+
+    def _tell(self, key: int, old: Entry | None, link: str | None, sender: int | None) -> None:
+        new = self.engine.entry(key)
+        if new is not None and new != old:
+            for listener in self.on_change:
+                listener(key, old, new, link, sender)
+
+    # -- what goes out -----------------------------------------------------------------
+    def queue_out(self) -> None:
+        """Copy the engine's outbox into every link's outlet (none: the outbox is dropped unsent)."""
+        engine = self.engine
+        if not engine.pending():
+            return
+        outgoing = engine.drain()
+        guard = self.guard
+        confined_to = guard.confined_to if guard is not None and guard.confines else None
+        if confined_to is None and not self._heard_from:  # the common case: every message to every link
+            for outlet in self.outlets:
+                push = outlet.push
+                for msg in outgoing:
+                    push(msg)
+        else:
+            self._push_where_due(outgoing, confined_to)
+
+    def _push_where_due(self, outgoing: list[Message], confined_to: Callable[[Message], str | None] | None) -> None:
+        """Queue each message on every link but the one-domain link it came from and those a guard keeps it off."""
+        origins = self._origins(outgoing)
+        for i, outlet in enumerate(self.outlets):
+            name = outlet.link.name
+            for msg, origin in zip(outgoing, origins, strict=True):
+                if origin == i:  # every robot on that link heard it already
+                    outlet.link.counters["not_echoed"] += 1
+                elif confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay
+                    outlet.push(msg)
+
+    def _origins(self, outgoing: list[Message]) -> list[int]:
+        """Per message, the one-domain link it was heard on (-1: none), and forget the notes."""
+        heard_from = self._heard_from
+        if not heard_from:
+            return [-1] * len(outgoing)
+        origins = []
+        for msg in outgoing:
+            noted = heard_from.get(msg[0])  # a PUT's head is its key
+            origins.append(noted[1] if noted is not None and noted[0] is msg else -1)
+        heard_from.clear()
+        return origins
