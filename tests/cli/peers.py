@@ -116,9 +116,15 @@ def has_open(pid: int, path: str) -> bool:
 
 
 def stop(process: subprocess.Popen[str], timeout: float = 10) -> tuple[str, str]:
-    """SIGTERM, as Ctrl-C would, and collect the output."""
+    """SIGTERM, as Ctrl-C would, and collect the output; a process that outlives `timeout` is killed and fails the
+    test (it must never outlive the test run)."""
     process.terminate()
-    out, err = process.communicate(timeout=timeout)
+    try:
+        out, err = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        out, err = process.communicate()
+        raise AssertionError(f"{process.args} ignored SIGTERM for {timeout} s; killed. stderr: {err[-2000:]}") from None
     return out, err
 
 

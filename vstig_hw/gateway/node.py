@@ -32,7 +32,6 @@ from __future__ import annotations
 import collections
 import enum
 import gc
-import queue
 import sys
 import threading
 import time
@@ -43,6 +42,7 @@ from ..counters import ENGINE_STATS, Counters
 from ..engine import ConflictResolver, Stigmergy
 from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
+from ..wakeup import Wakeup
 from ..wire import Message
 from .guard import Guard
 from .outlet import Outlet
@@ -137,7 +137,7 @@ class Node:
         self._calls: collections.deque[Callable[[], None]] = collections.deque()  # `call_soon`'s, for the loop
         self.lock = threading.RLock()  # whoever works on the Node holds it: a reader thread, the loop, a caller
         self._readers = LinkReaders(self.links, self._deliver)
-        self._wake: queue.SimpleQueue[None] = queue.SimpleQueue()  # one token wakes the waiting loop
+        self._wake = Wakeup()  # one token wakes the waiting loop
         self._sleep_until = 0.0  # when the waiting loop looks again by itself (0: it is not waiting)
         self._wake_on_arrival = False  # the loop has an `until` to check after every batch
         self._loop_thread = 0  # ident of the thread in `run`, of the reader handling a batch (0: none)
@@ -252,13 +252,7 @@ class Node:
         retry = self._retry_at
         if retry is not None:
             timeout = min(timeout, retry - time.monotonic())
-        try:
-            if timeout > 0:
-                wake.get(timeout=timeout)
-            while True:  # wake-ups that came together are one
-                wake.get_nowait()
-        except queue.Empty:
-            pass
+        wake.wait(timeout)  # wake-ups that came together are one
         self._sleep_until = 0.0
         with self.lock:  # held while working, never while waiting: other threads may call in between
             failure, self._failure = self._failure, None
@@ -291,14 +285,14 @@ class Node:
         except BaseException as failure:  # a listener broke: `run` raises it on the loop's thread, as before
             if self._failure is None:
                 self._failure = failure
-            self._wake.put(None)
+            self._wake.set()
             return
         finally:
             self._reader_thread = 0
             lock.release()
         retry = self._retry_at  # read after _spread set it; the loop sets _sleep_until before reading it
         if self._wake_on_arrival or (retry is not None and retry < self._sleep_until):
-            self._wake.put(None)
+            self._wake.set()
 
     def _arrive(self, index: int, t: float, units: list[Any]) -> None:
         link = self.links[index]
@@ -375,7 +369,7 @@ class Node:
         it raises ends `run`, so a caller wraps what may fail.
         """
         self._calls.append(call)  # deque.append is atomic: no lock shared with the loop
-        self._wake.put(None)
+        self._wake.set()
 
     def _tick(self, now: float) -> None:
         self.ticks += 1
@@ -390,7 +384,7 @@ class Node:
         self._spread(time.monotonic())
         retry = self._retry_at
         if retry is not None and retry < self._sleep_until:
-            self._wake.put(None)
+            self._wake.set()
 
     def _spread(self, now: float, heard_on: int = 0) -> None:
         """Queue the engine's outbox on the links (`Seat.queue_out`), then send what budgets allow.

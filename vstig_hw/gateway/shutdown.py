@@ -2,11 +2,18 @@
 
 SIGHUP is what a closed terminal (or a dropped ssh session) sends: it ends a command the way
 Ctrl-C does, files closed and counters printed, instead of killing it with its capture unfinished.
+
+A second signal while the first is still being acted on ends the process at once (the
+signal's default action), so a stop that cannot finish (a device that does not let go)
+never leaves the user with a command that ignores Ctrl-C. Captures survive that: they are
+flushed every tick and readable after a kill.
 """
 
 from __future__ import annotations
 
+import os
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -24,7 +31,12 @@ def stop_on_signals() -> Iterator[threading.Event]:
         return
 
     def handler(signum: int, frame: FrameType | None) -> None:
-        stop.set()
+        if not stop.is_set():
+            stop.set()
+            return
+        sys.stderr.write("stopping now\n")  # the second signal: no more waiting for a clean stop
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
 
     stopping = [signal.SIGINT, signal.SIGTERM]
     hangup = getattr(signal, "SIGHUP", None)  # not on Windows

@@ -30,8 +30,8 @@ Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session s
 
 from __future__ import annotations
 
+import collections
 import logging
-import queue
 import threading
 import time
 from collections.abc import Callable
@@ -40,6 +40,7 @@ from typing import Any
 import zenoh
 
 from ..framing.zenoh import MAX_SAMPLE, ZenohSample
+from ..wakeup import Wakeup
 from ..wire import MESSAGE_SIZE
 from .base import DeviceTransport, DeviceUnreachable, TransportError, one_line
 
@@ -95,7 +96,8 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         self._lock = threading.Lock()  # session changes (read thread) against publishing (loop thread)
         self._subscriber: Any = None
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._inbox: queue.SimpleQueue[ZenohSample] = queue.SimpleQueue()
+        self._inbox: collections.deque[ZenohSample] = collections.deque()  # appended by zenoh, read by `read`
+        self._arrived = Wakeup()  # given with every sample appended: `read` waits for it
         self._inbox_bytes = 0  # payload bytes in _inbox
         self._inbox_lock = threading.Lock()
         self._told_oversize = False
@@ -196,21 +198,20 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
                 return
             self._inbox_bytes += size
         stamp = sample.timestamp  # the publishing session's id, where it stamps (ours do: vstig_hw.links.zenoh)
-        self._inbox.put(ZenohSample(str(sample.key_expr), sample.payload.to_bytes(),
-                                    None if stamp is None else str(stamp.get_id())))
+        self._inbox.append(ZenohSample(str(sample.key_expr), sample.payload.to_bytes(),
+                                       None if stamp is None else str(stamp.get_id())))
+        self._arrived.set()
 
     # -- moving samples ------------------------------------------------------
     def _read_device(self, device: zenoh.Session, timeout: float) -> list[ZenohSample]:
         samples: list[ZenohSample] = []
         taken = 0
-        try:
-            samples.append(self._inbox.get(timeout=timeout) if timeout > 0 else self._inbox.get_nowait())
-            taken = len(samples[0].payload)
-            while len(samples) <= _DRAIN_LIMIT and taken < _DRAIN_BYTES:
-                samples.append(self._inbox.get_nowait())
-                taken += len(samples[-1].payload)
-        except queue.Empty:
-            pass
+        inbox = self._inbox
+        if not inbox:
+            self._arrived.wait(timeout)
+        while inbox and len(samples) <= _DRAIN_LIMIT and taken < _DRAIN_BYTES:  # deque.popleft is atomic
+            samples.append(inbox.popleft())
+            taken += len(samples[-1].payload)
         if taken:
             with self._inbox_lock:
                 self._inbox_bytes -= taken
