@@ -278,6 +278,9 @@ class Node:
             if self._readers.stopping:  # the closer may hold the lock: it hands this batch on
                 self._leftover.append((index, t, units))
                 return
+        if self._readers.stopping:  # a transport's callback, late: the closer may be past its leftovers
+            lock.release()
+            return
         self._reader_thread = threading.get_ident()
         try:
             self._arrive(index, t, units)

@@ -9,10 +9,15 @@ and sends the whole batch under its lock before this thread reads again (see
 A link that floods therefore waits for its own batch to be handled before it
 reads more (its device buffers, or its transport drops and counts), and the
 Node's lock, taken per batch, lets every other link in between.
+
+A transport whose device calls us back (Zenoh's subscriber) hands what it heard
+over from that callback (`deliver_to`), so nothing waits in a queue for the read
+thread; its read thread still runs, for the transport's reconnects and watches.
 """
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from collections.abc import Callable
@@ -44,6 +49,9 @@ class LinkReaders:
     def start(self) -> None:
         self._stop.clear()
         for index, link in enumerate(self.links):
+            deliver_to = getattr(link.transport, "deliver_to", None)
+            if deliver_to is not None:
+                deliver_to(functools.partial(self._pushed, index))
             thread = threading.Thread(target=self._read, args=(index, link), name=f"read-{link.name}", daemon=True)
             thread.start()
             self._threads.append(thread)
@@ -61,8 +69,16 @@ class LinkReaders:
             if units:
                 deliver(index, time.time(), units)
 
+    def _pushed(self, index: int, units: list[Any]) -> None:
+        """On the device's own thread (a transport's callback): what it heard, delivered as a read's would be."""
+        self.deliver(index, time.time(), units)
+
     def stop(self) -> None:
         self._stop.set()
+        for link in self.links:
+            deliver_to = getattr(link.transport, "deliver_to", None)
+            if deliver_to is not None:
+                deliver_to(None)
         for thread in self._threads:
             thread.join(timeout=2.0)
         self._threads.clear()

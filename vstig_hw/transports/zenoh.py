@@ -1,8 +1,9 @@
 """ZenohTransport: an embedded Zenoh session that moves samples, and survives the network going away.
 
 Units are `ZenohSample`s (key, payload). What the session's subscriber hears
-from other sessions is queued by Zenoh's callback thread and handed out by
-`read`; `write` publishes a sample under its key, one publisher per key.
+from other sessions is handed over from Zenoh's callback thread to whoever asked
+(`deliver_to`: a gateway's readers, with no queue between), else queued and
+handed out by `read`; `write` publishes a sample under its key, one publisher per key.
 
 Zenoh keeps its own links alive: a peer re-dials its `connect=` endpoints with
 backoff, forever. What this transport adds is what a user must see: when the
@@ -21,8 +22,10 @@ other links must not stall behind a slow network (docs/how-to/many-pcs.md).
 
 Bounded input: a sample whose payload is above `max_sample` bytes (MAX_SAMPLE,
 64 KiB, by default) is refused in Zenoh's callback before it is copied or decoded
-(`rx_oversize`, logged once); samples heard and not yet read hold at most
-INBOX_LIMIT bytes, beyond which a flooding peer's samples are dropped (`rx_overflow`).
+(`rx_oversize`, logged once); samples queued for `read` hold at most INBOX_LIMIT
+bytes, beyond which a flooding peer's samples are dropped (`rx_overflow`). Samples
+handed over from the callback wait for no queue: a flood waits in Zenoh's own
+buffers, which drop under congestion.
 
 Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session subscribed),
 `tx_dropped`, `rx_oversize`, `rx_overflow`, `lost`, `unreachable`, `reconnects`.
@@ -98,6 +101,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._inbox: collections.deque[ZenohSample] = collections.deque()  # appended by zenoh, read by `read`
         self._arrived = Wakeup()  # given with every sample appended: `read` waits for it
+        self._deliver: Callable[[list[ZenohSample]], None] | None = None  # see deliver_to
         self._inbox_bytes = 0  # payload bytes in _inbox
         self._inbox_lock = threading.Lock()
         self._told_oversize = False
@@ -182,8 +186,15 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
             except zenoh.ZError as exc:  # closing a session whose network is gone may complain
                 log.debug("%s: error while closing: %s", self.name, exc)
 
+    def deliver_to(self, deliver: Callable[[list[ZenohSample]], None] | None) -> None:
+        """Hand each sample heard to `deliver`, on Zenoh's callback thread, instead of queueing it for `read`.
+
+        None: queue them again. `deliver` must not wait long: Zenoh's receiving waits for it.
+        """
+        self._deliver = deliver
+
     def _heard(self, sample: zenoh.Sample) -> None:
-        """Zenoh's callback thread: hand the sample to `read` (nothing else runs here)."""
+        """Zenoh's callback thread: hand the sample on (`deliver_to`), or queue it for `read`."""
         size = len(sample.payload)
         if size > self.max_sample:  # refused before a byte of it is copied or decoded
             self.counters["rx_oversize"] += 1
@@ -192,14 +203,20 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
                 log.warning("%s: refused a %d-byte sample on %s (the limit is %d bytes: max_sample=); counting "
                             "others as rx_oversize", self.name, size, sample.key_expr, self.max_sample)
             return
+        stamp = sample.timestamp  # the publishing session's id, where it stamps (ours do: vstig_hw.links.zenoh)
+        heard = ZenohSample(str(sample.key_expr), sample.payload.to_bytes(),
+                            None if stamp is None else str(stamp.get_id()))
+        deliver = self._deliver
+        if deliver is not None:  # straight on, from this thread: it waits for the gateway, not a queue
+            self.counters["rx"] += 1
+            deliver([heard])
+            return
         with self._inbox_lock:
-            if self._inbox_bytes + size > INBOX_LIMIT:  # the loop is behind: a flood waits no further
+            if self._inbox_bytes + size > INBOX_LIMIT:  # the reader is behind: a flood waits no further
                 self.counters["rx_overflow"] += 1
                 return
             self._inbox_bytes += size
-        stamp = sample.timestamp  # the publishing session's id, where it stamps (ours do: vstig_hw.links.zenoh)
-        self._inbox.append(ZenohSample(str(sample.key_expr), sample.payload.to_bytes(),
-                                       None if stamp is None else str(stamp.get_id())))
+        self._inbox.append(heard)
         self._arrived.set()
 
     # -- moving samples ------------------------------------------------------
