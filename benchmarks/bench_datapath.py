@@ -3,7 +3,9 @@
 * CPU and context switches per message of a `vstig bridge` process relaying pty -> pty
   (raw and engine mode), from the process's own accounting (/proc: utime+stime of
   every thread, voluntary+involuntary switches of every thread), beside a bare pty hop:
-  a Python process that reads one pty and writes what it read to the other.
+  a Python process that reads one pty and writes what it read to the other. Also beside
+  the framing floor: a Python process that only cuts, checks and re-encodes the cobs8
+  frames (what any relay that checks frames must do), which tells the Node's own cost.
 * The healthy link's p50 delay in a three-radio engine bridge where one radio is
   never read, beside the same bridge without that radio; and how many it lost.
 * Zenoh samples the bridge publishes per message it relays onto zenoh, with a peer
@@ -134,6 +136,22 @@ while True:
 """
 
 
+# The least a Python relay of cobs8 frames does: cut and check the frames (our framing), re-encode, write.
+# Beside it, the Node's own cost (threads, guard, outlets, counters) shows apart from the framing's.
+_FRAMING_FLOOR = """
+import os, select, sys
+from vstig_hw.framing import make_serial_framing
+inward, outward = make_serial_framing("cobs8"), make_serial_framing("cobs8")
+a, b = (os.open(path, os.O_RDWR | os.O_NOCTTY) for path in sys.argv[1:3])
+print("ready", flush=True)
+while True:
+    select.select([a], [], [])
+    messages = inward.feed(os.read(a, 65536))
+    if messages:
+        os.write(b, b"".join(unit for msg in messages for unit in outward.encode(msg)))
+"""
+
+
 def _await(into: _Pty, out: _Arrivals, probe_key: int = 32767) -> None:
     cobs8 = make_serial_framing("cobs8")
     for stamp in range(1, 300):
@@ -172,6 +190,7 @@ def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool) -> tuple[
 @benchmark("datapath")
 def relay_cost() -> Iterator[Result]:
     bare = _relay_run(lambda a, b: [sys.executable, "-c", _BARE_HOP, a, b], echo_back=False)
+    floor = _relay_run(lambda a, b: [sys.executable, "-c", _FRAMING_FLOOR, a, b], echo_back=False)
     raw = _relay_run(lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8",
                                    "--raw"], echo_back=False)
     engine = _relay_run(lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8",
@@ -182,6 +201,10 @@ def relay_cost() -> Iterator[Result]:
                      bare[1])
         yield Result(f"datapath.relay_{name}_p50", run[2] * 1e3, "ms", "bare pty hop p50", bare[2] * 1e3)
         yield Result(f"datapath.relay_{name}_delivered", run[3] / COUNT * 100, "%", "offered", 100.0)
+        yield Result(f"datapath.relay_{name}_cpu_vs_framing_floor", run[0] * 1e6, "us",
+                     "Python cobs8 relay without a Node CPU/msg", floor[0] * 1e6)
+    yield Result("datapath.relay_framing_floor_cpu_per_msg", floor[0] * 1e6, "us", "bare pty hop CPU/msg",
+                 bare[0] * 1e6)
 
 
 def _healthy_delay(deaf: bool) -> tuple[float, int]:
