@@ -301,7 +301,7 @@ class Node:
         link = self.links[index]
         feed = link.framing.feed
         sender_of = link.sender_of
-        source_of = getattr(link.framing, "source_of", None)  # who really sent it, where more than the link
+        source_of = link.source_of
         part = self.part
         guard = self.guard
         heard_count = 0

@@ -37,6 +37,10 @@ class Link(Generic[Unit]):
         self.framing = framing
         self.one_domain = one_domain
         self.counters = Counters()
+        # What the framing offers beyond Framing, looked up once: a missing attribute costs an exception per look.
+        self._encode_batch = getattr(framing, "encode_batch", None)
+        self._sender_of = getattr(framing, "sender_of", None)
+        self.source_of = getattr(framing, "source_of", None)  # who really sent a unit, where more than the link
 
     def open(self) -> None:
         self.transport.open()
@@ -64,7 +68,7 @@ class Link(Generic[Unit]):
 
     def units_of(self, messages: list[Message]) -> list[Unit]:
         """The units that carry `messages`, as few as the medium allows (see `send_many`)."""
-        encode_batch = getattr(self.framing, "encode_batch", None)
+        encode_batch = self._encode_batch
         if encode_batch is not None:
             units: list[Unit] = encode_batch(messages)
         else:
@@ -86,7 +90,7 @@ class Link(Generic[Unit]):
 
     def sender_of(self, unit: Any) -> int | None:
         """The transmitting node, where the medium names it (CAN IDs do); None otherwise."""
-        sender = getattr(self.framing, "sender_of", None)
+        sender = self._sender_of
         return sender(unit) if sender else None
 
     def tick(self) -> None:
