@@ -303,10 +303,10 @@ def zenoh_samples_per_relayed_message() -> Iterator[Result]:
                  "no echo of what zenoh carried", 1.0)
 
 
-def _can_to_pty(relay: str) -> tuple[float, float, int]:
-    """(CPU s per message, switches per message, delivered) of the relay's own threads, in this process: a robot
-    on a python-can virtual bus, a relay to a cobs8 pty radio (our gateway's loop, reader and writer threads, or a
-    bare recv -> encode -> os.write thread), the radio's far end read here."""
+def _can_to_pty(relay: str) -> tuple[float, float, int, float]:
+    """(CPU s and switches per message of the relay's own threads, delivered, p50 delay s), in this process: a
+    robot on a python-can virtual bus, a relay to a cobs8 pty radio (our gateway's loop, reader and writer
+    threads, or a bare recv -> encode -> os.write thread), the radio's far end read here."""
     import can
 
     from vstig_hw.framing.can import can_framing_for
@@ -348,7 +348,7 @@ def _can_to_pty(relay: str) -> tuple[float, float, int]:
                 break
         relay_threads = [worker] if node is None else [worker, *node._readers._threads]  # the loop, the readers
         cpu0, sw0 = _threads_usage(relay_threads)
-        _paced(robot.send, frames)  # type: ignore[arg-type]
+        sent = _paced(robot.send, frames)  # type: ignore[arg-type]
         out.wait(COUNT + 1)
         if node is not None:  # a writer thread starts only when a device is slow: count it if it did
             relay_threads += [t for t in (o.writer._thread for o in node.outlets) if t is not None]
@@ -363,7 +363,8 @@ def _can_to_pty(relay: str) -> tuple[float, float, int]:
         robot.shutdown()
         out.close()
         radio.close()
-    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, sum(1 for i in range(COUNT) if i in out.arrived)
+    delays = [out.arrived[i] - sent[i] for i in range(COUNT) if i in out.arrived]
+    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, len(delays), _p50(delays)
 
 
 @benchmark("datapath")
@@ -375,6 +376,8 @@ def can_to_pty_cost() -> Iterator[Result]:
     yield Result("datapath.relay_can_pty_switches_per_msg", ours[1], "switches",
                  "bare virtual bus -> pty hop switches/msg", bare[1])
     yield Result("datapath.relay_can_pty_delivered", ours[2] / COUNT * 100, "%", "offered", 100.0)
+    # The gateway's latency against the same hop without it (cli.gateway_latency's anchor is a write with no hop).
+    yield Result("datapath.relay_can_pty_p50", ours[3] * 1e3, "ms", "bare virtual bus -> pty hop p50", bare[3] * 1e3)
 
 
 FD_BUS_MSGS_PER_S = 47_400  # a saturated CAN FD bus, 5 Mbit/s data phase, 8 messages (64 bytes) per frame
