@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import select
+import signal
 import subprocess
 import sys
 import threading
@@ -87,11 +88,23 @@ class SlcanAdapter(PtyPeer):
         super().close()
 
 
+STARTED: list[subprocess.Popen[str]] = []  # what start_vstig started: conftest kills what a test left running
+
+
+def _as_from_a_terminal() -> None:
+    """In the child: SIGHUP as a terminal session has it, even when the tests run under nohup (which ignores it)."""
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+
+
 def start_vstig(*args: str, **kwargs: Any) -> subprocess.Popen[str]:
-    return subprocess.Popen([VSTIG, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+    kwargs.setdefault("preexec_fn", _as_from_a_terminal)
+    process = subprocess.Popen([VSTIG, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+    STARTED.append(process)
+    return process
 
 
 def run_vstig(*args: str, timeout: float = 60, **kwargs: Any) -> subprocess.CompletedProcess[str]:
+    kwargs.setdefault("preexec_fn", _as_from_a_terminal)
     return subprocess.run([VSTIG, *args], capture_output=True, text=True, timeout=timeout, check=False, **kwargs)
 
 
