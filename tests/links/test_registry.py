@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ast
 import json
 import subprocess
 import sys
@@ -10,6 +9,7 @@ from importlib import import_module
 from pathlib import Path
 
 import pytest
+from module_imports import imports_of
 
 import vstig_hw.links
 from vstig_hw.links import LinkSpec, examples, grammar, notes, parse
@@ -55,26 +55,11 @@ def test_the_help_text_loads_every_medium_but_no_library() -> None:
     assert not _unwanted(loaded, (), HEAVY)
 
 
-def _imports(path: Path) -> set[str]:
-    """Absolute names of every module `path` imports, relative imports resolved against vstig_hw.links."""
-    names: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            names.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level == 0:
-                names.add(node.module or "")
-            else:
-                base = "vstig_hw.links".rsplit(".", node.level - 1)[0]
-                names.add(f"{base}.{node.module}" if node.module else base)
-                names.update(f"{base}.{alias.name}" for alias in node.names if not node.module)
-    return names
-
-
 @pytest.mark.parametrize("path", sorted(LINKS_DIR.glob("*.py")), ids=lambda p: p.name)
 def test_no_module_imports_a_medium_other_than_itself(path: Path) -> None:
     others = {f"vstig_hw.links.{medium}" for medium in MEDIA if medium != path.stem}
-    bad = sorted(name for name in _imports(path) if any(name == o or name.startswith(o + ".") for o in others))
+    imported = imports_of(path, "vstig_hw.links")
+    bad = sorted(name for name in imported if any(name == o or name.startswith(o + ".") for o in others))
     assert not bad, f"{path.name} imports {bad}"
 
 
