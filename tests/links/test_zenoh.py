@@ -473,3 +473,54 @@ def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_o
     assert refused() == 1000 - len(from_attacker), dict(gateway.counters)
     assert gateway.counters["drop_source_rate"] >= 1000 - len(from_attacker) - 10
     assert [h.message.value for h in heard if h.message.key == 2] == list(range(20))  # another session: its own
+
+
+def test_a_gateway_closes_at_once_while_a_peer_floods_it_through_zenohs_callback() -> None:
+    """Samples reach the gateway on Zenoh's callback thread; closing mid-flood neither waits on it nor breaks it."""
+    import os
+    import threading
+
+    from vstig_hw.gateway import Node
+
+    gateway = parse("zenoh:lab").build(robot_id=201)
+    bus = parse(f"can:virtual:zenoh-flood-{os.getpid()}").build(robot_id=201)
+    node = Node([gateway, bus], 201, budget=None)
+    threads: set[str] = set()  # the threads zenoh's messages were handled on
+    node.on_messages.append(lambda link, _t, _sender, _messages: threads.add(threading.current_thread().name)
+                            if link == gateway.name else None)
+    node.open()
+    stop = threading.Event()
+    loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
+    loop.start()
+    [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
+    peer = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
+    peer.open()
+    flooding = threading.Event()
+
+    def flood() -> None:
+        stamp = 0
+        while not flooding.is_set():
+            stamp += 1
+            peer.send_many([Message(Op.PUT, key, stamp, stamp, 202) for key in range(64)])
+
+    flooder = threading.Thread(target=flood, daemon=True)
+    flooder.start()
+    try:
+        _until(lambda: gateway.counters["in"] > 2000)
+        assert node.on_node_thread() is False  # the test's thread is not a gateway thread
+        stop.set()
+        loop.join(timeout=5)
+        began = time.monotonic()
+        node.close()
+        took = time.monotonic() - began
+    finally:
+        flooding.set()
+        flooder.join(timeout=5)
+        peer.close()
+    assert took < 3.0, f"close took {took:.1f} s under a zenoh flood"
+    assert not loop.is_alive()
+    heard = gateway.counters["in"]
+    assert bus.counters["out"] > 0  # what zenoh carried went on to the bus
+    assert threads and not any(name.startswith("read-") for name in threads)  # from zenoh's thread, not our reader
+    time.sleep(0.3)
+    assert gateway.counters["in"] == heard  # nothing handled after close
