@@ -122,6 +122,11 @@ def _threads_usage(threads: list[threading.Thread]) -> tuple[float, int]:
     return cpu, switches
 
 
+def _delays(out: _Arrivals, sent: list[float]) -> list[float]:
+    """Per message that arrived (keyed by its index), the time from sending it to its arrival."""
+    return [out.arrived[i] - sent[i] for i in range(len(sent)) if i in out.arrived]
+
+
 def _p50(values: list[float]) -> float:
     return sorted(values)[len(values) // 2] if values else float("nan")
 
@@ -183,7 +188,7 @@ def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool) -> tuple[
             echo.close()
         a.close()
         b.close()
-    delays = [out.arrived[i] - sent[i] for i in range(COUNT) if i in out.arrived]
+    delays = _delays(out, sent)
     return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, _p50(delays), len(delays)
 
 
@@ -227,7 +232,7 @@ def _healthy_delay(deaf: bool) -> tuple[float, int]:
         echo.close()
         for radio in (source, healthy, stuck):
             radio.close()
-    delays = [out.arrived[i] - sent[i] for i in range(count) if i in out.arrived]
+    delays = _delays(out, sent)
     return _p50(delays), len(delays)
 
 
@@ -363,7 +368,7 @@ def _can_to_pty(relay: str) -> tuple[float, float, int, float]:
         robot.shutdown()
         out.close()
         radio.close()
-    delays = [out.arrived[i] - sent[i] for i in range(COUNT) if i in out.arrived]
+    delays = _delays(out, sent)
     return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, len(delays), _p50(delays)
 
 
