@@ -7,6 +7,11 @@ from the user-mode-linux package's modules, creates vcan0 (classic) and vcan1
 (CAN FD, MTU 72), runs pytest, writes pytest's exit code and junit file into a
 work directory on the shared file system, and powers the guest off.
 
+The kernel runs under `fxsave_only.py`, which keeps UML 6.1 off the XSAVE
+ptrace requests it cannot use on a host with AVX-512 or AMX (it would die as it
+starts PID 1); the guest then keeps x87/SSE state only, so its glibc is told to
+use no AVX, nor are OpenSSL and numpy (`_NO_AVX`).
+
 A boot that dies before PID 1 runs anything (the kernel sometimes dies in its
 early memory setup, exit 134) is retried up to BOOT_RETRIES times; when every try
 dies, the result says so with the kernel log's last lines. Anything that ran
@@ -38,12 +43,21 @@ _PASSED_PREFIXES = ("VSTIG_", "HYPOTHESIS")
 _STANDARD_PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
 BOOT_RETRIES = 2  # extra boots after one that died before running anything
 KERNEL_TAIL = 15  # kernel log lines shown when a run fails
+FXSAVE_ONLY = Path(__file__).with_name("fxsave_only.py")
+# The guest keeps only x87/SSE state (fxsave_only.py), and a host with AVX reloads the rest as it likes: every
+# library that picks AVX code by CPUID is kept off it (glibc's string functions, OpenSSL, numpy's dispatch).
+_NO_AVX = {
+    "GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX,-AVX2,-AVX512F,-AVX512VL,-AVX512BW,-AVX512DQ,-AVX512CD,-FMA,"
+                      "-AVX_Fast_Unaligned_Load",
+    "OPENSSL_ia32cap": "~0x1000100000000000:0",  # CPUID.1 without AVX (bit 60) and FMA (bit 44); no CPUID.7 features
+    "NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR",
+}
 
 _INIT = """#!/bin/sh
 # PID 1 inside User-Mode Linux, written by tests/socketcan/uml.py for one run.
 PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin
 export PATH
-mount -t proc proc /proc
+{no_avx}mount -t proc proc /proc
 mount -t sysfs sysfs /sys
 mount -t tmpfs tmpfs /run
 mkdir -p /dev/shm && mount -t tmpfs tmpfs /dev/shm
@@ -123,6 +137,7 @@ def unavailable_reason() -> str | None:
 
 def _env_script() -> str:
     env = {k: v for k, v in os.environ.items() if k in _PASSED_ENV or k.startswith(_PASSED_PREFIXES)}
+    env.update(_NO_AVX)
     env.update(VSTIG_IN_UML="1", PYTHONDONTWRITEBYTECODE="1", PYTHONUNBUFFERED="1",
                PATH=os.pathsep.join([env.get("PATH", ""), _STANDARD_PATH]))
     return "".join(f"export {k}={shlex.quote(v)}\n" for k, v in sorted(env.items()))
@@ -147,13 +162,14 @@ def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: s
                          *pytest_args]
     (workdir / "env.sh").write_text(_env_script())
     init = workdir / "init.sh"
-    init.write_text(_INIT.format(moddir=moddir, out=workdir, repo=shlex.quote(str(REPO)),
+    no_avx = "".join(f"export {k}={shlex.quote(v)}\n" for k, v in _NO_AVX.items())
+    init.write_text(_INIT.format(no_avx=no_avx, moddir=moddir, out=workdir, repo=shlex.quote(str(REPO)),
                                  pytest=shlex.join(pytest)))
     init.chmod(0o755)
     if any(c.isspace() for c in str(init)):
         raise RuntimeError(f"the UML kernel command line cannot carry spaces: {init}")
-    command = [uml, f"mem={mem}", "root=/dev/root", "rootfstype=hostfs", "rw", f"init={init}",
-               f"uml_dir={workdir / 'uml'}", "umid=vstig", "con=null", "con0=null,fd:1", "ssl=null"]
+    command = [sys.executable, str(FXSAVE_ONLY), uml, f"mem={mem}", "root=/dev/root", "rootfstype=hostfs", "rw",
+               f"init={init}", f"uml_dir={workdir / 'uml'}", "umid=vstig", "con=null", "con0=null,fd:1", "ssl=null"]
     started = time.monotonic()
     boots = 0
     while True:
