@@ -1,11 +1,14 @@
 """The data path (issue 25): a relay's cost and isolation, each beside an anchor measured in the same run.
 
 * CPU and context switches per message of a `vstig bridge` process relaying pty -> pty
-  (raw and engine mode), from the process's own accounting (/proc: utime+stime of
-  every thread, voluntary+involuntary switches of every thread), beside a bare pty hop:
+  (raw and engine mode), from the process's own accounting (the kernel's CPU-time
+  clock of the process, in nanoseconds; voluntary+involuntary switches of every
+  thread), beside a bare pty hop:
   a Python process that reads one pty and writes what it read to the other. Also beside
   the framing floor: a Python process that only cuts, checks and re-encodes the cobs8
   frames (what any relay that checks frames must do), which tells the Node's own cost.
+* The same relays' user-space instructions per message under callgrind: a figure the
+  shared VM's load cannot move, for judging a change to the path.
 * The healthy link's p50 delay in a three-radio engine bridge where one radio is
   never read, beside the same bridge without that radio; and how many it lost.
 * Zenoh samples the bridge publishes per message it relays onto zenoh, with a peer
@@ -92,10 +95,17 @@ def _paced(write: Callable[[bytes], object], frames: list[bytes], rate_hz: int =
 
 
 def _usage(pid: int) -> tuple[float, int]:
-    """(CPU seconds, context switches) of every thread of process `pid` so far."""
-    with open(f"/proc/{pid}/stat") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    cpu = (int(fields[11]) + int(fields[12])) / _TICK  # utime, stime: the whole thread group
+    """(CPU seconds, context switches) of every thread of process `pid` so far.
+
+    CPU from the kernel's CPU-time clock of the whole process (clock_getcpuclockid(3): nanoseconds), where the
+    kernel lets us read it; else utime+stime from /proc, in clock ticks (10 ms each).
+    """
+    try:
+        cpu = time.clock_gettime((~pid << 3) | 2)  # MAKE_PROCESS_CPUCLOCK(pid, CPUCLOCK_SCHED)
+    except OSError:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+        cpu = (int(fields[11]) + int(fields[12])) / _TICK  # utime, stime: the whole thread group
     switches = 0
     for task in os.listdir(f"/proc/{pid}/task"):
         try:
@@ -106,19 +116,33 @@ def _usage(pid: int) -> tuple[float, int]:
     return cpu, switches
 
 
+def _thread_cpu(task: str) -> float:
+    """CPU seconds of one thread of this process: the scheduler's own sum (nanoseconds) where /proc shows it
+    (`sched`), else utime+stime in clock ticks."""
+    try:
+        with open(f"{task}/sched") as sched:
+            for line in sched:
+                if line.startswith("se.sum_exec_runtime"):
+                    return float(line.split(":")[1]) / 1e3  # milliseconds
+    except FileNotFoundError:
+        pass
+    with open(f"{task}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / _TICK
+
+
 def _threads_usage(threads: list[threading.Thread]) -> tuple[float, int]:
     """(CPU seconds, context switches) of these threads of this process so far (Linux: /proc/self/task)."""
     cpu, switches = 0.0, 0
     for thread in threads:
         task = f"/proc/self/task/{thread.native_id}"
         try:
-            with open(f"{task}/stat") as stat:
-                fields = stat.read().rsplit(")", 1)[1].split()
+            thread_cpu = _thread_cpu(task)
             with open(f"{task}/status") as status:
                 switches += sum(int(line.split()[1]) for line in status if "ctxt_switches" in line)
         except FileNotFoundError:
             continue
-        cpu += (int(fields[11]) + int(fields[12])) / _TICK
+        cpu += thread_cpu
     return cpu, switches
 
 
@@ -192,14 +216,19 @@ def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool) -> tuple[
     return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, _p50(delays), len(delays)
 
 
+# The four pty -> pty relays measured (argv for pty paths A, B; whether it re-broadcasts onto A).
+_RELAYS: dict[str, tuple[Callable[[str, str], list[str]], bool]] = {
+    "bare": (lambda a, b: [sys.executable, "-c", _BARE_HOP, a, b], False),
+    "floor": (lambda a, b: [sys.executable, "-c", _FRAMING_FLOOR, a, b], False),
+    "raw": (lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8", "--raw"], False),
+    "engine": (lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8",
+                             "--robot-id", "200", "--budget", "2000", "--no-refresh"], True),
+}
+
+
 @benchmark("datapath")
 def relay_cost() -> Iterator[Result]:
-    bare = _relay_run(lambda a, b: [sys.executable, "-c", _BARE_HOP, a, b], echo_back=False)
-    floor = _relay_run(lambda a, b: [sys.executable, "-c", _FRAMING_FLOOR, a, b], echo_back=False)
-    raw = _relay_run(lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8",
-                                   "--raw"], echo_back=False)
-    engine = _relay_run(lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8",
-                                      "--robot-id", "200", "--budget", "2000", "--no-refresh"], echo_back=True)
+    bare, floor, raw, engine = (_relay_run(*_RELAYS[name]) for name in ("bare", "floor", "raw", "engine"))
     for name, run in (("raw", raw), ("engine", engine)):
         yield Result(f"datapath.relay_{name}_cpu_per_msg", run[0] * 1e6, "us", "bare pty hop CPU/msg", bare[0] * 1e6)
         yield Result(f"datapath.relay_{name}_switches_per_msg", run[1], "switches", "bare pty hop switches/msg",
@@ -210,6 +239,62 @@ def relay_cost() -> Iterator[Result]:
                      "Python cobs8 relay without a Node CPU/msg", floor[0] * 1e6)
     yield Result("datapath.relay_framing_floor_cpu_per_msg", floor[0] * 1e6, "us", "bare pty hop CPU/msg",
                  bare[0] * 1e6)
+
+
+def _instructions(name: str, count: int, workdir: Path) -> int:
+    """User-space instructions (callgrind's Ir) relay `name` executed in all, having relayed `count` messages."""
+    argv, echo_back = _RELAYS[name]
+    a, b = _Pty(), _Pty()
+    out_file = workdir / f"{name}.{count}.callgrind"
+    process = subprocess.Popen(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}",
+                                *argv(a.path, b.path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    out = _Arrivals(b)
+    echo = _Arrivals(a, record=False) if echo_back else None
+    try:
+        _await(a, out)
+        _paced(lambda f: os.write(a.master, f), _frames(count), rate_hz=INSTRUCTIONS_RATE_HZ)
+        out.wait(count + 1, seconds=60)
+    finally:
+        process.terminate()  # callgrind writes its totals as the process exits
+        process.wait(timeout=120)
+        out.close()
+        if echo is not None:
+            echo.close()
+        a.close()
+        b.close()
+    if len(out.arrived) < count + 1:
+        raise RuntimeError(f"{name} under callgrind relayed {len(out.arrived) - 1} of {count} messages")
+    for line in out_file.read_text().splitlines():
+        if line.startswith(("totals:", "summary:")):
+            return int(line.split()[1])
+    raise RuntimeError(f"no totals in {out_file}")
+
+
+INSTRUCTIONS_RATE_HZ = 200  # slow enough for an engine under callgrind (~50x slower) to take each message alone
+
+
+@benchmark("datapath")
+def relay_instructions() -> Iterator[Result]:
+    """Instructions per relayed message (callgrind, so the same on a busy or an idle VM): the difference between a
+    run of 2,500 messages and one of 500, so start-up and imports cancel out. User space only: the kernel's pty and
+    wake-up work, which every relay pays alike, is not counted."""
+    import shutil
+    import tempfile
+
+    if shutil.which("valgrind") is None:
+        print("datapath.relay_instructions: needs valgrind (apt-get install valgrind)", file=sys.stderr)
+        return
+    per_msg = {}
+    with tempfile.TemporaryDirectory(prefix="vstig-bench-") as tmp:
+        for name in _RELAYS:
+            few, many = (_instructions(name, count, Path(tmp)) for count in (500, 2500))
+            per_msg[name] = (many - few) / 2000
+    for name in ("floor", "raw", "engine"):
+        yield Result(f"datapath.relay_{name}_instructions_per_msg", per_msg[name], "instr", "bare pty hop instr/msg",
+                     per_msg["bare"])
+    for name in ("raw", "engine"):
+        yield Result(f"datapath.relay_{name}_instructions_vs_framing_floor", per_msg[name], "instr",
+                     "Python cobs8 relay without a Node instr/msg", per_msg["floor"])
 
 
 def _healthy_delay(deaf: bool) -> tuple[float, int]:
