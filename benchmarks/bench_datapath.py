@@ -152,7 +152,17 @@ def _delays(out: _Arrivals, sent: list[float]) -> list[float]:
 
 
 def _p50(values: list[float]) -> float:
-    return sorted(values)[len(values) // 2] if values else float("nan")
+    return _quantiles(values)[0]
+
+
+QUANTILES = (("p50", 0.5), ("p90", 0.9), ("p99", 0.99))
+
+
+def _quantiles(values: list[float]) -> tuple[float, ...]:
+    """p50, p90, p99 of `values` (nan if none)."""
+    ordered = sorted(values)
+    return tuple(ordered[min(int(q * len(ordered)), len(ordered) - 1)] if ordered else float("nan")
+                 for _, q in QUANTILES)
 
 
 _BARE_HOP = """
@@ -191,8 +201,9 @@ def _await(into: _Pty, out: _Arrivals, probe_key: int = 32767) -> None:
     raise RuntimeError("the relay never came up")
 
 
-def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool) -> tuple[float, float, float, int]:
-    """(CPU s per message, switches per message, p50 delay s, delivered) of a process relaying pty A -> pty B."""
+def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool) -> tuple[float, float, tuple[float, ...], int]:
+    """(CPU s per message, switches per message, (p50, p90, p99) delay s, delivered) of a process relaying pty A ->
+    pty B."""
     a, b = _Pty(), _Pty()
     process = subprocess.Popen(argv(a.path, b.path), stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     out = _Arrivals(b)
@@ -213,7 +224,7 @@ def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool) -> tuple[
         a.close()
         b.close()
     delays = _delays(out, sent)
-    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, _p50(delays), len(delays)
+    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, _quantiles(delays), len(delays)
 
 
 # The four pty -> pty relays measured (argv for pty paths A, B; whether it re-broadcasts onto A).
@@ -233,7 +244,8 @@ def relay_cost() -> Iterator[Result]:
         yield Result(f"datapath.relay_{name}_cpu_per_msg", run[0] * 1e6, "us", "bare pty hop CPU/msg", bare[0] * 1e6)
         yield Result(f"datapath.relay_{name}_switches_per_msg", run[1], "switches", "bare pty hop switches/msg",
                      bare[1])
-        yield Result(f"datapath.relay_{name}_p50", run[2] * 1e3, "ms", "bare pty hop p50", bare[2] * 1e3)
+        for (label, _), ours, anchor in zip(QUANTILES, run[2], bare[2], strict=True):
+            yield Result(f"datapath.relay_{name}_{label}", ours * 1e3, "ms", f"bare pty hop {label}", anchor * 1e3)
         yield Result(f"datapath.relay_{name}_delivered", run[3] / COUNT * 100, "%", "offered", 100.0)
         yield Result(f"datapath.relay_{name}_cpu_vs_framing_floor", run[0] * 1e6, "us",
                      "Python cobs8 relay without a Node CPU/msg", floor[0] * 1e6)
@@ -393,10 +405,10 @@ def zenoh_samples_per_relayed_message() -> Iterator[Result]:
                  "no echo of what zenoh carried", 1.0)
 
 
-def _can_to_pty(relay: str) -> tuple[float, float, int, float]:
-    """(CPU s and switches per message of the relay's own threads, delivered, p50 delay s), in this process: a
-    robot on a python-can virtual bus, a relay to a cobs8 pty radio (our gateway's loop, reader and writer
-    threads, or a bare recv -> encode -> os.write thread), the radio's far end read here."""
+def _can_to_pty(relay: str) -> tuple[float, float, int, tuple[float, ...]]:
+    """(CPU s and switches per message of the relay's own threads, delivered, (p50, p90, p99) delay s), in this
+    process: a robot on a python-can virtual bus, a relay to a cobs8 pty radio (our gateway's loop, reader and
+    writer threads, or a bare recv -> encode -> os.write thread), the radio's far end read here."""
     import can
 
     from vstig_hw.framing.can import can_framing_for
@@ -454,7 +466,7 @@ def _can_to_pty(relay: str) -> tuple[float, float, int, float]:
         out.close()
         radio.close()
     delays = _delays(out, sent)
-    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, len(delays), _p50(delays)
+    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, len(delays), _quantiles(delays)
 
 
 @benchmark("datapath")
@@ -467,7 +479,9 @@ def can_to_pty_cost() -> Iterator[Result]:
                  "bare virtual bus -> pty hop switches/msg", bare[1])
     yield Result("datapath.relay_can_pty_delivered", ours[2] / COUNT * 100, "%", "offered", 100.0)
     # The gateway's latency against the same hop without it (cli.gateway_latency's anchor is a write with no hop).
-    yield Result("datapath.relay_can_pty_p50", ours[3] * 1e3, "ms", "bare virtual bus -> pty hop p50", bare[3] * 1e3)
+    for (label, _), our_delay, bare_delay in zip(QUANTILES, ours[3], bare[3], strict=True):
+        yield Result(f"datapath.relay_can_pty_{label}", our_delay * 1e3, "ms", f"bare virtual bus -> pty hop {label}",
+                     bare_delay * 1e3)
 
 
 FD_BUS_MSGS_PER_S = 47_400  # a saturated CAN FD bus, 5 Mbit/s data phase, 8 messages (64 bytes) per frame
