@@ -95,16 +95,74 @@ def _bare_hop(rate_hz: int, count: int) -> list[float]:
     return sorted(arrived[_tag(i)] - sent[i] for i in range(count) if _tag(i) in arrived)
 
 
+def _bare_path_hop(rate_hz: int, count: int) -> list[float]:
+    """The gateways' path with bare hops: a CAN frame in a thread here -> a bare Zenoh put -> a process that writes
+    each message to a cobs8 pty radio; the radio's far end timestamps, as in `_gateway_hop`."""
+    import can
+
+    from vstig_hw.framing.can import can_framing_for
+
+    master, slave, path = _raw_pty()
+    fork = multiprocessing.get_context("fork")
+    receive, done = fork.Pipe(duplex=False)
+    listener = fork.Process(target=_radio_listener, args=(master, count, done, 3.0))
+    listener.start()
+    port = free_port()
+    session = bare_session(listen=f"tcp/127.0.0.1:{port}")
+    publisher = session.declare_publisher(BARE_KEY)
+    far = subprocess.Popen([sys.executable, "-m", "benchmarks.zenoh_peer", "relay", f"tcp/127.0.0.1:{port}", path],
+                           stdout=subprocess.PIPE, text=True, cwd=_ROOT)
+    channel = f"bench-zenoh-bare-{os.getpid()}-{rate_hz}"
+    robot = can.Bus(interface="virtual", channel=channel)
+    bus = can.Bus(interface="virtual", channel=channel)
+    codec = can_framing_for(7)
+    frames = [codec.encode(_numbered(i))[0] for i in range(count)]
+    stop = threading.Event()
+
+    def hop() -> None:
+        while not stop.is_set():
+            frame = bus.recv(0.05)
+            if frame is not None:
+                publisher.put(bytes(frame.data))
+
+    worker = threading.Thread(target=hop, daemon=True)
+    worker.start()
+    try:
+        assert far.stdout is not None and far.stdout.readline().strip() == "ready"
+        time.sleep(1.0)  # its subscription reaches our session
+        sent = _sleep_paced(count, rate_hz, lambda i: robot.send(frames[i]))
+        arrived = receive.recv()
+        listener.join()
+    finally:
+        stop.set()
+        worker.join(timeout=5)
+        far.kill()
+        far.wait(timeout=20)
+        bus.shutdown()
+        robot.shutdown()
+        session.close()  # type: ignore[no-untyped-call]
+        os.close(master)
+        os.close(slave)
+    return sorted(arrived[_tag(i)] - sent[i] for i in range(count) if _tag(i) in arrived)
+
+
 @benchmark("zenoh")
 def cross_gateway_latency() -> Iterator[Result]:
-    """CAN into gateway A, zenoh to gateway B (a `vstig bridge` process), out of B's pty radio; p50/p99."""
+    """CAN into gateway A, zenoh to gateway B (a `vstig bridge` process), out of B's pty radio; p50/p99.
+
+    Beside bare Zenoh (one put to one subscriber), the same path with bare hops (CAN -> Zenoh in a thread,
+    Zenoh -> pty in a process): the first anchor has no CAN and no pty hop, the second has every hop the
+    gateways have, so it tells what the gateways themselves add."""
     for rate_hz in (1000, 5000):
         count = 2 * rate_hz
         ours = _gateway_hop(rate_hz, count)
         bare = _bare_hop(rate_hz, count)
+        bare_path = _bare_path_hop(rate_hz, count)
         for q, label in ((0.5, "p50"), (0.99, "p99")):
             yield Result(f"zenoh.gateway_latency_{rate_hz}hz_{label}", _p(ours, q) * 1e3, "ms",
                          f"bare Zenoh put->subscriber {label}", _p(bare, q) * 1e3)
+            yield Result(f"zenoh.gateway_latency_{rate_hz}hz_{label}_vs_bare_path", _p(ours, q) * 1e3, "ms",
+                         f"CAN->Zenoh->pty, bare hops {label}", _p(bare_path, q) * 1e3)
         yield Result(f"zenoh.gateway_delivered_{rate_hz}hz", len(ours) / count * 100, "%", "offered", 100.0)
 
 

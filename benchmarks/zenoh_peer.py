@@ -3,6 +3,8 @@
     receive bare|link ENDPOINT COUNT   subscribe (a bare Zenoh session, or a zenoh link as the gateway
                                        builds it), stamp every message's arrival (perf_counter is
                                        system-wide), print {tag: time} as JSON
+    relay ENDPOINT PTY                 a bare hop from Zenoh to a cobs8 pty radio: every message of every
+                                       sample on BARE_KEY, encoded and written to PTY, until killed
     throughput COUNT BATCH             one process sends COUNT messages to a receiver process, as
                                        batches over a zenoh link and as bare 8-byte samples; prints
                                        messages/s for both and, when it runs in its own network
@@ -83,6 +85,23 @@ def receive(mode: str, endpoint: str, count: int) -> dict[int, float]:
     return arrived
 
 
+def relay(endpoint: str, pty: str) -> None:
+    """Zenoh -> cobs8 pty with nothing between: the least a gateway's far side must do."""
+    from vstig_hw.framing import make_serial_framing
+
+    cobs8 = make_serial_framing("cobs8")
+    fd = os.open(pty, os.O_RDWR | os.O_NOCTTY)
+    session = bare_session(connect=endpoint)
+
+    def heard(sample: zenoh.Sample) -> None:
+        os.write(fd, b"".join(cobs8.encode(msg)[0] for msg in decode_many(sample.payload.to_bytes())))
+
+    session.declare_subscriber(BARE_KEY, heard)
+    print("ready", flush=True)
+    while True:
+        time.sleep(3600)
+
+
 def _wait(arrived: dict[int, float], count: int) -> None:
     last_size, idle_since = -1, time.perf_counter()
     end = time.perf_counter() + 60
@@ -157,6 +176,8 @@ def main(argv: list[str]) -> None:
     if argv[0] == "receive":
         arrived = receive(argv[1], argv[2], int(argv[3]))
         print(json.dumps(arrived))
+    elif argv[0] == "relay":
+        relay(argv[1], argv[2])
     elif argv[0] == "throughput":
         print(json.dumps(throughput(int(argv[1]), int(argv[2]))))
     else:
