@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import select
@@ -201,28 +202,45 @@ def _await(into: _Pty, out: _Arrivals, probe_key: int = 32767) -> None:
     raise RuntimeError("the relay never came up")
 
 
-def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool) -> tuple[float, float, tuple[float, ...], int]:
-    """(CPU s per message, switches per message, (p50, p90, p99) delay s, delivered) of a process relaying pty A ->
-    pty B."""
+@contextlib.contextmanager
+def _relaying(argv: Callable[[str, str], list[str]], echo_back: bool,
+              prefix: tuple[str, ...] = ()) -> Iterator[tuple[int, _Pty, _Arrivals]]:
+    """Start a relay from a new pty A to a new pty B (`argv(A, B)`, after `prefix`) and wait until it relays.
+
+    Yields (its pid, A, B's arrivals); stops it and closes both ptys after.
+    """
     a, b = _Pty(), _Pty()
-    process = subprocess.Popen(argv(a.path, b.path), stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        process = subprocess.Popen([*prefix, *argv(a.path, b.path)], stdout=subprocess.DEVNULL,
+                                   stderr=subprocess.DEVNULL)
+    except BaseException:
+        a.close()
+        b.close()
+        raise
     out = _Arrivals(b)
     echo = _Arrivals(a, record=False) if echo_back else None  # an engine re-broadcasts onto A too: read it
     try:
         _await(a, out)
-        frames = _frames(COUNT)
-        cpu0, sw0 = _usage(process.pid)
-        sent = _paced(lambda f: os.write(a.master, f), frames)
-        out.wait(COUNT + 1)
-        cpu1, sw1 = _usage(process.pid)
+        yield process.pid, a, out
     finally:
-        process.terminate()
-        process.wait(timeout=20)
+        process.terminate()  # (callgrind writes its totals as the process exits)
+        process.wait(timeout=120)
         out.close()
         if echo is not None:
             echo.close()
         a.close()
         b.close()
+
+
+def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool) -> tuple[float, float, tuple[float, ...], int]:
+    """(CPU s per message, switches per message, (p50, p90, p99) delay s, delivered) of a process relaying pty A ->
+    pty B."""
+    with _relaying(argv, echo_back) as (pid, a, out):
+        frames = _frames(COUNT)
+        cpu0, sw0 = _usage(pid)
+        sent = _paced(lambda f: os.write(a.master, f), frames)
+        out.wait(COUNT + 1)
+        cpu1, sw1 = _usage(pid)
     delays = _delays(out, sent)
     return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, _quantiles(delays), len(delays)
 
@@ -255,25 +273,11 @@ def relay_cost() -> Iterator[Result]:
 
 def _instructions(name: str, count: int, workdir: Path) -> int:
     """User-space instructions (callgrind's Ir) relay `name` executed in all, having relayed `count` messages."""
-    argv, echo_back = _RELAYS[name]
-    a, b = _Pty(), _Pty()
     out_file = workdir / f"{name}.{count}.callgrind"
-    process = subprocess.Popen(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}",
-                                *argv(a.path, b.path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    out = _Arrivals(b)
-    echo = _Arrivals(a, record=False) if echo_back else None
-    try:
-        _await(a, out)
+    callgrind = ("valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}")
+    with _relaying(*_RELAYS[name], prefix=callgrind) as (_pid, a, out):
         _paced(lambda f: os.write(a.master, f), _frames(count), rate_hz=INSTRUCTIONS_RATE_HZ)
         out.wait(count + 1, seconds=60)
-    finally:
-        process.terminate()  # callgrind writes its totals as the process exits
-        process.wait(timeout=120)
-        out.close()
-        if echo is not None:
-            echo.close()
-        a.close()
-        b.close()
     if len(out.arrived) < count + 1:
         raise RuntimeError(f"{name} under callgrind relayed {len(out.arrived) - 1} of {count} messages")
     for line in out_file.read_text().splitlines():

@@ -30,30 +30,51 @@ def _wait_for_peer(link: object, seconds: float = 20.0) -> None:
     time.sleep(1.0)  # the far end's subscriptions arrive after its session
 
 
+class _TimedRadio:
+    """A cobs8 pty radio whose far end, a forked process, timestamps each message that arrives. Make it before
+    this process opens any Zenoh session or starts a gateway thread: a fork copies only the calling thread."""
+
+    def __init__(self, count: int) -> None:
+        self.master, self.slave, self.path = _raw_pty()
+        fork = multiprocessing.get_context("fork")
+        self._arrivals, done = fork.Pipe(duplex=False)
+        self._listener = fork.Process(target=_radio_listener, args=(self.master, count, done, 3.0))
+        self._listener.start()
+
+    def latencies(self, sent: list[float]) -> list[float]:
+        """Per message that arrived, sorted: its arrival less `sent[i]`, the time message i was sent."""
+        arrived = self._arrivals.recv()
+        self._listener.join()
+        return sorted(arrived[_tag(i)] - sent[i] for i in range(len(sent)) if _tag(i) in arrived)
+
+    def close(self) -> None:
+        os.close(self.master)
+        os.close(self.slave)
+
+
+def _can_frames(count: int) -> list[can.Message]:
+    from vstig_hw.framing.can import can_framing_for
+
+    codec = can_framing_for(7)
+    return [codec.encode(_numbered(i))[0] for i in range(count)]
+
+
 def _gateway_hop(rate_hz: int, count: int) -> list[float]:
     """A frame into gateway A's CAN link (in this process) to the message out of gateway B's pty link.
 
-    B is a real `vstig bridge` process (zenoh + a cobs8 pty radio); the radio's far end is a
-    forked process that timestamps what arrives, forked before this process opens any Zenoh
-    session or gateway thread.
+    B is a real `vstig bridge` process (zenoh + a cobs8 pty radio); the radio's far end times arrivals.
     """
-    from vstig_hw.framing.can import can_framing_for
     from vstig_hw.gateway import Node, favour_latency
     from vstig_hw.links import parse
 
-    master, slave, path = _raw_pty()
-    fork = multiprocessing.get_context("fork")
-    receive, done = fork.Pipe(duplex=False)
-    listener = fork.Process(target=_radio_listener, args=(master, count, done, 3.0))
-    listener.start()
+    radio = _TimedRadio(count)
     port = free_port()
-    far = subprocess.Popen([VSTIG, "bridge", f"zenoh:bench?connect=tcp/127.0.0.1:{port}", f"serial:{path}",
+    far = subprocess.Popen([VSTIG, "bridge", f"zenoh:bench?connect=tcp/127.0.0.1:{port}", f"serial:{radio.path}",
                             "--robot-id", "202", "--budget", "20000", "--no-refresh"],
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     channel = f"bench-zenoh-{os.getpid()}-{rate_hz}"
     robot = can.Bus(interface="virtual", channel=channel)
-    codec = can_framing_for(7)
-    frames = [codec.encode(_numbered(i))[0] for i in range(count)]
+    frames = _can_frames(count)
     links = [parse(f"can:virtual:{channel}").build("bus", robot_id=201),
              parse(f"zenoh:bench?listen=tcp/127.0.0.1:{port}").build("zenoh", robot_id=201)]
     node = Node(links, 201, budget=20000, period=0.1)
@@ -64,9 +85,7 @@ def _gateway_hop(rate_hz: int, count: int) -> list[float]:
         node.open()
         loop.start()
         _wait_for_peer(links[1])
-        sent = _sleep_paced(count, rate_hz, lambda i: robot.send(frames[i]))
-        arrived = receive.recv()
-        listener.join()
+        return radio.latencies(_sleep_paced(count, rate_hz, lambda i: robot.send(frames[i])))
     finally:
         stop.set()
         loop.join(timeout=5)
@@ -74,9 +93,7 @@ def _gateway_hop(rate_hz: int, count: int) -> list[float]:
         robot.shutdown()
         far.terminate()
         far.wait(timeout=20)
-        os.close(master)
-        os.close(slave)
-    return sorted(arrived[_tag(i)] - sent[i] for i in range(count) if _tag(i) in arrived)
+        radio.close()
 
 
 def _bare_hop(rate_hz: int, count: int) -> list[float]:
@@ -97,26 +114,17 @@ def _bare_hop(rate_hz: int, count: int) -> list[float]:
 
 def _bare_path_hop(rate_hz: int, count: int) -> list[float]:
     """The gateways' path with bare hops: a CAN frame in a thread here -> a bare Zenoh put -> a process that writes
-    each message to a cobs8 pty radio; the radio's far end timestamps, as in `_gateway_hop`."""
-    import can
-
-    from vstig_hw.framing.can import can_framing_for
-
-    master, slave, path = _raw_pty()
-    fork = multiprocessing.get_context("fork")
-    receive, done = fork.Pipe(duplex=False)
-    listener = fork.Process(target=_radio_listener, args=(master, count, done, 3.0))
-    listener.start()
+    each message to a cobs8 pty radio, whose far end times arrivals as in `_gateway_hop`."""
+    radio = _TimedRadio(count)
     port = free_port()
     session = bare_session(listen=f"tcp/127.0.0.1:{port}")
     publisher = session.declare_publisher(BARE_KEY)
-    far = subprocess.Popen([sys.executable, "-m", "benchmarks.zenoh_peer", "relay", f"tcp/127.0.0.1:{port}", path],
-                           stdout=subprocess.PIPE, text=True, cwd=_ROOT)
+    far = subprocess.Popen([sys.executable, "-m", "benchmarks.zenoh_peer", "relay", f"tcp/127.0.0.1:{port}",
+                            radio.path], stdout=subprocess.PIPE, text=True, cwd=_ROOT)
     channel = f"bench-zenoh-bare-{os.getpid()}-{rate_hz}"
     robot = can.Bus(interface="virtual", channel=channel)
     bus = can.Bus(interface="virtual", channel=channel)
-    codec = can_framing_for(7)
-    frames = [codec.encode(_numbered(i))[0] for i in range(count)]
+    frames = _can_frames(count)
     stop = threading.Event()
 
     def hop() -> None:
@@ -130,9 +138,7 @@ def _bare_path_hop(rate_hz: int, count: int) -> list[float]:
     try:
         assert far.stdout is not None and far.stdout.readline().strip() == "ready"
         time.sleep(1.0)  # its subscription reaches our session
-        sent = _sleep_paced(count, rate_hz, lambda i: robot.send(frames[i]))
-        arrived = receive.recv()
-        listener.join()
+        return radio.latencies(_sleep_paced(count, rate_hz, lambda i: robot.send(frames[i])))
     finally:
         stop.set()
         worker.join(timeout=5)
@@ -141,9 +147,7 @@ def _bare_path_hop(rate_hz: int, count: int) -> list[float]:
         bus.shutdown()
         robot.shutdown()
         session.close()  # type: ignore[no-untyped-call]
-        os.close(master)
-        os.close(slave)
-    return sorted(arrived[_tag(i)] - sent[i] for i in range(count) if _tag(i) in arrived)
+        radio.close()
 
 
 @benchmark("zenoh")
