@@ -10,9 +10,10 @@ PTRACE_GETFPREGS/SETFPREGS (the 512-byte FXSAVE area: x87 and SSE) instead, on
 any host. This launcher installs a seccomp filter that makes those two requests
 fail with EIO for the command and its children, then executes the command.
 
-Only x87/SSE state is then kept per guest context, so the runner also tells the
-guest's glibc not to use AVX (GLIBC_TUNABLES in uml.py): a multithreaded guest
-process then uses no register that switches between its threads would not keep.
+Only x87/SSE state is then kept per guest context, and the host reloads the rest
+as it likes on every restore (even a single-threaded guest program computed
+garbage in AVX code), so the runner also keeps the guest's glibc, OpenSSL and
+numpy off AVX (`_NO_AVX` in uml.py).
 """
 
 from __future__ import annotations
