@@ -6,7 +6,9 @@ Ctrl-C does, files closed and counters printed, instead of killing it with its c
 A second signal while the first is still being acted on ends the process at once (the
 signal's default action), so a stop that cannot finish (a device that does not let go)
 never leaves the user with a command that ignores Ctrl-C. Captures survive that: they are
-flushed every tick and readable after a kill.
+flushed every tick and readable after a kill. A signal within `SAME_STOP_S` of the first is
+the same stop, not a second one: `timeout -s INT` signals its command and then the command's
+process group, so one timeout can deliver two signals a few microseconds apart.
 """
 
 from __future__ import annotations
@@ -15,11 +17,14 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-__all__ = ["stop_on_signals"]
+__all__ = ["SAME_STOP_S", "stop_on_signals"]
+
+SAME_STOP_S = 1.0  # a repeat this soon is one sender's echo (timeout(1)); a person's second Ctrl-C comes later
 
 
 @contextmanager
@@ -29,11 +34,15 @@ def stop_on_signals() -> Iterator[threading.Event]:
     if threading.current_thread() is not threading.main_thread():
         yield stop  # signals only reach the main thread; the caller stops us some other way
         return
+    first_at: list[float] = []
 
     def handler(signum: int, frame: FrameType | None) -> None:
-        if not stop.is_set():
+        if not first_at:
+            first_at.append(time.monotonic())
             stop.set()
             return
+        if time.monotonic() - first_at[0] < SAME_STOP_S:
+            return  # the same stop, delivered twice
         sys.stderr.write("stopping now\n")  # the second signal: no more waiting for a clean stop
         signal.signal(signum, signal.SIG_DFL)
         os.kill(os.getpid(), signum)
