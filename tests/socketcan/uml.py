@@ -140,7 +140,11 @@ def _env_script() -> str:
     env.update(_NO_AVX)
     env.update(VSTIG_IN_UML="1", PYTHONDONTWRITEBYTECODE="1", PYTHONUNBUFFERED="1",
                PATH=os.pathsep.join([env.get("PATH", ""), _STANDARD_PATH]))
-    return "".join(f"export {k}={shlex.quote(v)}\n" for k, v in sorted(env.items()))
+    return _exports(dict(sorted(env.items())))
+
+
+def _exports(env: dict[str, str]) -> str:
+    return "".join(f"export {k}={shlex.quote(v)}\n" for k, v in env.items())
 
 
 def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: str = "1G",
@@ -162,8 +166,7 @@ def run(pytest_args: list[str], workdir: Path, *, timeout: float = 900.0, mem: s
                          *pytest_args]
     (workdir / "env.sh").write_text(_env_script())
     init = workdir / "init.sh"
-    no_avx = "".join(f"export {k}={shlex.quote(v)}\n" for k, v in _NO_AVX.items())
-    init.write_text(_INIT.format(no_avx=no_avx, moddir=moddir, out=workdir, repo=shlex.quote(str(REPO)),
+    init.write_text(_INIT.format(no_avx=_exports(_NO_AVX), moddir=moddir, out=workdir, repo=shlex.quote(str(REPO)),
                                  pytest=shlex.join(pytest)))
     init.chmod(0o755)
     if any(c.isspace() for c in str(init)):
