@@ -8,6 +8,8 @@ import functools
 import io
 import os
 import sys
+import threading
+import time
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -225,20 +227,16 @@ def lossless(spec: LinkSpec, opening: float | None = None) -> LinkSpec:
     return replace(spec, block=True, peer_wait=spec.peer_wait if opening is None else opening)
 
 
-def run_until_stopped(node: Node, status: Any = None, duration: float | None = None) -> None:
-    """Run the node until Ctrl-C/SIGTERM (or `duration`), refreshing `status()` every half second."""
-    from vstig_hw.gateway.shutdown import stop_on_signals
-
-    with stop_on_signals() as stop:
-        if status is None:
-            node.run(stop=stop, duration=duration)
-            return
-        import time
-
-        end = None if duration is None else time.monotonic() + duration
-        while not stop.is_set() and (end is None or time.monotonic() < end):
-            node.run(stop=stop, duration=0.5 if end is None else max(0.0, min(0.5, end - time.monotonic())))
-            status()
+def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, duration: float | None = None) -> None:
+    """Run the node until `stop` (the command's `stop_on_signals()`, entered before its links opened: a signal
+    any time after "Ctrl-C stops" is said ends it cleanly) or `duration`, refreshing `status()` every half second."""
+    if status is None:
+        node.run(stop=stop, duration=duration)
+        return
+    end = None if duration is None else time.monotonic() + duration
+    while not stop.is_set() and (end is None or time.monotonic() < end):
+        node.run(stop=stop, duration=0.5 if end is None else max(0.0, min(0.5, end - time.monotonic())))
+        status()
 
 
 def print_counters(node: Node) -> None:

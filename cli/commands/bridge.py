@@ -7,7 +7,7 @@ import sys
 import click
 
 from vstig_hw.engine import larger_value_wins
-from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency
+from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency, stop_on_signals
 from vstig_hw.links import LinkSpec
 
 from ..live import Address, foxglove_option, live_view
@@ -82,12 +82,12 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
         if live:
             click.echo(f"\r\x1b[K{line}", nl=False, err=True)
 
-    with live_view(node, foxglove, larger_value_wins=larger), node:
+    with stop_on_signals() as stop, live_view(node, foxglove, larger_value_wins=larger), node:
         click.echo(f"bridging {', '.join(link.name for link in node.links)} "
                    f"({_raw_note(robot_id) if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
         describe_links(node)
         try:
-            run_until_stopped(node, status, duration)
+            run_until_stopped(node, stop, status, duration)
         finally:
             if live:
                 click.echo(err=True)

@@ -23,7 +23,7 @@ from vstig_hw.capture.records import (
 )
 from vstig_hw.extras import require
 from vstig_hw.framing.can import CanFraming
-from vstig_hw.gateway import Mode, Node
+from vstig_hw.gateway import Mode, Node, stop_on_signals
 from vstig_hw.links import Link, LinkSpec
 from vstig_hw.links.can import CanSpec
 from vstig_hw.links.zenoh import ZenohSpec
@@ -134,7 +134,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
 
     node.on_tick.append(flush)
     try:
-        with node:
+        with stop_on_signals() as stop, node:
             capture = RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
                                       append=append)
             with node.lock:  # the readers write under it: the early units go first, in order
@@ -150,7 +150,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
             line = StatusLine()
             status = (lambda: line.show(f"{captures[0].records} units  {node.summary()}")) if line.live else None
             try:
-                run_until_stopped(node, status, duration)
+                run_until_stopped(node, stop, status, duration)
             finally:
                 line.end()
     finally:

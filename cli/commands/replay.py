@@ -196,10 +196,10 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     passes_done = 0
     bad: list[CaptureError] = []  # what the last pass skipped
     try:
-        for link in targets.values():
-            link.open()
-            opened.append(link)
-        with stop_on_signals() as stop:
+        with stop_on_signals() as stop:  # before the links open: a signal while they do is a clean stop too
+            for link in targets.values():
+                link.open()
+                opened.append(link)
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
                 bad = []

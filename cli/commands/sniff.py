@@ -12,7 +12,7 @@ import click
 from vstig_hw.capture.filters import Filter
 from vstig_hw.engine import larger_value_wins
 from vstig_hw.framing.can import CanFraming
-from vstig_hw.gateway import Mode, Node
+from vstig_hw.gateway import Mode, Node, stop_on_signals
 from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard, LinkSpec
@@ -128,16 +128,17 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
 
         listeners.append(emit)
         node.on_tick.append(lambda _node: _warn(firewall))
-        with live_view(node, foxglove, value_type=value_type, larger_value_wins=larger), node:
+        with (stop_on_signals() as stop, live_view(node, foxglove, value_type=value_type, larger_value_wins=larger),
+              node):
             describe_links(node)
-            run_until_stopped(node, duration=duration)
+            run_until_stopped(node, stop, duration=duration)
         _warn(firewall)
         print_counters(node)
         return
     from rich.live import Live
 
     # The live view first, then the node: a port that cannot be bound or opened is the one line said
-    with live_view(node, foxglove, value_type=value_type, larger_value_wins=larger), node:
+    with stop_on_signals() as stop, live_view(node, foxglove, value_type=value_type, larger_value_wins=larger), node:
         if not sys.stdout.isatty():
             click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
                        "(--jsonl streams every message instead)", err=True)
@@ -148,7 +149,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
                 live.update(_table(view, value_type, node, height))
 
             describe_links(node)
-            run_until_stopped(node, redraw, duration)
+            run_until_stopped(node, stop, redraw, duration)
     _warn(firewall)
     print_counters(node)
 

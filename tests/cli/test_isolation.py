@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import socket
 import statistics
 import subprocess
 import sys
@@ -20,6 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from peers import PtyPeer, start_vstig, stop, wait_for
+from ports import free_port
 
 from vstig_hw import Message, Op, encode
 from vstig_hw.framing import make_serial_framing
@@ -96,7 +96,7 @@ class ZenohBridge:
     """`vstig bridge` of a listening zenoh link and one cobs8 radio, read by a Listener, and a peer session."""
 
     def __init__(self) -> None:
-        self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.radio = PtyPeer()
         self.process = start_vstig("bridge", f"zenoh:lab?listen={self.endpoint}",
                                    f"serial:{self.radio.path}?framing=cobs8", "--robot-id", "200", "--no-refresh")
@@ -162,12 +162,6 @@ def test_a_radio_nobody_reads_delays_no_other_link() -> None:
     assert stuck.get("tx_overflow", 0) > 0, stuck  # the deaf radio really stopped taking: its oldest were dropped
     assert err.count(f"{names[2]}: the device does not take what we send") == 1  # logged once for the episode
     assert rss_after - rss_before < 20_000, (rss_before, rss_after)  # kB: the deaf radio's queue is bounded
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
 
 
 def _zenoh_peer(endpoint: str) -> Any:
@@ -237,7 +231,7 @@ print(sent)
 
 
 def test_an_unpaced_zenoh_flood_does_not_starve_another_links_reads() -> None:
-    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
     source, healthy = PtyPeer(), PtyPeer()
     bridge = start_vstig("bridge", f"zenoh:lab?listen={endpoint}", *(f"serial:{radio.path}?framing=cobs8"
                                                                     for radio in (source, healthy)),

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import threading
 import time
@@ -20,6 +19,7 @@ from pathlib import Path
 import pytest
 from netns import Lan, netns_unavailable
 from peers import VSTIG, wait_for
+from ports import free_port
 from robots import CanRobot, PtyRobot, Robot
 
 pytestmark = pytest.mark.slow
@@ -28,12 +28,6 @@ SWARM = "lab"
 STEP = 0.1  # the paper's control step
 # A short lease, so a cut cable is noticed in about 2 s instead of Zenoh's default 10 s; passed through config=.
 CONFIG = "{ transport: { link: { tx: { lease: 2000, keep_alive: 4 } } } }\n"
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
 
 
 class Gateway:
@@ -73,7 +67,7 @@ class Federation:
         config = tmp_path / "lab.json5"
         config.write_text(CONFIG)
         hosts = [lan.address(n) if lan else "127.0.0.1" for n in range(len(robots))]
-        ports = [7447 if lan else _free_port() for _ in robots]
+        ports = [7447 if lan else free_port() for _ in robots]
         self.gateways = []
         for n, own in enumerate(robots):
             spec = f"zenoh:{SWARM}?listen=tcp/{hosts[n]}:{ports[n]}&config={config}"

@@ -10,7 +10,6 @@ reaches the lab, and it is told so in one line).
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
 import time
@@ -18,18 +17,13 @@ from pathlib import Path
 
 import pytest
 from certs import Authority, mtls_config, password_config
+from ports import free_port
 
 from vstig_hw.links import parse
 from vstig_hw.wire import Message, Op
 
 VSTIG = str(Path(sys.executable).with_name("vstig"))
 pytestmark = pytest.mark.slow
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
 
 
 def _configs(folder: Path, deployment: str) -> dict[str, Path]:
@@ -52,7 +46,7 @@ def _configs(folder: Path, deployment: str) -> dict[str, Path]:
 @pytest.mark.parametrize("deployment", ["mtls", "tls+password"])
 def test_only_gateways_with_the_labs_credentials_join(tmp_path: Path, deployment: str) -> None:
     configs = _configs(tmp_path, deployment)
-    port = _free_port()
+    port = free_port()
     listener = parse(f"zenoh:lab?listen=tls/localhost:{port}&config={configs['gw-a']}").build(robot_id=1)
     member = parse(f"zenoh:lab?connect=tls/localhost:{port}&config={configs['gw-b']}").build(robot_id=2)
     intruder = f"zenoh:lab?connect=tls/localhost:{port}&config={configs['intruder']}"

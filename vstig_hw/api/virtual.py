@@ -133,14 +133,15 @@ def main(argv: list[str] | None = None) -> int:
     path: Path = args.path
     if path.exists() or path.is_symlink():
         parser.error(f"{path} exists: name a path that does not (it is never replaced)")
-    with VirtualRobots(radio_ids=range(1, args.robots + 1), program=figure1, onconflict=larger_value_wins) as robots:
+    # Signals first: one that comes after "Ctrl-C stops" is said (or while the robots start) is a clean stop
+    with stop_on_signals() as stop, VirtualRobots(radio_ids=range(1, args.robots + 1), program=figure1,
+                                                  onconflict=larger_value_wins) as robots:
         assert robots.radio_path is not None
         path.symlink_to(robots.radio_path)
         try:
             print(f"{args.robots} robots play Figure 1 on serial:{path}?framing=cobs8; Ctrl-C stops", flush=True)
-            with stop_on_signals() as stop:
-                while not stop.wait(0.5) and not robots.errors:
-                    pass
+            while not stop.wait(0.5) and not robots.errors:
+                pass
         finally:
             path.unlink()
     held: dict[int | None, int] = {}
