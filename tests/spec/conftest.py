@@ -15,8 +15,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 SPEC = ROOT / "firmware_spec"
 VECTORS = SPEC / "vectors"
-C_DIR = SPEC / "c"
-C_SOURCES = [C_DIR / "vstig_wire.c", C_DIR / "test_vectors.c"]
+C_DIR = SPEC / "libvstig"
+C_SOURCES = [*sorted(C_DIR.glob("vstig_*.c")), C_DIR / "tests" / "driver.c"]
 STRICT_FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 BUILDS = {"strict": ["-O2"], "sanitized": ["-O1", "-g", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]}
 
@@ -37,7 +37,7 @@ def require_tool(tool: str) -> str:
 
 
 class Driver:
-    """The compiled test_vectors.c: one command per line in, one result per line out."""
+    """The compiled libvstig test driver: one command per line in, one result per line out."""
 
     def __init__(self, exe: Path) -> None:
         self.exe = exe
@@ -61,8 +61,9 @@ class Driver:
 def driver(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Driver:
     """The C driver built with the strict warning flags, plain and with ASan+UBSan."""
     gcc = require_tool("gcc")
-    exe = tmp_path_factory.mktemp("c") / f"test_vectors_{request.param}"
-    done = subprocess.run([gcc, *STRICT_FLAGS, *BUILDS[request.param], "-o", str(exe), *map(str, C_SOURCES)],
+    exe = tmp_path_factory.mktemp("c") / f"driver_{request.param}"
+    done = subprocess.run([gcc, *STRICT_FLAGS, *BUILDS[request.param], "-I", str(C_DIR), "-o", str(exe),
+                           *map(str, C_SOURCES)],
                           capture_output=True, text=True, timeout=120, check=False)
     assert done.returncode == 0, f"gcc {request.param} build failed:\n{done.stderr}"
     return Driver(exe)
@@ -71,7 +72,7 @@ def driver(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFact
 def results(messages: list[str], drops: dict[str, int]) -> str:
     """A receive result in the driver's `msgs=... drops=...` form (drops in the header's reason order)."""
     order = ["cobs", "crc", "bad_length", "overlong", "bad_index", "collision", "check", "stale", "duplicate",
-             "foreign_type", "bad_version"]
+             "foreign_type", "bad_version", "error_frame", "unknown_id", "remote_frame", "bad_dlc", "op_mismatch"]
     shown = [f"{name}:{drops[name]}" for name in order if drops.get(name)]
     assert set(drops) <= set(order), f"a vector names an unknown drop reason: {set(drops) - set(order)}"
     return f"msgs={','.join(messages) or '-'} drops={','.join(shown) or '-'}"

@@ -110,6 +110,6 @@ def test_drop_table_names_exactly_what_code_c_and_vectors_count() -> None:
     vectors = set().union(*(_vector_reasons(json.loads(p.read_text(encoding="utf-8")))
                             for p in VECTORS.glob("*.json")))
     assert python and c_names and vectors, "found no drop reasons to compare"
-    for where, names in (("vstig_hw/framing", python), ("c/vstig_wire.c", c_names), ("vectors", vectors)):
+    for where, names in (("vstig_hw/framing", python), ("libvstig/vstig_wire.c", c_names), ("vectors", vectors)):
         assert names - table == set(), f"{where} counts reasons SPEC.md 6.6 does not list"
     assert table - (python | c_names | vectors) == set(), "SPEC.md 6.6 lists reasons nothing counts"

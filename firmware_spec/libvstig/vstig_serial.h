@@ -1,77 +1,19 @@
 /*
- * vstig_wire: reference C99 codec for vstig-hw robot firmware (firmware_spec/SPEC.md).
+ * vstig_serial: the serial frame of every UART link and the framings on it: cobs8,
+ * epuck4, kilobot and kilobot-ohc (SPEC.md 6.0 to 6.4). Part of libvstig.
  *
- * Portable: fixed-width integers only, no malloc, no floating point, no 64-bit
- * arithmetic, no lookup tables. It builds for an 8-bit AVR as well as for a PC.
- * Every decoder is a small struct the caller owns (static or on the stack) and
- * feeds one byte or one word at a time; drops are counted in it by reason.
+ * Every decoder is a small struct the caller owns (static or on the stack) and feeds
+ * one byte or one word at a time, or a whole buffer (vstig_serial_receive); drops are
+ * counted in it by reason.
  */
-#ifndef VSTIG_WIRE_H
-#define VSTIG_WIRE_H
+#ifndef VSTIG_SERIAL_H
+#define VSTIG_SERIAL_H
 
-#include <stddef.h>
-#include <stdint.h>
+#include "vstig_wire.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
-
-/* ---- the 8-byte message (SPEC.md section 2) ------------------------------ */
-#define VSTIG_MESSAGE_SIZE 8u
-#define VSTIG_PUT 0u
-#define VSTIG_GET 1u
-#define VSTIG_KEY_MAX 0x7FFFu
-#define VSTIG_TS_NONE 0u /* reserved: "no entry" */
-
-typedef struct {
-    uint8_t op;         /* VSTIG_PUT or VSTIG_GET */
-    uint16_t key;       /* 0..0x7FFF */
-    uint16_t value;
-    uint16_t timestamp; /* 0 is reserved */
-    uint16_t robot;     /* the robot that wrote the value */
-} vstig_msg_t;
-
-/* Writes the 8 wire bytes. Out-of-range fields are masked (op to 1 bit, key to 15). */
-void vstig_msg_encode(const vstig_msg_t *msg, uint8_t out[VSTIG_MESSAGE_SIZE]);
-/* Any 8 bytes are a message. */
-void vstig_msg_decode(const uint8_t in[VSTIG_MESSAGE_SIZE], vstig_msg_t *msg);
-
-/* ---- timestamps (SPEC.md section 3) -------------------------------------- */
-/* 1 when timestamp a is strictly newer than b (serial-number arithmetic, 0 reserved). */
-uint8_t vstig_ts_newer(uint16_t a, uint16_t b);
-/* The timestamp a local put gives after ts: ts + 1, skipping 0 (65535 -> 1). */
-uint16_t vstig_ts_next(uint16_t ts);
-
-/* ---- CRCs ---------------------------------------------------------------- */
-/* CRC-16/MCRF4XX, byte-wise without a table (avr-libc's _crc_ccitt_update computes the same). */
-#define VSTIG_CRC16_INIT 0xFFFFu
-uint16_t vstig_crc16_update(uint16_t crc, uint8_t byte);
-uint16_t vstig_crc16(const uint8_t *data, size_t len);
-/* CRC-32/ISO-HDLC (zlib's crc32), bit by bit. */
-uint32_t vstig_crc32(const uint8_t *data, size_t len);
-
-/* ---- drop counters ------------------------------------------------------- */
-typedef enum {
-    VSTIG_DROP_COBS = 0,   /* undecodable COBS */
-    VSTIG_DROP_CRC,        /* CRC mismatch */
-    VSTIG_DROP_BAD_LENGTH, /* payload length not this framing's */
-    VSTIG_DROP_OVERLONG,   /* no delimiter within VSTIG_FRAME_MAX bytes */
-    VSTIG_DROP_BAD_INDEX,  /* epuck4: index 3 */
-    VSTIG_DROP_COLLISION,  /* epuck4: a fragment clashed with a stored one (older ones evicted) */
-    VSTIG_DROP_CHECK,      /* epuck4: complete set failed the CRC-32 check */
-    VSTIG_DROP_STALE,      /* epuck4: fragments expired */
-    VSTIG_DROP_DUPLICATE,  /* epuck4: identical fragment already held */
-    VSTIG_DROP_FOREIGN_TYPE, /* kilobot: another message type (other Kilobot traffic) */
-    VSTIG_DROP_BAD_VERSION,  /* kilobot: data[8] is not format version 1 */
-    VSTIG_DROP_REASONS
-} vstig_drop_t;
-
-typedef struct {
-    uint16_t count[VSTIG_DROP_REASONS]; /* saturating */
-} vstig_drops_t;
-
-/* The reason's name as SPEC.md spells it ("crc", "bad_length", ...). */
-const char *vstig_drop_name(vstig_drop_t reason);
 
 /* ---- the serial frame (SPEC.md 6.0): COBS(payload || crc16_le) || 0x00 --- */
 #define VSTIG_FRAME_MAX 64u /* longest run of non-zero bytes a receiver buffers */
@@ -107,10 +49,6 @@ uint8_t vstig_epuck4_word_frame(uint32_t word, uint8_t out[VSTIG_EPUCK4_FRAME_SI
 /* Feed one UART byte; returns 1 when a whole word arrived in *word. */
 uint8_t vstig_epuck4_uart_feed(vstig_deframer_t *d, uint8_t byte, uint32_t *word);
 
-#ifndef VSTIG_EPUCK4_SLOTS
-#define VSTIG_EPUCK4_SLOTS 16u /* one per group: with fewer, busy slots are evicted oldest first */
-#endif
-
 typedef struct {
     uint32_t chunk[3];
     uint16_t order[3]; /* arrival number of each held fragment (compared modulo 2^16) */
@@ -120,7 +58,7 @@ typedef struct {
 } vstig_epuck4_partial_t;
 
 typedef struct {
-    vstig_epuck4_partial_t slot[VSTIG_EPUCK4_SLOTS];
+    vstig_epuck4_partial_t slot[VSTIG_EPUCK4_SLOTS]; /* with fewer than 16, busy slots go oldest first */
     uint16_t arrivals;
     uint8_t now;
     uint8_t expiry_ticks; /* 1..254 */
@@ -153,8 +91,30 @@ uint8_t vstig_kilobot_uart_feed(vstig_deframer_t *d, uint8_t byte, uint8_t type,
 #define VSTIG_OHC_FORWARDMSGSINGLE 6u /* sent once */
 void vstig_ohc_packet(const vstig_msg_t *msg, uint8_t packet_type, uint8_t type, uint8_t out[VSTIG_OHC_PACKET_SIZE]);
 
+/* ---- a serial link's receiver over buffers --------------------------------- */
+#define VSTIG_COBS8 0u
+#define VSTIG_EPUCK4 1u
+#define VSTIG_KILOBOT 2u
+
+typedef struct {
+    vstig_deframer_t deframer;
+    uint8_t framing;      /* VSTIG_COBS8, VSTIG_EPUCK4 or VSTIG_KILOBOT */
+    uint8_t kilobot_type; /* kilobot: the message type of the swarm (VSTIG_KILOBOT_TYPE) */
+    vstig_epuck4_reassembler_t *epuck4; /* epuck4: the caller's reassembler (it counts the epuck4 drops) */
+} vstig_serial_rx_t;
+
+/* 0, or VSTIG_ERR_ARG for an unknown framing, a kilobot type of 0x80 or more, or an epuck4
+ * receiver without a reassembler. */
+int vstig_serial_rx_init(vstig_serial_rx_t *rx, uint8_t framing, uint8_t kilobot_type,
+                         vstig_epuck4_reassembler_t *epuck4);
+/* Feed len received bytes; every message they complete is written to out, at most max of them.
+ * Returns how many were written; *used is how many bytes were taken, len unless out filled up
+ * first (call again with the rest). Bad frames are counted in rx->deframer.drops. */
+size_t vstig_serial_receive(vstig_serial_rx_t *rx, const uint8_t *data, size_t len, size_t *used,
+                            vstig_msg_t *out, size_t max);
+
 #ifdef __cplusplus
 }
 #endif
 
-#endif /* VSTIG_WIRE_H */
+#endif /* VSTIG_SERIAL_H */

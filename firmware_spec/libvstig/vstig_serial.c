@@ -1,83 +1,5 @@
-/* vstig_wire: reference C99 codec for vstig-hw robot firmware. See vstig_wire.h and SPEC.md. */
-#include "vstig_wire.h"
-
-/* ---- message ------------------------------------------------------------- */
-
-static void put16(uint8_t *out, uint16_t v) {
-    out[0] = (uint8_t)(v >> 8);
-    out[1] = (uint8_t)(v & 0xFFu);
-}
-
-static uint16_t get16(const uint8_t *in) { return (uint16_t)(((uint16_t)in[0] << 8) | in[1]); }
-
-void vstig_msg_encode(const vstig_msg_t *msg, uint8_t out[VSTIG_MESSAGE_SIZE]) {
-    put16(out, (uint16_t)(((uint16_t)(msg->op & 1u) << 15) | (msg->key & VSTIG_KEY_MAX)));
-    put16(out + 2, msg->value);
-    put16(out + 4, msg->timestamp);
-    put16(out + 6, msg->robot);
-}
-
-void vstig_msg_decode(const uint8_t in[VSTIG_MESSAGE_SIZE], vstig_msg_t *msg) {
-    msg->op = (uint8_t)(in[0] >> 7);
-    msg->key = (uint16_t)(get16(in) & VSTIG_KEY_MAX);
-    msg->value = get16(in + 2);
-    msg->timestamp = get16(in + 4);
-    msg->robot = get16(in + 6);
-}
-
-/* ---- timestamps ---------------------------------------------------------- */
-
-uint8_t vstig_ts_newer(uint16_t a, uint16_t b) {
-    uint16_t distance;
-    if (b == VSTIG_TS_NONE) return (uint8_t)(a != VSTIG_TS_NONE);
-    if (a == VSTIG_TS_NONE) return 0;
-    distance = (uint16_t)(a - b); /* modulo 2^16 */
-    if (distance == 0x8000u) return (uint8_t)(a > b); /* half-way: the larger number is newer */
-    return (uint8_t)(distance != 0 && distance < 0x8000u);
-}
-
-uint16_t vstig_ts_next(uint16_t ts) { return ts == 0xFFFFu ? 1u : (uint16_t)(ts + 1u); }
-
-/* ---- CRCs ---------------------------------------------------------------- */
-
-uint16_t vstig_crc16_update(uint16_t crc, uint8_t byte) {
-    /* Reflected poly 0x8408 processed a byte at a time: the same shift/xor identity
-     * avr-libc documents for _crc_ccitt_update. */
-    uint8_t x = (uint8_t)(byte ^ (uint8_t)(crc & 0xFFu));
-    x = (uint8_t)(x ^ (uint8_t)(x << 4));
-    return (uint16_t)((((uint16_t)x << 8) | (crc >> 8)) ^ (uint8_t)(x >> 4) ^ ((uint16_t)x << 3));
-}
-
-uint16_t vstig_crc16(const uint8_t *data, size_t len) {
-    uint16_t crc = VSTIG_CRC16_INIT;
-    while (len--) crc = vstig_crc16_update(crc, *data++);
-    return crc;
-}
-
-uint32_t vstig_crc32(const uint8_t *data, size_t len) {
-    uint32_t crc = 0xFFFFFFFFul;
-    uint8_t bit;
-    while (len--) {
-        crc ^= *data++;
-        for (bit = 0; bit < 8; bit++) crc = (crc & 1u) ? (crc >> 1) ^ 0xEDB88320ul : crc >> 1;
-    }
-    return crc ^ 0xFFFFFFFFul;
-}
-
-/* ---- drops --------------------------------------------------------------- */
-
-static const char *const drop_names[VSTIG_DROP_REASONS] = {
-    "cobs", "crc", "bad_length", "overlong", "bad_index", "collision",
-    "check", "stale", "duplicate", "foreign_type", "bad_version",
-};
-
-const char *vstig_drop_name(vstig_drop_t reason) {
-    return (unsigned)reason < VSTIG_DROP_REASONS ? drop_names[reason] : "?";
-}
-
-static void count(vstig_drops_t *drops, vstig_drop_t reason) {
-    if (drops->count[reason] != 0xFFFFu) drops->count[reason]++;
-}
+/* vstig_serial: the serial frame and its framings. See vstig_serial.h and SPEC.md 6.0 to 6.4. */
+#include "vstig_serial.h"
 
 /* ---- serial frame -------------------------------------------------------- */
 
@@ -101,10 +23,9 @@ uint8_t vstig_frame_encode(const uint8_t *payload, uint8_t len, uint8_t *out) {
 }
 
 void vstig_deframer_init(vstig_deframer_t *d) {
-    uint8_t i;
     d->len = 0;
     d->discarding = 0;
-    for (i = 0; i < VSTIG_DROP_REASONS; i++) d->drops.count[i] = 0;
+    vstig_drops_clear(&d->drops);
 }
 
 /* Decodes COBS in place (output never overtakes input); returns the decoded length or -1. */
@@ -125,7 +46,7 @@ uint8_t vstig_deframer_feed(vstig_deframer_t *d, uint8_t byte, uint8_t want) {
     if (byte != 0) {
         if (d->discarding) return 0;
         if (d->len == VSTIG_FRAME_MAX) { /* no delimiter in sight: drop, resync at the next 0x00 */
-            count(&d->drops, VSTIG_DROP_OVERLONG);
+            vstig_drops_count(&d->drops, VSTIG_DROP_OVERLONG);
             d->discarding = 1;
             d->len = 0;
             return 0;
@@ -141,15 +62,15 @@ uint8_t vstig_deframer_feed(vstig_deframer_t *d, uint8_t byte, uint8_t want) {
     n = cobs_decode_in_place(d->buf, d->len);
     d->len = 0;
     if (n < 0) {
-        count(&d->drops, VSTIG_DROP_COBS);
+        vstig_drops_count(&d->drops, VSTIG_DROP_COBS);
         return 0;
     }
     if (n < 2 || vstig_crc16(d->buf, (size_t)n) != 0) { /* over payload || crc_le the residue is 0 */
-        count(&d->drops, VSTIG_DROP_CRC);
+        vstig_drops_count(&d->drops, VSTIG_DROP_CRC);
         return 0;
     }
     if (n - 2 != want) {
-        count(&d->drops, VSTIG_DROP_BAD_LENGTH);
+        vstig_drops_count(&d->drops, VSTIG_DROP_BAD_LENGTH);
         return 0;
     }
     return 1;
@@ -208,7 +129,7 @@ uint8_t vstig_epuck4_uart_feed(vstig_deframer_t *d, uint8_t byte, uint32_t *word
 void vstig_epuck4_init(vstig_epuck4_reassembler_t *r, uint8_t expiry_ticks) {
     uint8_t i;
     for (i = 0; i < VSTIG_EPUCK4_SLOTS; i++) r->slot[i].held = 0;
-    for (i = 0; i < VSTIG_DROP_REASONS; i++) r->drops.count[i] = 0;
+    vstig_drops_clear(&r->drops);
     r->arrivals = 0;
     r->now = 0;
     r->expiry_ticks = expiry_ticks;
@@ -238,7 +159,7 @@ static vstig_epuck4_partial_t *partial_for(vstig_epuck4_reassembler_t *r, uint8_
         }
     }
     if (!free_slot) { /* fewer slots than groups, all busy: the oldest partial makes room */
-        count(&r->drops, VSTIG_DROP_STALE);
+        vstig_drops_count(&r->drops, VSTIG_DROP_STALE);
         victim->held = 0;
         free_slot = victim;
     }
@@ -252,18 +173,18 @@ uint8_t vstig_epuck4_feed(vstig_epuck4_reassembler_t *r, uint32_t word, vstig_ms
     uint8_t m[VSTIG_MESSAGE_SIZE];
     vstig_epuck4_partial_t *p;
     if (index == 3) {
-        count(&r->drops, VSTIG_DROP_BAD_INDEX);
+        vstig_drops_count(&r->drops, VSTIG_DROP_BAD_INDEX);
         return 0;
     }
     p = partial_for(r, group);
     if (p->held & (1u << index)) {
         uint16_t cut = p->order[index];
         if (p->chunk[index] == chunk) {
-            count(&r->drops, VSTIG_DROP_DUPLICATE);
+            vstig_drops_count(&r->drops, VSTIG_DROP_DUPLICATE);
             return 0;
         }
         /* the clashing fragment and everything older belong to an earlier, lost message */
-        count(&r->drops, VSTIG_DROP_COLLISION);
+        vstig_drops_count(&r->drops, VSTIG_DROP_COLLISION);
         for (i = 0; i < 3; i++)
             if ((p->held & (1u << i)) && arrived_no_later(p->order[i], cut)) p->held &= (uint8_t)~(1u << i);
     }
@@ -282,7 +203,7 @@ uint8_t vstig_epuck4_feed(vstig_epuck4_reassembler_t *r, uint32_t word, vstig_ms
     m[7] = (uint8_t)(p->chunk[2] >> 14);
     c = vstig_crc32(m, VSTIG_MESSAGE_SIZE);
     if ((uint8_t)(c >> 28) != group || (uint16_t)((c >> 14) & CHECK_MASK) != (uint16_t)(p->chunk[2] & CHECK_MASK)) {
-        count(&r->drops, VSTIG_DROP_CHECK);
+        vstig_drops_count(&r->drops, VSTIG_DROP_CHECK);
         p->held &= (uint8_t)~(1u << oldest_index(p)); /* most likely the leftover of a lost message */
         return 0;
     }
@@ -303,7 +224,7 @@ void vstig_epuck4_tick(vstig_epuck4_reassembler_t *r) {
                 stale = 1;
             }
         }
-        if (stale) count(&r->drops, VSTIG_DROP_STALE);
+        if (stale) vstig_drops_count(&r->drops, VSTIG_DROP_STALE);
     }
 }
 
@@ -327,11 +248,11 @@ void vstig_kilobot_encode(const vstig_msg_t *msg, uint8_t type, uint8_t out[12])
 
 uint8_t vstig_kilobot_accept(const uint8_t head[10], uint8_t type, vstig_msg_t *out, vstig_drops_t *drops) {
     if (head[9] != type) {
-        count(drops, VSTIG_DROP_FOREIGN_TYPE);
+        vstig_drops_count(drops, VSTIG_DROP_FOREIGN_TYPE);
         return 0;
     }
     if (head[8] != VSTIG_KILOBOT_VERSION) {
-        count(drops, VSTIG_DROP_BAD_VERSION);
+        vstig_drops_count(drops, VSTIG_DROP_BAD_VERSION);
         return 0;
     }
     vstig_msg_decode(head, out);
@@ -359,4 +280,33 @@ void vstig_ohc_packet(const vstig_msg_t *msg, uint8_t packet_type, uint8_t type,
     kilobot_head(msg, type, out + 2);
     for (i = 0; i < VSTIG_OHC_PACKET_SIZE - 1u; i++) x ^= out[i];
     out[VSTIG_OHC_PACKET_SIZE - 1u] = x;
+}
+
+/* ---- a serial link's receiver over buffers --------------------------------- */
+
+int vstig_serial_rx_init(vstig_serial_rx_t *rx, uint8_t framing, uint8_t kilobot_type,
+                         vstig_epuck4_reassembler_t *epuck4) {
+    if (framing > VSTIG_KILOBOT || kilobot_type >= 0x80u || (framing == VSTIG_EPUCK4 && !epuck4)) return VSTIG_ERR_ARG;
+    vstig_deframer_init(&rx->deframer);
+    rx->framing = framing;
+    rx->kilobot_type = kilobot_type;
+    rx->epuck4 = epuck4;
+    return 0;
+}
+
+static uint8_t serial_feed(vstig_serial_rx_t *rx, uint8_t byte, vstig_msg_t *out) {
+    uint32_t word;
+    switch (rx->framing) {
+    case VSTIG_COBS8: return vstig_cobs8_feed(&rx->deframer, byte, out);
+    case VSTIG_KILOBOT: return vstig_kilobot_uart_feed(&rx->deframer, byte, rx->kilobot_type, out);
+    default: return vstig_epuck4_uart_feed(&rx->deframer, byte, &word) && vstig_epuck4_feed(rx->epuck4, word, out);
+    }
+}
+
+size_t vstig_serial_receive(vstig_serial_rx_t *rx, const uint8_t *data, size_t len, size_t *used,
+                            vstig_msg_t *out, size_t max) {
+    size_t i = 0, n = 0;
+    while (i < len && n < max) n += serial_feed(rx, data[i++], &out[n]);
+    *used = i;
+    return n;
 }

@@ -1,0 +1,113 @@
+/*
+ * A robot on an ATmega328P (the Kilobot's MCU) whose radio is its UART, speaking cobs8:
+ * libvstig's engine driven by a sleeping main loop. It runs the paper's program: every
+ * robot writes its id under key 1 and the larger value wins, so the swarm agrees on the
+ * highest id; each control step the robot reads key 1 and reports what it holds under
+ * key 0x100 + its id, so a PC sees this robot's own view converge.
+ *
+ * Its robot id is read from EEPROM bytes 0xB0-0xB1, where kilolib keeps a Kilobot's.
+ * Build (the tests do it, and run it in simavr with its UART on a pty):
+ *   avr-gcc -mmcu=atmega328p -DF_CPU=8000000UL -Os -DVSTIG_KEYS=16u -I.. avr_robot.c ../vstig_*.c
+ */
+#include <avr/eeprom.h>
+#include <avr/interrupt.h>
+#include <avr/io.h>
+#include <avr/sleep.h>
+
+#include "vstig.h"
+
+#define BAUD_DIVISOR ((F_CPU / 8UL / 115200UL) - 1UL) /* 115200 8N1 (SPEC.md 6.0.1), double speed */
+#define STEP_TICKS ((F_CPU / 64UL / 20UL) - 1UL)      /* a control step every 50 ms (Timer1, clk/64) */
+#define UID_ADDRESS ((const uint8_t *)0xB0)           /* kilolib's EEPROM_UID */
+#define KEY_LEADER 1u
+#define KEY_REPORT 0x100u
+#define BUDGET 4u    /* messages sent per control step: the radio's bandwidth */
+#define RX_RING 128u /* bytes the UART interrupt can hold between two passes of the main loop */
+
+static volatile uint8_t ring[RX_RING];
+static volatile uint8_t ring_head, ring_tail, ring_lost; /* ring_lost: bytes the ring had no room for */
+static volatile uint8_t step_due;
+
+ISR(USART_RX_vect) {
+    uint8_t byte = UDR0, next = (uint8_t)((ring_head + 1u) % RX_RING);
+    if (next == ring_tail) {
+        ring_lost++;
+        return;
+    }
+    ring[ring_head] = byte;
+    ring_head = next;
+}
+
+ISR(TIMER1_COMPA_vect) { step_due = 1; }
+
+static void uart_send(const uint8_t *data, uint8_t len) {
+    while (len--) {
+        while (!(UCSR0A & _BV(UDRE0))) {
+        }
+        UDR0 = *data++;
+    }
+}
+
+static void send_queue(vstig_engine_t *engine) {
+    vstig_msg_t out[BUDGET];
+    uint8_t frame[VSTIG_COBS8_FRAME_SIZE];
+    size_t i, n = vstig_engine_drain(engine, out, BUDGET);
+    for (i = 0; i < n; i++) uart_send(frame, vstig_cobs8_encode(&out[i], frame));
+}
+
+/* Everything the UART brought since the last pass, through the framing into the engine. */
+static void take_in(vstig_engine_t *engine, vstig_serial_rx_t *rx) {
+    vstig_msg_t heard[4];
+    uint8_t chunk[16];
+    size_t n, used, at, len = 0;
+    while (ring_tail != ring_head && len < sizeof chunk) {
+        chunk[len++] = ring[ring_tail];
+        ring_tail = (uint8_t)((ring_tail + 1u) % RX_RING);
+    }
+    for (at = 0; at < len; at += used) {
+        n = vstig_serial_receive(rx, &chunk[at], len - at, &used, heard, 4);
+        vstig_engine_receive_many(engine, heard, n, 0);
+    }
+}
+
+int main(void) {
+    static vstig_engine_t engine; /* the whole stigmergy: table and outgoing queue */
+    static vstig_serial_rx_t rx;
+    uint16_t uid = (uint16_t)(eeprom_read_byte(UID_ADDRESS) | (uint16_t)eeprom_read_byte(UID_ADDRESS + 1) << 8);
+    uint16_t leader = 0, reported = 0;
+    const uint8_t idle = 0; /* SPEC.md 6.0.3: a 0x00 first, so the far end drops any partial frame */
+
+    vstig_engine_init(&engine, uid, vstig_larger_value_wins, 0, 0);
+    vstig_serial_rx_init(&rx, VSTIG_COBS8, 0, 0);
+    UBRR0 = BAUD_DIVISOR;
+    UCSR0A = _BV(U2X0);
+    UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
+    UCSR0C = _BV(UCSZ01) | _BV(UCSZ00);
+    OCR1A = STEP_TICKS;
+    TCCR1B = _BV(WGM12) | _BV(CS11) | _BV(CS10);
+    TIMSK1 = _BV(OCIE1A);
+    set_sleep_mode(SLEEP_MODE_IDLE);
+    sei();
+    uart_send(&idle, 1);
+    vstig_engine_put(&engine, KEY_LEADER, uid);
+
+    for (;;) {
+        take_in(&engine, &rx);
+        if (step_due) {
+            step_due = 0;
+            if (vstig_engine_get(&engine, KEY_LEADER, &leader) == 1 && leader != reported) {
+                vstig_engine_put(&engine, (uint16_t)(KEY_REPORT + uid), leader);
+                reported = leader;
+            }
+            send_queue(&engine);
+        }
+        cli();
+        if (ring_tail == ring_head && !step_due) { /* nothing to do: sleep until an interrupt */
+            sleep_enable();
+            sei();
+            sleep_cpu();
+            sleep_disable();
+        }
+        sei();
+    }
+}

@@ -1,0 +1,27 @@
+/*
+ * libvstig: the vstig-hw protocol in portable C99, for robot firmware and gateways.
+ * Include this one header; compile the vstig_*.c files beside it (README.md).
+ *
+ *   vstig_wire      the 8-byte message, timestamps (RFC 1982), CRCs, drop counters
+ *   vstig_serial    the serial frame and the cobs8, epuck4, kilobot, kilobot-ohc framings
+ *   vstig_can       the CAN ID scheme, classic frames and CAN FD batches
+ *   vstig_outqueue  the outgoing queue: one message per key, newest wins, PUTs first
+ *   vstig_engine    put, get, receive, the conflict rule as a callback, drain
+ *   vstig_guard     a gateway's jump bound
+ *
+ * No malloc, no I/O, no clock, no global state: every structure is the caller's, passed
+ * explicitly, with capacities fixed at compile time (vstig_config.h).
+ */
+#ifndef VSTIG_H
+#define VSTIG_H
+
+#include "vstig_wire.h"
+#include "vstig_serial.h"
+#include "vstig_can.h"
+#include "vstig_outqueue.h"
+#include "vstig_engine.h"
+#include "vstig_guard.h"
+
+#define VSTIG_FORMAT_VERSION 1u /* SPEC.md section 8 */
+
+#endif /* VSTIG_H */
