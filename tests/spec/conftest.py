@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import pytest
+from required import require_tool
 
 ROOT = Path(__file__).resolve().parents[2]
 SPEC = ROOT / "firmware_spec"
@@ -23,17 +23,6 @@ BUILDS = {"strict": ["-O2"], "sanitized": ["-O1", "-g", "-fsanitize=address,unde
 
 def load(name: str) -> Any:
     return json.loads((VECTORS / name).read_text(encoding="utf-8"))
-
-
-def require_tool(tool: str) -> str:
-    """The tool's path; skip when it is missing, fail instead under VSTIG_REQUIRE_PEERS=1."""
-    path = shutil.which(tool)
-    if path is None:
-        reason = f"{tool} is not installed (tests/sysdeps.sh installs it when run as root)"
-        if os.environ.get("VSTIG_REQUIRE_PEERS") == "1":
-            pytest.fail(f"VSTIG_REQUIRE_PEERS=1 but {reason}")
-        pytest.skip(reason)
-    return path
 
 
 class Driver:

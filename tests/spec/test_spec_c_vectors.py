@@ -131,8 +131,9 @@ def test_can_frames(driver: Driver) -> None:
 
 
 def _hex(m: dict[str, object]) -> str:
-    op = 0x8000 if m["op"] == "GET" else 0
-    return f"{op | int(str(m['key'])):04x}{int(str(m['value'])):04x}{int(str(m['timestamp'])):04x}{int(str(m['robot'])):04x}"
+    words = [(0x8000 if m["op"] == "GET" else 0) | int(str(m["key"]))] + [int(str(m[f]))
+                                                                      for f in ("value", "timestamp", "robot")]
+    return "".join(f"{word:04x}" for word in words)
 
 
 def test_a_node_id_above_255_is_refused_on_11_bits(driver: Driver) -> None:
