@@ -56,29 +56,24 @@ static void send_queue(vstig_engine_t *engine) {
 }
 
 /* Everything the UART brought since the last pass, through the framing into the engine. */
-static void take_in(vstig_engine_t *engine, vstig_serial_rx_t *rx) {
-    vstig_msg_t heard[4];
-    uint8_t chunk[16];
-    size_t n, used, at, len = 0;
-    while (ring_tail != ring_head && len < sizeof chunk) {
-        chunk[len++] = ring[ring_tail];
+static void take_in(vstig_engine_t *engine, vstig_deframer_t *deframer) {
+    vstig_msg_t heard;
+    while (ring_tail != ring_head) {
+        uint8_t byte = ring[ring_tail];
         ring_tail = (uint8_t)((ring_tail + 1u) % RX_RING);
-    }
-    for (at = 0; at < len; at += used) {
-        n = vstig_serial_receive(rx, &chunk[at], len - at, &used, heard, 4);
-        vstig_engine_receive_many(engine, heard, n, 0);
+        if (vstig_cobs8_feed(deframer, byte, &heard)) vstig_engine_receive(engine, &heard);
     }
 }
 
 int main(void) {
     static vstig_engine_t engine; /* the whole stigmergy: table and outgoing queue */
-    static vstig_serial_rx_t rx;
+    static vstig_deframer_t deframer; /* the cobs8 receiver; deframer.drops counts what it drops */
     uint16_t uid = (uint16_t)(eeprom_read_byte(UID_ADDRESS) | (uint16_t)eeprom_read_byte(UID_ADDRESS + 1) << 8);
     uint16_t leader = 0, reported = 0;
     const uint8_t idle = 0; /* SPEC.md 6.0.3: a 0x00 first, so the far end drops any partial frame */
 
     vstig_engine_init(&engine, uid, vstig_larger_value_wins, 0, 0);
-    vstig_serial_rx_init(&rx, VSTIG_COBS8, 0, 0);
+    vstig_deframer_init(&deframer);
     UBRR0 = BAUD_DIVISOR;
     UCSR0A = _BV(U2X0);
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
@@ -92,7 +87,7 @@ int main(void) {
     vstig_engine_put(&engine, KEY_LEADER, uid);
 
     for (;;) {
-        take_in(&engine, &rx);
+        take_in(&engine, &deframer);
         if (step_due) {
             step_due = 0;
             if (vstig_engine_get(&engine, KEY_LEADER, &leader) == 1 && leader != reported) {
