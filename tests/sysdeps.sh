@@ -5,6 +5,10 @@
 set -u
 want=()
 command -v gcc >/dev/null || want+=(gcc)
+command -v make >/dev/null || want+=(make)  # libvstig's Makefile (firmware_spec/libvstig)
+command -v avr-gcc >/dev/null || want+=(gcc-avr binutils-avr)  # libvstig for the Kilobot's ATmega328P
+[ -e /usr/lib/avr/include/avr/io.h ] || want+=(avr-libc)
+[ -e /usr/include/simavr/sim_avr.h ] || want+=(libsimavr-dev)  # the simulated AVR robot's board (tests/cli)
 command -v linux.uml >/dev/null || [ -x /usr/bin/linux.uml ] || want+=(user-mode-linux)
 command -v modprobe >/dev/null || [ -x /sbin/modprobe ] || want+=(kmod)
 command -v cansend >/dev/null || want+=(can-utils)
