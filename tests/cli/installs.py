@@ -38,15 +38,20 @@ def _pip(*args: str) -> subprocess.CompletedProcess[str]:
     return done
 
 
-def build_wheel(folder: Path) -> Path:
-    """A wheel of this tree (no dependencies fetched), built from a clean copy under `folder`."""
-    source = folder / "source"
-    for name in SOURCES:
+def clean_copy(source: Path, names: tuple[str, ...] = SOURCES) -> Path:
+    """The files and folders `names` of this tree copied into `source`, without bytecode or build folders."""
+    for name in names:
         if (ROOT / name).is_dir():
-            shutil.copytree(ROOT / name, source / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+            shutil.copytree(ROOT / name, source / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "build"))
         else:
             source.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / name, source / name)
+    return source
+
+
+def build_wheel(folder: Path) -> Path:
+    """A wheel of this tree (no dependencies fetched), built from a clean copy under `folder`."""
+    source = clean_copy(folder / "source")
     _pip("wheel", "--quiet", "--no-deps", "--wheel-dir", str(folder / "dist"), str(source))
     (wheel,) = (folder / "dist").glob("vstig_hw-*.whl")
     return wheel

@@ -9,12 +9,13 @@ library is refused at init.
 from __future__ import annotations
 
 import ctypes
+import re
 import subprocess
 from ctypes import byref, c_uint16
 from pathlib import Path
 
 import pytest
-from clib import LIBVSTIG, CGuard, CMsg, COutQueue, CStigmergy, Lib
+from clib import LIBVSTIG, STRICT, CGuard, CMsg, COutQueue, CStigmergy, Lib
 from required import require_tool
 
 from vstig_hw import Message, Op, Outcome
@@ -45,8 +46,8 @@ def test_no_object_holds_writable_data(host_build: Path) -> None:
     table = subprocess.run([require_tool("objdump", "binutils"), "-t", str(host_build / "libvstig.a")],
                            capture_output=True, text=True, check=True).stdout
     objects = [line.split() for line in table.splitlines() if " O " in line]
-    writable = [o for o in objects if o[3] in (".data", ".bss", "*COM*") or o[3].startswith((".data.", ".bss."))
-                and not o[3].startswith(".data.rel.ro")]
+    writable = [o for o in objects if o[3] in (".data", ".bss", "*COM*") or (o[3].startswith((".data.", ".bss."))
+                and not o[3].startswith(".data.rel.ro"))]
     assert objects and not writable, writable  # drop_names is there, read-only
 
 
@@ -57,6 +58,19 @@ def test_it_builds_for_an_atmega328p_warnings_as_errors(tmp_path: Path) -> None:
     header = subprocess.run([require_tool("avr-objdump", "binutils-avr"), "-f", str(elf)], capture_output=True,
                             text=True, check=True).stdout
     assert "elf32-avr" in header
+
+
+def test_the_readme_main_loop_compiles_for_the_host_and_the_avr(tmp_path: Path) -> None:
+    text = (LIBVSTIG / "README.md").read_text(encoding="utf-8")
+    (snippet,) = re.findall(r"```c\n(.*?)```", text, flags=re.S)
+    source = tmp_path / "robot.c"
+    source.write_text(snippet, encoding="utf-8")
+    for compiler in (require_tool("gcc"), require_tool("avr-gcc", "gcc-avr and avr-libc")):
+        target = ["-mmcu=atmega328p"] if "avr" in compiler else []
+        done = subprocess.run([compiler, *target, *STRICT, "-DVSTIG_KEYS=16u", "-I", str(LIBVSTIG), "-c",
+                               str(source), "-o", str(tmp_path / "robot.o")], capture_output=True, text=True,
+                              check=False)
+        assert done.returncode == 0, done.stderr
 
 
 def test_a_full_table_refuses_a_new_key_and_counts_it(small_lib: Lib) -> None:
