@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
+import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -51,7 +52,7 @@ def _object_size(elf: Path, prefix: str) -> int:
 @benchmark("avr")
 def sizes() -> Iterator[Result]:
     if shutil.which("avr-gcc") is None or shutil.which("make") is None:
-        print("avr: skipped, avr-gcc (gcc-avr, avr-libc) or make is not installed (tests/sysdeps.sh)")
+        print("avr: skipped, avr-gcc (gcc-avr, avr-libc) or make is not installed (tests/sysdeps.sh)", file=sys.stderr)
         return
     with tempfile.TemporaryDirectory() as scratch:
         for keys in KEYS:
