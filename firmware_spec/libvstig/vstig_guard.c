@@ -72,8 +72,9 @@ uint8_t vstig_guard_check(vstig_guard_t *g, const vstig_msg_t *msg, uint32_t now
     if (g->key[place] == key) {
         k = &g->at[place];
     } else { /* tracked from here on only if it passes or spends a budget */
-        fresh.timestamp = VSTIG_TS_NONE;
+        fresh.timestamp = fresh.robot = fresh.value = VSTIG_TS_NONE;
         fresh.has_budget = 0;
+        fresh.budget = fresh.spent = 0;
         k = &fresh;
     }
     jump = jumps(g, k, msg->timestamp, now);
