@@ -10,6 +10,7 @@ from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency, stop_on_signals
 from vstig_hw.links import LinkSpec
 
+from ..config import ConfiguredCommand, config_options
 from ..live import Address, foxglove_option, live_view
 from ..options import Finite, GuardChoice, guard_options, take_warnings
 from ..running import LINK, build_links, describe_links, print_counters, reports_errors, run_until_stopped
@@ -22,7 +23,7 @@ def _raw_note(robot_id: int | None) -> str:
     return f"raw; messages re-encoded onto CAN go out as node {robot_id}"
 
 
-@click.command()
+@click.command(cls=ConfiguredCommand)
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), help="The PC's robot id (required unless --raw).")
 @click.option("--tick", type=Finite(0.001, 60), default=DEFAULT_PERIOD, show_default=True,
@@ -38,6 +39,7 @@ def _raw_note(robot_id: int | None) -> str:
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @foxglove_option
 @guard_options
+@config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
             larger: bool, refresh: bool, duration: float | None, foxglove: Address | None,

@@ -28,6 +28,7 @@ from vstig_hw.links import Link, LinkSpec
 from vstig_hw.links.can import CanSpec
 from vstig_hw.links.zenoh import ZenohSpec
 
+from ..config import ConfiguredCommand, config_options
 from ..options import ByteSize, Finite, filter_options, overwrite_option, refuse_to_replace
 from ..running import (
     LINK,
@@ -67,7 +68,7 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
     refuse_to_replace(path, overwrite or append, ", --append adds to it")  # appending replaces nothing
 
 
-@click.command()
+@click.command(cls=ConfiguredCommand)
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("-o", "--output", type=click.Path(path_type=str),
               help="FILE, or a folder for a timestamped name (the default: one here, as candump -l). "
@@ -79,6 +80,7 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
                                   "an existing numbered file is skipped, never replaced.")
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @filter_options
+@config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: int | None,
             duration: float | None, keep: Filter) -> None:

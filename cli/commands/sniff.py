@@ -18,6 +18,7 @@ from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
+from ..config import ConfiguredCommand, config_options
 from ..live import Address, foxglove_option, live_view
 from ..options import VALUE_TYPE_HELP, Finite, GuardChoice, filter_options, guard_options, take_warnings
 from ..running import LINK, build_links, describe_links, must_hear, print_counters, reports_errors, run_until_stopped
@@ -49,7 +50,7 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
     return table
 
 
-@click.command()
+@click.command(cls=ConfiguredCommand)
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
@@ -63,6 +64,7 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 @foxglove_option
 @filter_options
 @guard_options
+@config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
             hide_refused: bool, foxglove: Address | None, keep: Filter, guard: GuardChoice) -> None:
