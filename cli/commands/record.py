@@ -29,7 +29,8 @@ from vstig_hw.links.can import CanSpec
 from vstig_hw.links.zenoh import ZenohSpec
 
 from ..config import ConfiguredCommand, config_options
-from ..options import ByteSize, Finite, filter_options, overwrite_option, refuse_to_replace
+from ..ops.metrics import metrics_option, metrics_served
+from ..options import Address, ByteSize, Finite, filter_options, overwrite_option, refuse_to_replace
 from ..running import (
     LINK,
     StatusLine,
@@ -79,11 +80,12 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
 @click.option("--max-bytes", type=ByteSize(), help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
                                   "an existing numbered file is skipped, never replaced.")
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
+@metrics_option
 @filter_options
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: int | None,
-            duration: float | None, keep: Filter) -> None:
+            duration: float | None, metrics: Address | None, keep: Filter) -> None:
     """Record the LINKS' traffic into a file until Ctrl-C (passive: never transmits).
 
     The links are opened before the file, and an existing capture is never replaced
@@ -136,7 +138,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
 
     node.on_tick.append(flush)
     try:
-        with stop_on_signals() as stop, node:
+        with stop_on_signals() as stop, metrics_served(node, metrics), node:
             capture = RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
                                       append=append)
             with node.lock:  # the readers write under it: the early units go first, in order
