@@ -19,7 +19,6 @@ command -v npm >/dev/null || want+=(npm)
 command -v chromium >/dev/null || want+=(chromium)  # the docs site looked at in a real browser (tests/docs)
 command -v prometheus >/dev/null || want+=(prometheus)  # a real Prometheus scrapes --metrics (tests/cli/test_metrics.py)
 command -v systemd-analyze >/dev/null || want+=(systemd)  # `systemd-analyze verify` checks `vstig service`'s unit
-command -v faketime >/dev/null || want+=(faketime)  # gateways whose clocks are set apart on purpose (clock sync tests)
 [ ${#want[@]} -eq 0 ] && exit 0
 if [ "$(id -u)" -ne 0 ]; then
   echo "sysdeps: not root, cannot install: ${want[*]} (their tests will skip)" >&2

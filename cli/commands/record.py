@@ -9,6 +9,7 @@ from typing import Any
 
 import click
 
+from vstig_hw.capture.clock_notes import clock_note, offset_note
 from vstig_hw.capture.decoded import Decoder, RecordFilter, default_framings
 from vstig_hw.capture.files import RotatingCapture
 from vstig_hw.capture.filters import Filter
@@ -132,8 +133,14 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
 
     node.on_unit.append(write)
 
+    # Zenoh links measure their peers' clocks: the capture keeps whose clock it is and the offsets (clock_notes).
+    clocks = [clock for link in node.links if (clock := getattr(link.transport, "clock", None)) is not None]
+
     def flush(_: Node) -> None:  # every tick: what a kill leaves behind is at most one tick's frames
         if captures:
+            for clock in clocks:
+                for trip in clock.take():
+                    captures[0].note(offset_note(trip))
             captures[0].flush()
 
     node.on_tick.append(flush)
@@ -142,12 +149,17 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
             capture = RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
                                       append=append)
             with node.lock:  # the readers write under it: the early units go first, in order
+                if clocks:
+                    capture.note(clock_note(), every_file=True)
                 captures.append(capture)
                 for unit in early:
                     write(*unit)
                 early.clear()
             click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
                        err=True)
+            if clocks and not capture.takes_notes:
+                click.echo(f"{path} keeps no clock notes: to merge captures from several PCs on one clock, record "
+                           "the zenoh link into a line capture (.cap) of its own too", err=True)
             if medium == "can" and link_names_lost(path):
                 click.echo(f"{path} names no link: decode reads its frames back as one unnamed link", err=True)
             describe_links(node)
