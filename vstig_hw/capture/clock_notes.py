@@ -71,8 +71,9 @@ def shifts(clocks: Sequence[CaptureClock]) -> list[Shift | None]:
     """
     edges: dict[str, dict[str, tuple[float, float]]] = {}  # a -> b: (b's clock minus a's, bound)
     for capture in clocks:
-        for trip in capture.offsets if capture.clock else ():
-            for a, b, offset in ((capture.clock, trip.peer, trip.offset), (trip.peer, capture.clock, -trip.offset)):
+        mine = capture.clock
+        for trip in capture.offsets if mine is not None else ():
+            for a, b, offset in ((mine, trip.peer, trip.offset), (trip.peer, mine, -trip.offset)):
                 known = edges.setdefault(a, {}).get(b)
                 if known is None or trip.error < known[1]:
                     edges[a][b] = (offset, trip.error)
