@@ -72,7 +72,9 @@ def shifts(clocks: Sequence[CaptureClock]) -> list[Shift | None]:
     edges: dict[str, dict[str, tuple[float, float]]] = {}  # a -> b: (b's clock minus a's, bound)
     for capture in clocks:
         mine = capture.clock
-        for trip in capture.offsets if mine is not None else ():
+        if mine is None:
+            continue
+        for trip in capture.offsets:
             for a, b, offset in ((mine, trip.peer, trip.offset), (trip.peer, mine, -trip.offset)):
                 known = edges.setdefault(a, {}).get(b)
                 if known is None or trip.error < known[1]:
