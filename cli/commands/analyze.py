@@ -66,7 +66,9 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     has reached a sender when that sender first shows it or a newer entry. A write
     has converged when every sender heard within --window seconds of it has.
     Serial links name no sender: for them, the first and last time each write was
-    heard per link is reported instead. Several FILES are merged by time. The
+    heard per link is reported instead. Several FILES are merged by time, on
+    the first one's clock where their clock notes join them (captures that
+    zenoh links recorded on several PCs; the shift and its bound are said). The
     filters (--key, --robot, --sender, --op, --link, --since, --until) choose
     which messages count; --plot draws the first --key given. - reads stdin;
     pipes and <(...) work too, their type told by their first bytes.
