@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import threading
 import time
@@ -22,6 +21,7 @@ import pytest
 from netns import Lan, netns_unavailable
 from peers import STARTED, VSTIG, run_vstig, stop, wait_for
 from ports import free_port
+from required import require_tool
 from robots import PtyRobot
 
 from vstig_hw.capture.zenoh_log import read_zenoh_capture
@@ -34,12 +34,7 @@ WITHIN_S = 0.002
 
 def _clock_ahead(folder: Path) -> str:
     """The LD_PRELOAD library that runs a process's wall clock ahead (clock_ahead.c), built here with gcc."""
-    gcc = shutil.which("gcc")
-    if gcc is None:
-        reason = "gcc is missing (tests/sysdeps.sh installs it)"
-        if os.environ.get("VSTIG_REQUIRE_PEERS"):
-            pytest.fail(reason)
-        pytest.skip(reason)
+    gcc = require_tool("gcc")
     library = folder / "clock_ahead.so"
     subprocess.run([gcc, "-shared", "-fPIC", "-O2", "-o", str(library), str(Path(__file__).with_name("clock_ahead.c")),
                     "-ldl"], check=True, capture_output=True, timeout=120)

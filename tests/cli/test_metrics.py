@@ -7,7 +7,6 @@ import json
 import os
 import re
 import resource
-import shutil
 import socket
 import subprocess
 import threading
@@ -19,17 +18,8 @@ from pathlib import Path
 import pytest
 from peers import run_vstig, start_vstig, stop, wait_for
 from ports import free_port
+from required import require_tool
 from robots import PtyRobot
-
-
-def _prometheus() -> str:
-    found = shutil.which("prometheus")
-    if found is None:
-        reason = "Debian's prometheus is missing (tests/sysdeps.sh installs it)"
-        if os.environ.get("VSTIG_REQUIRE_PEERS"):
-            pytest.fail(reason)
-        pytest.skip(reason)
-    return found
 
 
 def _get(url: str, timeout: float = 5) -> bytes:
@@ -52,7 +42,7 @@ class Prometheus:
                           f"  - job_name: vstig\n    static_configs:\n      - targets: ['{target}']\n")
         self.port = free_port()
         self.process = subprocess.Popen(
-            [_prometheus(), f"--config.file={config}", f"--storage.tsdb.path={folder / 'data'}",
+            [require_tool("prometheus"), f"--config.file={config}", f"--storage.tsdb.path={folder / 'data'}",
              f"--web.listen-address=127.0.0.1:{self.port}", "--log.level=warn"],
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 

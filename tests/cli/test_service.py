@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import itertools
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -16,6 +15,7 @@ from pathlib import Path
 
 import pytest
 from peers import has_open, run_vstig, start_vstig, stop
+from required import require_tool
 from robots import PtyRobot
 
 from vstig_cli.ops.notify import ServiceNotifier
@@ -69,11 +69,7 @@ def _env(address: str, **extra: str) -> dict[str, str]:
 
 
 def test_the_unit_passes_systemd_analyze_verify(tmp_path: Path) -> None:
-    analyze = shutil.which("systemd-analyze")
-    if analyze is None:
-        if os.environ.get("VSTIG_REQUIRE_PEERS"):
-            pytest.fail("systemd-analyze is missing (tests/sysdeps.sh installs systemd)")
-        pytest.skip("systemd-analyze is missing (tests/sysdeps.sh installs systemd)")
+    analyze = require_tool("systemd-analyze", "systemd")
     folder = tmp_path / "a lab's 100% folder"  # ExecStart= quoting: a space, a quote and a % specifier
     folder.mkdir()
     config = folder / "lab.toml"
