@@ -15,6 +15,7 @@ every 10 ms, robot B gets them every control step. Checked at the end, after SIG
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import re
 import signal
@@ -26,10 +27,10 @@ import threading
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cli"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cli"))  # the tests' peers and robots
 
-from peers import VSTIG  # noqa: E402  (the test helpers' folder, put on the path above)
-from robots import PtyRobot  # noqa: E402
+from peers import VSTIG
+from robots import PtyRobot
 
 KEYS = range(1, 11)
 
@@ -102,7 +103,7 @@ def main() -> int:
         _, err = gateway.communicate()
     took = time.monotonic() - asked
     pings = [t for t, text in heard if "WATCHDOG=1" in text.split("\n")]
-    gap = max((q - p for p, q in zip(pings, pings[1:], strict=False)), default=0.0)
+    gap = max((q - p for p, q in itertools.pairwise(pings)), default=0.0)
     lost = {k: (v, b.value(k)) for k, v in last.items() if b.value(k) != v}
     drops = re.findall(r"\b((?:drop_\w+|tx_overflow|tx_dropped|lost)=\d+)", err)
     stopping = any("STOPPING=1" in text for _, text in heard)
