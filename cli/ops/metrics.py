@@ -7,6 +7,7 @@ What a scrape shows (prometheus_client's exposition, from `Node.stats()` read wh
 * `vstig_link_queued{link}`, `vstig_link_up{link}` (1 while its device is connected), `vstig_table_keys`;
 * `vstig_relay_latency_seconds`: a histogram, per batch a link read, of the time from the read to what it caused
   being handed to the other links' devices (written, or queued behind a slow one);
+* `vstig_clock_offset_seconds{peer}` and `..._error_seconds{peer}`: each Zenoh peer's clock against ours;
 * `vstig_metrics_connections_total{outcome}`: the endpoint's own (served, evicted, timed_out, too_large).
 
 The endpoint is never in the data path and never stalls the gateway: one thread serves it without blocking
@@ -106,6 +107,8 @@ class GatewayCollector:
             keys = node.engine.size() if node.engine is not None else None
             up = {link.name: bool(getattr(link.transport, "connected", True)) for link in node.links}
             buckets, total = self.latency.buckets(), self.latency.total
+        clocks = {peer: trip for link in node.links if (clock := getattr(link.transport, "clock", None)) is not None
+                  for peer, trip in clock.estimates().items()}
         events = CounterMetricFamily("vstig_link_events", "Every counter of every link: units and messages moved, "
                                      "each drop by reason (docs/reference/counters.md).", labels=["link", "counter"])
         queued = GaugeMetricFamily("vstig_link_queued", "Units waiting in a link's outgoing queues.", labels=["link"])
@@ -132,6 +135,16 @@ class GatewayCollector:
             yield GaugeMetricFamily("vstig_table_keys", "Keys in the gateway's table.", value=keys)
         yield HistogramMetricFamily("vstig_relay_latency_seconds", "From a batch's read to what it caused being "
                                     "handed to the other links' devices.", buckets=buckets, sum_value=total)
+        if clocks:
+            offset = GaugeMetricFamily("vstig_clock_offset_seconds", "A Zenoh peer's clock minus ours (the tightest "
+                                       "recent round trip).", labels=["peer"])
+            bound = GaugeMetricFamily("vstig_clock_offset_error_seconds", "The bound of that offset: half its round "
+                                      "trip.", labels=["peer"])
+            for peer, trip in sorted(clocks.items()):
+                offset.add_metric([peer], trip.offset)
+                bound.add_metric([peer], trip.error)
+            yield offset
+            yield bound
         served = CounterMetricFamily("vstig_metrics_connections", "This endpoint's connections by outcome.",
                                      labels=["outcome"])
         for outcome, value in sorted(self.connections.items()):

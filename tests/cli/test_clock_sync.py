@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -73,7 +75,8 @@ def test_captures_from_two_pcs_250_ms_apart_merge_within_2_ms_of_the_truth(tmp_p
 
     bridge = start([*on[0], VSTIG, "bridge", robot.spec, swarm, "--robot-id", "200"])
     recorder_a = start([*on[0], VSTIG, "record", joins, "-o", str(a_cap)])
-    recorder_b = start([*on[1], VSTIG, "record", joins, "-o", str(b_cap)], env=ahead)
+    metrics = f"127.0.0.1:{free_port()}"  # B's recorder also shows its offsets to Prometheus
+    recorder_b = start([*on[1], VSTIG, "record", joins, "-o", str(b_cap), "--metrics", metrics], env=ahead)
     writing = threading.Event()
 
     def robot_writes() -> None:  # a new value every 50 ms: samples for both recorders to hear
@@ -89,6 +92,9 @@ def test_captures_from_two_pcs_250_ms_apart_merge_within_2_ms_of_the_truth(tmp_p
         writer.start()
         wait_for(lambda: "clock-offset" in a_cap.read_text() and "clock-offset" in b_cap.read_text(), 60)
         time.sleep(6)  # a few more round trips (one every 2 s) and ~120 samples
+        scrape = "import sys, urllib.request; print(urllib.request.urlopen(sys.argv[1], timeout=5).read().decode())"
+        page = subprocess.run([*on[1], sys.executable, "-c", scrape, f"http://{metrics}/metrics"],
+                              capture_output=True, text=True, timeout=60, check=True).stdout
     finally:
         writing.set()
         for process in (recorder_a, recorder_b, bridge):
@@ -102,6 +108,9 @@ def test_captures_from_two_pcs_250_ms_apart_merge_within_2_ms_of_the_truth(tmp_p
     assert abs(shift["shift_s"] - AHEAD_S) < WITHIN_S, shift  # B's clock is 250 ms ahead: taken off its times
     assert shift["error_s"] < WITHIN_S
     assert f"pc-b.cap: on {a_cap}'s clock: -2" in done.stderr  # said: about -250 ms, with its bound
+
+    gauges = [float(v) for v in re.findall(r"^vstig_clock_offset_seconds\{peer=\"\w+\"\} (\S+)$", page, re.M)]
+    assert any(abs(gauge + AHEAD_S) < WITHIN_S for gauge in gauges), page  # the bridge's clock, 250 ms behind B's
 
     heard_a, heard_b = _once(a_cap, 0.0), _once(b_cap, shift["shift_s"])
     both = heard_a.keys() & heard_b.keys()

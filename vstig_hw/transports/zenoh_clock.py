@@ -75,6 +75,11 @@ class ZenohClock:
             self.filter.add(trip)
             self._new.append(trip)
 
+    def estimates(self) -> dict[str, ClockOffset]:
+        """Each peer's offset now (the tightest of its recent round trips)."""
+        with self._lock:
+            return self.filter.estimates()
+
     def take(self) -> list[ClockOffset]:
         """The round trips measured since the last call."""
         with self._lock:
