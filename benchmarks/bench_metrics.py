@@ -16,10 +16,7 @@ from collections.abc import Iterator
 
 import can
 
-from vstig_hw.gateway import Mode, Node
-from vstig_hw.links.can import can_link
-
-from .bench_live import _BATCH, _frames
+from .bench_live import _frames, engine_bridge, relay
 from .registry import Result, benchmark
 
 _N = 20_000
@@ -36,11 +33,7 @@ while True:
 
 
 def _relay_cpu(frames: list[can.Message], run: int, metrics: bool) -> float:
-    channel = f"bench-metrics-{run}-{metrics}"
-    node = Node([can_link("virtual", channel, robot_id=1), can_link("virtual", channel + "-out", robot_id=1)],
-                200, mode=Mode.ENGINE, budget=None)
-    sender = can.Bus(interface="virtual", channel=channel)
-    drain = can.Bus(interface="virtual", channel=channel + "-out")
+    node, sender, drain = engine_bridge(f"bench-metrics-{run}-{metrics}")
     server = scraper = None
     try:
         if metrics:
@@ -52,15 +45,8 @@ def _relay_cpu(frames: list[can.Message], run: int, metrics: bool) -> float:
             while not server.connections["served"]:
                 time.sleep(0.05)
         with node:
-            heard = node.links[0].counters
             start = time.process_time()
-            for at in range(0, len(frames), _BATCH):
-                for frame in frames[at:at + _BATCH]:
-                    sender.send(frame)
-                while heard["in"] < at + _BATCH:
-                    node.poll(0.01)
-                while drain.recv(0) is not None:
-                    pass
+            relay(node, sender, drain, frames)
             spent = time.process_time() - start
         return spent / len(frames)
     finally:

@@ -10,21 +10,15 @@ What a scrape shows (prometheus_client's exposition, from `Node.stats()` read wh
 * `vstig_clock_offset_seconds{peer}` and `..._error_seconds{peer}`: each Zenoh peer's clock against ours;
 * `vstig_metrics_connections_total{outcome}`: the endpoint's own (served, evicted, timed_out, too_large).
 
-The endpoint is never in the data path and never stalls the gateway: one thread serves it without blocking
-(selectors), holds at most MAX_CONNECTIONS at once (a new one evicts the oldest that has not asked yet), gives
-each CONNECTION_DEADLINE_S to ask and read its answer, reads requests of at most REQUEST_MAX_BYTES, and renders
-the page at most once per RENDER_EVERY_S however often it is asked. The latency histogram is counted under the
-Node's lock in a few list operations; prometheus_client only formats the page.
+The endpoint is never in the data path and never stalls the gateway: a `PageServer` (page_server.py) serves
+it, bounded in connections, bytes and time. The latency histogram is counted under the Node's lock in a few
+list operations; prometheus_client only formats the page.
 """
 
 from __future__ import annotations
 
 import bisect
-import collections
 import contextlib
-import selectors
-import socket
-import threading
 import time
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
@@ -36,6 +30,7 @@ from vstig_hw.counters import ENGINE_STATS, Counters
 from vstig_hw.extras import MissingExtra, require
 
 from ..options import LOOPBACK, Address, is_loopback, listen_address
+from .page_server import PageServer
 
 if TYPE_CHECKING:
     from vstig_hw.gateway import Node
@@ -43,10 +38,6 @@ if TYPE_CHECKING:
 __all__ = ["LATENCY_BUCKETS", "MetricsServer", "RelayLatency", "metrics_option", "metrics_served"]
 
 DOCS = "docs/how-to/service.md"
-MAX_CONNECTIONS = 32  # a Prometheus server or two, a curl: far fewer at once
-CONNECTION_DEADLINE_S = 5.0  # from accept to the last byte of the answer
-REQUEST_MAX_BYTES = 8 * 1024  # a scrape's request is a few hundred bytes
-RENDER_EVERY_S = 0.5  # scrapes closer than this share one page: a scraper in a loop costs the gateway little
 LATENCY_BUCKETS = (0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0)
 
 
@@ -155,170 +146,29 @@ class GatewayCollector:
         yield info
 
 
-class _Client:
-    __slots__ = ("answer", "asked", "deadline", "request", "sock")
-
-    def __init__(self, sock: socket.socket, deadline: float) -> None:
-        self.sock = sock
-        self.deadline = deadline
-        self.request = b""
-        self.answer = b""
-        self.asked = False  # a whole request came: never evicted for a newcomer
-
-
 class MetricsServer:
-    """The /metrics endpoint on its own thread: non-blocking, bounded in connections, bytes and time."""
+    """The /metrics endpoint of one Node: its collector on a PageServer, and the Node's latency hook."""
 
     def __init__(self, node: Node, host: str, port: int) -> None:
-        from prometheus_client import CollectorRegistry
+        from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 
         self.latency = RelayLatency()
-        self.connections = Counters()
-        self.registry = CollectorRegistry(auto_describe=False)
-        self.registry.register(GatewayCollector(node, self.latency, self.connections))
         self._node = node
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
-        family, _, _, _, where = infos[0]
-        self._listener = socket.socket(family, socket.SOCK_STREAM)
-        self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            self._listener.bind(where)
-            self._listener.listen(128)
-        except OSError:
-            self._listener.close()
-            raise
-        self._listener.setblocking(False)
-        bound = self._listener.getsockname()
-        self.host, self.port = host, int(bound[1])
-        self._clients: collections.OrderedDict[int, _Client] = collections.OrderedDict()  # oldest first
-        self._selector = selectors.DefaultSelector()
-        self._selector.register(self._listener, selectors.EVENT_READ)
-        self._page = b""
-        self._rendered_at = -RENDER_EVERY_S
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._serve, name="metrics", daemon=True)
-
-    @property
-    def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/metrics"
+        self.registry = CollectorRegistry(auto_describe=False)
+        self.server = PageServer(host, port, b"/metrics", CONTENT_TYPE_LATEST.encode(),
+                                 lambda: generate_latest(self.registry))
+        self.connections = self.server.connections
+        self.registry.register(GatewayCollector(node, self.latency, self.connections))
+        self.host, self.port, self.url = self.server.host, self.server.port, self.server.url
 
     def start(self) -> None:
         self._node.on_delivered.append(self.latency.observe)
-        self._thread.start()
+        self.server.start()
 
     def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2)
+        self.server.close()
         with contextlib.suppress(ValueError):
             self._node.on_delivered.remove(self.latency.observe)
-        for client in list(self._clients.values()):
-            self._drop(client)
-        self._selector.close()
-        self._listener.close()
-
-    # -- the thread ---------------------------------------------------------------
-    def _serve(self) -> None:
-        while not self._stop.is_set():
-            for key, events in self._selector.select(timeout=0.2):
-                if key.fileobj is self._listener:
-                    self._accept()
-                else:
-                    client = self._clients.get(key.fd)
-                    if client is not None:
-                        self._read(client) if events & selectors.EVENT_READ else self._write(client)
-            now = time.monotonic()
-            for client in [c for c in self._clients.values() if c.deadline < now]:
-                self.connections["timed_out"] += 1
-                self._drop(client)
-
-    def _accept(self) -> None:
-        for _ in range(64):  # a burst of connections is taken in, a bounded number per turn
-            try:
-                sock, _ = self._listener.accept()
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError:  # out of descriptors, a connection reset before we took it: the next turn retries
-                return
-            sock.setblocking(False)
-            if len(self._clients) >= MAX_CONNECTIONS:
-                idle = next((c for c in self._clients.values() if not c.asked), None)
-                if idle is None:
-                    self.connections["evicted"] += 1
-                    sock.close()
-                    continue
-                self.connections["evicted"] += 1
-                self._drop(idle)
-            client = _Client(sock, time.monotonic() + CONNECTION_DEADLINE_S)
-            self._clients[sock.fileno()] = client
-            self._selector.register(sock, selectors.EVENT_READ)
-
-    def _read(self, client: _Client) -> None:
-        try:
-            data = client.sock.recv(4096)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError:
-            data = b""
-        if not data:
-            self._drop(client)
-            return
-        client.request += data
-        if b"\r\n\r\n" not in client.request and b"\n\n" not in client.request:
-            if len(client.request) > REQUEST_MAX_BYTES:
-                self.connections["too_large"] += 1
-                self._drop(client)
-            return
-        client.asked = True
-        client.answer = self._answer(client.request)
-        self._selector.modify(client.sock, selectors.EVENT_WRITE)
-        self._write(client)
-
-    def _answer(self, request: bytes) -> bytes:
-        method, _, rest = request.partition(b" ")
-        path = rest.split(b" ", 1)[0].split(b"?", 1)[0]
-        if method not in (b"GET", b"HEAD"):
-            return _response(b"405 Method Not Allowed", b"text/plain", b"GET /metrics\n")
-        if path != b"/metrics":
-            return _response(b"404 Not Found", b"text/plain", b"the metrics are at /metrics\n")
-        self.connections["served"] += 1
-        from prometheus_client import CONTENT_TYPE_LATEST
-
-        body = self._render()
-        return _response(b"200 OK", CONTENT_TYPE_LATEST.encode(), b"" if method == b"HEAD" else body,
-                         len(body))
-
-    def _render(self) -> bytes:
-        now = time.monotonic()
-        if now - self._rendered_at >= RENDER_EVERY_S:
-            from prometheus_client import generate_latest
-
-            self._page = generate_latest(self.registry)
-            self._rendered_at = now
-        return self._page
-
-    def _write(self, client: _Client) -> None:
-        try:
-            sent = client.sock.send(client.answer)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError:
-            self._drop(client)
-            return
-        client.answer = client.answer[sent:]
-        if not client.answer:
-            self._drop(client)
-
-    def _drop(self, client: _Client) -> None:
-        self._clients.pop(client.sock.fileno(), None)
-        with contextlib.suppress(KeyError, ValueError):
-            self._selector.unregister(client.sock)
-        client.sock.close()
-
-
-def _response(status: bytes, content_type: bytes, body: bytes, length: int | None = None) -> bytes:
-    return (b"HTTP/1.1 " + status + b"\r\nContent-Type: " + content_type + b"\r\nContent-Length: "
-            + str(len(body) if length is None else length).encode() + b"\r\nConnection: close\r\n\r\n" + body)
 
 
 @contextlib.contextmanager
