@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 CORE_STAMP := $(VENV)/.installed-core
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck layers pytest docs bench sysdeps clean fuzz soak
+.PHONY: demo test lint typecheck layers pytest docs bench sysdeps clean fuzz soak supervised
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -72,6 +72,11 @@ fuzz: $(FUZZ_STAMP)
 
 soak: $(STAMP)
 	$(BIN)/python tests/soak/run.py --seconds $(SOAK_SECONDS)
+
+# A bridge from a config file under a played systemd (notify socket, watchdog) for SUPERVISED_SECONDS: 0 lost.
+SUPERVISED_SECONDS ?= 1800
+supervised: $(STAMP)
+	$(BIN)/python tests/soak/supervised.py --seconds $(SUPERVISED_SECONDS)
 
 clean:
 	rm -rf $(VENV) build site *.egg-info .pytest_cache .mypy_cache .ruff_cache

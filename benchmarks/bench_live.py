@@ -40,14 +40,29 @@ def _frames(n: int) -> list[can.Message]:
     return [framings[msg.robot % 50].encode(msg)[0] for msg in realistic_mix(n)]
 
 
+def engine_bridge(channel: str) -> tuple[Node, can.BusABC, can.BusABC]:
+    """An engine Node between two virtual buses (not yet open), the bus a swarm sends on and the one it drains."""
+    node = Node([can_link("virtual", channel, robot_id=1), can_link("virtual", channel + "-out", robot_id=1)],
+                200, mode=Mode.ENGINE, budget=None)
+    return node, can.Bus(interface="virtual", channel=channel), can.Bus(interface="virtual", channel=channel + "-out")
+
+
+def relay(node: Node, sender: can.BusABC, drain: can.BusABC, frames: list[can.Message]) -> None:
+    """Send `frames` in bursts through the open `node`, each burst heard before the next goes."""
+    heard = node.links[0].counters
+    for at in range(0, len(frames), _BATCH):
+        for frame in frames[at:at + _BATCH]:
+            sender.send(frame)
+        while heard["in"] < at + _BATCH:
+            node.poll(0.01)
+        while drain.recv(0) is not None:
+            pass
+
+
 def _relay_cpu(frames: list[can.Message], run: int, viewer: bool) -> tuple[float, float, float]:
     """(gateway process, gateway loop thread, live view server process) CPU seconds per message heard by
     an engine bridge, with a live view and a viewer on it or not."""
-    channel = f"bench-live-{run}-{viewer}"
-    node = Node([can_link("virtual", channel, robot_id=1), can_link("virtual", channel + "-out", robot_id=1)],
-                200, mode=Mode.ENGINE, budget=None)
-    sender = can.Bus(interface="virtual", channel=channel)
-    drain = can.Bus(interface="virtual", channel=channel + "-out")
+    node, sender, drain = engine_bridge(f"bench-live-{run}-{viewer}")
     view = client = None
     try:
         if viewer:
@@ -69,15 +84,8 @@ def _relay_cpu(frames: list[can.Message], run: int, viewer: bool) -> tuple[float
             if not subscribed.wait(30):
                 raise RuntimeError("the viewer did not subscribe within 30 s")
         with node:
-            heard = node.links[0].counters
             start, loop_start = time.process_time(), time.thread_time()
-            for at in range(0, len(frames), _BATCH):
-                for frame in frames[at:at + _BATCH]:
-                    sender.send(frame)
-                while heard["in"] < at + _BATCH:
-                    node.poll(0.01)
-                while drain.recv(0) is not None:
-                    pass
+            relay(node, sender, drain, frames)
             loop = time.thread_time() - loop_start
             if view is not None:
                 view.flush()  # shipping what is left is part of the cost

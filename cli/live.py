@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
@@ -13,44 +12,30 @@ from vstig_hw.extras import MissingExtra, require
 from vstig_hw.gateway import Node
 from vstig_hw.values import ValueType
 
+from .options import LOOPBACK, Address, is_loopback, listen_address
+
 if TYPE_CHECKING:
     from vstig_hw.live.view import LiveView
 
-Address = tuple[str, int]
-LOOPBACK = "127.0.0.1"
 DOCS = "docs/how-to/live-view.md"
 
 
 def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> Address | None:
-    """PORT or HOST:PORT ([::1]:PORT for IPv6) into (host, port); bad ones are usage errors."""
+    """--foxglove's [HOST:]PORT; the live extra is checked here, before any link opens (one line, exit 1)."""
     if value is None:
         return None
-    host, colon, port = value.rpartition(":")
-    host = host.removeprefix("[").removesuffix("]") if colon else LOOPBACK
-    if not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise click.BadParameter(f"{value!r}: the port must be a number in 0..65535 (0: any free port)", ctx, param)
-    if not host:
-        raise click.BadParameter(f"{value!r}: an empty host (PORT alone binds {LOOPBACK})", ctx, param)
+    address = listen_address(value, ctx, param)
     try:
-        require("live", "--foxglove")  # here, before any link opens: one line, exit 1
+        require("live", "--foxglove")
     except MissingExtra as error:
         raise click.ClickException(str(error)) from None
-    return host, int(port)
+    return address
 
 
 foxglove_option = click.option(
     "--foxglove", "foxglove", metavar="[HOST:]PORT", callback=_address,
     help=f"Serve the live view to Foxglove on PORT (8765 is Foxglove's default), on {LOOPBACK} unless HOST "
          f"is given. Needs the live extra. Channels and layout: {DOCS}.")
-
-
-def _loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:  # a name: wherever it resolves, it may be the network
-        return False
 
 
 @contextlib.contextmanager
@@ -72,7 +57,7 @@ def live_view(node: Node, address: Address | None, *, value_type: ValueType = "u
     except RuntimeError as error:  # the SDK's FoxgloveError: cannot bind, cannot resolve the host
         reason = str(error).removeprefix("FoxgloveError: ").removeprefix("Failed to bind port: ")
         raise click.ClickException(f"--foxglove {host}:{port}: cannot listen: {reason}") from None
-    if not _loopback(host):
+    if not is_loopback(host):
         click.echo(f"--foxglove: WARNING: the live view listens on {view.url} with no authentication: anyone "
                    f"on the network can watch the swarm's traffic (the default, {LOOPBACK}, with an SSH tunnel "
                    f"keeps it to you; see {DOCS})", err=True)

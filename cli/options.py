@@ -34,6 +34,7 @@ if TYPE_CHECKING:
 __all__ = [
     "INPUT_FORMATS",
     "KEY",
+    "LOOPBACK",
     "VALUE_TYPE_HELP",
     "ByteSize",
     "Finite",
@@ -46,6 +47,8 @@ __all__ = [
     "guard_options",
     "input_format_option",
     "input_name",
+    "is_loopback",
+    "listen_address",
     "overwrite_option",
     "parse_id_base",
     "readable_capture",
@@ -149,6 +152,37 @@ class NegativeNumbersAreArguments(click.Command):
             value_next = not value_next and name in takes_value and "=" not in arg
         ctx.ignore_unknown_options = True  # what is left unknown is a negative number
         return super().parse_args(ctx, args)
+
+
+# -- Addresses a command serves on (--foxglove, --metrics): [HOST:]PORT, loopback unless a HOST is given.
+
+LOOPBACK = "127.0.0.1"
+Address: TypeAlias = "tuple[str, int]"
+
+
+def listen_address(value: str, ctx: click.Context | None, param: click.Parameter | None) -> Address:
+    """PORT or HOST:PORT ([::1]:PORT for IPv6) into (host, port), host LOOPBACK for PORT alone; bad ones are
+    usage errors naming the option."""
+    text = str(value)
+    host, colon, port = text.rpartition(":")
+    host = host.removeprefix("[").removesuffix("]") if colon else LOOPBACK
+    if not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise click.BadParameter(f"{text!r}: the port must be a number in 0..65535 (0: any free port)", ctx, param)
+    if not host:
+        raise click.BadParameter(f"{text!r}: an empty host (PORT alone binds {LOOPBACK})", ctx, param)
+    return host, int(port)
+
+
+def is_loopback(host: str) -> bool:
+    """Whether `host` keeps a server to this PC; a name other than localhost may be the network."""
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 # -- The files a user names (-o FILE, --capture, --plot...): none replaced unless --overwrite says so.

@@ -229,14 +229,36 @@ def lossless(spec: LinkSpec, opening: float | None = None) -> LinkSpec:
 
 def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, duration: float | None = None) -> None:
     """Run the node until `stop` (the command's `stop_on_signals()`, entered before its links opened: a signal
-    any time after "Ctrl-C stops" is said ends it cleanly) or `duration`, refreshing `status()` every half second."""
-    if status is None:
-        node.run(stop=stop, duration=duration)
-        return
-    end = None if duration is None else time.monotonic() + duration
-    while not stop.is_set() and (end is None or time.monotonic() < end):
-        node.run(stop=stop, duration=0.5 if end is None else max(0.0, min(0.5, end - time.monotonic())))
-        status()
+    any time after "Ctrl-C stops" is said ends it cleanly) or `duration`, refreshing `status()` every half second.
+
+    Under a service manager (systemd's $NOTIFY_SOCKET, `Type=notify`) it says READY=1 as it starts (every link
+    is open by then), pings the watchdog from the loop's tick, and says STOPPING=1 as the stop begins.
+    """
+    from .ops.notify import ServiceNotifier
+
+    service = ServiceNotifier.from_environment()
+    if service is not None:
+        node.on_tick.append(service.tick)
+        service.ready(_readiness(node))
+    try:
+        if status is None:
+            node.run(stop=stop, duration=duration)
+            return
+        end = None if duration is None else time.monotonic() + duration
+        while not stop.is_set() and (end is None or time.monotonic() < end):
+            node.run(stop=stop, duration=0.5 if end is None else max(0.0, min(0.5, end - time.monotonic())))
+            status()
+    finally:
+        if service is not None:
+            service.stopping()
+            service.close()
+
+
+def _readiness(node: Node) -> str:
+    """The STATUS= of READY=1: the links, and those still waiting for their device (a router not up yet)."""
+    waiting = [link.name for link in node.links if not getattr(link.transport, "connected", True)]
+    line = f"running on {', '.join(link.name for link in node.links)}"
+    return f"{line}; waiting for {', '.join(waiting)}" if waiting else line
 
 
 def print_counters(node: Node) -> None:

@@ -17,6 +17,8 @@ command -v ip >/dev/null || want+=(iproute2)  # network namespaces for the zenoh
 command -v node >/dev/null || want+=(nodejs)  # Foxglove's WebSocket client, the live view's viewer in tests
 command -v npm >/dev/null || want+=(npm)
 command -v chromium >/dev/null || want+=(chromium)  # the docs site looked at in a real browser (tests/docs)
+command -v prometheus >/dev/null || want+=(prometheus)  # a real Prometheus scrapes --metrics (tests/cli/test_metrics.py)
+command -v systemd-analyze >/dev/null || want+=(systemd)  # `systemd-analyze verify` checks `vstig service`'s unit
 [ ${#want[@]} -eq 0 ] && exit 0
 if [ "$(id -u)" -ne 0 ]; then
   echo "sysdeps: not root, cannot install: ${want[*]} (their tests will skip)" >&2

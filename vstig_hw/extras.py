@@ -21,6 +21,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "analyze": ("numpy", "matplotlib"),
     "mcap": ("mcap", "rosbags"),
     "live": ("foxglove",),
+    "metrics": ("prometheus_client",),
 }
 
 

@@ -13,6 +13,7 @@ import click
 
 from vstig_hw.analysis import CONFLICT_RULES, DEFAULT_WINDOW, Analyzer, Conflict, Report, Traffic, WriteReport
 from vstig_hw.capture.analyzefile import Fed, analyze_captures
+from vstig_hw.capture.clock_notes import CaptureClock, Shift, read_clock_notes, shifts
 from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError
 from vstig_hw.counters import Counters
@@ -65,7 +66,9 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     has reached a sender when that sender first shows it or a newer entry. A write
     has converged when every sender heard within --window seconds of it has.
     Serial links name no sender: for them, the first and last time each write was
-    heard per link is reported instead. Several FILES are merged by time. The
+    heard per link is reported instead. Several FILES are merged by time, on
+    the first one's clock where their clock notes join them (captures that
+    zenoh links recorded on several PCs; the shift and its bound are said). The
     filters (--key, --robot, --sender, --op, --link, --since, --until) choose
     which messages count; --plot draws the first --key given. - reads stdin;
     pipes and <(...) work too, their type told by their first bytes.
@@ -82,8 +85,10 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     names = ", ".join(map(input_name, files))
     with contextlib.ExitStack() as spooled:  # stdin and pipes are copied to a file first
         readable = {spooled.enter_context(readable_capture(path, input_format)): input_name(path) for path in files}
+        clocks = _on_one_clock(readable)
         try:
-            drops, bad, filtered_out = _read(readable, analyzer, skip_bad, base, width, keep, deployment)
+            drops, bad, filtered_out = _read(readable, analyzer, skip_bad, base, width, keep, deployment,
+                                             [shift.seconds if shift else 0.0 for shift in clocks] if clocks else None)
         except CaptureError as error:
             raise renamed(error, error.path, readable.get(error.path, error.path)) from None
     echo_skipped(renamed(error, error.path, readable.get(error.path, error.path)) for error in bad)
@@ -99,7 +104,11 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
 
         plot_report(report, plot, min(keep.keys) if keep.keys else None)
     if as_json:
-        click.echo(json.dumps(_as_json(report, tuple(readable.values()), drops, len(bad), value_type)))
+        result = _as_json(report, tuple(readable.values()), drops, len(bad), value_type)
+        if clocks:
+            result["capture"]["clocks"] = [None if shift is None else {"shift_s": shift.seconds, "error_s": shift.error}
+                                           for shift in clocks]
+        click.echo(json.dumps(result))
     else:
         _print_text(report, value_type)
     summary = f"{report.messages} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
@@ -108,21 +117,45 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     click.echo(summary + (f"; wrote {plot}" if plot else ""), err=True)
 
 
+def _on_one_clock(names: dict[str, str]) -> list[Shift | None]:
+    """Several captures whose clock notes join them: each one's shift onto the first's clock, said on stderr
+    (nothing when no capture names its clock: they merge on their own clocks, as before)."""
+    if len(names) < 2:
+        return []
+    clocks = [read_clock_notes(path) if _line_capture(path) else CaptureClock(None, []) for path in names]
+    if not any(clock.clock for clock in clocks):
+        return []
+    found = shifts(clocks)
+    first, *others = names.values()
+    for name, shift in zip(others, found[1:], strict=True):
+        if shift is None:
+            click.echo(f"{name}: no clock offset to {first}'s was measured: merged on its own clock", err=True)
+        else:
+            click.echo(f"{name}: on {first}'s clock: {-shift.seconds * 1e3:+.3f} ms "
+                       f"(± {shift.error * 1e3:.3f} ms)", err=True)
+    return found
+
+
+def _line_capture(path: str) -> bool:
+    with open(path, "rb") as file:
+        return file.read(8) == b"# vstig "
+
+
 def _read(names: dict[str, str], analyzer: Analyzer, skip_bad: bool, base: int | None, width: bool | None,
-          keep: Filter, deployment: str | None) -> Fed:
-    """`names`: the files to read, each with the name the user gave it."""
+          keep: Filter, deployment: str | None, shifts: list[float] | None = None) -> Fed:
+    """`names`: the files to read, each with the name the user gave it; `shifts`: seconds off each one's times."""
     files = tuple(names)
     size = sum(os.path.getsize(path) for path in files)
     if not (sys.stderr.isatty() and size > _PROGRESS_BYTES):
         return analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep,
-                                deployment=deployment)
+                                deployment=deployment, shifts=shifts)
     from rich.console import Console
     from rich.progress import Progress
 
     with Progress(console=Console(stderr=True), transient=True) as bar:
         task = bar.add_task(f"analyzing {os.path.basename(names[files[0]])}", total=size)
         result = analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep,
-                                  deployment=deployment, progress=lambda n: bar.advance(task, n))
+                                  deployment=deployment, progress=lambda n: bar.advance(task, n), shifts=shifts)
     return result
 
 

@@ -10,8 +10,10 @@ from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency, stop_on_signals
 from vstig_hw.links import LinkSpec
 
-from ..live import Address, foxglove_option, live_view
-from ..options import Finite, GuardChoice, guard_options, take_warnings
+from ..config import ConfiguredCommand, config_options
+from ..live import foxglove_option, live_view
+from ..ops.metrics import metrics_option, metrics_served
+from ..options import Address, Finite, GuardChoice, guard_options, take_warnings
 from ..running import LINK, build_links, describe_links, print_counters, reports_errors, run_until_stopped
 
 
@@ -22,7 +24,7 @@ def _raw_note(robot_id: int | None) -> str:
     return f"raw; messages re-encoded onto CAN go out as node {robot_id}"
 
 
-@click.command()
+@click.command(cls=ConfiguredCommand)
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), help="The PC's robot id (required unless --raw).")
 @click.option("--tick", type=Finite(0.001, 60), default=DEFAULT_PERIOD, show_default=True,
@@ -37,11 +39,13 @@ def _raw_note(robot_id: int | None) -> str:
                    "that were apart (network partition, restart) without waiting for the next write.")
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @foxglove_option
+@metrics_option
 @guard_options
+@config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
             larger: bool, refresh: bool, duration: float | None, foxglove: Address | None,
-            guard: GuardChoice) -> None:
+            metrics: Address | None, guard: GuardChoice) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
     The status line and the counters printed on exit have each link's counters
@@ -82,7 +86,8 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
         if live:
             click.echo(f"\r\x1b[K{line}", nl=False, err=True)
 
-    with stop_on_signals() as stop, live_view(node, foxglove, larger_value_wins=larger), node:
+    with (stop_on_signals() as stop, live_view(node, foxglove, larger_value_wins=larger),
+          metrics_served(node, metrics), node):
         click.echo(f"bridging {', '.join(link.name for link in node.links)} "
                    f"({_raw_note(robot_id) if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
         describe_links(node)

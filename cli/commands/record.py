@@ -9,6 +9,7 @@ from typing import Any
 
 import click
 
+from vstig_hw.capture.clock_notes import clock_note, offset_note
 from vstig_hw.capture.decoded import Decoder, RecordFilter, default_framings
 from vstig_hw.capture.files import RotatingCapture
 from vstig_hw.capture.filters import Filter
@@ -28,7 +29,9 @@ from vstig_hw.links import Link, LinkSpec
 from vstig_hw.links.can import CanSpec
 from vstig_hw.links.zenoh import ZenohSpec
 
-from ..options import ByteSize, Finite, filter_options, overwrite_option, refuse_to_replace
+from ..config import ConfiguredCommand, config_options
+from ..ops.metrics import metrics_option, metrics_served
+from ..options import Address, ByteSize, Finite, filter_options, overwrite_option, refuse_to_replace
 from ..running import (
     LINK,
     StatusLine,
@@ -67,7 +70,7 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
     refuse_to_replace(path, overwrite or append, ", --append adds to it")  # appending replaces nothing
 
 
-@click.command()
+@click.command(cls=ConfiguredCommand)
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("-o", "--output", type=click.Path(path_type=str),
               help="FILE, or a folder for a timestamped name (the default: one here, as candump -l). "
@@ -78,10 +81,12 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
 @click.option("--max-bytes", type=ByteSize(), help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
                                   "an existing numbered file is skipped, never replaced.")
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
+@metrics_option
 @filter_options
+@config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: int | None,
-            duration: float | None, keep: Filter) -> None:
+            duration: float | None, metrics: Address | None, keep: Filter) -> None:
     """Record the LINKS' traffic into a file until Ctrl-C (passive: never transmits).
 
     The links are opened before the file, and an existing capture is never replaced
@@ -128,22 +133,33 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
 
     node.on_unit.append(write)
 
+    # Zenoh links measure their peers' clocks: the capture keeps whose clock it is and the offsets (clock_notes).
+    clocks = [clock for link in node.links if (clock := getattr(link.transport, "clock", None)) is not None]
+
     def flush(_: Node) -> None:  # every tick: what a kill leaves behind is at most one tick's frames
         if captures:
+            for clock in clocks:
+                for trip in clock.take():
+                    captures[0].note(offset_note(trip))
             captures[0].flush()
 
     node.on_tick.append(flush)
     try:
-        with stop_on_signals() as stop, node:
+        with stop_on_signals() as stop, metrics_served(node, metrics), node:
             capture = RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
                                       append=append)
             with node.lock:  # the readers write under it: the early units go first, in order
+                if clocks:
+                    capture.note(clock_note(), every_file=True)
                 captures.append(capture)
                 for unit in early:
                     write(*unit)
                 early.clear()
             click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
                        err=True)
+            if clocks and not capture.takes_notes:
+                click.echo(f"{path} keeps no clock notes: to merge captures from several PCs on one clock, record "
+                           "the zenoh link into a line capture (.cap) of its own too", err=True)
             if medium == "can" and link_names_lost(path):
                 click.echo(f"{path} names no link: decode reads its frames back as one unnamed link", err=True)
             describe_links(node)

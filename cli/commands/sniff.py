@@ -18,8 +18,10 @@ from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
-from ..live import Address, foxglove_option, live_view
-from ..options import VALUE_TYPE_HELP, Finite, GuardChoice, filter_options, guard_options, take_warnings
+from ..config import ConfiguredCommand, config_options
+from ..live import foxglove_option, live_view
+from ..ops.metrics import metrics_option, metrics_served
+from ..options import VALUE_TYPE_HELP, Address, Finite, GuardChoice, filter_options, guard_options, take_warnings
 from ..running import LINK, build_links, describe_links, must_hear, print_counters, reports_errors, run_until_stopped
 
 _TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
@@ -49,7 +51,7 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
     return table
 
 
-@click.command()
+@click.command(cls=ConfiguredCommand)
 @click.argument("links", nargs=-1, required=True, type=LINK)
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
@@ -61,11 +63,14 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 @click.option("--hide-refused", is_flag=True,
               help="Leave out what the guard options would refuse (it is still counted under the table).")
 @foxglove_option
+@metrics_option
 @filter_options
 @guard_options
+@config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
-            hide_refused: bool, foxglove: Address | None, keep: Filter, guard: GuardChoice) -> None:
+            hide_refused: bool, foxglove: Address | None, metrics: Address | None, keep: Filter,
+            guard: GuardChoice) -> None:
     """Decode what each LINK hears live, per key; passive: never transmits.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
@@ -129,7 +134,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
         listeners.append(emit)
         node.on_tick.append(lambda _node: _warn(firewall))
         with (stop_on_signals() as stop, live_view(node, foxglove, value_type=value_type, larger_value_wins=larger),
-              node):
+              metrics_served(node, metrics), node):
             describe_links(node)
             run_until_stopped(node, stop, duration=duration)
         _warn(firewall)
@@ -138,7 +143,8 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
     from rich.live import Live
 
     # The live view first, then the node: a port that cannot be bound or opened is the one line said
-    with stop_on_signals() as stop, live_view(node, foxglove, value_type=value_type, larger_value_wins=larger), node:
+    with (stop_on_signals() as stop, live_view(node, foxglove, value_type=value_type, larger_value_wins=larger),
+          metrics_served(node, metrics), node):
         if not sys.stdout.isatty():
             click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
                        "(--jsonl streams every message instead)", err=True)

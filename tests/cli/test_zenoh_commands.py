@@ -48,7 +48,9 @@ def test_record_decode_and_replay_a_zenoh_link(tmp_path: Path) -> None:
         assert recorder.returncode == 0
         lines = capture.read_text().splitlines()
         assert lines[0] == "# vstig zenoh capture v1"
-        assert " zenoh rx vstig/lab/3/201 " in lines[1]  # one sample per batch, under the sender's key
+        assert lines[1].startswith("# vstig clock ")  # whose clock its times are on (clock notes)
+        samples = [line for line in lines if not line.startswith("#")]
+        assert " zenoh rx vstig/lab/3/201 " in samples[0]  # one sample per batch, under the sender's key
 
         decoded = run_vstig("decode", str(capture), "--format", "jsonl")
         assert decoded.returncode == 0, decoded.stderr

@@ -8,6 +8,7 @@ once, goes record by record, merged by time.
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import NamedTuple
@@ -39,11 +40,12 @@ class Fed(NamedTuple):
 def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, skip_bad: bool = False,
                      id_base: int | None = None, extended: bool | None = None, keep: Filter | None = None,
                      progress: Callable[[int], None] | None = None,
-                     deployment: str | None = None) -> Fed:
+                     deployment: str | None = None, shifts: Sequence[float] | None = None) -> Fed:
     """Feed every message of `paths` that `keep` passes.
 
     `extended=None` reads each CAN link's ID width from its frames. `progress(n)`
-    hears of each n bytes read, on the bulk path.
+    hears of each n bytes read, on the bulk path. `shifts`: seconds to take from each
+    file's times, putting captures from several PCs on one clock (clock_notes.shifts).
     """
     decoder = Decoder(default_framings(id_base, extended, deployment))
     sink = _Sink(analyzer, decoder, keep or Filter())
@@ -53,9 +55,16 @@ def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, skip_bad: bool
         drops = _candump_chunks(paths[0], sink, skip_bad, bad, id_base, progress)
         drops.update(decoder.drops())
         return Fed(drops, bad, sink.filtered_out)
-    readers = (read_capture(path, skip_bad, bad, fmt=fmt) for path, fmt in zip(paths, formats, strict=True))
+    readers = [read_capture(path, skip_bad, bad, fmt=fmt) for path, fmt in zip(paths, formats, strict=True)]
+    if shifts is not None:
+        readers = [_shifted(reader, shift) if shift else reader for reader, shift in zip(readers, shifts, strict=True)]
     sink.add_records(heapq.merge(*readers, key=lambda r: r.t))
     return Fed(decoder.drops(), bad, sink.filtered_out)
+
+
+def _shifted(records: Iterable[Record], seconds: float) -> Iterator[Record]:
+    for record in records:
+        yield dataclasses.replace(record, t=record.t - seconds)
 
 
 class _Sink:

@@ -50,6 +50,7 @@ class RotatingCapture:
         self.files = [path]
         self.records = 0
         self._writer = self._open(path, append)
+        self._preamble: list[str] = []  # notes each rotated file starts with
         self._in_file = 0  # records written to the current file
         self._next_check = 1  # the record count of the current file at which its size is next looked at
 
@@ -97,6 +98,23 @@ class RotatingCapture:
         self.files.append(path)
         self._writer = self._open(path)
         self._in_file, self._next_check = 0, 1
+        for text in self._preamble:
+            getattr(self._writer, "note", lambda _text: None)(text)
+
+    @property
+    def takes_notes(self) -> bool:
+        """Whether this format keeps comment lines (our line captures do; CAN logs and MCAP here do not)."""
+        return hasattr(self._writer, "note")
+
+    def note(self, text: str, every_file: bool = False) -> None:
+        """A comment line in the capture, if its format keeps them; `every_file`: again at the top of each
+        rotated file (a capture's clock)."""
+        if every_file:
+            self._preamble.append(text)
+        note = getattr(self._writer, "note", None)
+        if note is not None:
+            with self._naming():
+                note(text)
 
     def flush(self) -> None:
         """Push what is written to the file (the recorder does this every tick, so `tail -f` works)."""

@@ -48,6 +48,10 @@ class SerialCaptureWriter:
     def write(self, record: Record) -> None:
         self.file.write(self.format_line(record))
 
+    def note(self, text: str) -> None:
+        """A comment line (`# text`) that readers skip: what the capture says about itself (clock_notes)."""
+        self.file.write(f"# {text}\n")
+
     def size(self) -> int:
         return self.file.tell()
 

@@ -35,15 +35,13 @@ count, little-endian, then NUL-terminated strings in id order) and the `.basm` (
 from __future__ import annotations
 
 import math
-import os
-import re
-import stat
 import struct
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, get_args
 
+from ..inputs import InputFileError, read_regular, toml_line
 from ..values import from_raw, to_raw
 from ..wire import KEY_MAX
 from .bittybuzz import BbzType, bbzfloat_from_float, bbzfloat_to_float
@@ -203,24 +201,11 @@ SYMBOLS_MAX_BYTES = 16 << 20  # a compiled script's .bo or .basm; its string tab
 
 
 def _read_regular(path: Path, limit: int, what: str) -> bytes:
-    """The bytes of `path`, a regular file of at most `limit` bytes; anything else a DeploymentError naming it.
-
-    Opened without blocking (a FIFO would wait for a writer) and checked on the open descriptor, so a
-    device (/dev/zero), a pipe or a folder is refused before a byte is read.
-    """
+    """`read_regular` (vstig_hw.inputs) with its error as a DeploymentError."""
     try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    except (OSError, ValueError) as error:  # ValueError: a NUL in the name
-        reason = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
-        raise DeploymentError(f"{path}: cannot read {what}: {reason}") from None
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
-        os.close(fd)
-        raise DeploymentError(f"{path}: {what} must be a regular file, not a device, pipe or folder")
-    with os.fdopen(fd, "rb") as file:
-        data = file.read(limit + 1)  # not st_size alone: a file may grow while read
-    if len(data) > limit:
-        raise DeploymentError(f"{path}: {what} is larger than the {limit >> 20} MiB read at most")
-    return data
+        return read_regular(path, limit, what)
+    except InputFileError as error:
+        raise DeploymentError(str(error)) from None
 
 
 def read_bbz_symbols(path: Path) -> list[str]:
@@ -243,12 +228,6 @@ def read_bbz_symbols(path: Path) -> list[str]:
     if data[2:].count(b"\0") < announced:
         raise DeploymentError(f"{path}: the .bo announces {announced} strings but the file ends first")
     return [s.decode("utf-8", "replace") for s in data[2:].split(b"\0")[:announced]]
-
-
-def _line_of(text: str, key: str) -> str:
-    """`:N` for the first line of TOML `text` that sets `key` (tomllib keeps no positions), or ''."""
-    match = re.search(rf"^[ \t]*{re.escape(key)}[ \t]*=", text, re.MULTILINE)
-    return f":{text.count(chr(10), 0, match.start()) + 1}" if match else ""
 
 
 def _int(table: dict[str, Any], name: str, where: str, low: int, high: int, default: int) -> int:
@@ -280,7 +259,7 @@ def parse_deployment(text: str, source: str = "<deployment>", base: Path | None 
         try:
             symbols = read_bbz_symbols(path if path.is_absolute() or base is None else base / path)
         except DeploymentError as error:
-            raise DeploymentError(f"{source}{_line_of(text, 'symbols')}: bittybuzz.symbols: {error}") from None
+            raise DeploymentError(f"{source}{toml_line(text, 'symbols')}: bittybuzz.symbols: {error}") from None
     ids = {name: index for index, name in reversed(list(enumerate(symbols)))}
     entries: dict[str, KeyMap] = {}
     for name, spec in keys.items():

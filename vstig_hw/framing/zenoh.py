@@ -80,6 +80,11 @@ class ZenohKeySpace:
         """The key expression that matches every gateway of this swarm and stigmergy."""
         return f"{self.prefix}*"
 
+    @property
+    def clock_prefix(self) -> str:
+        """Where the swarm's sessions answer for their clocks: vstig/<swarm>/clock/<clock id> (not a stigmergy)."""
+        return f"{KEY_ROOT}/{self.swarm}/clock"
+
     def key(self, gateway: int) -> str:
         if isinstance(gateway, bool) or not isinstance(gateway, int) or not 0 <= gateway <= MAX_GATEWAY:
             raise ValueError(f"a gateway id is 0..{MAX_GATEWAY}, got {gateway!r}")

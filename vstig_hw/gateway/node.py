@@ -125,6 +125,9 @@ class Node:
         self.on_tick: list[TickListener] = []
         self.on_messages: list[MessagesListener] = []
         self.on_change: list[ChangeListener] = []  # the table changed (Python API's watch); see `Seat`
+        # A batch was handled and what it caused handed to the links (written, or queued to a slow link's writer):
+        # called with the wall-clock time the batch was read, under `lock` (the metrics' relay latency).
+        self.on_delivered: list[Callable[[float], None]] = []
         self.engine: Stigmergy | None = None
         self.seat: Seat | None = None  # the engine's part: ENGINE, or LISTEN with count_outcomes
         self.part: Seat | RawRelay | None = None  # what handles the messages links heard (None: nothing)
@@ -285,6 +288,8 @@ class Node:
         try:
             self._arrive(index, t, units)
             self._spread(time.monotonic(), 1 << index)
+            for delivered in self.on_delivered:
+                delivered(t)
         except BaseException as failure:  # a listener broke: `run` raises it on the loop's thread, as before
             if self._failure is None:
                 self._failure = failure

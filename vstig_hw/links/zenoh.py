@@ -270,6 +270,7 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
                          listen_only: bool = False) -> Link[Any]:
     """A Zenoh link (not yet open) publishing as gateway `robot_id` (0 when it never transmits)."""
     from ..transports.zenoh import ZenohTransport
+    from ..transports.zenoh_clock import ZenohClock
 
     space = ZenohKeySpace(spec.swarm, spec.stigmergy)
     framing = ZenohFraming(space, 0 if listen_only else robot_id)
@@ -301,7 +302,7 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
                                expects_peer=bool(connecting) or _mode(first) == "client",
                                listening=tuple(_endpoints(first, "listen/endpoints")), reaches=reaches,
                                rebind=fresh_listener if ours else None, peer_wait=spec.peer_wait,
-                               max_sample=spec.max_sample)
+                               max_sample=spec.max_sample, clock=ZenohClock(space.clock_prefix))
     # Every gateway of the swarm hears every sample: a PUT heard here is not published back here (unless echo=1:
     # peers that do not all reach each other, and no router, where a gateway's re-broadcast carries it a hop on).
     return Link(name, transport, framing, one_domain=not spec.echo)

@@ -46,6 +46,7 @@ from ..framing.zenoh import MAX_SAMPLE, ZenohSample
 from ..wakeup import Wakeup
 from ..wire import MESSAGE_SIZE
 from .base import DeviceTransport, DeviceUnreachable, TransportError, one_line
+from .zenoh_clock import ZenohClock
 
 __all__ = ["ZenohTransport"]
 
@@ -82,11 +83,13 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         backoff: tuple[float, float] = (0.5, 10.0),
         peer_wait: float | None = None,
         max_sample: int = MAX_SAMPLE,
+        clock: ZenohClock | None = None,
     ) -> None:
         if max_sample < MESSAGE_SIZE:
             raise ValueError(f"max_sample must allow one {MESSAGE_SIZE}-byte message, got {max_sample}")
         super().__init__(name, backoff)
         self.max_sample = max_sample  # payload bytes: a bigger sample is refused before it is copied or decoded
+        self.clock = clock  # answers clock queries and measures the peers' clocks over this session (or None)
         self.listening = listening  # the endpoints it listens on (a free loopback port by default)
         self._reaches = reaches  # where else it reaches (connects, scouts), for the start line
         self._rebind = rebind  # new endpoints to listen on, when those picked for us were taken
@@ -157,6 +160,8 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
             session.close()  # type: ignore[no-untyped-call]  # zenoh's stub leaves close() untyped
             raise TransportError(f"{self.name}: cannot subscribe to {self.subscription}: {one_line(exc)}") from None
         self._subscriber = subscriber
+        if self.clock is not None:
+            self.clock.attach(session)
         return session
 
     def _open_session(self, *, may_rebind: bool) -> zenoh.Session | None:
@@ -233,6 +238,8 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
             with self._inbox_lock:
                 self._inbox_bytes -= taken
         self._watch_peers(device)
+        if self.clock is not None:
+            self.clock.probe(device)
         return samples
 
     def write_nowait(self, unit: ZenohSample) -> ZenohSample | None:
