@@ -147,7 +147,7 @@ def test_topics_are_valid_ros_names() -> None:
 
 @given(op=st.sampled_from(list(Op)), key=st.integers(0, 0x7FFF), value=st.integers(0, 0xFFFF),
        timestamp=st.integers(0, 0xFFFF), robot=st.integers(0, 0xFFFF),
-       sender=st.none() | st.integers(0, 0x7FFFFFFF))
+       sender=st.none() | st.integers(0, 0x7FFF_FFFF_FFFF_FFFF))
 def test_cdr_message_is_what_rosbags_serializes(op: Op, key: int, value: int, timestamp: int, robot: int,
                                                  sender: int | None) -> None:
     """The struct-packed CDR (MCAP captures and the live view) is byte for byte rosbags' encoding of MSGDEF."""
