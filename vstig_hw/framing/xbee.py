@@ -162,18 +162,6 @@ def _stuffed(wire: bytes) -> bool:
     return any(wire.find(special, 1) >= 0 for special in (b"\x7d", b"\x7e", b"\x11", b"\x13"))
 
 
-def _unescape(raw: bytes | bytearray) -> bytes | None:
-    """Mode 2's stuffing undone; None for a bad escape (0x7D at the end, or before a byte it never escapes)."""
-    parts = bytes(raw).split(b"\x7d")
-    out = bytearray(parts[0])
-    for part in parts[1:]:
-        if not part or part[0] ^ _FLIP not in _SPECIAL:
-            return None
-        out.append(part[0] ^ _FLIP)
-        out += part[1:]
-    return bytes(out)
-
-
 class XBeeStreamReader:
     """A UART byte stream in, checked frames out as (bytes on the wire, frame data); bad units counted.
 
@@ -272,28 +260,53 @@ class XBeeStreamReader:
         return end, bytes(buf[start + 3:end - 1])
 
     def _escaped_frame_at(self, buf: bytearray, start: int) -> tuple[int, bytes] | str | None:
-        # Mode 2: the frame runs at most to the next 0x7E; unescape what is there and measure.
+        # Mode 2: the frame runs at most to the next 0x7E; unescape as far as its length says, no further
+        # (what follows a whole frame is the next unit's business, noise or not).
         stop = buf.find(START, start + 1)
-        raw = buf[start + 1:] if stop < 0 else buf[start + 1:stop]
-        body = _unescape(raw)
-        if body is None:
-            if stop < 0 and raw.endswith(b"\x7d") and _unescape(raw[:-1]) is not None:
-                return None  # an escape cut by the chunk's end: its byte is on its way
-            return "escape"
-        if len(body) < 2:
+        raw = bytes(buf[start + 1:] if stop < 0 else buf[start + 1:stop])
+        head = _unescape_prefix(raw, 2)
+        if isinstance(head, str):
+            return head
+        if len(head[0]) < 2:
             return None if stop < 0 else "truncated"
-        length = body[0] << 8 | body[1]
+        length = head[0][0] << 8 | head[0][1]
         if not 0 < length <= MAX_FRAME_DATA:
             return "frame_length"
-        if len(body) < length + 3:
+        found = _unescape_prefix(raw, length + 3)
+        if isinstance(found, str):
+            return found
+        frame, used = found
+        if len(frame) < length + 3:
             return None if stop < 0 else "truncated"
-        frame = body[:length + 3]
-        wire = escape(frame)  # where the frame ends on the wire (modules escape every byte they must)
-        if bytes(raw[:len(wire)]) != wire:
+        if raw[:used] != escape(frame):  # a byte left raw that a module escapes: not a mode-2 frame
             return "escape"
         if sum(frame[2:]) & 0xFF != 0xFF:
             return "checksum"
-        return start + 1 + len(wire), frame[2:-1]
+        return start + 1 + used, frame[2:-1]
+
+
+def _unescape_prefix(data: bytes, want: int) -> tuple[bytes, int] | str:
+    """The first `want` bytes of `data` unescaped (fewer if it ends first) and the raw bytes they took; "escape"
+    for a 0x7D before a byte it never escapes (a 0x7D at the very end waits for its byte)."""
+    out = bytearray()
+    i, end = 0, len(data)
+    while len(out) < want and i < end:
+        j = data.find(b"\x7d", i)
+        if j < 0 or j - i >= want - len(out):
+            take = min(want - len(out), end - i)
+            out += data[i:i + take]
+            i += take
+            break
+        out += data[i:j]
+        if j + 1 >= end:
+            i = j
+            break
+        byte = data[j + 1] ^ _FLIP
+        if byte not in _SPECIAL:
+            return "escape"
+        out.append(byte)
+        i = j + 2
+    return bytes(out), i
 
 
 class XBeeFraming:
