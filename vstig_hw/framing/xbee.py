@@ -178,11 +178,11 @@ class XBeeStreamReader:
                        for reason in ("noise", "escape", "frame_length", "truncated", "checksum")}
         self._buf = bytearray()
         self._junk = 0  # bytes at the head of _buf already known not to be a frame
-        self._accounted = False  # the junk run is a bad frame already counted (not noise too)
+        self._counted = False  # the bytes being skipped are already counted (noise, or what is left of a bad frame)
 
     @property
     def holding(self) -> bool:
-        """Bytes are waiting: part of a frame, or noise not yet counted."""
+        """Bytes are waiting: part of a frame, or noise."""
         return bool(self._buf)
 
     def feed(self, chunk: bytes | bytearray | memoryview) -> list[tuple[bytes, bytes]]:
@@ -191,10 +191,8 @@ class XBeeStreamReader:
 
     def flush(self) -> list[tuple[bytes, bytes]]:
         """The line went quiet: a frame still arriving never will (`truncated`), but frames may follow its
-        start (it claimed more bytes than came); they are returned. Noise ends its run."""
+        start (it claimed more bytes than came); they are returned."""
         frames = self._cut(final=True)
-        if self._buf:
-            self._end_junk()
         self.reset()
         return frames
 
@@ -203,6 +201,8 @@ class XBeeStreamReader:
         frames: list[tuple[bytes, bytes]] = []
         while True:
             start = buf.find(START, self._junk)
+            if (len(buf) if start < 0 else start) > self._junk and not self._counted:
+                self._drop("noise")  # bytes no frame claims: one drop per run
             if start < 0:
                 self._junk = len(buf)
                 break
@@ -213,17 +213,15 @@ class XBeeStreamReader:
                     break
                 verdict = "truncated"
             if isinstance(verdict, str):
-                self._drop(verdict)
+                self._drop(verdict)  # what follows it up to the next 0x7E is its remains, not more noise
                 self._junk = start + 1  # resynchronise at the next 0x7E
                 continue
             end, data = verdict
-            if start:
-                self._end_junk()
             frames.append((bytes(buf[start:end]), data))
             del buf[:end]
             self._junk = 0
+            self._counted = False
         if self._junk > MAX_FRAME_DATA:  # noise: keep no more of it than one frame's worth
-            self._end_junk()
             del buf[:self._junk]
             self._junk = 0
         return frames
@@ -232,16 +230,11 @@ class XBeeStreamReader:
         """Forget everything held (a reopened port: the old bytes belong to nobody)."""
         self._buf.clear()
         self._junk = 0
-        self._accounted = False
+        self._counted = False
 
     def _drop(self, reason: str) -> None:
         self.drops[self._names[reason]] += 1
-        self._accounted = True
-
-    def _end_junk(self) -> None:
-        if not self._accounted:
-            self.drops[self._names["noise"]] += 1
-        self._accounted = False
+        self._counted = True
 
     def _frame_at(self, buf: bytearray, start: int) -> tuple[int, bytes] | str | None:
         """(end, frame data) of the frame at `start`, a drop reason, or None while it is still arriving."""
