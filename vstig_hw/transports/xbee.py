@@ -110,10 +110,19 @@ class XBeeTransport(SerialTransport):
         chunks = super()._read_device(device, timeout)
         if chunks:
             self._last_byte = time.monotonic()
-            return self._units(self._reader.feed(chunks[0]))
+            return self.cut(chunks[0])
         if self._reader.holding and time.monotonic() - self._last_byte > QUIET:
-            return self._units(self._reader.flush())
+            return self.quiet()
         return []
+
+    # -- the module's stream (pure: `read` calls these; the spec's vectors too) ---------
+    def cut(self, chunk: bytes) -> list[bytes]:
+        """The units (whole frames for the framing) that this chunk of the module's bytes completes."""
+        return self._units(self._reader.feed(chunk))
+
+    def quiet(self) -> list[bytes]:
+        """The line went quiet: a frame still arriving is cut short; the units its bytes held after all."""
+        return self._units(self._reader.flush())
 
     # -- the module ------------------------------------------------------------
     def _ask(self, port: serial.Serial) -> ModuleInfo:
