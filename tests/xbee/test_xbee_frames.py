@@ -58,13 +58,13 @@ def test_every_frame_we_send_is_a_transmit_request_digi_reads_as_sent(name: str,
     framing.use_module(ModuleInfo(max_payload=np))
     frames = framing.encode_batch(batch)
     carried = []
-    for raw in frames:
+    for number, raw in enumerate(frames):
         packet = digi(raw, mode)
         assert isinstance(packet, TransmitPacket)
         assert packet.x64bit_dest_addr == XBee64BitAddress.from_hex_string(f"{dest:016X}")
         assert packet.x16bit_dest_addr == XBee16BitAddress.from_hex_string("FFFE")
         assert (packet.broadcast_radius, packet.transmit_options) == (0, 0)
-        assert 1 <= packet.frame_id <= 255  # a status comes back for every frame
+        assert packet.frame_id == (1 if number == 0 else 0)  # the period's first frame asks for a report
         assert len(packet.rf_data) <= np and len(packet.rf_data) % 8 == 0
         carried.append(bytes(packet.rf_data))
     assert b"".join(carried) == b"".join(encode(m) for m in batch)  # in order, nothing lost or split
@@ -87,10 +87,17 @@ def test_receive_packets_digi_builds_give_their_messages_and_sender(name: str, m
     assert framing.drops == Counters()
 
 
-def test_frame_ids_cycle_through_1_to_255_and_never_0() -> None:
+def test_the_first_frame_of_each_control_period_asks_for_a_report_with_ids_cycling_1_to_255() -> None:
     framing = XBeeFraming()
-    ids = [digi(framing.encode(AWKWARD)[0], OperatingMode.API_MODE).frame_id for _ in range(600)]
-    assert ids[:3] == [1, 2, 3] and ids[254:257] == [255, 1, 2] and 0 not in ids
+
+    def period() -> list[int]:
+        ids = [digi(framing.encode(AWKWARD)[0], OperatingMode.API_MODE).frame_id for _ in range(3)]
+        framing.tick()
+        return ids
+
+    ids = [period() for _ in range(300)]
+    assert ids[0] == [1, 0, 0] and ids[1] == [2, 0, 0] and {tuple(p[1:]) for p in ids} == {(0, 0)}
+    assert [p[0] for p in ids[253:257]] == [254, 255, 1, 2]
 
 
 def test_np_sets_the_batch_and_a_module_below_one_message_still_gets_one_per_frame() -> None:

@@ -290,6 +290,7 @@ class XbeeMavFraming(XBeeFraming):
         return unit
 
     def tick(self) -> None:
+        super().tick()
         self.reassembler.tick()
 
 

@@ -328,6 +328,9 @@ class XBeeFraming:
         self.max_payload = self.default_max_payload
         self.per_frame = self.max_payload // MESSAGE_SIZE
         self._frame_id = 0
+        self._report = True  # the next frame asks the module for a Transmit Status (see `_transmit`)
+        self._head = bytes((TRANSMIT_REQUEST, 0)) + dest.to_bytes(8, "big") + UNKNOWN_16.to_bytes(2, "big") + \
+            b"\x00\x00"  # a Transmit Request's fields, frame id 0 (byte 1)
         self._reader = XBeeStreamReader(self.escaped, self.drops)
         self._last: tuple[bytes | None, int | None] = (None, None)
 
@@ -351,8 +354,17 @@ class XBeeFraming:
         return [b"".join(encode(m) for m in messages[i:i + step]) for i in range(0, len(messages), step)]
 
     def _transmit(self, rf_data: bytes) -> bytes:
-        self._frame_id = self._frame_id % 255 + 1  # 1..255: the module reports each frame's delivery (0x8B)
-        return api_frame(transmit_request(self._frame_id, rf_data, self.dest), self.escaped)
+        """A Transmit Request. The first frame of each control period has a frame id (1..255), so the module
+        reports its delivery (0x8B); the others have 0. A report per frame would cost the host's UART 11 bytes
+        and the gateway a read for each: a sample shows the same channel, NP and network faults."""
+        head = self._head
+        if self._report:
+            self._report = False
+            self._frame_id = self._frame_id % 255 + 1
+            head = head[:1] + bytes((self._frame_id,)) + head[2:]
+        data = head + rf_data
+        body = len(data).to_bytes(2, "big") + data + bytes((0xFF - (sum(data) & 0xFF),))
+        return b"\x7e" + (escape(body) if self.escaped else body)
 
     # -- receiving -----------------------------------------------------------------
     def feed(self, unit: bytes) -> list[Message]:
@@ -407,7 +419,8 @@ class XBeeFraming:
         return reader.feed(unit) + reader.flush()  # a unit is whole: what it did not complete never will
 
     def tick(self) -> None:
-        """Units are whole frames: nothing ages."""
+        """A control period passed: the next frame asks for a report. (Units are whole frames: nothing ages.)"""
+        self._report = True
 
     def reset(self) -> None:
         """No partial state between units."""

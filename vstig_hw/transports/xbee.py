@@ -54,6 +54,7 @@ _ASKED = ("AP", "NP", "SH", "SL")  # in this order; frame ids 1..4
 _DELIVERY = {0x01: "no_ack", 0x02: "cca_failure", 0x03: "purged", 0x21: "network_ack_failure",
              0x22: "not_joined", 0x23: "self_addressed", 0x24: "address_not_found", 0x25: "route_not_found",
              0x26: "broadcast_failed", 0x74: "payload_too_large"}
+_REPORTS = (TX_STATUS, MODEM_STATUS, AT_RESPONSE)  # the module's own frames: kept here, not units
 _MODEM = {0x00: "modem_reset", 0x01: "modem_watchdog_reset", 0x02: "modem_joined", 0x03: "modem_left"}
 
 
@@ -118,6 +119,10 @@ class XBeeTransport(SerialTransport):
     # -- the module's stream (pure: `read` calls these; the spec's vectors too) ---------
     def cut(self, chunk: bytes) -> list[bytes]:
         """The units (whole frames for the framing) that this chunk of the module's bytes completes."""
+        if not self._reader.holding and self.api == 1 and len(chunk) > 4 and chunk[0] == 0x7E \
+                and (chunk[1] << 8 | chunk[2]) + 4 == len(chunk) and sum(memoryview(chunk)[3:]) & 0xFF == 0xFF:
+            # the common read: one whole frame and nothing held, checked in place
+            return [chunk] if chunk[3] not in _REPORTS else self._units([(chunk, chunk[3:-1])])
         return self._units(self._reader.feed(chunk))
 
     def quiet(self) -> list[bytes]:
