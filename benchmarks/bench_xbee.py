@@ -28,7 +28,7 @@ from pathlib import Path
 
 from vstig_hw import Message, Op, encode
 
-from .bench_datapath import VSTIG, _delays, _paced, _quantiles, _relaying, _usage
+from .bench_datapath import VSTIG, _Arrivals, _delays, _paced, _quantiles, _relaying, _usage
 from .registry import Result, benchmark
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "xbee"))
@@ -39,15 +39,12 @@ PROBE = 32767
 _ENGINE = ("--robot-id", "200", "--budget", "2000", "--no-refresh")
 
 
-class _XBeeArrivals:
-    """The far module's host: when each message (by key) first arrived in a Receive Packet."""
+class _XBeeArrivals(_Arrivals):
+    """bench_datapath's arrivals, read from the far module's host: Receive Packets instead of cobs8 frames."""
 
     def __init__(self, host: object) -> None:
         self.host = host
-        self.arrived: dict[int, float] = {}
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._read, daemon=True)
-        self._thread.start()
+        super().__init__(None)  # type: ignore[arg-type]  # no pty: `_read` reads the host
 
     def _read(self) -> None:
         while not self._stop.is_set():
@@ -56,15 +53,6 @@ class _XBeeArrivals:
             for _source, rf in got:
                 for words in struct.iter_unpack(">HHHH", rf):
                     self.arrived.setdefault(words[0] & 0x7FFF, stamp)
-
-    def wait(self, count: int, seconds: float = 10.0) -> None:
-        end = time.monotonic() + seconds
-        while len(self.arrived) < count and time.monotonic() < end:
-            time.sleep(0.05)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join()
 
 
 @contextlib.contextmanager

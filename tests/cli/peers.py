@@ -16,11 +16,12 @@ import sys
 import threading
 import time
 import tty
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import can
+import pytest
 
 VSTIG = str(Path(sys.executable).with_name("vstig"))
 
@@ -89,6 +90,17 @@ class SlcanAdapter(PtyPeer):
 
 
 STARTED: list[subprocess.Popen[str]] = []  # what start_vstig started: conftest kills what a test left running
+
+
+@pytest.fixture(autouse=True)
+def no_process_outlives_its_test() -> Iterator[None]:
+    """Kill any `vstig` a test started and left running (a conftest imports this fixture to use it)."""
+    yield
+    while STARTED:
+        process = STARTED.pop()
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
 
 
 def _as_from_a_terminal() -> None:

@@ -1,9 +1,10 @@
 """A ROSBuzz drone on its XBee radio, as a separate process, written from ROSBuzz's and XbeeMav's C++ alone.
 
-Independent of vstig_hw. The drone runs the paper's script with Buzz's vstig rules (the
-`Robot` of kh4_robot.py: put("leader", id) once, get("leader") every step, Buzz's conflict
-rule and out-queue). Every step (ROSBuzz's BUZZRATE, 10 Hz) it publishes what ROSBuzz
-publishes (roscontroller.cpp `prepare_msg_and_publish`, buzz_utility.cpp `obt_out_msg`):
+Independent of vstig_hw: its XBee frames are the emulated modules' own codec (xbee_network.py).
+The drone runs the paper's script with Buzz's vstig rules (the `Robot` of kh4_robot.py:
+put("leader", id) once, get("leader") every step, Buzz's conflict rule and out-queue).
+Every step (ROSBuzz's BUZZRATE, 10 Hz) it publishes what ROSBuzz publishes (roscontroller.cpp
+`prepare_msg_and_publish`, buzz_utility.cpp `obt_out_msg`):
 
     payload64 = [header: u16 type 2 (BUZZ_MESSAGE), u16 message number, u32 time] [ROS time ns]
                 [latitude] [longitude] [altitude] [Buzz block: u16 words, u16 robot id,
@@ -30,27 +31,21 @@ from __future__ import annotations
 import struct
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import serial
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cli"))
-from kh4_robot import KEY, PUT, QUERY, STIG, Robot, message, parse
+from kh4_robot import KEY, PUT, QUERY, STIG, Robot, message, messages_in, parse_or_say_bad
+from xbee_network import FrameParser, wire
 
 MTU = 250
-_SPECIAL = (0x7E, 0x7D, 0x11, 0x13)
-
-
-def frame(frame_data: bytes, api: int) -> bytes:
-    """PacketsHandler::Generate_Transmit_Request_Frame: checksum, then length and 0x7E (escaped in mode 2)."""
-    body = len(frame_data).to_bytes(2, "big") + frame_data + bytes((0xFF - (sum(frame_data) & 0xFF),))
-    if api == 2:
-        body = b"".join(bytes((0x7D, b ^ 0x20)) if b in _SPECIAL else bytes((b,)) for b in body)
-    return b"\x7e" + body
 
 
 def transmit(rf: bytes, api: int) -> bytes:
-    return frame(b"\x10\x01" + bytes.fromhex("000000000000FFFF" "FFFE" "00" "00") + rf, api)
+    """PacketsHandler::Generate_Transmit_Request_Frame: frame id 1, broadcast, 16-bit FFFE, radius 0, options 0."""
+    return wire(b"\x10\x01" + bytes.fromhex("000000000000FFFF" "FFFE" "00" "00") + rf, api)
 
 
 def packets(robot_id: int, number: int, entry_messages: list[bytes], fragment: bool) -> list[bytes]:
@@ -73,40 +68,14 @@ def packets(robot_id: int, number: int, entry_messages: list[bytes], fragment: b
 
 
 class Radio:
-    """The module's UART: frames in (unescaped), Receive Packets' RF data out."""
+    """The module's UART: frames in (the frame data, checksums checked), ours out."""
 
     def __init__(self, path: str, api: int) -> None:
         self.port = serial.Serial(path, 230400, timeout=0.05)
-        self.api = api
-        self.buffer = bytearray()
+        self.parser = FrameParser(api, Counter())
 
     def frames(self) -> list[bytes]:
-        self.buffer += self.port.read(65536)
-        found = []
-        while True:
-            start = self.buffer.find(0x7E)
-            if start < 0:
-                self.buffer.clear()
-                return found
-            del self.buffer[:start]
-            body = bytearray()
-            i = 1
-            while i < len(self.buffer) and (len(body) < 2 or len(body) < (body[0] << 8 | body[1]) + 3):
-                byte = self.buffer[i]
-                if self.api == 2 and byte == 0x7D:
-                    if i + 1 >= len(self.buffer):
-                        break
-                    body.append(self.buffer[i + 1] ^ 0x20)
-                    i += 2
-                else:
-                    body.append(byte)
-                    i += 1
-            if len(body) < 2 or len(body) < (body[0] << 8 | body[1]) + 3:
-                return found
-            data = bytes(body[2:-1])
-            del self.buffer[:i]
-            if (sum(data) + body[-1]) & 0xFF == 0xFF:
-                found.append(data)
+        return [data for _raw, data in self.parser.feed(self.port.read(65536))]
 
 
 def payload_obt(robot: Robot, payload64: list[int]) -> None:
@@ -114,23 +83,12 @@ def payload_obt(robot: Robot, payload64: list[int]) -> None:
     if not payload64 or payload64[0] & 0xFFFF != 2:
         return
     block = struct.pack(f"<{len(payload64) - 5}Q", *payload64[5:])
-    words, _sender = struct.unpack_from("<HH", block)
-    pos, end = 4, min(words * 8, len(block))
-    while end - pos > 2:
-        (length,) = struct.unpack_from("<H", block, pos)
-        pos += 2
-        if length == 0 or length > end - pos:
-            break
-        data = block[pos:pos + length]
-        pos += length
-        if data[0] in (PUT, QUERY):
-            try:
-                kind, stig, key, value, ts, writer = parse(data)
-            except (ValueError, struct.error, IndexError):
-                print(f"bad {data.hex()}", flush=True)
-                continue
-            if stig == STIG and key == KEY:
-                robot.receive(kind, value, ts, writer)
+    (words,) = struct.unpack_from("<H", block)
+    for data in messages_in(block, 4, min(words * 8, len(block))):
+        parsed = parse_or_say_bad(data) if data[0] in (PUT, QUERY) else None
+        if parsed is not None and parsed[1:3] == (STIG, KEY):
+            kind, _stig, _key, value, ts, writer = parsed
+            robot.receive(kind, value, ts, writer)
 
 
 def main() -> int:
@@ -139,7 +97,7 @@ def main() -> int:
     api = int(options[options.index("--api") + 1]) if "--api" in options else 1
     fragment, silent = "--fragment" in options, "--silent" in options
     radio = Radio(path, api)
-    radio.port.write(frame(b"\x09\x01SL", api) + frame(b"\x09\x01SH", api))  # PacketsHandler::Send_SL_and_SH_Commands
+    radio.port.write(wire(b"\x09\x01SL", api) + wire(b"\x09\x01SH", api))  # PacketsHandler::Send_SL_and_SH_Commands
     robot = Robot(rid)
     if not silent:
         robot.store((rid, 1, rid))  # put("leader", id)
