@@ -208,6 +208,10 @@ def test_a_capture_holds_each_frame_as_the_module_sent_it_and_decodes_with_its_s
         ("PUT", 11, 0x7E7D, modules[1].address), ("GET", 21, 0, modules[1].address)]
     only = run_vstig("decode", str(path), "--format", "jsonl", "--sender", f"{modules[1].address:#x}", "--op", "PUT")
     assert [json.loads(line)["key"] for line in only.stdout.splitlines()] == [11]
+    analyzed = run_vstig("analyze", str(path))
+    assert analyzed.returncode == 0, analyzed.stderr
+    assert [line.split()[1] for line in analyzed.stdout.splitlines() if line.startswith("sender ")] == [
+        f"{m.address:016X}" for m in modules]  # by their 64-bit addresses
     mcap = path.with_suffix(".mcap")
     assert run_vstig("decode", str(path), "-o", str(mcap)).returncode == 0
     again = run_vstig("decode", str(mcap), "--format", "jsonl")
