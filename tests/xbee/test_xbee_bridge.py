@@ -230,3 +230,24 @@ def test_a_capture_replays_onto_another_module_as_transmit_requests(
     assert b"".join(carried) == b"".join(encode(m) for m in (
         Message(Op.PUT, 10, 0x7E7D, 1, 10), Message(Op.GET, 20, 0, 0, 10),
         Message(Op.PUT, 11, 0x7E7D, 1, 11), Message(Op.GET, 21, 0, 0, 11)))  # re-encoded, in API mode 1
+
+
+def test_a_stop_while_the_bridge_asks_a_silent_module_ends_within_the_at_timeout() -> None:
+    with XBeeNetwork() as network:
+        silent = network.module(GATEWAY, api=0)  # in AT mode: our API frames go on the air as bytes
+        listener = Host(network.module(ROBOT))
+        radio = PtyPeer()
+        bridge = start_vstig("bridge", _xbee(silent), f"serial:{radio.path}", "--robot-id", "200")
+        try:
+            wait_for(lambda: bool(listener.received(0.05)), 30)  # the AT commands are out: the bridge waits
+            stopped = time.monotonic()
+            _out, err = stop(bridge)
+            took = time.monotonic() - stopped
+        finally:
+            listener.close()
+            radio.close()
+    assert took < 2.0, took  # at most the 1 s the module is given
+    assert bridge.returncode == 1 and err.strip().splitlines()[-1] == (
+        f"Error: XBee module on {silent.path}: no answer to AT commands within 1 s at 230400 baud: the module must "
+        "run API mode 1 (AP=1) at that speed (BD); set it with XCTU, or give baud= and api= to match it "
+        "(docs/how-to/xbee.md)")
