@@ -251,3 +251,28 @@ def test_a_stop_while_the_bridge_asks_a_silent_module_ends_within_the_at_timeout
         f"Error: XBee module on {silent.path}: no answer to AT commands within 1 s at 230400 baud: the module must "
         "run API mode 1 (AP=1) at that speed (BD); set it with XCTU, or give baud= and api= to match it "
         "(docs/how-to/xbee.md)")
+
+
+def test_sniff_shows_each_message_with_its_module_and_what_trusting_one_module_refuses() -> None:
+    with XBeeNetwork() as network:
+        radio = network.module(GATEWAY)
+        trusted, other = (Host(network.module(ROBOT + i)) for i in range(2))
+        name = os.path.basename(radio.path)
+        sniff = start_vstig("sniff", _xbee(radio), "--jsonl", "--trust", f"{name}={trusted.module.address:#x}")
+        rows: list[dict[str, object]] = []
+        reader = threading.Thread(target=lambda: rows.extend(json.loads(line) for line in sniff.stdout), daemon=True)
+        reader.start()
+        try:
+            wait_for(lambda: radio.at_log[:4] == ["AP", "NP", "SH", "SL"], 30)
+            time.sleep(0.3)
+            for key, host in enumerate((trusted, other), 1):
+                host.transmit(encode(Message(Op.PUT, key, 100 + key, 1, 7)))
+            wait_for(lambda: len(rows) == 2, 10)
+        finally:
+            _out, err = stop(sniff)
+            trusted.close()
+            other.close()
+    assert sniff.returncode == 0, err
+    assert sorted((r["key"], r["sender"], r["refused"]) for r in rows) == [
+        (1, trusted.module.address, None), (2, other.module.address, "drop_untrusted")]
+    assert _counters(err, name)["drop_untrusted"] == 1
