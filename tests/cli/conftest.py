@@ -3,4 +3,13 @@ by holding its pty or port)."""
 
 from __future__ import annotations
 
-from peers import no_process_outlives_its_test  # noqa: F401  (an autouse fixture: pytest finds it here)
+from collections.abc import Iterator
+
+import pytest
+from peers import kill_what_tests_left_running
+
+
+@pytest.fixture(autouse=True)
+def _no_process_outlives_its_test() -> Iterator[None]:
+    yield
+    kill_what_tests_left_running()

@@ -16,12 +16,11 @@ import sys
 import threading
 import time
 import tty
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import can
-import pytest
 
 VSTIG = str(Path(sys.executable).with_name("vstig"))
 
@@ -92,10 +91,8 @@ class SlcanAdapter(PtyPeer):
 STARTED: list[subprocess.Popen[str]] = []  # what start_vstig started: conftest kills what a test left running
 
 
-@pytest.fixture(autouse=True)
-def no_process_outlives_its_test() -> Iterator[None]:
-    """Kill any `vstig` a test started and left running (a conftest imports this fixture to use it)."""
-    yield
+def kill_what_tests_left_running() -> None:
+    """Kill any `vstig` a test started and left running (the conftests call it after every test)."""
     while STARTED:
         process = STARTED.pop()
         if process.poll() is None:
