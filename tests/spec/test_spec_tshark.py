@@ -168,7 +168,7 @@ def _xbee_expected(frame: bytes) -> list[str]:
 
 
 def test_xbee_frames_from_a_capture(tmp_path: Path) -> None:
-    text2pcap = require_tool("text2pcap")
+    text2pcap = require_tool("text2pcap", "wireshark-common")
     tshark = require_tool("tshark")
     frames = _xbee_frames()
     dump = tmp_path / "radio.txt"
