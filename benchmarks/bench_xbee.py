@@ -10,14 +10,15 @@ ptys, at the same pace and count, measured in the same run:
   bridge sends with a Transmit Status, which the bridge reads and counts too.
 
 CPU from the bridge process's CPU-time clock, context switches of all its threads, and the p50 delay from
-the robot's send to the far module's host; the goal is an XBee relay within 1.3x the cobs8 relay's CPU
-per message.
+the robot's send to the far module's host, each the median of three interleaved pairs of runs; the goal
+is an XBee relay within 1.3x the cobs8 relay's CPU per message.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import statistics
 import struct
 import subprocess
 import sys
@@ -28,7 +29,18 @@ from pathlib import Path
 
 from vstig_hw import Message, Op, encode
 
-from .bench_datapath import VSTIG, _Arrivals, _delays, _paced, _quantiles, _relaying, _usage
+from .bench_datapath import (
+    INSTRUCTIONS_RATE_HZ,
+    VSTIG,
+    _Arrivals,
+    _delays,
+    _instructions,
+    _paced,
+    _quantiles,
+    _relaying,
+    _totals,
+    _usage,
+)
 from .registry import Result, benchmark
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "xbee"))
@@ -56,15 +68,16 @@ class _XBeeArrivals(_Arrivals):
 
 
 @contextlib.contextmanager
-def _xbee_relaying() -> Iterator[tuple[int, object, int, _XBeeArrivals]]:
-    """A bridge between two modules on two networks; yields (its pid, the robot's host, A's address, B's far end)."""
+def _xbee_relaying(prefix: tuple[str, ...] = ()) -> Iterator[tuple[int, object, int, _XBeeArrivals]]:
+    """A bridge between two modules on two networks (run under `prefix`, e.g. callgrind); yields (its pid, the
+    robot's host, A's address, B's far end)."""
     from xbee_network import Host, XBeeNetwork
 
     with XBeeNetwork() as near, XBeeNetwork() as far:
         a, b = near.module(0x0013A20040000001), far.module(0x0013A20040000002)
         robot, listener = Host(near.module(0x0013A20040000003)), Host(far.module(0x0013A20040000004))
         spec = "serial:{}?framing=xbee&baud=230400"
-        process = subprocess.Popen([VSTIG, "bridge", spec.format(a.path), spec.format(b.path), *_ENGINE],
+        process = subprocess.Popen([*prefix, VSTIG, "bridge", spec.format(a.path), spec.format(b.path), *_ENGINE],
                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         out = _XBeeArrivals(listener)
         echo = threading.Event()  # the bridge's re-broadcasts reach the robot's module: its host reads them
@@ -76,7 +89,7 @@ def _xbee_relaying() -> Iterator[tuple[int, object, int, _XBeeArrivals]]:
         draining = threading.Thread(target=drain, daemon=True)
         draining.start()
         try:
-            for stamp in range(1, 300):
+            for stamp in range(1, 3000):
                 robot.transmit(encode(Message(Op.PUT, PROBE, 1, stamp, 7)), dest=a.address)
                 time.sleep(0.1)
                 if PROBE in out.arrived:
@@ -125,12 +138,49 @@ def _cobs8_run() -> tuple[float, float, float, int]:
     return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, _quantiles(delays)[0], len(delays)
 
 
+ROUNDS = 3  # interleaved pairs; each figure is the median of its rounds (preemption on a shared machine moves one)
+
+
+def _median(runs: list[tuple[float, float, float, int]]) -> tuple[float, ...]:
+    return tuple(statistics.median(column) for column in zip(*runs, strict=True))
+
+
 @benchmark("xbee")
 def relay_cost() -> Iterator[Result]:
-    cobs8, xbee = _cobs8_run(), _xbee_run()
+    pairs = [(_cobs8_run(), _xbee_run()) for _ in range(ROUNDS)]
+    cobs8, xbee = _median([c for c, _ in pairs]), _median([x for _, x in pairs])
     yield Result("xbee.relay_cpu_per_msg", xbee[0] * 1e6, "us", "cobs8 relay CPU/msg (goal <= 1.3x)", cobs8[0] * 1e6)
     yield Result("xbee.relay_switches_per_msg", xbee[1], "switches", "cobs8 relay switches/msg", cobs8[1])
     # The XBee p50 includes the emulated modules' two hops (a Python thread each way), which the cobs8 path lacks.
     yield Result("xbee.relay_p50", xbee[2] * 1e3, "ms", "cobs8 relay p50 (+2 emulated module hops)", cobs8[2] * 1e3)
     yield Result("xbee.relay_delivered", xbee[3] / COUNT * 100, "%", "cobs8 relay delivered %", cobs8[3] / COUNT * 100)
 
+
+
+def _xbee_instructions(count: int, workdir: Path) -> int:
+    """User-space instructions (callgrind's Ir) an XBee relay executed in all, having relayed `count` messages."""
+    out_file = workdir / f"xbee.{count}.callgrind"
+    callgrind = ("valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}")
+    with _xbee_relaying(prefix=callgrind) as (_pid, robot, address, out):
+        payloads = [encode(Message(Op.PUT, i, i, 1, 7)) for i in range(count)]
+        _paced(lambda rf: robot.transmit(rf, dest=address), payloads, rate_hz=INSTRUCTIONS_RATE_HZ)  # type: ignore[attr-defined]
+        out.wait(count + 1, seconds=60)
+    if len(out.arrived) < count + 1:
+        raise RuntimeError(f"the XBee relay under callgrind relayed {len(out.arrived) - 1} of {count} messages")
+    return _totals(out_file)
+
+
+@benchmark("xbee")
+def relay_instructions() -> Iterator[Result]:
+    """Instructions per relayed message through XBee modules and through cobs8 radios, under callgrind (the same
+    on a busy or an idle machine): the difference between runs of 2,500 and 500 messages, so start-up cancels."""
+    import shutil
+    import tempfile
+
+    if shutil.which("valgrind") is None:
+        print("xbee.relay_instructions: needs valgrind (apt-get install valgrind)", file=sys.stderr)
+        return
+    with tempfile.TemporaryDirectory(prefix="vstig-bench-") as tmp:
+        xbee = (_xbee_instructions(2500, Path(tmp)) - _xbee_instructions(500, Path(tmp))) / 2000
+        cobs8 = (_instructions("engine", 2500, Path(tmp)) - _instructions("engine", 500, Path(tmp))) / 2000
+    yield Result("xbee.relay_instructions_per_msg", xbee, "instr", "cobs8 engine relay instr/msg", cobs8)

@@ -351,7 +351,9 @@ class XBeeFraming:
     def _payloads(self, messages: Sequence[Message]) -> list[bytes]:
         """The RF data that carry `messages`: here up to `per_frame` messages back to back in each."""
         step = self.per_frame
-        return [b"".join(encode(m) for m in messages[i:i + step]) for i in range(0, len(messages), step)]
+        if len(messages) <= step:  # one flush, one frame: the common case, without slicing
+            return [b"".join(map(encode, messages))] if messages else []
+        return [b"".join(map(encode, messages[i:i + step])) for i in range(0, len(messages), step)]
 
     def _transmit(self, rf_data: bytes) -> bytes:
         """A Transmit Request. The first frame of each control period has a frame id (1..255), so the module

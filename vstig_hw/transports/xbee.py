@@ -140,9 +140,11 @@ class XBeeTransport(SerialTransport):
             raise TransportError(f"XBee module on {self.port}: cannot send AT commands ({exc})") from None
         answers: dict[str, bytes | None] = {}
         deadline = time.monotonic() + self.at_timeout
-        while len(answers) < len(_ASKED) and _number(answers.get("AP")) in (None, self.api) \
-                and (left := deadline - time.monotonic()) > 0:
-            for chunk in SerialTransport._read_device(self, port, min(left, 0.05)):
+        left = self.at_timeout
+        while len(answers) < len(_ASKED) and _number(answers.get("AP")) in (None, self.api) and left >= 0:
+            # what came is read even when the wait is over (a process slowed down may get there late)
+            left = deadline - time.monotonic()
+            for chunk in SerialTransport._read_device(self, port, min(max(left, 0.0), 0.05)):
                 for wire, data in self._reader.feed(chunk):
                     if data[0] == AT_RESPONSE and len(data) >= 5:
                         command = data[2:4].decode("ascii", "replace")
