@@ -83,6 +83,5 @@ def test_rosbuzz_drones_the_gateway_and_a_radio_robot_agree_on_the_largest_id(ap
     assert sum(line.startswith("module 0013A200") for line in everything) == 3  # their modules answered SL and SH
     assert 7 in writers
     link = next(line for line in err.splitlines() if line.startswith(f"{os.path.basename(gateway.path)}: "))
-    assert "drop_xbeemav_control=" in link  # the fragmenting drone's pings, counted
     # Lost fragments leave packets that never complete: counted as they are evicted or go stale, nothing else.
     assert "drop_fragment_bad" not in link and "drop_buzz" not in link and "drop_unmapped" not in link, link
