@@ -280,6 +280,11 @@ def _instructions(name: str, count: int, workdir: Path) -> int:
         out.wait(count + 1, seconds=60)
     if len(out.arrived) < count + 1:
         raise RuntimeError(f"{name} under callgrind relayed {len(out.arrived) - 1} of {count} messages")
+    return _totals(out_file)
+
+
+def _totals(out_file: Path) -> int:
+    """The instructions a callgrind output file counts in all."""
     for line in out_file.read_text().splitlines():
         if line.startswith(("totals:", "summary:")):
             return int(line.split()[1])

@@ -13,6 +13,7 @@ command -v linux.uml >/dev/null || [ -x /usr/bin/linux.uml ] || want+=(user-mode
 command -v modprobe >/dev/null || [ -x /sbin/modprobe ] || want+=(kmod)
 command -v cansend >/dev/null || want+=(can-utils)
 command -v tshark >/dev/null || want+=(tshark)
+command -v text2pcap >/dev/null || want+=(wireshark-common)  # pcaps of XBee frames for the dissector (tests/spec, docs/how-to/xbee.md)
 command -v ip >/dev/null || want+=(iproute2)  # network namespaces for the zenoh federation tests
 command -v node >/dev/null || want+=(nodejs)  # Foxglove's WebSocket client, the live view's viewer in tests
 command -v npm >/dev/null || want+=(npm)

@@ -27,7 +27,8 @@ _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never w
 
 
 def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
-    """Write a record as is when the medium and framing match; otherwise re-encode its messages.
+    """Write a record as is when the medium and framing match (for XBee, frames we sent); otherwise re-encode its
+    messages.
 
     A CAN capture is read with the default ID scheme (11-bit, base 0x600); a target that asks for
     another (id_base, extended, stigmergy) gets the messages re-encoded in its own IDs.
@@ -38,7 +39,10 @@ def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
                    and onto.stigmergy == 0)
 
     def send(record: Record) -> None:
-        same = (record.framing == CAN_FRAMING and default_ids) if is_can else (record.framing == link.framing.name)
+        same = (record.framing == CAN_FRAMING and default_ids) if is_can else (
+            record.framing == link.framing.name
+            # a module takes Transmit Requests: the Receive Packets it handed over are re-encoded
+            and (record.direction == "tx" or getattr(link.framing, "replays_received", True)))
         if same:
             link.transport.write(_fresh(record.unit) if is_can else record.unit)
             link.counters["out_units"] += 1

@@ -91,6 +91,15 @@ class SlcanAdapter(PtyPeer):
 STARTED: list[subprocess.Popen[str]] = []  # what start_vstig started: conftest kills what a test left running
 
 
+def kill_what_tests_left_running() -> None:
+    """Kill any `vstig` a test started and left running (the conftests call it after every test)."""
+    while STARTED:
+        process = STARTED.pop()
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+
+
 def _as_from_a_terminal() -> None:
     """In the child: SIGHUP as a terminal session has it, even when the tests run under nohup (which ignores it)."""
     signal.signal(signal.SIGHUP, signal.SIG_DFL)

@@ -37,23 +37,28 @@ uint16 key
 uint16 value
 uint16 timestamp
 uint16 robot
-int32 sender
+int64 sender
 """
+# Files written before XBee links (whose senders are 64-bit addresses) carry `int32 sender`: still read.
+_MSGDEF_INT32 = MSGDEF.replace("int64 sender", "int32 sender")
 TOPIC_PREFIX = "/vstig/"
 NO_SENDER = -1
 _MAGIC = b"\x89MCAP0\r\n"  # an MCAP file starts and, once closed, ends with it
 _TOPIC_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
 # MSGDEF in CDR, little-endian: the encapsulation header, then each field at its natural alignment
-# (a pad byte after `op`, two before `sender`). Packed by struct: the live view sends one per message
+# (a pad byte after `op`, six before `sender`). Packed by struct: the live view sends one per message
 # heard, and it needs no rosbags; tests/unit hold it equal to rosbags' serialize_cdr.
-_CDR = struct.Struct("<4sBxHHHHxxi")
+_CDR = struct.Struct("<4sBxHHHH6xq")
 _CDR_LE = b"\x00\x01\x00\x00"
+_TWO64 = 1 << 64
 
 
 def cdr_message(message: Message, sender: int | None) -> bytes:
-    """`message` as a CDR-encoded `vstig_msgs/msg/Message` (sender -1 where the medium names none)."""
+    """`message` as a CDR-encoded `vstig_msgs/msg/Message` (sender -1 where the medium names none; a 64-bit
+    address from 2**63 up, which no XBee has, as its two's complement)."""
+    wire_sender = NO_SENDER if sender is None else sender - _TWO64 if sender >= 1 << 63 else sender
     return _CDR.pack(_CDR_LE, message[0] >> 15, message[0] & 0x7FFF, message[1], message[2], message[3],
-                     NO_SENDER if sender is None else sender)
+                     wire_sender)
 
 
 def _needs_extra(path: str) -> CaptureError:
@@ -68,13 +73,18 @@ def _typestore(path: str) -> Any:
 
 
 @functools.cache
-def _our_typestore() -> Any:
-    """Built once per process: parsing the message definition takes ~10 ms, more than reading a small capture."""
+def _our_typestore(definition: str = MSGDEF) -> Any:
+    """Built once per process and definition: parsing one takes ~10 ms, more than reading a small capture."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.EMPTY)
-    store.register(get_types_from_msg(MSGDEF, TYPE_NAME))
+    store.register(get_types_from_msg(definition, TYPE_NAME))
     return store
+
+
+def _store_for(schema: Any, store: Any) -> Any:
+    """The typestore for a file's schema: ours, or the one of files whose sender is an int32."""
+    return _our_typestore(_MSGDEF_INT32) if b"int32 sender" in bytes(schema.data) else store
 
 
 def topic_for(link: str) -> str:
@@ -159,7 +169,7 @@ def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None 
             for schema, channel, raw in make_reader(file).iter_messages(log_time_order=True):
                 if schema is None or schema.name != TYPE_NAME:
                     continue  # another type on another topic: not ours
-                yield _record(store, channel, raw)
+                yield _record(_store_for(schema, store), channel, raw)
     except CaptureError:
         raise
     except Exception as error:  # a damaged file surfaces as any of McapError, zstd, lz4, CDR, struct errors...
@@ -170,7 +180,8 @@ def _record(store: Any, channel: Any, raw: Any) -> Record:
     m = store.deserialize_cdr(raw.data, TYPE_NAME)
     link = channel.metadata.get("link") or channel.topic.removeprefix(TOPIC_PREFIX)
     message = Message(Op(m.op), m.key, m.value, m.timestamp, m.robot)
-    return Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, None if m.sender < 0 else m.sender))
+    sender = None if m.sender == NO_SENDER else m.sender + _TWO64 if m.sender < 0 else m.sender
+    return Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, sender))
 
 
 def _has_footer(file: IO[bytes]) -> bool:
@@ -211,7 +222,7 @@ def _recover(path: str, file: IO[bytes], store: Any, skip_bad: bool,
                 schema = schemas.get(channel.schema_id)
                 if schema is not None and schema.name == TYPE_NAME:
                     kept += 1
-                    yield _record(store, channel, item)
+                    yield _record(_store_for(schema, store), channel, item)
     lost = file.seek(0, 2) - end
     cut_short(path, kept, f"messages in {chunks} chunks",
               f"the {lost} bytes after them are incomplete" if lost else "it has no summary or footer", skip_bad, bad)
