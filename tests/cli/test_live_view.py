@@ -209,11 +209,12 @@ def test_foxglove_client_decodes_every_channel_of_a_sniffer(
 
         can_heard = viewer.messages(topic_for(can_link))
         first_put = next(m for m in can_heard if m["data"]["key"] == 1 and m["data"]["op"] == 0)
-        assert first_put["data"] == {"op": 0, "key": 1, "value": 111, "timestamp": 1, "robot": 3, "sender": 3}
-        assert any(m["data"]["key"] == 1 and m["data"]["sender"] == 4 and m["data"]["timestamp"] == 1
+        # sender is an int64 (64-bit XBee addresses): Foxglove's decoder gives a BigInt, which the client prints as text
+        assert first_put["data"] == {"op": 0, "key": 1, "value": 111, "timestamp": 1, "robot": 3, "sender": "3"}
+        assert any(m["data"]["key"] == 1 and m["data"]["sender"] == "4" and m["data"]["timestamp"] == 1
                    for m in can_heard)  # robot 4's relay or GET shows the entry it caught up to
         radio_put = next(m for m in viewer.messages(topic_for(radio_link)) if m["data"]["op"] == 0)
-        assert radio_put["data"] == {"op": 0, "key": 2, "value": 222, "timestamp": 1, "robot": 9, "sender": -1}
+        assert radio_put["data"] == {"op": 0, "key": 2, "value": 222, "timestamp": 1, "robot": 9, "sender": "-1"}
         for message in (first_put, radio_put):  # stamped with the time it was heard
             assert started - 1 < int(message["logTime"]) / 1e9 < time.time()
 
