@@ -17,6 +17,7 @@ from vstig_hw.engine import Outcome
 from vstig_hw.framing.can import can_framing_for
 from vstig_hw.gateway import Mode, Node, Outlet, SendWindow, favour_latency
 from vstig_hw.links import Heard, Link, parse
+from vstig_hw.transports.base import Transport
 
 _ids = itertools.count()
 
@@ -289,11 +290,11 @@ def test_per_link_queue_keeps_the_newest_message_per_key(channels: tuple[str, st
     observer.shutdown()
 
 
-class BrokenTransport:
+class BrokenTransport(Transport[can.Message]):
     """A transport that breaks its promise never to raise (nothing real fails on cue like this)."""
 
     name = "broken"
-    connected = True
+    connected = True  # type: ignore[assignment]  # a plain attribute for the abstract property
 
     def __init__(self) -> None:
         self.counters = Counters()

@@ -40,7 +40,6 @@ from typing import Any
 
 from ..counters import ENGINE_STATS, Counters
 from ..engine import ConflictResolver, Stigmergy
-from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
 from ..wakeup import Wakeup
 from ..wire import Message
@@ -304,7 +303,7 @@ class Node:
 
     def _arrive(self, index: int, t: float, units: list[Any]) -> None:
         link = self.links[index]
-        feed = link.framing.feed
+        decode = link.decode
         sender_of = link.sender_of
         source_of = link.source_of
         part = self.part
@@ -313,11 +312,7 @@ class Node:
         for unit in units:
             for listener in self.on_unit:
                 listener(link, t, unit)
-            try:
-                messages = feed(unit)
-            except TransmitOnlyError:  # bytes from a stock overhead controller: counted, not decoded
-                link.counters["drop_undecodable"] += 1
-                continue
+            messages = decode(unit)
             if not messages:
                 continue
             heard_count += len(messages)
@@ -325,7 +320,7 @@ class Node:
                 else None
             told = False
             if guard is not None:
-                source = source_of(unit) if source_of is not None else None
+                source = source_of(unit)
                 if self.on_refused:
                     messages, told = self._judge_and_tell(guard, link, sender, source, messages, t), True
                 else:

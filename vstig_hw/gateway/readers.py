@@ -49,15 +49,13 @@ class LinkReaders:
     def start(self) -> None:
         self._stop.clear()
         for index, link in enumerate(self.links):
-            deliver_to = getattr(link.transport, "deliver_to", None)
-            if deliver_to is not None:
-                deliver_to(functools.partial(self._pushed, index))
+            link.deliver_to(functools.partial(self._pushed, index))  # a device that calls back hands over at once
             thread = threading.Thread(target=self._read, args=(index, link), name=f"read-{link.name}", daemon=True)
             thread.start()
             self._threads.append(thread)
 
     def _read(self, index: int, link: Link[Any]) -> None:
-        read = link.transport.read
+        read = link.read
         deliver = self.deliver
         while not self._stop.is_set():
             try:
@@ -76,9 +74,7 @@ class LinkReaders:
     def stop(self) -> None:
         self._stop.set()
         for link in self.links:
-            deliver_to = getattr(link.transport, "deliver_to", None)
-            if deliver_to is not None:
-                deliver_to(None)
+            link.deliver_to(None)
         for thread in self._threads:
             thread.join(timeout=2.0)
         self._threads.clear()
