@@ -238,7 +238,7 @@ def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, dur
 
     service = ServiceNotifier.from_environment()
     if service is not None:
-        node.on_tick.append(service.tick)
+        node.listen(tick=service.tick)
         service.ready(_readiness(node))
     try:
         if status is None:

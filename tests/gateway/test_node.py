@@ -156,7 +156,7 @@ def test_the_gateways_own_get_of_another_key_in_that_poll_does_not_undo_it(chann
     put = Message(Op.PUT, 4, 77, 1, 7)
     with Node([bus_link(a), bus_link(b)], robot_id=100, period=1e-6) as node:  # every poll ticks
         node.put(9, 1)
-        node.on_tick.append(lambda n: n.get(9) and None)
+        node.listen(tick=lambda n: n.get(9) and None)
         robot.send(can_framing_for(7).encode(put)[0])
         time.sleep(0.2)  # the PUT waits in the arrival queue: the next poll hears it, then ticks
         crossed: list[can.Message] = []
@@ -205,7 +205,7 @@ def test_listen_mode_never_transmits_and_reports_what_it_heard(channels: tuple[s
     observer = can.Bus(interface="virtual", channel=a)
     heard: list[Heard] = []
     node = Node([bus_link(a)], mode=Mode.LISTEN)
-    node.on_heard.append(heard.append)
+    node.listen(heard=heard.append)
     with node:
         for frame in can_framing_for(42).encode(Message(Op.GET, 2, 0, 0, 42)):
             tap.send(frame)

@@ -27,7 +27,7 @@ from ..counters import Counters
 from ..links.link import Link
 from ..outqueue import OutQueue
 from ..wire import Message
-from .writer import TX_QUEUE_LIMIT, LinkWriter
+from .writer import CLOSE_WAIT, TX_QUEUE_LIMIT, LinkWriter
 
 __all__ = ["Outlet", "SendWindow"]
 
@@ -79,6 +79,7 @@ class Outlet:
         self.keep_all = keep_all  # raw mode: a FIFO of every frame, not newest-per-key
         self._newest = OutQueue()
         self._fifo: deque[Message] = deque()
+        self.handed = 0  # messages handed to the writer so far (what `Node.drain` waits for)
 
     @property
     def counters(self) -> Counters:
@@ -119,12 +120,31 @@ class Outlet:
             else:
                 batch = self._newest.drain(allowed)
             window.record(now, len(batch))
+        self._hand(batch)
+        return window.next_free() if waiting else None
+
+    def send_now(self, msg: Message, now: float) -> None:
+        """Send `msg` ahead of everything queued here, whatever the window (which it still counts against).
+
+        For what must leave before anything queued after it (a confirmed write's probe, see `confirm`):
+        queued, a PUT for the same key would replace it.
+        """
+        self.window.record(now, 1)
+        self._hand([msg])
+
+    def _hand(self, batch: list[Message]) -> None:
+        self.handed += len(batch)
         try:
             self.writer.submit(self.link.units_of(batch), len(batch))  # one unit for the batch on a byte stream
         except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
             self.counters["drop_write_error"] += len(batch)
-        return window.next_free() if waiting else None
 
-    def close(self) -> None:
-        """Let the device take what is queued (briefly), then stop the writer."""
-        self.writer.close()
+    def close(self, wait: float = CLOSE_WAIT) -> None:
+        """Give the device up to `wait` seconds to take what the writer holds, then stop it. What the window
+        still held back, and what the device did not take, is counted as `unsent_at_close`."""
+        held = len(self)
+        if held:
+            self.counters["unsent_at_close"] += held
+            self._newest = OutQueue()
+            self._fifo.clear()
+        self.writer.close(wait)

@@ -11,12 +11,12 @@ messages to a `Listener` the same way):
   every other link as is: no engine, no merging (RAW mode).
 * A listening Node has no part at all: nothing is judged or sent.
 
-A part runs under `Node.lock`, on whichever thread handed it the batch.
+A part runs under the Node's lock, on whichever thread handed it the batch.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from ..engine import Entry, Outcome, Stigmergy
@@ -59,16 +59,16 @@ class Seat:
 
     A PUT it stores is not echoed onto the link it came from when that link is one
     broadcast domain (`Link.one_domain`): every robot there heard the original.
-    `on_change` (the Node's list, shared) hears of every entry that changed.
+    `on_change` (the Node's listeners, set by the Node) hears of every entry that changed.
     """
 
     def __init__(self, engine: Stigmergy, links: list[Link[Any]], outlets: list[Outlet], guard: Guard | None,
-                 on_change: list[ChangeListener]) -> None:
+                 on_change: Sequence[ChangeListener] = ()) -> None:
         self.engine = engine
         self.links = links
         self.outlets = outlets  # outlets[i] belongs to links[i]; none: the seat only judges
         self.guard = guard
-        self.on_change = on_change
+        self.on_change = on_change  # the Node's, replaced as listeners come and go
         # key -> (the PUT just stored, index of the one-domain link it came from), until the next queue_out
         self._heard_from: dict[int, tuple[Message, int]] = {}
 

@@ -75,6 +75,8 @@ class LinkReaders:
         self._stop.set()
         for link in self.links:
             link.deliver_to(None)
+        me = threading.current_thread()
         for thread in self._threads:
-            thread.join(timeout=2.0)
+            if thread is not me:  # a listener on a reader thread may close the node
+                thread.join(timeout=2.0)
         self._threads.clear()

@@ -2,7 +2,7 @@
 
 `sniff/bridge --foxglove` serve Foxglove (docs/how-to/live-view.md). The server (`server`: the
 SDK, CDR, the table, each write's spread, JSON) runs in a process of its own, so its Python work never
-takes the GIL from the gateway's loop. The loop pays one call per unit heard (`Node.on_messages`) and
+takes the GIL from the gateway's loop. The loop pays one call per unit heard (a `messages` listener) and
 a bounded `deque` append (full: counted `drop_behind`, never a wait); a thread ships what piled up to
 the server through a pipe every PUMP seconds (a slow server blocks that thread only, and the inbox
 then fills and drops). Counters reach the server at most `rate` times a second.
@@ -20,7 +20,7 @@ import time
 from typing import IO, Any
 
 from ..counters import Counters
-from ..gateway.node import Node
+from ..gateway.node import Listening, Node
 from ..links.link import Heard
 from ..values import ValueType
 from ..wire import Message
@@ -61,6 +61,7 @@ class LiveView:
         self._thread: threading.Thread | None = None
         self._server: subprocess.Popen[bytes] | None = None
         self._pipe: IO[bytes] | None = None
+        self._listening: Listening | None = None
 
     # -- lifetime -------------------------------------------------------------
     def open(self) -> None:
@@ -80,20 +81,13 @@ class LiveView:
         self.port = int(line.split()[1])
         self._started_cpu = float(line.split()[2])
         self._server, self._pipe = server, server.stdin
-        self.node.on_messages.append(self._heard)
-        self.node.on_refused.append(self._refused)
-        self.node.on_tick.append(self._tick)
+        self._listening = self.node.listen(messages=self._heard, refused=self._refused, tick=self._tick)
         self._thread = threading.Thread(target=self._run, name="vstig-live-view", daemon=True)
         self._thread.start()
 
     def close(self) -> None:
-        node = self.node
-        if self._heard in node.on_messages:
-            node.on_messages.remove(self._heard)
-        if self._refused in node.on_refused:
-            node.on_refused.remove(self._refused)
-        if self._tick in node.on_tick:
-            node.on_tick.remove(self._tick)
+        if self._listening is not None:
+            self._listening.cancel()
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
