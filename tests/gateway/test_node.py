@@ -5,6 +5,7 @@ from __future__ import annotations
 import gc
 import itertools
 import sys
+import threading
 import time
 from collections.abc import Callable
 
@@ -339,3 +340,35 @@ def test_node_rejects_bad_wiring() -> None:
     with pytest.raises(ValueError, match="raw bridge"):
         Node([bus_link("x")], mode=Mode.RAW)
 
+
+
+def test_drain_ends_once_what_was_held_back_left_though_the_swarm_keeps_talking(channels: tuple[str, str]) -> None:
+    """A robot on bus a rewrites three keys every 2 ms; the node passes them to bus b at one message a step:
+    b's queue never empties, yet `drain` returns once the three it held when asked have gone out."""
+    a, b = channels
+    talker = can.Bus(interface="virtual", channel=a)
+    framing = can_framing_for(7)
+    running = True
+
+    def talk() -> None:
+        stamp = 0
+        while running:
+            stamp += 1
+            for key in (1, 2, 3):
+                talker.send(framing.encode(Message(Op.PUT, key, stamp & 0xFFFF, stamp, 7))[0])
+            time.sleep(0.002)
+
+    thread = threading.Thread(target=talk, daemon=True)
+    with Node([bus_link(a), bus_link(b)], robot_id=100, period=0.1, budget=1) as node:
+        thread.start()
+        node.run(until=lambda: node.stats()[b].get("queued", 0) >= 3, duration=5)
+        heard = node.stats()[a]["in"]
+        started = time.monotonic()
+        drained = node.drain(3.0)
+        took = time.monotonic() - started
+        heard_meanwhile = node.stats()[a]["in"] - heard
+        running = False
+        thread.join(2)
+    talker.shutdown()
+    assert drained and took < 1.0, took  # three messages at one a step, not the 3 s timeout
+    assert heard_meanwhile > 0  # the swarm kept talking (and b's queue filling) while it drained

@@ -326,7 +326,10 @@ class Node:
             self._taking = False  # before the leftovers are taken: one appended later is `_deliver`'s to count
             leftover, self._leftover = self._leftover, []
             for item in leftover:
-                self._arrive(*item)
+                try:
+                    self._arrive(*item)
+                except Exception:  # a listener that breaks now must not keep the links open
+                    log.exception("a listener of %s failed while it stopped", self.label)
         self._fail_calls()
         self._stop_requested.clear()  # the stop asked of a running loop was honoured: the drain runs it again
         if self._opened and self.outlets:

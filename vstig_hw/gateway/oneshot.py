@@ -98,16 +98,20 @@ class _Driver:
     # -- what the machine asks -------------------------------------------------------------
     def _do(self, sends: list[Send]) -> None:
         node, machine = self.node, self.machine
-        for send in sends:
-            if machine.done:
-                break
-            if send is Send.PROBE:
-                node.probe(machine.key)
-            elif send is Send.ASK:
-                node.get(machine.key)
-            else:
-                entry = node.put(machine.key, self.value)
-                self._do(machine.wrote(entry, time.monotonic()))
+        try:
+            for send in sends:
+                if machine.done:
+                    break
+                if send is Send.PROBE:
+                    node.probe(machine.key)
+                elif send is Send.ASK:
+                    node.get(machine.key)
+                else:
+                    entry = node.put(machine.key, self.value)
+                    self._do(machine.wrote(entry, time.monotonic()))
+        except SwarmClosed as closed:  # the node began closing (what it read is handed over then): no verdict
+            self._finish(closed)
+            return
         self._settle()
 
     def _settle(self) -> None:
