@@ -1,15 +1,19 @@
-"""`vstig bridge` stopped while flooded (issue 38, item 1): every frame it read is handled or counted in the
-counters it prints, whatever the moment of the stop. Real processes, real ptys (pyserial in the bridge)."""
+"""`vstig bridge` and `vstig record` stopped while flooded (issue 38, item 1): every frame they read is handled
+(relayed, recorded) or counted in the counters they print, whatever the moment of the stop. Real processes, real
+ptys (pyserial in the command)."""
 
 from __future__ import annotations
 
 import random
 import re
 import time
+from pathlib import Path
 
 import pytest
 from flood import FRAME, FloodedPty
 from peers import start_vstig, stop, wait_for
+
+from vstig_hw.framing import make_serial_framing
 
 pytestmark = pytest.mark.slow
 
@@ -39,3 +43,25 @@ def test_a_flooded_bridge_stopped_at_random_moments_prints_every_frame_it_read(m
             link = radio.path.rsplit("/", 1)[-1]
             counters = _printed(err, link)
             assert counters["rx_bytes"] // FRAME == counters["in"] + counters.get("dropped_at_stop", 0), err
+
+
+def test_a_flooded_recording_stopped_holds_every_frame_it_read_or_counts_it(tmp_path: Path) -> None:
+    """The capture holds every unit handed over before the stop (the file closes after the node handed them
+    on), and the printed counters account for every frame the device read."""
+    radio = FloodedPty(7)
+    capture = tmp_path / "flood.cap"
+    try:
+        recorder = start_vstig("record", f"serial:{radio.path}?framing=cobs8", "-o", str(capture))
+        wait_for(lambda: radio.written > 20 * FRAME * 64, 30)
+        time.sleep(random.Random(381).uniform(0.0, 0.5))
+        _out, err = stop(recorder)
+    finally:
+        radio.stop()
+        radio.close()
+    assert recorder.returncode == 0, err
+    counters = _printed(err, radio.path.rsplit("/", 1)[-1])
+    assert counters["rx_bytes"] // FRAME == counters["in"] + counters.get("dropped_at_stop", 0), err
+    recorded = bytes.fromhex("".join(line.split()[-1] for line in capture.read_text().splitlines() if " rx " in line))
+    assert len(make_serial_framing("cobs8").feed(recorded)) == counters["in"]  # every message handled is in it
+    if not counters.get("dropped_at_stop"):
+        assert len(recorded) == counters["rx_bytes"]  # every byte read
