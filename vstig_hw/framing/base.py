@@ -12,11 +12,12 @@ with the default a medium without them gets, so the gateway calls them
 unconditionally and mypy checks a new medium against them:
 
 * `encode_batch`: several messages in as few units as the medium allows (CAN FD,
-  zenoh samples, BuzzKH4 frames); default, one `encode` after another;
+  zenoh samples, BuzzKH4 frames); default, one `encode` after another. For one
+  message it must give what `encode` gives (a link sends a lone message with `encode`);
 * `sender_of`: the node that transmitted a unit, where the medium names it (CAN
   IDs, zenoh keys, BuzzKH4 frame headers; `names_senders` says it does); default None;
 * `source_of`: who really sent a unit, where the medium says more than the sender
-  it claims (a zenoh session); default None;
+  it claims (a zenoh session; `names_sources` says it does); default None;
 * `transmit_only`: nothing ever comes back (an overhead controller): `feed`
   raises TransmitOnlyError, and a link built on it never decodes.
 """
@@ -24,7 +25,6 @@ unconditionally and mypy checks a new medium against them:
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
 from typing import ClassVar, Generic, TypeVar
 
 from ..counters import Counters
@@ -40,9 +40,10 @@ class Framing(abc.ABC, Generic[Unit]):
     drops: Counters
     transmit_only: ClassVar[bool] = False  # True: `feed` raises TransmitOnlyError (nothing comes back)
     names_senders: ClassVar[bool] = False  # True: `sender_of` reads who transmitted a unit from the unit itself
+    names_sources: ClassVar[bool] = False  # True: `source_of` says more than the sender a unit claims
 
     @abc.abstractmethod
-    def encode(self, msg: Message) -> Sequence[Unit]:
+    def encode(self, msg: Message) -> list[Unit]:
         """The units that carry `msg`, in transmission order."""
 
     @abc.abstractmethod

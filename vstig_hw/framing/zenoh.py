@@ -111,6 +111,7 @@ class ZenohFraming(Framing[ZenohSample]):
     """
 
     names_senders = True  # the key a sample is published under ends with the gateway's id
+    names_sources = True  # each sample says which session published it
 
     name = "zenoh"
 

@@ -527,6 +527,7 @@ class Node:
         part = self.part
         guard = self.guard
         on_unit, on_heard, on_messages = self._on_unit, self._on_heard, self._on_messages
+        source_of = link.source_of if link.framing.names_sources else None  # one call less a unit where it says none
         heard_count = 0
         for unit in units:
             for listener in on_unit:
@@ -538,7 +539,7 @@ class Node:
             sender = sender_of(unit) if guard is not None or on_heard or self._on_change or on_messages else None
             told = False
             if guard is not None:
-                source = link.source_of(unit)
+                source = source_of(unit) if source_of is not None else None
                 if self._on_refused:
                     messages, told = self._judge_and_tell(guard, link, sender, source, messages, t), True
                 else:

@@ -120,7 +120,11 @@ class Outlet:
             else:
                 batch = self._newest.drain(allowed)
             window.record(now, len(batch))
-        self._hand(batch)
+        self.handed += len(batch)
+        try:
+            self.writer.submit(self.link.units_of(batch), len(batch))  # one unit for the batch on a byte stream
+        except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
+            self.counters["drop_write_error"] += len(batch)
         return window.next_free() if waiting else None
 
     def send_now(self, msg: Message, now: float) -> None:
@@ -130,14 +134,11 @@ class Outlet:
         queued, a PUT for the same key would replace it.
         """
         self.window.record(now, 1)
-        self._hand([msg])
-
-    def _hand(self, batch: list[Message]) -> None:
-        self.handed += len(batch)
+        self.handed += 1
         try:
-            self.writer.submit(self.link.units_of(batch), len(batch))  # one unit for the batch on a byte stream
-        except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
-            self.counters["drop_write_error"] += len(batch)
+            self.writer.submit(self.link.units_of([msg]), 1)
+        except Exception:  # as in `flush`
+            self.counters["drop_write_error"] += 1
 
     def close(self, wait: float = CLOSE_WAIT) -> None:
         """Give the device up to `wait` seconds to take what the writer holds, then stop it. What the window

@@ -103,7 +103,9 @@ class Link(Generic[Unit]):
 
     def units_of(self, messages: list[Message]) -> list[Unit]:
         """The units that carry `messages`, as few as the medium allows (see `send_many`)."""
-        units = self.framing.encode_batch(messages)
+        framing = self.framing
+        # One message (a quiet link's usual batch): its own units, without a batching call around them.
+        units = framing.encode(messages[0]) if len(messages) == 1 else framing.encode_batch(messages)
         if len(units) > 1 and isinstance(units[0], bytes):
             units = [b"".join(units)]  # type: ignore[list-item,arg-type]  # Unit is bytes here
         return units
