@@ -11,11 +11,24 @@ from pathlib import Path
 
 import pytest
 from flood import FRAME, FloodedPty
-from peers import start_vstig, stop, wait_for
+from peers import has_open, start_vstig, stop, wait_for
 
 from vstig_hw.framing import make_serial_framing
 
 pytestmark = pytest.mark.slow
+
+READING = 256 * 64 * FRAME  # bytes a radio wrote once the command reads it: beyond what a pty holds unread
+
+
+def _reading(command: object, radios: list[FloodedPty]) -> None:
+    """Wait until `command` has every radio open and has read well past what a pty buffers by itself."""
+    pid = command.pid  # type: ignore[attr-defined]
+    try:
+        wait_for(lambda: all(has_open(pid, radio.path) and radio.written > READING for radio in radios), 60)
+    except AssertionError:
+        said = command.communicate(timeout=5)[1] if command.poll() is not None else ""  # type: ignore[attr-defined]
+        raise AssertionError(f"not reading after 60 s: open {[has_open(pid, r.path) for r in radios]}, written "
+                             f"{[r.written for r in radios]}, said {said!r}") from None
 
 
 def _printed(err: str, link: str) -> dict[str, int]:
@@ -31,7 +44,7 @@ def test_a_flooded_bridge_stopped_at_random_moments_prints_every_frame_it_read(m
         radios = [FloodedPty(7), FloodedPty(8)]
         try:
             bridge = start_vstig("bridge", *(f"serial:{radio.path}?framing=cobs8" for radio in radios), *mode)
-            wait_for(lambda radios=radios: all(r.written > 20 * FRAME * 64 for r in radios), 30)  # read, under load
+            _reading(bridge, radios)
             time.sleep(chance.uniform(0.0, 0.5))
             _out, err = stop(bridge)
         finally:
@@ -52,7 +65,7 @@ def test_a_flooded_recording_stopped_holds_every_frame_it_read_or_counts_it(tmp_
     capture = tmp_path / "flood.cap"
     try:
         recorder = start_vstig("record", f"serial:{radio.path}?framing=cobs8", "-o", str(capture))
-        wait_for(lambda: radio.written > 20 * FRAME * 64, 30)
+        _reading(recorder, [radio])
         time.sleep(random.Random(381).uniform(0.0, 0.5))
         _out, err = stop(recorder)
     finally:
