@@ -18,8 +18,8 @@ from collections.abc import Iterator
 
 from ..inputs import InputFileError, read_regular
 
-__all__ = ["CONFIG_MAX_BYTES", "MAX_DEPTH", "NAMED_FILES", "ConfigFile", "check_listen_path", "outline",
-           "read_config", "read_named", "users_in"]
+__all__ = ["CONFIG_MAX_BYTES", "MAX_DEPTH", "NAMED_FILES", "ConfigFile", "TooDeep", "check_listen_path",
+           "outline", "read_config", "read_named", "users_in"]
 
 CONFIG_MAX_BYTES = 1 << 20  # a Zenoh config is a few kB; a config file with certificates inline, still far below
 NAMED_MAX_BYTES = 1 << 20  # a certificate, key, or user/password dictionary a config names
@@ -41,6 +41,14 @@ NAMED_FILES = {
 _ESCAPE = re.compile(r"\\(?:u([0-9a-fA-F]{4})|x([0-9a-fA-F]{2})|(\r\n|[\s\S]))")
 _SIMPLE = {"b": "\b", "f": "\f", "n": "\n", "r": "\r", "t": "\t", "v": "\v", "0": "\0"}
 _DELIMITERS = frozenset("{}[]:,\"'/")
+
+
+class TooDeep(ValueError):
+    """JSON5 nested deeper than MAX_DEPTH; `line` is where the level beyond begins."""
+
+    def __init__(self, line: int) -> None:
+        super().__init__(f"line {line}: nested deeper than {MAX_DEPTH} levels")
+        self.line = line
 
 
 class ConfigFile:
@@ -117,8 +125,8 @@ def _join(path: str, key: str) -> str:
 def outline(text: str) -> dict[str, int]:
     """The line of every key JSON5 `text` sets in objects (as a/b/c; keys inside arrays are not config keys).
 
-    ValueError(`:line: why`) if objects and arrays nest deeper than MAX_DEPTH. Not a validator: what is
-    not JSON5 is Zenoh's to report.
+    TooDeep if objects and arrays nest deeper than MAX_DEPTH. Not a validator: what is not JSON5 is Zenoh's
+    to report.
     """
     keys: dict[str, int] = {}
     stack: list[str | None] = []  # per open object its key path, None for an array or what is inside one
@@ -127,7 +135,7 @@ def outline(text: str) -> dict[str, int]:
     for kind, value, line in _tokens(text):
         if kind in ("{", "["):
             if len(stack) >= MAX_DEPTH:
-                raise ValueError(f":{line}: nested deeper than {MAX_DEPTH} levels")
+                raise TooDeep(line)
             parent = stack[-1] if stack else ""
             if not stack:
                 stack.append(None if kind == "[" else "")  # the file's top level
@@ -165,9 +173,9 @@ def read_config(path: str) -> ConfigFile:
         raise InputFileError(f"{path}:{line}: {what} is not UTF-8 text") from None
     try:
         keys = outline(text)
-    except ValueError as error:
-        raise InputFileError(f"{path}{error}: {what} nests objects and arrays too deeply for Zenoh to read "
-                             "safely") from None
+    except TooDeep as error:
+        raise InputFileError(f"{path}:{error.line}: {what} nests objects and arrays deeper than {MAX_DEPTH} levels "
+                             "(Zenoh's parser would crash)") from None
     return ConfigFile(path, text, keys)
 
 
