@@ -243,6 +243,8 @@ def parse_deployment(text: str, source: str = "<deployment>", base: Path | None 
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise DeploymentError(f"{source}: not valid TOML: {error}") from None
+    except RecursionError:  # tomllib recurses once per nested array or inline table
+        raise DeploymentError(f"{source}: arrays or tables nested too deeply to read") from None
     unknown = sorted(set(doc) - {"buzz", "bittybuzz", "keys"})
     if unknown:
         raise DeploymentError(f"{source}: unknown section(s) {', '.join(unknown)}; expected buzz, bittybuzz, keys")
