@@ -469,3 +469,38 @@ def test_a_gateway_closes_at_once_while_a_peer_floods_it_through_zenohs_callback
     assert threads and not any(name.startswith("read-") for name in threads)  # from zenoh's thread, not our reader
     time.sleep(0.3)
     assert gateway.counters["in"] == heard  # nothing handled after close
+
+
+# -- what a peer can make the gateway hold: bounded in the config we build ------------------------------------
+def test_the_config_we_build_bounds_a_peers_sample_and_shares_no_memory() -> None:
+    from vstig_hw.links.zenoh import HEADROOM
+
+    config = zenoh_config(ZenohSpec("lab"))
+    assert config.get_json("transport/link/rx/max_message_size") == str(64 * 1024 + HEADROOM)
+    assert config.get_json("transport/shared_memory/enabled") == "false"
+    bigger = zenoh_config(parse("zenoh:lab?max_sample=1048576"))  # derived from max_sample
+    assert bigger.get_json("transport/link/rx/max_message_size") == str(1048576 + HEADROOM)
+
+
+def test_a_config_file_that_loosens_our_bounds_keeps_its_values_and_is_warned_about(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    file = tmp_path / "lab.json5"
+    file.write_text("{\n  transport: {\n    link: { rx: { max_message_size: 1073741824 } },\n"
+                    "    shared_memory: { enabled: true },\n  },\n}\n")
+    with caplog.at_level(logging.WARNING):
+        link = parse(f"zenoh:lab?config={file}").build(robot_id=1)
+    config = zenoh_config(parse(f"zenoh:lab?config={file}"))
+    assert config.get_json("transport/link/rx/max_message_size") == "1073741824"  # the user's, as written
+    assert config.get_json("transport/shared_memory/enabled") == "true"
+    assert [r.getMessage() for r in caplog.records] == [
+        f"zenoh-lab: {file}:3 sets transport/link/rx/max_message_size to 1073741824 (vstig's default: 131072): "
+        "one peer's sample can take that much of this PC's memory",
+        f"zenoh-lab: {file}:4 sets transport/shared_memory/enabled to true (vstig's default: false): each local "
+        "peer's shared memory may stay mapped here after it leaves"]
+    assert link.name == "zenoh-lab"
+    caplog.clear()
+    file.write_text("{ transport: { link: { tx: { lease: 2500 } } } }")  # the file sets neither: ours, silently
+    with caplog.at_level(logging.WARNING):
+        parse(f"zenoh:lab?config={file}").build(robot_id=1)
+    assert caplog.records == []
+    assert zenoh_config(parse(f"zenoh:lab?config={file}")).get_json("transport/shared_memory/enabled") == "false"
