@@ -50,7 +50,7 @@ from ..wire import MESSAGE_SIZE
 from .base import DeviceTransport, DeviceUnreachable, TransportError, one_line
 from .zenoh_clock import ZenohClock
 
-__all__ = ["ZenohTransport"]
+__all__ = ["MMAP_THRESHOLD", "ZenohTransport", "free_big_blocks_at_once"]
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ _M_MMAP_THRESHOLD = -3  # mallopt's parameter number (malloc.h)
 _allocator_set = False
 
 
-def _free_big_blocks_at_once() -> None:
+def free_big_blocks_at_once() -> None:
     """Have glibc's malloc return blocks of MMAP_THRESHOLD bytes or more to the system when they are freed, once
     per process, before Zenoh's threads allocate (DECISIONS.md, "What a Zenoh peer can make a gateway hold").
 
@@ -192,7 +192,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
 
     def _open_session(self, *, may_rebind: bool) -> zenoh.Session | None:
         """A new session; None if the listener port picked for us was taken (`listening` is then a fresh one)."""
-        _free_big_blocks_at_once()
+        free_big_blocks_at_once()
         try:
             return zenoh.open(self._make_config())
         except zenoh.ZError as exc:
