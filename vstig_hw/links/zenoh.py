@@ -6,14 +6,15 @@ no multicast scouting unless the spec (`listen=`, `scout=1`) or the Zenoh config
 file says otherwise. The port is picked when the link is built and bound when its
 session opens; should another program take it in between, the session opens on a
 fresh one (Zenoh's Python API cannot report a port it picked itself from port 0,
-short of opening its admin space to every peer). A config file passes through unchanged: only the keys the
-spec names override it, and our closed defaults fill only what it leaves unset.
+short of opening its admin space to every peer). A config file (read under the file rules: zenoh_files) passes
+through: only the keys the spec names override it, and our closed defaults and bounds fill only what it leaves
+unset; where it loosens a bound (`bounds`: what one peer can make the gateway hold), one line says so.
 
-Opening a link that lets unauthenticated peers in from the network logs one
-warning line: a listener beyond loopback that is neither covered by user/password
-or known public keys nor a TLS/QUIC listener with mutual TLS, or multicast
-scouting without such authentication. The loopback default is open to every
-user of this PC (docs/how-to/many-pcs.md).
+Opening a link that lets unauthenticated peers in from beyond this PC logs one
+warning line (`exposure`): a listener not reachable from this PC alone, unless
+Zenoh makes every peer authenticate or it is a TLS/QUIC listener with mutual
+TLS, or multicast scouting without such authentication. The loopback default is
+open to every user of this PC (docs/how-to/many-pcs.md).
 
 The zenoh library is imported when a link is built, not when a spec is parsed.
 """
@@ -56,8 +57,9 @@ EXAMPLES = {
 NOTES = {
     "zenoh": "zenoh: gateways on many PCs as one swarm (key vstig/<swarm>/<stigmergy>/<gateway id>). Closed by "
              "default: listens on a free loopback port (printed once open), no multicast scouting; listen=, connect= "
-             "or scout=1 open it, config= passes a Zenoh config file (TLS, user/password, routers) through. A sample "
-             f"above max_sample= bytes (default {MAX_SAMPLE}) is refused unread and counted (rx_oversize). One "
+             "or scout=1 open it, config= passes a Zenoh JSON5 config file (TLS, user/password, routers) through. A "
+             f"sample above max_sample= bytes (default {MAX_SAMPLE}) is refused unread and counted (rx_oversize); "
+             "Zenoh holds none above max_sample + 64 KiB, and shares no memory with local peers. One "
              "broadcast domain: a PUT heard on zenoh is not published back onto it; echo=1 does (peers that do not "
              "all reach each other, with no router).",
 }

@@ -4,7 +4,7 @@ Each is read as every file vstig reads at an edge (`vstig_hw.inputs`): a regular
 command, /dev/zero is refused before a byte is read), bounded in size, every error naming the file and, where
 there is one, the line.
 
-Zenoh parses JSON5 recursively with no depth limit: a config nested a few thousand deep crashes the process
+Zenoh parses JSON5 recursively with no depth limit: a config nested 100,000 deep crashed the process
 (SIGSEGV). `outline` reads the text first, without recursion, so nesting is bounded before Zenoh sees it; it also
 keeps the line of every key, so errors name it and the link knows which keys the file sets itself.
 """
@@ -23,7 +23,7 @@ __all__ = ["CONFIG_MAX_BYTES", "MAX_DEPTH", "NAMED_FILES", "ConfigFile", "TooDee
 
 CONFIG_MAX_BYTES = 1 << 20  # a Zenoh config is a few kB; a config file with certificates inline, still far below
 NAMED_MAX_BYTES = 1 << 20  # a certificate, key, or user/password dictionary a config names
-MAX_DEPTH = 32  # objects and arrays inside each other: Zenoh's own configs use 7; its parser crashes near 5,000
+MAX_DEPTH = 32  # objects and arrays inside each other: Zenoh's own configs use 7; 100,000 crashed its parser
 
 # The config keys that name a file Zenoh reads (Zenoh 1.10: transport/link/tls, transport/auth), and what it holds.
 NAMED_FILES = {
