@@ -499,6 +499,11 @@ def test_a_config_file_that_loosens_our_bounds_keeps_its_values_and_is_warned_ab
         "peer's shared memory may stay mapped here after it leaves"]
     assert link.name == "zenoh-lab"
     caplog.clear()
+    file.write_text("{ transport: { link: { rx: { max_message_size: 100000 } } } }")  # tighter: kept, silently
+    with caplog.at_level(logging.WARNING):
+        parse(f"zenoh:lab?config={file}").build(robot_id=1)
+    assert caplog.records == []
+    assert zenoh_config(parse(f"zenoh:lab?config={file}")).get_json("transport/link/rx/max_message_size") == "100000"
     file.write_text("{ transport: { link: { tx: { lease: 2500 } } } }")  # the file sets neither: ours, silently
     with caplog.at_level(logging.WARNING):
         parse(f"zenoh:lab?config={file}").build(robot_id=1)
