@@ -39,14 +39,13 @@ CLOSE_TRY_AGAIN = 1013  # the WebSocket close code for "the server is overloaded
 
 _REGISTERED = re.compile(r"(Un)?[Rr]egistered client (\S+)$")
 _SDK_LOGGERS = ("foxglove", "tungstenite")  # the targets the SDK logs under, as pyo3-log names them
-_NOT_SHOWN = re.compile(r"[^\x20-\x7e\u00a0-\u2027\u202a-\ud7ff\ue000-\ufffd]")  # quick test before the slow one
 
 
 def safe_line(text: str, limit: int = LINE_CHARS) -> str:
     """`text` as one line a terminal shows as it is: every character that is not printable escaped, cut to
     `limit` characters (marked with ...)."""
     text = text[:limit * 2]  # escaping at most quadruples what is kept; never read megabytes
-    if _NOT_SHOWN.search(text):
+    if not text.isprintable():  # control characters, and format ones (bidi overrides) that reorder a line
         text = "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
