@@ -30,10 +30,11 @@ def refuse_symlink(path: str | os.PathLike[str]) -> None:
 
 def drop_setid(path: str | os.PathLike[str]) -> None:
     """Clear the setuid and setgid bits of `path` if it is a regular file about to be written (nothing if it is
-    not there, or not ours to change: then the kernel clears them as we write)."""
+    not there or cannot be reached: writing it fails as it would have; nothing if it is not ours to change: then
+    the kernel clears them as we write)."""
     try:
         mode = os.lstat(path).st_mode
         if stat.S_ISREG(mode) and mode & (stat.S_ISUID | stat.S_ISGID):
             os.chmod(path, stat.S_IMODE(mode) & ~(stat.S_ISUID | stat.S_ISGID))
-    except (FileNotFoundError, PermissionError):
+    except OSError:
         pass
