@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar
 import click
 
 from vstig_hw.capture.records import READABLE_EXTENSIONS, CaptureError, line_capture_at, sniff_suffix
-from vstig_hw.outputs import LinkedOutput, refuse_symlink
+from vstig_hw.outputs import LinkedOutput, drop_setid, refuse_symlink
 from vstig_hw.wire import KEY_MAX
 
 if TYPE_CHECKING:
@@ -214,6 +214,7 @@ def refuse_links_in(folder: Path, names: tuple[str, ...]) -> None:
     """refuse_link for each file a command names itself inside its output folder."""
     for name in names:
         refuse_link(folder / name)
+        drop_setid(folder / name)
 
 
 def refuse_to_replace(path: str | Path, overwrite: bool, otherwise: str = "") -> None:
@@ -226,6 +227,7 @@ def refuse_to_replace(path: str | Path, overwrite: bool, otherwise: str = "") ->
     refuse_link(path)
     if not overwrite and os.path.isfile(path) and os.path.getsize(path) > 0:
         raise click.UsageError(f"{path} exists: --overwrite replaces it{otherwise}")
+    drop_setid(path)  # what replaces it is not a program to run as its owner
 
 
 # -- The capture files decode and analyze read: by extension, else (-, a pipe, <(...)) by first bytes.

@@ -44,7 +44,7 @@ def _raw_note(robot_id: int | None) -> str:
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
-            larger: bool, refresh: bool, duration: float | None, foxglove: Address | None,
+            larger: bool, refresh: bool, duration: float | None, foxglove: Address | None, foxglove_viewers: int,
             metrics: Address | None, guard: GuardChoice) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
@@ -86,7 +86,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
         if live:
             click.echo(f"\r\x1b[K{line}", nl=False, err=True)
 
-    with (stop_on_signals() as stop, live_view(node, foxglove, larger_value_wins=larger),
+    with (stop_on_signals() as stop, live_view(node, foxglove, larger_value_wins=larger, viewers=foxglove_viewers),
           metrics_served(node, metrics), node):
         click.echo(f"bridging {', '.join(link.name for link in node.links)} "
                    f"({_raw_note(robot_id) if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)

@@ -69,7 +69,8 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
-            hide_refused: bool, foxglove: Address | None, metrics: Address | None, keep: Filter,
+            hide_refused: bool, foxglove: Address | None, foxglove_viewers: int, metrics: Address | None,
+            keep: Filter,
             guard: GuardChoice) -> None:
     """Decode what each LINK hears live, per key; passive: never transmits.
 
@@ -133,7 +134,8 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
 
         listeners.append(emit)
         node.on_tick.append(lambda _node: _warn(firewall))
-        with (stop_on_signals() as stop, live_view(node, foxglove, value_type=value_type, larger_value_wins=larger),
+        with (stop_on_signals() as stop,
+              live_view(node, foxglove, value_type=value_type, larger_value_wins=larger, viewers=foxglove_viewers),
               metrics_served(node, metrics), node):
             describe_links(node)
             run_until_stopped(node, stop, duration=duration)
@@ -143,7 +145,8 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
     from rich.live import Live
 
     # The live view first, then the node: a port that cannot be bound or opened is the one line said
-    with (stop_on_signals() as stop, live_view(node, foxglove, value_type=value_type, larger_value_wins=larger),
+    with (stop_on_signals() as stop,
+          live_view(node, foxglove, value_type=value_type, larger_value_wins=larger, viewers=foxglove_viewers),
           metrics_served(node, metrics), node):
         if not sys.stdout.isatty():
             click.echo("stdout is not a terminal: the table is printed once, when sniff ends "

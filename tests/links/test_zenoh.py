@@ -95,61 +95,6 @@ def test_by_default_it_listens_on_loopback_only_and_does_not_scout() -> None:
     assert exposure(config) is None
 
 
-def test_listening_beyond_loopback_or_scouting_without_auth_is_an_exposure() -> None:
-    assert exposure(zenoh_config(parse("zenoh:lab?listen=tcp/0.0.0.0:7447"))) == "listens on tcp/0.0.0.0:7447"
-    assert exposure(zenoh_config(parse("zenoh:lab?scout=1"))) == "scouts the LAN by multicast"
-    assert exposure(zenoh_config(parse("zenoh:lab?listen=tcp/127.0.0.1:7447,unixsock-stream//tmp/z"))) is None
-
-
-OPEN_DESPITE_AUTH_SETTINGS = {  # each lets a plain session in: mutual TLS covers TLS links only; a key size is no key
-    "mtls-on-tcp": "{ transport: { link: { tls: { enable_mtls: true } } } }",
-    "key-size-only": "{ transport: { auth: { pubkey: { key_size: 512 } } } }",
-}
-
-
-@pytest.mark.parametrize("name", sorted(OPEN_DESPITE_AUTH_SETTINGS))
-def test_auth_settings_that_let_plain_sessions_in_are_an_exposure_and_they_do_let_one_in(
-        name: str, tmp_path: Path) -> None:
-    import json
-
-    import zenoh
-
-    from vstig_hw.links.zenoh import _free_loopback_port
-
-    file = tmp_path / f"{name}.json5"
-    file.write_text(OPEN_DESPITE_AUTH_SETTINGS[name])
-    assert exposure(zenoh_config(parse(f"zenoh:lab?config={file}&listen=tcp/0.0.0.0:7447"))) \
-        == "listens on tcp/0.0.0.0:7447"
-    endpoint = f"tcp/127.0.0.1:{_free_loopback_port()}"  # the same settings on loopback, to try them
-    gateway = parse(f"zenoh:lab?config={file}&listen={endpoint}").build(robot_id=201)
-    gateway.open()
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    intruder = zenoh.open(config)
-    try:
-        def injected() -> bool:
-            intruder.put("vstig/lab/0/66", encode(MESSAGES[0]))
-            return any(h.message == MESSAGES[0] for h in gateway.receive(0.2))
-
-        _until(injected)
-    finally:
-        intruder.close()  # type: ignore[no-untyped-call]
-        gateway.close()
-
-
-def test_auth_that_every_peer_must_pass_is_not_an_exposure(tmp_path: Path) -> None:
-    for name, text in (("known-keys", "{ transport: { auth: { pubkey: { known_keys_file: 'k.pem' } } } }"),
-                       ("mtls-on-tls", "{ transport: { link: { tls: { enable_mtls: true } } } }")):
-        file = tmp_path / f"{name}.json5"
-        file.write_text(text)
-        assert exposure(zenoh_config(parse(f"zenoh:lab?config={file}&listen=tls/0.0.0.0:7447"))) is None, name
-    file = tmp_path / "mtls-scouting.json5"
-    file.write_text("{ transport: { link: { tls: { enable_mtls: true } } } }")
-    assert exposure(zenoh_config(parse(f"zenoh:lab?config={file}&listen=tls/0.0.0.0:7447&scout=1"))) \
-        == "scouts the LAN by multicast"  # scouting may still reach peers over plain TCP
-
-
 def test_a_config_file_passes_through_and_the_spec_overrides_only_what_it_names(tmp_path: Path) -> None:
     file = tmp_path / "lab.json5"
     file.write_text('{ connect: { endpoints: ["tcp/10.0.0.9:7447"] }, listen: { endpoints: ["tcp/0.0.0.0:7447"] },'
@@ -524,3 +469,43 @@ def test_a_gateway_closes_at_once_while_a_peer_floods_it_through_zenohs_callback
     assert threads and not any(name.startswith("read-") for name in threads)  # from zenoh's thread, not our reader
     time.sleep(0.3)
     assert gateway.counters["in"] == heard  # nothing handled after close
+
+
+# -- what a peer can make the gateway hold: bounded in the config we build ------------------------------------
+def test_the_config_we_build_bounds_a_peers_sample_and_shares_no_memory() -> None:
+    from vstig_hw.links.zenoh import HEADROOM
+
+    config = zenoh_config(ZenohSpec("lab"))
+    assert config.get_json("transport/link/rx/max_message_size") == str(64 * 1024 + HEADROOM)
+    assert config.get_json("transport/shared_memory/enabled") == "false"
+    bigger = zenoh_config(parse("zenoh:lab?max_sample=1048576"))  # derived from max_sample
+    assert bigger.get_json("transport/link/rx/max_message_size") == str(1048576 + HEADROOM)
+
+
+def test_a_config_file_that_loosens_our_bounds_keeps_its_values_and_is_warned_about(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    file = tmp_path / "lab.json5"
+    file.write_text("{\n  transport: {\n    link: { rx: { max_message_size: 1073741824 } },\n"
+                    "    shared_memory: { enabled: true },\n  },\n}\n")
+    with caplog.at_level(logging.WARNING):
+        link = parse(f"zenoh:lab?config={file}").build(robot_id=1)
+    config = zenoh_config(parse(f"zenoh:lab?config={file}"))
+    assert config.get_json("transport/link/rx/max_message_size") == "1073741824"  # the user's, as written
+    assert config.get_json("transport/shared_memory/enabled") == "true"
+    assert [r.getMessage() for r in caplog.records] == [
+        f"zenoh-lab: {file}:3 sets transport/link/rx/max_message_size to 1073741824 (vstig's default: 131072): "
+        "one peer's sample can take that much of this PC's memory",
+        f"zenoh-lab: {file}:4 sets transport/shared_memory/enabled to true (vstig's default: false): each local "
+        "peer's shared memory may stay mapped here after it leaves"]
+    assert link.name == "zenoh-lab"
+    caplog.clear()
+    file.write_text("{ transport: { link: { rx: { max_message_size: 100000 } } } }")  # tighter: kept, silently
+    with caplog.at_level(logging.WARNING):
+        parse(f"zenoh:lab?config={file}").build(robot_id=1)
+    assert caplog.records == []
+    assert zenoh_config(parse(f"zenoh:lab?config={file}")).get_json("transport/link/rx/max_message_size") == "100000"
+    file.write_text("{ transport: { link: { tx: { lease: 2500 } } } }")  # the file sets neither: ours, silently
+    with caplog.at_level(logging.WARNING):
+        parse(f"zenoh:lab?config={file}").build(robot_id=1)
+    assert caplog.records == []
+    assert zenoh_config(parse(f"zenoh:lab?config={file}")).get_json("transport/shared_memory/enabled") == "false"

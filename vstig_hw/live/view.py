@@ -24,9 +24,9 @@ from ..gateway.node import Node
 from ..links.link import Heard
 from ..values import ValueType
 from ..wire import Message
-from .server import BACKLOG, FRAME, LINK_RATE, LIVE_STATS, RECORD
+from .server import BACKLOG, FRAME, LINK_RATE, LIVE_STATS, RECORD, VIEWERS
 
-__all__ = ["DEFAULT_PORT", "LIVE_STATS", "LiveView"]
+__all__ = ["DEFAULT_PORT", "LIVE_STATS", "VIEWERS", "LiveView"]
 
 log = logging.getLogger(__name__)
 
@@ -43,12 +43,13 @@ class LiveView:
 
     def __init__(self, node: Node, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *,
                  value_type: ValueType = "uint16", larger_value_wins: bool = False, rate: float = 10.0,
-                 inbox: int = INBOX, backlog: int | None = None, link_rate: float | None = None) -> None:
+                 inbox: int = INBOX, backlog: int | None = None, link_rate: float | None = None,
+                 viewers: int = VIEWERS) -> None:
         self.node = node
         self.host, self.port = host, port
         self._config = {"links": [link.name for link in node.links], "host": host, "value_type": value_type,
                         "larger_value_wins": larger_value_wins, "backlog": backlog or BACKLOG,
-                        "link_rate": link_rate or LINK_RATE}
+                        "link_rate": link_rate or LINK_RATE, "viewers": viewers}
         self.interval = 1.0 / rate
         self.counters = Counters(drop_behind=0)  # the server's join them on close()
         self._index = {link.name: i for i, link in enumerate(node.links)}

@@ -34,7 +34,9 @@ Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session s
 from __future__ import annotations
 
 import collections
+import ctypes
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -48,7 +50,7 @@ from ..wire import MESSAGE_SIZE
 from .base import DeviceTransport, DeviceUnreachable, TransportError, one_line
 from .zenoh_clock import ZenohClock
 
-__all__ = ["ZenohTransport"]
+__all__ = ["MMAP_THRESHOLD", "ZenohTransport", "free_big_blocks_at_once"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +63,30 @@ _FIRST_PEER_WAIT_S = 3.0  # open() waits this long for a peer it was told to con
 _UNREACHABLE_MARK = "Unable to connect"  # Zenoh's words when a client finds no router at all
 _IN_USE_MARKS = ("Address already in use", "os error 10048")  # a listener's port taken (POSIX, Windows)
 _REBIND_TRIES = 5  # fresh ports tried after the picked one was taken, before giving up
+MMAP_THRESHOLD = 32 * 1024  # bytes: glibc maps blocks this large apart and unmaps them when freed
+_M_MMAP_THRESHOLD = -3  # mallopt's parameter number (malloc.h)
+_allocator_set = False
+
+
+def free_big_blocks_at_once() -> None:
+    """Have glibc's malloc return blocks of MMAP_THRESHOLD bytes or more to the system when they are freed, once
+    per process, before Zenoh's threads allocate (DECISIONS.md, "What a Zenoh peer can make a gateway hold").
+
+    glibc's own threshold starts at 128 KiB and climbs to 32 MiB after the first big block is freed, so a
+    flood's 64 KiB batches came from Zenoh's threads' arenas and stayed there after the peers left (+60 MB over
+    five floods of 60 kB samples; +13 MB with this). A user's MALLOC_MMAP_THRESHOLD_ is theirs; other C
+    libraries have no mallopt and are left as they are.
+    """
+    global _allocator_set
+    if _allocator_set:
+        return
+    _allocator_set = True
+    try:
+        glibc = os.confstr("CS_GNU_LIBC_VERSION") is not None
+    except (ValueError, OSError):  # not glibc, or not a POSIX system
+        glibc = False
+    if glibc and "MALLOC_MMAP_THRESHOLD_" not in os.environ:
+        ctypes.CDLL(None).mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)
 
 
 class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
@@ -166,6 +192,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
 
     def _open_session(self, *, may_rebind: bool) -> zenoh.Session | None:
         """A new session; None if the listener port picked for us was taken (`listening` is then a fresh one)."""
+        free_big_blocks_at_once()
         try:
             return zenoh.open(self._make_config())
         except zenoh.ZError as exc:
