@@ -6,6 +6,7 @@ import logging
 import os
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -428,9 +429,26 @@ def test_a_client_opened_before_its_router_joins_when_the_router_comes_up() -> N
         router.close()  # type: ignore[attr-defined]
 
 
-def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_others_keep_theirs() -> None:
+def _honest_gateway_and_stock_session(gateway: Link[Any]) -> tuple[Link[Any], Any]:
+    """Beside an open zenoh link: another gateway's link (gateway 202) and a stock Zenoh session, both connected to
+    it, once the stock session hears its subscription."""
     import json
 
+    import zenoh
+
+    [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
+    honest = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
+    honest.open()
+    config = zenoh.Config()
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    stock = zenoh.open(config)
+    _until(lambda: stock.info.peers_zid())
+    time.sleep(0.5)  # the gateway's subscription reaches the stock session just after the session opens
+    return honest, stock
+
+
+def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_others_keep_theirs() -> None:
     import zenoh
 
     from vstig_hw.gateway import Mode, Node
@@ -442,16 +460,8 @@ def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_o
     heard: list[Heard] = []
     node.on_heard.append(heard.append)
     with node:
-        [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
-        honest = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
-        honest.open()
-        config = zenoh.Config()  # a stock session: it stamps nothing, and claims a new gateway id per sample
-        config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-        config.insert_json5("scouting/multicast/enabled", "false")
-        attacker = zenoh.open(config)
-        try:
-            _until(lambda: attacker.info.peers_zid())
-            time.sleep(0.5)  # the gateway's subscription reaches the attacker just after the session opens
+        honest, attacker = _honest_gateway_and_stock_session(gateway)  # the stock session claims a new gateway id
+        try:                                                             # per sample, and stamps nothing
             for i in range(1000):
                 attacker.put(f"vstig/lab/0/{1000 + i}", encode(Message(Op.PUT, 1, i, i + 1, 1000 + i)),
                              congestion_control=zenoh.CongestionControl.BLOCK)
@@ -480,7 +490,6 @@ def test_a_peer_stamping_a_fresh_session_id_on_every_sample_is_held_to_one_sourc
     """The stock API stamps any id per sample (`put(timestamp=...)`): a made-up id names no session connected to
     ours, so every such sample shares the link's one bucket, while a connected session keeps its own."""
     import datetime
-    import json
 
     import zenoh
 
@@ -493,16 +502,8 @@ def test_a_peer_stamping_a_fresh_session_id_on_every_sample_is_held_to_one_sourc
     node.on_messages.append(lambda _link, _t, _sender, msgs: passed.update(
         {key: passed[key] + sum(m.key == key for m in msgs) for key in passed}))
     with node:
-        [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
-        honest = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
-        honest.open()
-        config = zenoh.Config()
-        config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-        config.insert_json5("scouting/multicast/enabled", "false")
-        forger = zenoh.open(config)
+        honest, forger = _honest_gateway_and_stock_session(gateway)
         try:
-            _until(lambda: forger.info.peers_zid())
-            time.sleep(0.5)  # the gateway's subscription reaches the forger just after the session opens
             start = time.monotonic()
             sent = 0
             while time.monotonic() - start < 2.0:  # ~2 s of forged samples, each with a new session id
