@@ -19,7 +19,7 @@ import time
 from collections.abc import Iterator
 from types import TracebackType
 
-from peers import PtyPeer, start_vstig, stop
+from peers import Listener, PtyPeer, start_vstig, stop
 
 from vstig_hw import Message, Op
 from vstig_hw.framing import make_serial_framing
@@ -39,34 +39,24 @@ def flood_message(i: int, robot: int = 66) -> Message:
 
 
 class Radio:
-    """A pty radio whose far end is read all the time, noting when each of A's keys first arrived."""
+    """A pty radio whose far end is read all the time (`listener`: when each key first arrived)."""
 
     def __init__(self) -> None:
         self.peer = PtyPeer()
         self.spec = f"serial:{self.peer.path}?framing=cobs8"
-        self.arrived: dict[int, float] = {}
-        self.heard = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._read, daemon=True)
-        self._thread.start()
+        self.listener = Listener(self.peer)
+        self.arrived = self.listener.arrived
 
-    def _read(self) -> None:
-        framing = make_serial_framing("cobs8")
-        while not self._stop.is_set():
-            data = self.peer.read(0.05)
-            now = time.perf_counter()
-            for msg in framing.feed(data):
-                self.heard += 1
-                if msg.key in HONEST_KEYS:
-                    self.arrived.setdefault(msg.key, now)
+    @property
+    def heard(self) -> int:
+        return self.listener.heard
 
     def write(self, messages: list[Message]) -> None:
         framing = make_serial_framing("cobs8")
         self.peer.write(b"".join(unit for msg in messages for unit in framing.encode(msg)))
 
     def close(self) -> None:
-        self._stop.set()
-        self._thread.join()
+        self.listener.close()
         self.peer.close()
 
 

@@ -49,7 +49,7 @@ from collections.abc import Hashable
 from typing import Generic, TypeVar
 
 from ..outqueue import OutQueue, replaces, same_entry
-from ..wire import KEY_MAX, Message
+from ..wire import GET_BIT, KEY_MAX, Message
 
 __all__ = ["LINES_PER_LINK", "LOCAL", "FairFifo", "FairQueue"]
 
@@ -64,6 +64,11 @@ class _Line(OutQueue):
         super().__init__()
         self.link = link
         self.sub = sub
+        self.waiting = False  # in the turns (it has messages)
+
+    def place(self, key: int, msg: Message) -> None:
+        """Queue `msg` for `key`, which no line holds: last in its op's line (no judging needed)."""
+        (self._gets if msg[0] & GET_BIT else self._puts)[key] = msg
 
 
 class _Fifo(deque[Message]):
@@ -73,65 +78,94 @@ class _Fifo(deque[Message]):
         super().__init__()
         self.link = link
         self.sub = sub
+        self.waiting = False
 
 
 Line = TypeVar("Line", _Line, _Fifo)
 
 
 class _Turns(Generic[Line]):
-    """The lines of the sources with messages waiting, in the order of their turns (links, then sub-sources)."""
+    """The lines of the sources with messages waiting, in the order of their turns (links, then sub-sources).
+
+    A link's own line (sub None) is kept once made, empty or not (there is one per link, and the hot path then
+    makes nothing); a sub-source's line lives while it has messages waiting.
+    """
 
     _kind: type[Line]
 
     def __init__(self) -> None:
-        # link -> sub -> line; the first of each is next. Only lines with messages are here.
-        self._turns: OrderedDict[int, OrderedDict[Hashable, Line]] = OrderedDict()
+        # link -> its ring of lines with messages waiting (sub -> line), the first of each next in turn; a link
+        # is here while its ring is not empty (so nothing waits when it is empty). The rings are kept once made.
+        self.turns: OrderedDict[int, OrderedDict[Hashable, Line]] = OrderedDict()
+        self._rings: dict[int, OrderedDict[Hashable, Line]] = {}
+        self._lines: dict[tuple[int, Hashable], Line] = {}  # (link, sub) -> its line, made or kept
+        self._subs: dict[int, int] = {}  # link -> how many sub-source lines (sub not None) it has
 
     @property
     def sources(self) -> int:
         """How many sources (link, sub) have messages waiting."""
-        return sum(len(subs) for subs in self._turns.values())
+        return sum(len(subs) for subs in self.turns.values())
 
     def _line(self, link: int, sub: Hashable) -> Line:
-        """The line of source (link, sub), made and put last in turn if it has none (check it is not left empty)."""
-        subs = self._turns.get(link)
-        if subs is None:
-            subs = self._turns[link] = OrderedDict()
-        line = subs.get(sub)
+        """The line of source (link, sub): made if it has none (`_settle` it once queued to)."""
+        line = self._lines.get((link, sub))
         if line is None:
-            if sub is not None and len(subs) >= LINES_PER_LINK:
-                return self._line(link, None)
-            line = subs[sub] = self._kind(link, sub)
+            if sub is not None:
+                made = self._subs.get(link, 0)
+                if made >= LINES_PER_LINK:
+                    return self._line(link, None)
+                self._subs[link] = made + 1
+            line = self._lines[link, sub] = self._kind(link, sub)
         return line
 
-    def _forget(self, line: Line) -> None:
+    def _settle(self, line: Line) -> None:
+        """After messages were queued to or taken from `line`: it joins the turns (last) or leaves them."""
+        if line:
+            if not line.waiting:
+                line.waiting = True
+                link = line.link
+                ring = self._rings.get(link)
+                if ring is None:
+                    ring = self._rings[link] = OrderedDict()
+                ring[line.sub] = line
+                if len(ring) == 1:
+                    self.turns[link] = ring
+        elif line.waiting:
+            self._leave(line)
+        elif line.sub is not None:  # made for nothing: a sub-source's line lives only while it has messages
+            self._drop(line)
+
+    def _leave(self, line: Line) -> None:
         """Take an emptied line out of the turns."""
-        subs = self._turns[line.link]
-        del subs[line.sub]
-        if not subs:
-            del self._turns[line.link]
+        line.waiting = False
+        ring = self._rings[line.link]
+        del ring[line.sub]
+        if not ring:
+            del self.turns[line.link]
+        if line.sub is not None:
+            self._drop(line)
+
+    def _drop(self, line: Line) -> None:
+        del self._lines[line.link, line.sub]
+        self._subs[line.link] -= 1
 
     def _served(self, line: Line) -> None:
         """After `line` sent one message: it goes last among its link's lines, its link last among the links."""
-        link, turns = line.link, self._turns
-        subs = turns[link]
-        if line:
-            subs.move_to_end(line.sub)
-        else:
-            del subs[line.sub]
-        if subs:
-            turns.move_to_end(link)
-        else:
-            del turns[link]
+        if not line:
+            self._leave(line)
+            return
+        link, turns = line.link, self.turns
+        turns[link].move_to_end(line.sub)
+        turns.move_to_end(link)
 
     def _next(self) -> Line:
         """The line whose turn it is (there is one: the caller checked)."""
-        subs = next(iter(self._turns.values()))
+        subs = next(iter(self.turns.values()))
         return next(iter(subs.values()))
 
     def _only(self) -> Line | None:
         """The one line with messages waiting, if there is exactly one (the common case: no contention)."""
-        turns = self._turns
+        turns = self.turns
         if len(turns) == 1:
             subs = next(iter(turns.values()))
             if len(subs) == 1:
@@ -161,15 +195,15 @@ class FairQueue(_Turns[_Line]):
             key = msg[0] & KEY_MAX
             holder = holders.get(key)
             if holder is None:
-                line.push(msg)
+                line.place(key, msg)
                 holders[key] = line
             elif holder is line:
                 if not line.push(msg):
                     merged += 1
             elif not self._contest(msg, key, holder, line):
                 merged += 1
-        if not line:
-            self._forget(line)
+        if not line.waiting:
+            self._settle(line)
         return merged
 
     def _contest(self, msg: Message, key: int, holder: _Line | tuple[_Line, ...], line: _Line) -> bool:
@@ -179,7 +213,7 @@ class FairQueue(_Turns[_Line]):
         assert pending is not None
         if same_entry(msg, pending):
             if line not in held:  # a place in this source's line too: it leaves from whichever reaches it first
-                line.push(pending)
+                line.place(key, pending)
                 self._holders[key] = (*held, line)
             return False
         if not replaces(msg, pending):
@@ -188,7 +222,7 @@ class FairQueue(_Turns[_Line]):
             if other is not line:
                 other.remove(key)
                 if not other:
-                    self._forget(other)
+                    self._leave(other)
         line.push(msg)  # in place if this line held the key
         self._holders[key] = line
         return True
@@ -204,7 +238,7 @@ class FairQueue(_Turns[_Line]):
                     del holders[msg[0] & KEY_MAX]
             else:
                 self._holders.clear()
-                self._turns.clear()
+                self._leave(only)
             return out
         out = []
         holders = self._holders
@@ -221,7 +255,7 @@ class FairQueue(_Turns[_Line]):
                     if other is not line:
                         other.remove(key)
                         if not other:
-                            self._forget(other)
+                            self._leave(other)
         return out
 
 
@@ -241,22 +275,19 @@ class FairFifo(_Turns[_Fifo]):
         super().__init__()
         self.limit = limit
         self._count = 0
-        self._per_link: dict[int, int] = {}  # link -> messages waiting from it
 
     def __len__(self) -> int:
         return self._count
 
     def push(self, messages: list[Message], link: int, sub: Hashable = None) -> int:
         """Queue every message of `messages` from source (link, sub); returns how many were dropped to make room."""
-        line = self._line(link, sub)
-        before = len(line)
-        line.extend(messages)
-        added = len(line) - before
-        if not line:
-            self._forget(line)
+        if not messages:
             return 0
-        self._count += added
-        self._per_link[link] = self._per_link.get(link, 0) + added
+        line = self._line(link, sub)
+        line.extend(messages)
+        if not line.waiting:
+            self._settle(line)
+        self._count += len(messages)
         dropped = 0
         while self._count > self.limit:
             self._drop_one()
@@ -264,30 +295,23 @@ class FairFifo(_Turns[_Fifo]):
         return dropped
 
     def _drop_one(self) -> None:
-        per_link = self._per_link
-        link = max(self._turns, key=per_link.__getitem__)  # the first in turn among the most loaded
-        line = max(self._turns[link].values(), key=len)
+        """Drop the oldest message of the longest line of the link with the most waiting (the first in turn of
+        equals). Counting them costs a pass over the waiting lines, made only when the queue is full."""
+        ring = max(self.turns.values(), key=lambda lines: sum(map(len, lines.values())))
+        line = max(ring.values(), key=len)
         line.popleft()
-        self._left(line)
-        if not line:
-            self._forget(line)
-
-    def _left(self, line: _Fifo) -> None:
         self._count -= 1
-        left = self._per_link[line.link] - 1
-        if left:
-            self._per_link[line.link] = left
-        else:
-            del self._per_link[line.link]
+        if not line:
+            self._leave(line)
 
     def drain(self, budget: int | None = None) -> list[Message]:
         """Up to `budget` messages (all if None): one from each source in turn."""
         only = self._only()
         if only is not None and (budget is None or budget >= len(only)):  # one source, all of it: the hot path
             out = list(only)
-            self._turns.clear()
-            self._per_link.clear()
+            only.clear()
             self._count = 0
+            self._leave(only)
             return out
         out = []
         limit = self._count if budget is None else min(budget, self._count)
@@ -295,5 +319,5 @@ class FairFifo(_Turns[_Fifo]):
             line = self._next()
             out.append(line.popleft())
             self._served(line)
-            self._left(line)
+        self._count -= len(out)
         return out

@@ -106,6 +106,11 @@ class SendWindow:
 class Outlet:
     """A link, its send queue (one line per source: `fairshare`) and its budget window.
 
+    What is pushed while nothing waits is only held (`_held`), as it came, until the
+    next flush: if the window and the writer take it all, it goes out as it came
+    (what its source's line would have sent, in that order), and only what must
+    wait enters the lines. So a gateway that keeps up pays nothing for the share.
+
     `on_room` is called from the link's writer thread when a device that was slow
     takes data again: what waits here can go (a Node wakes its loop)."""
 
@@ -119,30 +124,63 @@ class Outlet:
         # What a message not queued counts as: a raw queue dropped a flooder's oldest to make room; an engine
         # queue had a message at least as new for its key pending.
         self._not_queued = "drop_overflow" if keep_all else "superseded"
+        self._held: list[Message] = []  # one push's messages, pushed while nothing waited: see the docstring
+        self._held_link = LOCAL  # and their source
+        self._held_sub: Hashable = None
 
     @property
     def counters(self) -> Counters:
         return self.link.counters
 
     def __len__(self) -> int:
-        return len(self.queue)
+        return len(self.queue) + len(self._held)
 
     def push(self, messages: list[Message], link: int = LOCAL, sub: Hashable = None) -> None:
         """Queue `messages` from source (`link`, `sub`): `link` is the index of the link they came from (LOCAL:
-        this gateway's own), `sub` tells that link's peers apart where it can (None: the link as one source)."""
+        this gateway's own), `sub` tells that link's peers apart where it can (None: the link as one source).
+        The list is kept as it is until sent: the caller must not change it."""
+        if not messages:
+            return
+        held = self._held
+        if not held:
+            if not self.queue.turns:  # nothing waits
+                self._held, self._held_link, self._held_sub = messages, link, sub
+                return
+        elif self.keep_all and link == self._held_link and sub == self._held_sub:  # a raw batch's next unit
+            self._held = held + messages
+            return
+        self._enqueue_held()
+        self._enqueue(messages, link, sub)
+
+    def _enqueue(self, messages: list[Message], link: int, sub: Hashable) -> None:
         refused = self.queue.push(messages, link, sub)
         if refused:
             self.counters[self._not_queued] += refused
+
+    def _enqueue_held(self) -> None:
+        held = self._held
+        if held:
+            self._held = []
+            self._enqueue(held, self._held_link, self._held_sub)
 
     def flush(self, now: float) -> float | None:
         """Send what the window and the writer's room allow; returns when to try again if messages wait.
 
         A writer without room calls `on_room` when it has some again: no retry time for that.
         """
-        queue = self.queue
         window = self.window
         writer = self.writer
-        while queue:
+        held = self._held
+        if held:  # nothing else waits: all of it now, as it came, if the window and the writer take it all
+            room = writer.room()
+            if len(held) <= room and (window.budget is None or len(held) <= window.allowance(now)):
+                self._held = []
+                window.record(now, len(held))
+                self._submit(held)
+                return None
+            self._enqueue_held()
+        queue = self.queue
+        while queue.turns:
             allowed = writer.room()
             if allowed <= 0:
                 return None
@@ -151,12 +189,15 @@ class Outlet:
                 if allowed <= 0:
                     return window.next_free()
             batch = queue.drain(allowed)
-            window.record(now, len(batch), bool(queue))
-            try:
-                writer.submit(self.link.units_of(batch), len(batch))  # one unit for the batch on a byte stream
-            except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
-                self.counters["drop_write_error"] += len(batch)
+            window.record(now, len(batch), bool(queue.turns))
+            self._submit(batch)
         return None
+
+    def _submit(self, batch: list[Message]) -> None:
+        try:
+            self.writer.submit(self.link.units_of(batch), len(batch))  # one unit for the batch on a byte stream
+        except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
+            self.counters["drop_write_error"] += len(batch)
 
     def close(self) -> None:
         """Let the device take what is queued (briefly), then stop the writer."""

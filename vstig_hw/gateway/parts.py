@@ -91,22 +91,24 @@ class Seat:
         self.guard = guard
         self.on_change = on_change
         self.intake = intake
-        self._taken: dict[tuple[int, Hashable], int] = {}  # (link, sub) -> messages the engine took this tick
-        self._source: tuple[int, Hashable] = (LOCAL, None)  # what caused the messages in the engine's outbox
+        self._taken_by_link = [0] * len(links)  # per link, messages the engine took from it (sub None) this tick
+        self._taken: dict[tuple[int, Hashable], int] = {}  # (link, sub) -> the same, for a link's peers
+        self._link: int = LOCAL  # the source (link, sub) that caused the messages in the engine's outbox
+        self._sub: Hashable = None
         # key -> (the PUT just stored, index of the one-domain link it came from), until the next queue_out
         self._heard_from: dict[int, tuple[Message, int]] = {}
 
     # -- the robot's program ---------------------------------------------------------
     def put(self, key: int, value: int) -> None:
         engine = self.engine
-        self._caused_by((LOCAL, None))
+        self._caused_by(LOCAL, None)
         old = engine.entry(key) if self.on_change else None
         engine.put(key, value)
         if self.on_change:
             self._tell(key, old, None, engine.robot_id)
 
     def get(self, key: int) -> int | None:
-        self._caused_by((LOCAL, None))
+        self._caused_by(LOCAL, None)
         value = self.engine.get(key)
         self._heard_from.pop(key, None)  # the GET may have merged into the key's pending PUT: send it everywhere
         return value
@@ -120,9 +122,8 @@ class Seat:
     # -- what links heard ------------------------------------------------------------
     def take(self, index: int, messages: list[Message], sender: int | None, sub: Hashable = None) -> None:
         engine = self.engine
-        source = (index, sub)
-        if source != self._source:
-            self._caused_by(source)
+        if index != self._link or sub != self._sub:
+            self._caused_by(index, sub)
         if self.on_change:
             self._receive_telling(index, messages, sender)
         elif self.outlets and self.links[index].one_domain:
@@ -131,12 +132,12 @@ class Seat:
             for msg in messages:
                 engine.receive(msg)
 
-    def _caused_by(self, source: tuple[int, Hashable]) -> None:
-        """What the engine queues next is caused by `source`: queue out what another source caused first."""
-        if source != self._source:
+    def _caused_by(self, link: int, sub: Hashable) -> None:
+        """What the engine queues next is caused by source (link, sub): queue out what another caused first."""
+        if link != self._link or sub != self._sub:
             if self.engine.pending():
                 self.queue_out()
-            self._source = source
+            self._link, self._sub = link, sub
 
     def admit(self, index: int, sub: Hashable, messages: list[Message]) -> list[Message]:
         """Of what link `index` (peer `sub`) just handed over, what the engine takes within the source's intake
@@ -145,18 +146,27 @@ class Seat:
         intake = self.intake
         if intake is None:
             return messages
-        source = (index, sub)
-        taken = self._taken.get(source, 0)
-        room = intake - taken
+        if sub is None:  # the link as one source: its count by index (the hot path)
+            taken = self._taken_by_link[index]
+            if taken + len(messages) <= intake:
+                self._taken_by_link[index] = taken + len(messages)
+                return messages
+        else:
+            taken = self._taken.get((index, sub), 0)
+        room = max(intake - taken, 0)
         if room < len(messages):
-            self.links[index].counters["drop_intake"] += len(messages) - max(room, 0)
-            messages = messages[:max(room, 0)]
-        self._taken[source] = taken + len(messages)
+            self.links[index].counters["drop_intake"] += len(messages) - room
+            messages = messages[:room]
+        if sub is None:
+            self._taken_by_link[index] = taken + len(messages)
+        else:
+            self._taken[index, sub] = taken + len(messages)
         return messages
 
     def tick(self) -> None:
         """A new tick: every source may give the engine `intake` messages again."""
         self._taken.clear()
+        self._taken_by_link = [0] * len(self.links)
 
     def _receive_from_domain(self, index: int, messages: list[Message]) -> None:
         """Receive what link `index` (one broadcast domain) heard, noting each PUT stored from it.
@@ -203,7 +213,7 @@ class Seat:
         if not engine.pending():
             return
         outgoing = engine.drain()
-        link, sub = self._source
+        link, sub = self._link, self._sub
         guard = self.guard
         confined_to = guard.confined_to if guard is not None and guard.confines else None
         if confined_to is None and not self._heard_from:  # the common case: every message to every link
