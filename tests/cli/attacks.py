@@ -120,7 +120,7 @@ class RadioFlood:
 
 
 _ZENOH_FLOODER = """
-import json, sys, time
+import datetime, json, os, sys, time
 import zenoh
 sys.path.insert(0, {attacks!r})
 from attacks import flood_message
@@ -130,24 +130,33 @@ config.insert_json5("connect/endpoints", json.dumps([{endpoint!r}]))
 config.insert_json5("scouting/multicast/enabled", "false")
 session = zenoh.open(config)
 publisher = session.declare_publisher("vstig/lab/0/66")
+while not session.info.peers_zid():
+    time.sleep(0.01)
+time.sleep(0.5)  # the bridge's subscription reaches this session just after it connects
 print("ready", flush=True)
+
+def stamp():  # the stock API stamps any id: a session that never was, per sample
+    return zenoh.Timestamp(datetime.datetime.now(datetime.UTC), zenoh.TimestampId(os.urandom(16)))
+
 start, sent = time.perf_counter(), 0
 while True:
     due = int((time.perf_counter() - start) * {rate})
     while sent < due:
-        publisher.put(b"".join(encode(flood_message(i)) for i in range(sent, sent + 64)))
+        payload = b"".join(encode(flood_message(i)) for i in range(sent, sent + 64))
+        publisher.put(payload, timestamp=stamp()) if {forge} else publisher.put(payload)
         sent += 64
     time.sleep(0.002)
 """
 
 
 @contextlib.contextmanager
-def zenoh_flood(endpoint: str, rate: int = ZENOH_FLOOD_RATE) -> Iterator[subprocess.Popen[str]]:
-    """A local process on the bridge's zenoh link publishing distinct keys at `rate` messages a second."""
+def zenoh_flood(endpoint: str, rate: int = ZENOH_FLOOD_RATE, forge: bool = False) -> Iterator[subprocess.Popen[str]]:
+    """A local process on the bridge's zenoh link publishing distinct keys at `rate` messages a second; `forge`:
+    each sample stamped with a new session id."""
     here = os.path.dirname(os.path.abspath(__file__))
-    process = subprocess.Popen([sys.executable, "-c", _ZENOH_FLOODER.format(attacks=here, endpoint=endpoint,
-                                                                           rate=rate)],
-                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    script = _ZENOH_FLOODER.format(attacks=here, endpoint=endpoint, rate=rate, forge=forge)
+    process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                               text=True)
     try:
         assert process.stdout is not None and process.stdout.readline().strip() == "ready"
         yield process
@@ -208,10 +217,11 @@ def can_flood_bridge(a: Radio, b: Radio, flooding: bool, rate: int = CAN_FLOOD_R
 
 
 class Bridge:
-    """`vstig bridge` on the given link specs as robot 200, with default options, stopped on exit."""
+    """`vstig bridge` on the given link specs (and options, if any: the defaults otherwise) as robot 200, stopped on
+    exit; `stderr` has its counters then."""
 
-    def __init__(self, *specs: str) -> None:
-        self.process = start_vstig("bridge", *specs, "--robot-id", "200")
+    def __init__(self, *args: str) -> None:
+        self.process = start_vstig("bridge", *args, "--robot-id", "200")
         self.stderr = ""
 
     def __enter__(self) -> Bridge:

@@ -8,6 +8,7 @@ queued ahead of them in each radio's outlet.
 
 from __future__ import annotations
 
+import re
 import time
 
 from attacks import Bridge, Radio, RadioFlood, honest_delays, quantile, wait_until_relaying, zenoh_flood
@@ -53,3 +54,21 @@ def test_a_local_zenoh_flood_of_distinct_keys_leaves_a_to_b_near_normal() -> Non
     finally:
         for radio in (a, b):
             radio.close()
+
+
+def test_a_zenoh_peer_stamping_a_new_session_on_every_sample_gets_at_most_its_source_rate() -> None:
+    """The stock API stamps any id per sample; before, each was a new source with a bucket of its own (79x the
+    rate got through). A stamp that names no session connected to the bridge is no source of its own."""
+    endpoint = f"tcp/127.0.0.1:{_free_loopback_port()}"
+    rate, seconds = 100, 3.0
+    radio = Radio()
+    try:
+        with Bridge(radio.spec, f"zenoh:lab?listen={endpoint}", "--source-rate", str(rate), "--no-refresh") as bridge:
+            time.sleep(0.5)
+            with zenoh_flood(endpoint, forge=True):
+                time.sleep(seconds)
+        stored = int(re.search(r"engine:.*\bstored=(\d+)", bridge.stderr).group(1))  # type: ignore[union-attr]
+    finally:
+        radio.close()
+    assert "drop_source_rate=" in bridge.stderr, bridge.stderr[-800:]
+    assert stored <= 1.5 * rate * (1 + seconds), (stored, bridge.stderr[-800:])  # a burst of N, then N a second

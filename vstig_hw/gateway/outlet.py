@@ -127,6 +127,7 @@ class Outlet:
         self._held: list[Message] = []  # one push's messages, pushed while nothing waited: see the docstring
         self._held_link = LOCAL  # and their source
         self._held_sub: Hashable = None
+        self._held_ours = False  # `_held` is a list of our own (a raw batch's units joined), not the caller's
 
     @property
     def counters(self) -> Counters:
@@ -144,10 +145,13 @@ class Outlet:
         held = self._held
         if not held:
             if not self.queue.turns:  # nothing waits
-                self._held, self._held_link, self._held_sub = messages, link, sub
+                self._held, self._held_link, self._held_sub, self._held_ours = messages, link, sub, False
                 return
         elif self.keep_all and link == self._held_link and sub == self._held_sub:  # a raw batch's next unit
-            self._held = held + messages
+            if self._held_ours:
+                held.extend(messages)
+            else:
+                self._held, self._held_ours = held + messages, True
             return
         self._enqueue_held()
         self._enqueue(messages, link, sub)
