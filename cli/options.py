@@ -408,8 +408,11 @@ def _guard_option_list() -> list[Callable[[Callable[..., Any]], Callable[..., An
                           "see --source-rate."),
         click.option("--source-rate", type=Finite(0.0, min_open=True), metavar="N",
                      help="At most N messages per second from each real source, whatever ids it claims: a serial or "
-                          "CAN link is one source, a zenoh peer's session (the id zenoh stamps on its samples) is one; "
-                          "excess counted drop_source_rate."),
+                          "CAN link is one source; on zenoh, each session connected to ours (by the id stamped on its "
+                          "samples); samples stamped with no connected session's id (unstamped, made up, relayed by a "
+                          "router) share one more. On open loopback any local user can connect sessions: only "
+                          "authenticated zenoh keeps them out; every source also gets only its fair share of each "
+                          "link. Excess counted drop_source_rate."),
         click.option("--trust", multiple=True, metavar="LINK=IDS", callback=_pairs(SENDER.high, "ids"),
                      help="Accept on LINK only these sender ids, e.g. can0=1-20,33, or XBee modules' 64-bit "
                           "addresses, radio=0x0013A20040A1B2C3 (drop_untrusted). Repeatable."),

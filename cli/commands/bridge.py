@@ -30,7 +30,7 @@ def _raw_note(robot_id: int | None) -> str:
 @click.option("--tick", type=Finite(0.001, 60), default=DEFAULT_PERIOD, show_default=True,
               help="Control period in seconds.")
 @click.option("--budget", type=click.IntRange(1, 1_000_000), default=DEFAULT_BUDGET, show_default=True,
-              help="Messages per link per tick.")
+              help="Messages per link per tick, shared fairly among their sources.")
 @click.option("--raw", is_flag=True, help="Relay every frame between links, translating framings, with no engine.")
 @click.option("--larger-value-wins", "larger", is_flag=True,
               help="Resolve conflicts by the larger value (the paper's Figure 1) instead of the higher robot id.")
@@ -58,6 +58,11 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     default; --learn, --rate, --source-rate, --trust, --deny, --keys, --read-only and --flap add
     policies. LINK names are those printed at start (the device's name: can0, ttyUSB0...). Refusals
     are counted per link (drop_jump, drop_rate, drop_source_rate, drop_untrusted, drop_key).
+
+    Every link's --budget is shared fairly among the sources of what it carries (each link, each
+    zenoh session connected to ours, the bridge itself), so a flooding radio or zenoh peer delays
+    only its own messages; the engine takes at most 16 ticks of budget per source and tick
+    (drop_intake).
 
     \b
     Many PCs: add a zenoh link on each (vstig links lists its options), e.g.

@@ -48,6 +48,34 @@ class PtyPeer:
         os.close(self.slave)
 
 
+class Listener:
+    """The far end of a cobs8 radio that does read: the time each message (by key) first arrived, and how many
+    messages arrived in all."""
+
+    def __init__(self, radio: PtyPeer) -> None:
+        from vstig_hw.framing import make_serial_framing
+
+        self.radio = radio
+        self.arrived: dict[int, float] = {}
+        self.heard = 0
+        self._framing = make_serial_framing("cobs8")
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        while not self._stop.is_set():
+            data = self.radio.read(0.05)
+            stamp = time.perf_counter()
+            for msg in self._framing.feed(data) if data else ():
+                self.heard += 1
+                self.arrived.setdefault(msg.key, stamp)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
 class SlcanAdapter(PtyPeer):
     """The adapter side of slcan: frames the driver sends land in `sent`; `inject` puts frames on its bus."""
 

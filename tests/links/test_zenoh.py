@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -372,9 +374,26 @@ def test_a_client_opened_before_its_router_joins_when_the_router_comes_up() -> N
         router.close()  # type: ignore[attr-defined]
 
 
-def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_others_keep_theirs() -> None:
+def _honest_gateway_and_stock_session(gateway: Link[Any]) -> tuple[Link[Any], Any]:
+    """Beside an open zenoh link: another gateway's link (gateway 202) and a stock Zenoh session, both connected to
+    it, once the stock session hears its subscription."""
     import json
 
+    import zenoh
+
+    [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
+    honest = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
+    honest.open()
+    config = zenoh.Config()
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    stock = zenoh.open(config)
+    _until(lambda: stock.info.peers_zid())
+    time.sleep(0.5)  # the gateway's subscription reaches the stock session just after the session opens
+    return honest, stock
+
+
+def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_others_keep_theirs() -> None:
     import zenoh
 
     from vstig_hw.gateway import Mode, Node
@@ -386,16 +405,8 @@ def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_o
     heard: list[Heard] = []
     node.on_heard.append(heard.append)
     with node:
-        [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
-        honest = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
-        honest.open()
-        config = zenoh.Config()  # a stock session: it stamps nothing, and claims a new gateway id per sample
-        config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-        config.insert_json5("scouting/multicast/enabled", "false")
-        attacker = zenoh.open(config)
-        try:
-            _until(lambda: attacker.info.peers_zid())
-            time.sleep(0.5)  # the gateway's subscription reaches the attacker just after the session opens
+        honest, attacker = _honest_gateway_and_stock_session(gateway)  # the stock session claims a new gateway id
+        try:                                                             # per sample, and stamps nothing
             for i in range(1000):
                 attacker.put(f"vstig/lab/0/{1000 + i}", encode(Message(Op.PUT, 1, i, i + 1, 1000 + i)),
                              congestion_control=zenoh.CongestionControl.BLOCK)
@@ -418,6 +429,46 @@ def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_o
     assert refused() == 1000 - len(from_attacker), dict(gateway.counters)
     assert gateway.counters["drop_source_rate"] >= 1000 - len(from_attacker) - 10
     assert [h.message.value for h in heard if h.message.key == 2] == list(range(20))  # another session: its own
+
+
+def test_a_peer_stamping_a_fresh_session_id_on_every_sample_is_held_to_one_source_rate() -> None:
+    """The stock API stamps any id per sample (`put(timestamp=...)`): a made-up id names no session connected to
+    ours, so every such sample shares the link's one bucket, while a connected session keeps its own."""
+    import datetime
+
+    import zenoh
+
+    from vstig_hw.gateway import Mode, Node
+    from vstig_hw.gateway.guard import Guard
+
+    gateway = parse("zenoh:lab").build(robot_id=201)
+    node = Node([gateway], mode=Mode.LISTEN, guard=Guard(source_rate=100))
+    passed: dict[int, int] = {1: 0, 2: 0}
+    node.on_messages.append(lambda _link, _t, _sender, msgs: passed.update(
+        {key: passed[key] + sum(m.key == key for m in msgs) for key in passed}))
+    with node:
+        honest, forger = _honest_gateway_and_stock_session(gateway)
+        try:
+            start = time.monotonic()
+            sent = 0
+            while time.monotonic() - start < 2.0:  # ~2 s of forged samples, each with a new session id
+                stamp = zenoh.Timestamp(datetime.datetime.now(datetime.UTC),
+                                        zenoh.TimestampId(os.urandom(16)))
+                forger.put(f"vstig/lab/0/{1000 + sent % 1000}", encode(Message(Op.PUT, 1, sent, 1 + sent % 255, 7)),
+                           timestamp=stamp, congestion_control=zenoh.CongestionControl.BLOCK)
+                sent += 1
+                if sent % 50 == 0:  # the honest session: 25 messages a second, well within its own 100
+                    honest.send_many([Message(Op.PUT, 2, sent // 50, sent // 50, 202)])
+                    time.sleep(0.04)
+            took = time.monotonic() - start
+            node.run(duration=0.5)
+        finally:
+            forger.close()  # type: ignore[no-untyped-call]
+            honest.close()
+    assert sent > 1000, sent  # the forger sent far beyond the rate
+    assert passed[1] <= 1.5 * 100 * (1 + took), (passed, took)  # a burst of 100, then 100 a second: at most 1.5x
+    assert gateway.counters["drop_source_rate"] >= sent - passed[1] - 10
+    assert passed[2] == sent // 50, passed  # the connected session's own bucket: every honest message
 
 
 def test_a_gateway_closes_at_once_while_a_peer_floods_it_through_zenohs_callback() -> None:

@@ -46,7 +46,7 @@ from ..wakeup import Wakeup
 from ..wire import Message
 from .guard import Guard
 from .outlet import Outlet
-from .parts import ChangeListener, RawRelay, Seat
+from .parts import INTAKE_TICKS, ChangeListener, RawRelay, Seat
 from .readers import READ_TIMEOUT, LinkReaders
 
 __all__ = ["DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "favour_latency"]
@@ -116,8 +116,9 @@ class Node:
         self.mode = mode
         self.period = period
         self.guard = guard  # what links hear passes it before the engine, a relay or a listener sees it
+        self._wake = Wakeup()  # one token wakes the waiting loop (a call, a window or a slow device's room opening)
         self.outlets = [] if mode is Mode.LISTEN else [
-            Outlet(link, budget, period, keep_all=mode is Mode.RAW) for link in self.links
+            Outlet(link, budget, period, keep_all=mode is Mode.RAW, on_room=self._wake.set) for link in self.links
         ]
         self.on_unit: list[UnitListener] = []
         self.on_heard: list[HeardListener] = []
@@ -135,12 +136,12 @@ class Node:
             self.part = RawRelay(self.outlets, guard)
         elif mode is Mode.ENGINE or count_outcomes:
             self.engine = Stigmergy(robot_id, onconflict=onconflict)
-            self.part = self.seat = Seat(self.engine, self.links, self.outlets, guard, self.on_change)
+            intake = INTAKE_TICKS * budget if mode is Mode.ENGINE and budget is not None else None
+            self.part = self.seat = Seat(self.engine, self.links, self.outlets, guard, self.on_change, intake)
         self.ticks = 0
         self._calls: collections.deque[Callable[[], None]] = collections.deque()  # `call_soon`'s, for the loop
         self.lock = threading.RLock()  # whoever works on the Node holds it: a reader thread, the loop, a caller
         self._readers = LinkReaders(self.links, self._deliver)
-        self._wake = Wakeup()  # one token wakes the waiting loop
         self._sleep_until = 0.0  # when the waiting loop looks again by itself (0: it is not waiting)
         self._wake_on_arrival = False  # the loop has an `until` to check after every batch
         self._loop_thread = 0  # ident of the thread in `run`, of the reader handling a batch (0: none)
@@ -309,6 +310,7 @@ class Node:
         source_of = link.source_of
         part = self.part
         guard = self.guard
+        admit = self.seat.admit if self.seat is not None and self.seat.intake is not None else None
         heard_count = 0
         for unit in units:
             for listener in self.on_unit:
@@ -321,11 +323,15 @@ class Node:
             if not messages:
                 continue
             heard_count += len(messages)
+            source = source_of(unit) if source_of is not None else None  # which of the link's peers sent it
+            if admit is not None:  # the engine's intake per source and tick, before any other work
+                messages = admit(index, source, messages)
+                if not messages:
+                    continue
             sender = sender_of(unit) if guard is not None or self.on_heard or self.on_change or self.on_messages \
                 else None
             told = False
             if guard is not None:
-                source = source_of(unit) if source_of is not None else None
                 if self.on_refused:
                     messages, told = self._judge_and_tell(guard, link, sender, source, messages, t), True
                 else:
@@ -339,7 +345,7 @@ class Node:
                 for m_listener in self.on_messages:
                     m_listener(link.name, t, sender, messages)
             if part is not None and messages:
-                part.take(index, messages, sender)
+                part.take(index, messages, sender, source)
         link.counters["in"] += heard_count
 
     def _judge_and_tell(self, guard: Guard, link: Link[Any], sender: int | None, source: str | None,
@@ -384,6 +390,8 @@ class Node:
         self._next_tick = max(self._next_tick + self.period, now)  # no catch-up burst after a stall
         for link in self.links:
             link.tick()
+        if self.part is not None:
+            self.part.tick()
         for listener in self.on_tick:
             listener(self)
 

@@ -27,6 +27,15 @@ bytes, beyond which a flooding peer's samples are dropped (`rx_overflow`). Sampl
 handed over from the callback wait for no queue: a flood waits in Zenoh's own
 buffers, which drop under congestion.
 
+Who sent a sample (`ZenohSample.source`, what `--source-rate` and the outlets' fair
+share key on) is the id stamped on it, but only when that id is a session
+connected to ours: the stamp is the publisher's claim (the stock API sets any id
+per sample), while the sessions connected to ours are transports Zenoh opened
+(and authenticated, where the config asks), which a peer cannot make up per
+sample. A sample stamped with any other id (made up, unstamped and stamped here,
+or relayed through a router from a session beyond it) has no source of its own:
+None, the link as one source.
+
 Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session subscribed),
 `tx_dropped`, `rx_oversize`, `rx_overflow`, `lost`, `unreachable`, `reconnects`.
 """
@@ -127,6 +136,9 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         self._peer_wait = _FIRST_PEER_WAIT_S if peer_wait is None else peer_wait
         self._lock = threading.Lock()  # session changes (read thread) against publishing (loop thread)
         self._subscriber: Any = None
+        self._transports: Any = None  # the listener that keeps `_connected` up to date
+        self._connected: frozenset[str] = frozenset()  # ids of the sessions connected to ours: verified sources
+        self._connected_lock = threading.Lock()
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._inbox: collections.deque[ZenohSample] = collections.deque()  # appended by zenoh, read by `read`
         self._arrived = Wakeup()  # given with every sample appended: `read` waits for it
@@ -188,7 +200,18 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         self._subscriber = subscriber
         if self.clock is not None:
             self.clock.attach(session)
+        self._connected = frozenset()
+        self._transports = session.info.declare_transport_events_listener(self._transport_event, history=True)
         return session
+
+    def _transport_event(self, event: zenoh.TransportEvent) -> None:
+        """Zenoh's thread: a session connected to ours (or left): its id names a source from now on (or not)."""
+        zid = str(event.transport.zid)
+        with self._connected_lock:  # events may come from more than one of Zenoh's threads
+            if event.kind == zenoh.SampleKind.PUT:
+                self._connected = self._connected | {zid}
+            else:
+                self._connected = self._connected - {zid}
 
     def _open_session(self, *, may_rebind: bool) -> zenoh.Session | None:
         """A new session; None if the listener port picked for us was taken (`listening` is then a fresh one)."""
@@ -212,6 +235,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
     def _close_device(self, device: zenoh.Session) -> None:
         with self._lock:  # not while the loop thread publishes
             self._subscriber = None
+            self._transports = None
             self._publishers.clear()
             try:
                 device.close()  # type: ignore[no-untyped-call]  # zenoh's stub leaves close() untyped
@@ -236,8 +260,9 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
                             "others as rx_oversize", self.name, size, sample.key_expr, self.max_sample)
             return
         stamp = sample.timestamp  # the publishing session's id, where it stamps (ours do: vstig_hw.links.zenoh)
+        claimed = None if stamp is None else str(stamp.get_id())
         heard = ZenohSample(str(sample.key_expr), sample.payload.to_bytes(),
-                            None if stamp is None else str(stamp.get_id()))
+                            claimed if claimed in self._connected else None)
         deliver = self._deliver
         if deliver is not None:  # straight on, from this thread: it waits for the gateway, not a queue
             self.counters["rx"] += 1
