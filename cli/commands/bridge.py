@@ -61,8 +61,8 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
 
     Every link's --budget is shared fairly among the sources of what it carries (each link, each
     zenoh session connected to ours, the bridge itself), so a flooding radio or zenoh peer delays
-    only its own messages; the engine takes at most 16 ticks of budget per source and tick
-    (drop_intake).
+    only its own messages; the engine takes at most 16 ticks of budget per source and tick,
+    on average, with bursts of ten times that (drop_intake).
 
     \b
     Many PCs: add a zenoh link on each (vstig links lists its options), e.g.

@@ -12,11 +12,12 @@ import can
 import pytest
 
 from vstig_hw import Message, Op
-from vstig_hw.engine import Outcome
+from vstig_hw.engine import Outcome, Stigmergy
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import can_framing_for
 from vstig_hw.gateway import Node, Outlet, SendWindow
 from vstig_hw.gateway.outlet import PACE_BURST
+from vstig_hw.gateway.parts import INTAKE_BURST_TICKS, Seat
 from vstig_hw.gateway.writer import WRITER_HOLD
 from vstig_hw.links import parse
 
@@ -106,24 +107,44 @@ def test_a_slow_device_holds_a_few_messages_and_the_share_decides_what_it_gets_n
     assert keys.index(1) < 5000 - waiting + WRITER_HOLD + 64 + 2  # after what the pty and writer held, at once
 
 
-def test_the_engine_takes_at_most_its_intake_from_one_source_per_tick(bus: str) -> None:
+def test_the_engine_takes_at_most_its_intake_from_one_source(bus: str) -> None:
+    """A flood from one source past its allowance (INTAKE_BURST_TICKS ticks of intake, refilled at the intake a
+    tick) is dropped before the engine and counted; the next message after the refill gets in."""
     robot = can.Bus(interface="virtual", channel=bus)
     codec = can_framing_for(7)
     with Node([parse(f"can:virtual:{bus}").build("bus", robot_id=100)], 100, period=60.0, budget=2) as node:
         assert node.seat is not None and node.seat.intake == 32  # 16 ticks of a budget of 2
-        for i in range(100):
+        burst = 32 * INTAKE_BURST_TICKS
+        for i in range(burst + 80):
             robot.send(codec.encode(Message(Op.PUT, i, i, 1, 7))[0])
         deadline = time.monotonic() + 10
-        while node.stats()["bus"]["in"] < 100 and time.monotonic() < deadline:
+        while node.stats()["bus"]["in"] < burst + 80 and time.monotonic() < deadline:
             node.run(duration=0.05)
         stats = node.stats()
-        node.seat.tick()  # a new tick: the source may give the engine its intake again
-        robot.send(codec.encode(Message(Op.PUT, 500, 1, 1, 7))[0])
-        while node.engine is not None and not node.engine.has(500) and time.monotonic() < deadline:
-            node.run(duration=0.05)
-        assert node.engine is not None and node.engine.has(500)
     robot.shutdown()
-    assert stats["bus"]["drop_intake"] == 68 and stats["engine"]["stored"] == 32
+    assert stats["bus"]["drop_intake"] == 80 and stats["engine"]["stored"] == burst
+
+
+def _seat(intake: int, period: float) -> Seat:
+    link = parse("can:virtual:unused").build("bus", robot_id=100)
+    return Seat(Stigmergy(100), [link], [], None, [], intake, period)
+
+
+def test_the_intake_refills_with_time_not_with_ticks() -> None:
+    """As data: a source's allowance refills at `intake` a period by the batches' read times, so a backlog after a
+    stall or a late tick (a loaded machine) gets in whole, and a sustained flood only at the intake's rate."""
+    seat = _seat(8, 0.125)  # 64 messages a second (times below are exact in binary), bursts of INTAKE_BURST_TICKS * 8
+    batch = [Message(Op.PUT, 1, 1, 1, 7)]
+    burst = 8 * INTAKE_BURST_TICKS
+    assert len(seat.admit(0, None, batch * burst, 1000.0)) == burst  # a backlog: all of it
+    assert seat.admit(0, None, batch, 1000.0) == []  # nothing left
+    assert len(seat.admit(0, None, batch * 50, 1000.25)) == 16  # a quarter second later: 16 more
+    assert len(seat.admit(0, "peer", batch * 50, 1000.25)) == 50  # another source has its own
+    taken = sum(len(seat.admit(0, None, batch * 5, 1000.25 + i / 64)) for i in range(1, 193))
+    assert taken == 192  # a flood of 320 a second for 3 s: 64 a second got in
+    assert seat.links[0].counters["drop_intake"] == 1 + 34 + 4 * 192
+    assert len(seat.admit(0, None, batch * burst * 2, 1100.0)) == burst  # refilled whole, never past it
+    seat.tick()  # sources idle for a whole refill are forgotten (none is)
 
 
 def test_an_answer_belongs_to_the_asker_and_leaves_ahead_of_the_flood_whose_entry_it_carries(bus: str) -> None:

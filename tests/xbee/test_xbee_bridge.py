@@ -135,7 +135,8 @@ def test_a_module_that_stops_reading_and_one_buried_in_noise_cost_only_their_own
     assert statistics.median(delays) < 0.050, f"p50 {statistics.median(delays) * 1e3:.1f} ms"
     assert sum(1 for key in out.arrived if 30000 <= key < 30100) > 50  # the noisy module's good frames got through
     stuck = _counters(err, names["deaf"])
-    assert stuck.get("tx_overflow", 0) > 0, stuck  # its oldest were dropped, counted, and nothing else was held
+    # what the deaf module could not take waits in its own link's lines (one message per key: bounded), counted
+    assert stuck.get("queued", 0) > 1000, stuck
     loud = _counters(err, names["noisy"])
     assert loud["drop_noise"] > 0 and loud["drop_checksum"] > 0 and loud["drop_truncated"] > 0, loud
 

@@ -137,7 +137,8 @@ class Node:
         elif mode is Mode.ENGINE or count_outcomes:
             self.engine = Stigmergy(robot_id, onconflict=onconflict)
             intake = INTAKE_TICKS * budget if mode is Mode.ENGINE and budget is not None else None
-            self.part = self.seat = Seat(self.engine, self.links, self.outlets, guard, self.on_change, intake)
+            self.part = self.seat = Seat(self.engine, self.links, self.outlets, guard, self.on_change, intake,
+                                         period)
         self.ticks = 0
         self._calls: collections.deque[Callable[[], None]] = collections.deque()  # `call_soon`'s, for the loop
         self.lock = threading.RLock()  # whoever works on the Node holds it: a reader thread, the loop, a caller
@@ -324,8 +325,8 @@ class Node:
                 continue
             heard_count += len(messages)
             source = source_of(unit) if source_of is not None else None  # which of the link's peers sent it
-            if admit is not None:  # the engine's intake per source and tick, before any other work
-                messages = admit(index, source, messages)
+            if admit is not None:  # the engine's intake per source, before any other work
+                messages = admit(index, source, messages, t)
                 if not messages:
                     continue
             sender = sender_of(unit) if guard is not None or self.on_heard or self.on_change or self.on_messages \

@@ -32,9 +32,10 @@ from .fairshare import LOCAL
 from .guard import Guard
 from .outlet import Outlet
 
-__all__ = ["INTAKE_TICKS", "ChangeListener", "RawRelay", "Seat"]
+__all__ = ["INTAKE_BURST_TICKS", "INTAKE_TICKS", "ChangeListener", "RawRelay", "Seat"]
 
 INTAKE_TICKS = 16  # a source's messages the engine takes per tick: this many ticks of a link's budget
+INTAKE_BURST_TICKS = 10  # a source that was quiet may give this many ticks of intake at once (a backlog)
 
 # key, entry before (None: new key), entry after, link it came from (None: our own put), sender (None: unnamed)
 ChangeListener = Callable[[int, Entry | None, Entry, str | None, int | None], None]
@@ -75,14 +76,17 @@ class Seat:
     carry the link (and its `sub`); the program's put/get/ask, `LOCAL`. The engine's
     outbox is queued out whenever the source changes, so it never mixes two.
 
-    The engine takes at most `intake` messages from one source per tick (`tick`);
-    the rest are dropped before it and counted as `drop_intake` on the link: a flood
-    costs the engine and the outlets no more than that, whatever the medium carries.
-    None: no bound (a seat that only judges, or a node without a budget).
+    The engine takes at most `intake` messages a `period` from one source, measured
+    by the time each batch was read (a token bucket holding `INTAKE_BURST_TICKS`
+    periods' worth: a backlog after a stall, or a loop delayed by a loaded machine,
+    still gets in whole); the rest are dropped before it and counted as `drop_intake`
+    on the link: a flood costs the engine and the outlets no more than that, whatever
+    the medium carries. None: no bound (a seat that only judges, or a node without a
+    budget).
     """
 
     def __init__(self, engine: Stigmergy, links: list[Link[Any]], outlets: list[Outlet], guard: Guard | None,
-                 on_change: list[ChangeListener], intake: int | None = None) -> None:
+                 on_change: list[ChangeListener], intake: int | None = None, period: float = 0.1) -> None:
         if intake is not None and intake < 1:
             raise ValueError(f"the engine's intake per source and tick must be at least 1 message, got {intake}")
         self.engine = engine
@@ -91,8 +95,11 @@ class Seat:
         self.guard = guard
         self.on_change = on_change
         self.intake = intake
-        self._taken_by_link = [0] * len(links)  # per link, messages the engine took from it (sub None) this tick
-        self._taken: dict[tuple[int, Hashable], int] = {}  # (link, sub) -> the same, for a link's peers
+        self._rate = 0.0 if intake is None else intake / period  # messages a second a source may give
+        self._burst = 0.0 if intake is None else float(intake * INTAKE_BURST_TICKS)
+        # source (a link's index, or (index, sub) for a link's peer) -> (messages it may still give, as of when)
+        self._allowed: dict[Hashable, tuple[float, float]] = {}
+        self._latest = 0.0  # the newest batch time seen: sources idle for a full refill are forgotten at `tick`
         self._link: int = LOCAL  # the source (link, sub) that caused the messages in the engine's outbox
         self._sub: Hashable = None
         # key -> (the PUT just stored, index of the one-domain link it came from), until the next queue_out
@@ -139,34 +146,35 @@ class Seat:
                 self.queue_out()
             self._link, self._sub = link, sub
 
-    def admit(self, index: int, sub: Hashable, messages: list[Message]) -> list[Message]:
-        """Of what link `index` (peer `sub`) just handed over, what the engine takes within the source's intake
-        this tick; the rest are counted `drop_intake`. The Node asks before the guard, so a flood past its
-        intake costs no more than its decoding."""
-        intake = self.intake
-        if intake is None:
-            return messages
-        if sub is None:  # the link as one source: its count by index (the hot path)
-            taken = self._taken_by_link[index]
-            if taken + len(messages) <= intake:
-                self._taken_by_link[index] = taken + len(messages)
-                return messages
+    def admit(self, index: int, sub: Hashable, messages: list[Message], t: float) -> list[Message]:
+        """Of what link `index` (peer `sub`) handed over in the batch read at `t`, what the engine takes within
+        the source's intake; the rest are counted `drop_intake`. The Node asks before the guard, so a flood past
+        its intake costs no more than its decoding."""
+        source: Hashable = index if sub is None else (index, sub)
+        allowed = self._allowed.get(source)
+        if allowed is None:
+            left = self._burst
         else:
-            taken = self._taken.get((index, sub), 0)
-        room = max(intake - taken, 0)
-        if room < len(messages):
+            left, since = allowed
+            if t > since:
+                left = min(self._burst, left + (t - since) * self._rate)
+        if len(messages) > left:
+            room = int(left)
             self.links[index].counters["drop_intake"] += len(messages) - room
             messages = messages[:room]
-        if sub is None:
-            self._taken_by_link[index] = taken + len(messages)
-        else:
-            self._taken[index, sub] = taken + len(messages)
+        self._allowed[source] = (left - len(messages), t)
+        if t > self._latest:
+            self._latest = t
         return messages
 
     def tick(self) -> None:
-        """A new tick: every source may give the engine `intake` messages again."""
-        self._taken.clear()
-        self._taken_by_link = [0] * len(self.links)
+        """Forget the sources whose allowance has refilled whole since they last gave (as good as new)."""
+        allowed = self._allowed
+        if len(allowed) > len(self.links):
+            full_after = self._burst / self._rate if self._rate else 0.0
+            old = self._latest - full_after
+            for source in [source for source, (_, since) in allowed.items() if since < old]:
+                del allowed[source]
 
     def _receive_from_domain(self, index: int, messages: list[Message]) -> None:
         """Receive what link `index` (one broadcast domain) heard, noting each PUT stored from it.
