@@ -121,6 +121,7 @@ class DeviceTransport(Generic[Unit, Device]):
         self._lost_at = 0.0
         self._backoff = Backoff(*backoff)
         self._retrying = threading.Lock()  # one thread reopens at a time (the reader and a writer may both try)
+        self._closed = threading.Event()  # set by close(): a device call still waiting (an open's wait) gives up
 
     # -- the device calls: all a transport implements ----------------------------
     def _open_device(self) -> Device:
@@ -146,6 +147,7 @@ class DeviceTransport(Generic[Unit, Device]):
 
     def open(self) -> None:
         """Open the device now; TransportError (one line naming it) if it cannot be. Unreachable: retried later."""
+        self._closed.clear()
         try:
             self._device = self._open_device()
         except DeviceUnreachable as exc:
@@ -157,6 +159,7 @@ class DeviceTransport(Generic[Unit, Device]):
 
     def close(self) -> None:
         self._wanted = False
+        self._closed.set()
         self._drop_device()
 
     def read(self, timeout: float) -> list[Unit]:
@@ -205,6 +208,8 @@ class DeviceTransport(Generic[Unit, Device]):
     def _lose(self, reason: str) -> None:
         """The device failed: drop it; report the outage once, then reopen it with backoff from read/write."""
         self._drop_device()
+        if not self._wanted:  # a call that failed because close() took the device away: no outage
+            return
         if self._outage:  # the reopened device failed at once: still the same outage
             self.last_error = reason
             self._retry_later(reason)

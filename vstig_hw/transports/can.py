@@ -27,6 +27,7 @@ from typing import Any
 import can
 
 from .base import DeviceTransport, TransportError, errno_of, one_line
+from .slcan import SlcanBus
 from .socketcan_drops import count_kernel_drops
 
 __all__ = ["CanTransport"]
@@ -41,7 +42,7 @@ _STATE_POLL_S = 1.0  # how often to ask interfaces that report it (pcan, kvaser.
 # Send failures that mean "the bus is busy", not "the device is gone".
 _TRANSIENT_ERRNOS = frozenset({errno.ENOBUFS, errno.EAGAIN})
 # Interfaces whose send(timeout=0) returns at once (queue full: an error), so the gateway's loop may call it.
-_NONBLOCKING_SEND = frozenset({"socketcan", "virtual"})
+_NONBLOCKING_SEND = frozenset({"socketcan", "virtual", "slcan"})
 
 
 class CanTransport(DeviceTransport[can.Message, can.BusABC]):
@@ -85,6 +86,9 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
     # -- the device calls ------------------------------------------------------
     def _open_device(self) -> can.BusABC:
         try:
+            if self.interface == "slcan":  # our own reader and writer of the slcan line protocol (transports/slcan.py)
+                options = {k: v for k, v in self._bus_kwargs.items() if k != "interface"}
+                return SlcanBus(**options, counters=self.counters, abort=self._closed)
             return count_kernel_drops(can.Bus(**self._bus_kwargs), self.counters)
         except can.CanInterfaceNotImplementedError as exc:
             known = "" if self.interface in can.VALID_INTERFACES else f" (python-can knows: " \
