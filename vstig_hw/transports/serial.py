@@ -139,7 +139,7 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
             try:
                 device.write(unit)
             except serial.SerialTimeoutException:
-                self.counters["tx_timeout"] += 1  # flow control held us off: drop, the line stays ours
+                self._not_taken("tx_timeout")  # flow control held us off: drop, the line stays ours
                 self._fresh = bool(self.preamble)  # maybe half a frame went: the next one starts clean
                 return
             self._sent()
@@ -154,7 +154,7 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
             unit = rest
             left = None if deadline is None else deadline - time.monotonic()
             if (left is not None and left <= 0) or not select.select([], [fd], [], left)[1]:
-                self.counters["tx_timeout"] += 1  # flow control or a deaf device held us off: drop the rest
+                self._not_taken("tx_timeout")  # flow control or a deaf device held us off: drop the rest
                 self._fresh = bool(self.preamble)  # half a frame went: the next one starts clean
                 return
 

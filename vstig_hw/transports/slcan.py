@@ -210,7 +210,7 @@ class SlcanBus(slcanBus):
         limit = OPEN_TIMEOUT if self._deadline is None else self._deadline - time.monotonic()
         if not self._put(string.encode() + b"\r", limit):
             raise can.CanOperationError(f"the adapter took no command within {OPEN_TIMEOUT:g} s (is it hung? "
-                                        "its buffer is full)", error_code=errno.EAGAIN)
+                                        "its buffer is full)")
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Write `msg`'s line; CanOperationError (errno EAGAIN) if the adapter takes none of it within `timeout`."""
