@@ -204,7 +204,7 @@ def overwrite_option(target: str) -> Callable[..., Any]:
 
 def refuse_link(path: str | Path) -> None:
     """A usage error naming `path` if it is a symbolic link (dangling or not), or not a file to write into
-    (a FIFO, a socket, a device: `vstig_hw.outputs`)."""
+    (a FIFO, a terminal, a socket: `vstig_hw.outputs`)."""
     try:
         refuse_symlink(path)
         refuse_special(path)

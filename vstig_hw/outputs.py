@@ -8,10 +8,11 @@ A file that is replaced or added to loses its setuid and setgid bits first: it w
 and the bits would let anyone run them as its owner. Linux clears them itself when a process without
 CAP_FSETID writes, so this is for root, whom the kernel lets keep them.
 
-No output is written into something that is not a file: a named pipe (FIFO) holds its writer in `open()`
-until some program reads it, and then in every write it is slow to take, so a command writing there could
-not be stopped; a socket or a device is no place for a capture either. Only the null device is taken, as the
-sink it is. Checked before any work, so nothing runs for an output that cannot be written.
+No output is written into something that may hold its writer or is no place for a capture: a named pipe
+(FIFO) holds its writer in `open()` until some program reads it, and then in every write it is slow to take,
+a terminal in every write its flow control holds back, so a command writing there could not be stopped; a
+socket or a block device (a disk) is no place for a capture either. Other devices are sinks that answer at
+once (`/dev/null`, `/dev/full`). Checked before any work, so nothing runs for an output that cannot be written.
 """
 
 from __future__ import annotations
@@ -21,8 +22,7 @@ import stat
 
 __all__ = ["LinkedOutput", "SpecialOutput", "drop_setid", "refuse_special", "refuse_symlink"]
 
-_KINDS = ((stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
-          (stat.S_ISBLK, "a block device"))
+_PTY_SLAVES = range(136, 144)  # the kernel's major numbers of /dev/pts/N (UNIX98_PTY_SLAVE_MAJOR and on)
 
 
 class LinkedOutput(ValueError):
@@ -52,13 +52,28 @@ def drop_setid(path: str | os.PathLike[str]) -> None:
         pass
 
 def refuse_special(path: str | os.PathLike[str]) -> None:
-    """SpecialOutput if `path` is a named pipe, a socket or a device (the null device excepted)."""
+    """SpecialOutput if `path` is a named pipe, a terminal, a socket or a block device."""
     try:
-        mode = os.stat(path).st_mode
+        info = os.stat(path)
     except OSError:  # not there (yet): a file will be made
         return
-    if stat.S_ISREG(mode) or stat.S_ISDIR(mode) or os.path.realpath(path) == os.devnull:
-        return
-    kind = next((name for test, name in _KINDS if test(mode)), "not a regular file")
-    raise SpecialOutput(f"{os.fspath(path)} is {kind}: vstig writes its outputs into regular files only (a "
-                        "writer into a pipe waits for its reader, and could not be stopped)")
+    kind = _special_kind(info)
+    if kind is not None:
+        raise SpecialOutput(f"{os.fspath(path)} is {kind}: vstig writes its outputs into regular files only (a "
+                            "writer into a pipe or a terminal waits for its reader, and could not be stopped)")
+
+
+def _special_kind(info: os.stat_result) -> str | None:
+    mode = info.st_mode
+    if stat.S_ISFIFO(mode):
+        return "a named pipe (FIFO)"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if stat.S_ISBLK(mode):
+        return "a block device"
+    if stat.S_ISCHR(mode):
+        major, minor = os.major(info.st_rdev), os.minor(info.st_rdev)
+        subsystem = os.path.realpath(f"/sys/dev/char/{major}:{minor}/subsystem")  # Linux; elsewhere not there
+        if major in _PTY_SLAVES or os.path.basename(subsystem) == "tty":
+            return "a terminal"
+    return None

@@ -1,9 +1,9 @@
-"""An output that is not a file (a FIFO, a socket, a device) is refused before any work (issue 38, item 5).
+"""An output that is not a file (a FIFO, a terminal, a socket) is refused before any work (issue 38, item 5).
 
 A named pipe holds its writer in open() until a reader comes, and then in every write it is slow to take:
 `record -o FIFO --for 2` was still blocked in open() ten minutes after a SIGINT. Each command is a real
 `vstig` process here, given a real FIFO (and a socket); it must end at once with one line naming the path
-and exit 2, having run nothing. The null device stays a valid sink.
+and exit 2, having run nothing. Devices that answer at once (/dev/null, /dev/full) stay valid sinks.
 """
 
 from __future__ import annotations
@@ -63,3 +63,12 @@ def test_a_socket_output_is_refused(tmp_path: Path, radio: PtyPeer) -> None:
 def test_the_null_device_is_a_sink(radio: PtyPeer) -> None:
     done = run_vstig("record", f"serial:{radio.path}", "-o", os.devnull, "--for", "0.5", timeout=60)
     assert done.returncode == 0, done.stderr
+
+
+def test_a_terminal_output_is_refused(radio: PtyPeer) -> None:
+    other = PtyPeer()  # a terminal nobody reads: a write there would wait on its flow control
+    try:
+        done = run_vstig("record", f"serial:{radio.path}", "-o", other.path, "--for", "1", timeout=60)
+    finally:
+        other.close()
+    assert done.returncode == 2 and f"{other.path} is a terminal" in done.stderr, done.stderr
