@@ -154,3 +154,32 @@ def test_a_full_line_at_open_is_refused_in_half_a_second(tmp_path: Path) -> None
         assert time.monotonic() - started < 1.5
     finally:
         peer.close()
+
+
+def test_closing_a_port_gives_a_reader_what_was_written_and_a_deaf_one_half_a_second() -> None:
+    """A closing port waits for the kernel to hand its output to a device that reads, never for one that does not."""
+    from vstig_hw.transports.serial import CLOSE_DRAIN, SerialTransport
+
+    listening, deaf = PtyPeer(), PtyPeer()
+    try:
+        port = SerialTransport(listening.path)
+        port.open()
+        got = bytearray()
+        reader = threading.Thread(target=lambda: [got.extend(listening.read(0.05)) for _ in range(40)], daemon=True)
+        reader.start()
+        port.write(b"x" * 3000)  # more than a pty takes at once is not needed: what is queued must reach it
+        port.close()
+        reader.join()
+        assert bytes(got) == b"x" * 3000
+
+        fill(deaf.path)  # the line to the far end is full, and nobody reads it
+        port = SerialTransport(deaf.path)
+        port.open()
+        port.write(b"y" * 100)  # waits its write_timeout, then counted
+        started = time.monotonic()
+        port.close()
+        assert time.monotonic() - started < CLOSE_DRAIN + 0.5
+        assert port.counters["tx_timeout"] == 1 and port.counters["disconnects"] == 0
+    finally:
+        listening.close()
+        deaf.close()

@@ -37,7 +37,6 @@ import os
 import queue
 import re
 import select
-import termios
 import threading
 import time
 from typing import Any
@@ -48,11 +47,12 @@ from can.interfaces.slcan import slcanBus
 from can.util import CAN_FD_DLC, check_or_adjust_timing_clock, len2dlc
 
 from ..counters import Counters
+from .serial import drain_briefly
 
 __all__ = ["OPEN_TIMEOUT", "SlcanBus", "SlcanLines", "frame_line", "parse_line"]
 
 OPEN_TIMEOUT = 0.5  # seconds the adapter may take to take the commands that open it (a dozen bytes)
-CLOSE_TIMEOUT = 0.05  # seconds the channel-close command may wait at shutdown: nothing more is owed
+CLOSE_TIMEOUT = 0.1  # seconds the channel-close command may take at shutdown: nothing more is owed
 READ_SIZE = 65536  # bytes one read takes at most: what a pty or a USB adapter holds
 MAX_LINE = 160  # bytes: the longest slcan line (an extended CAN FD frame, 64 bytes, a timestamp) with room
 _TIMESTAMP_DIGITS = 4  # a Lawicel adapter with time stamps on ("Z1") adds 4 hex digits of milliseconds
@@ -352,8 +352,7 @@ class SlcanBus(slcanBus):
         can.BusABC.shutdown(self)
         with contextlib.suppress(can.CanError):
             self._put(b"C\r", CLOSE_TIMEOUT)
-        if self._fd is not None:  # what the adapter never took would hold close() on a real UART: drop it
-            with contextlib.suppress(OSError, termios.error):
-                termios.tcflush(self._fd, termios.TCOFLUSH)
+        if self._fd is not None:  # what the adapter never took would hold close() on a real UART
+            drain_briefly(self._fd, CLOSE_TIMEOUT)
         with contextlib.suppress(OSError, serial.SerialException):
             self.serialPortOrig.close()
