@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vstig_hw.counters import Counters
-from vstig_hw.transports.slcan import SlcanBus, SlcanLines, frame_line, parse_line
+from vstig_hw.transports.slcan import SlcanBus, SlcanLines, frame_line, is_answer, parse_line
 
 FD_LENGTHS = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64]
 
@@ -166,7 +166,8 @@ def test_we_write_the_line_python_can_writes(msg: can.Message) -> None:
         port = bus.serialPortOrig
         port.read(port.in_waiting)  # "O\r"
         bus.send(msg)
-        assert frame_line(msg) == port.read(port.in_waiting)
+        port.timeout = 5
+        assert frame_line(msg) == port.read_until(b"\r")
     finally:
         bus.shutdown()
 
@@ -224,3 +225,28 @@ def test_both_drivers_on_real_ptys_hear_the_same_frames(segments: list[can.Messa
         ours_bus.shutdown()
         for fd in (m1, s1, m2, s2):
             os.close(fd)
+
+
+@pytest.mark.parametrize(("line", "answer"), [(b"\r", True), (b"\x07", True), (b"z\r", True), (b"Z\r", True),
+                                              (b"V1013\r", True), (b"NA123\r", True), (b"F00\r", True),
+                                              (b"zz\r", False), (b"V10\r", False), (b"Fxy\r", False),
+                                              (b"hello\r", False), (b"O\r", False)])
+def test_an_adapters_answers_are_not_noise(line: bytes, answer: bool) -> None:
+    assert is_answer(line) is answer
+
+
+def test_noise_is_counted_once_per_line() -> None:
+    """Through a real pty: each line of noise is one rx_garbage, an overlong one too, answers none."""
+    master, slave, path = _pty()
+    counters = Counters()
+    bus = SlcanBus(path, counters=counters)
+    try:
+        os.read(master, 64)
+        os.write(master, b"hello\rz\r" + b"n" * 500 + b"\rt1230\r\x07V1013\r")
+        got = [m for m in _drain(bus) if isinstance(m, can.Message)]
+        assert [m.arbitration_id for m in got] == [0x123]
+        assert counters["rx_garbage"] == 2
+    finally:
+        bus.shutdown()
+        os.close(master)
+        os.close(slave)

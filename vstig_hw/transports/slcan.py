@@ -56,7 +56,8 @@ CLOSE_TIMEOUT = 0.1  # seconds the channel-close command may take at shutdown: n
 READ_SIZE = 65536  # bytes one read takes at most: what a pty or a USB adapter holds
 MAX_LINE = 160  # bytes: the longest slcan line (an extended CAN FD frame, 64 bytes, a timestamp) with room
 _TIMESTAMP_DIGITS = 4  # a Lawicel adapter with time stamps on ("Z1") adds 4 hex digits of milliseconds
-_ANSWER_LETTERS = b"zZVvNF"  # an adapter's answers: transmit acks (z, Z), version, serial number, status
+# An adapter's answers: OK (CR) or error (BEL) alone, a transmit ack (z, Z), its version, serial number or status.
+_ANSWER = re.compile(rb"(?:[zZ]|[Vv][0-9A-Fa-f]{4}|N[0-9A-Za-z]{4}|F[0-9A-Fa-f]{2})?[\r\x07]\Z")
 
 # letter -> (identifier digits, extended, remote, CAN FD, bitrate switch)
 _KINDS: dict[int, tuple[int, bool, bool, bool, bool]] = {
@@ -106,7 +107,7 @@ def parse_line(line: bytes, timestamp: float = 0.0) -> can.Message | None:
 
 def is_answer(line: bytes) -> bool:
     """An adapter's answer to a command (OK, error, transmit ack, version...), not noise."""
-    return len(line) == 1 or line[0] in _ANSWER_LETTERS
+    return _ANSWER.match(line) is not None
 
 
 def frame_line(msg: can.Message) -> bytes:
@@ -166,7 +167,8 @@ class SlcanBus(slcanBus):
         self._ready: collections.deque[bytes] = collections.deque()  # lines read, not yet taken
         self._pending = b""  # the rest of a line the adapter took in part: it goes out before anything else
         self._writing = threading.Lock()
-        self._deadline: float | None = time.monotonic() + open_timeout  # while opening: for every command
+        self._open_timeout = open_timeout
+        self._deadline: float | None = None  # while opening: when every command must have been taken
         self._queue: queue.SimpleQueue[str] = queue.SimpleQueue()  # lines python-can's get_version() put aside
         self._buffer = bytearray()
         self._can_protocol = can.CanProtocol.CAN_20
@@ -175,8 +177,10 @@ class SlcanBus(slcanBus):
                                                         timeout=timeout)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise can.CanInitializationError(str(exc)) from exc
-        fd = getattr(self.serialPortOrig, "fd", None)
+        fd = getattr(self.serialPortOrig, "fd", None)  # a POSIX device: pyserial opened it O_NONBLOCK; make sure of it
         self._fd: int | None = fd if isinstance(fd, int) else None
+        if self._fd is not None:
+            os.set_blocking(self._fd, False)
         try:
             if sleep_after_open > 0:
                 (abort or threading.Event()).wait(sleep_after_open)
@@ -206,14 +210,16 @@ class SlcanBus(slcanBus):
 
     # -- writing: never waits beyond its timeout --------------------------------------
     def _write(self, string: str) -> None:
-        """A command (python-can's O, C, S6, V...): taken within the open's deadline (or OPEN_TIMEOUT), else raises."""
-        limit = OPEN_TIMEOUT if self._deadline is None else self._deadline - time.monotonic()
+        """A command (python-can's O, C, S6, V...): taken within the open's deadline (`open_timeout` after the
+        open began; later, `open_timeout` each), else CanOperationError."""
+        limit = self._open_timeout if self._deadline is None else self._deadline - time.monotonic()
         if not self._put(string.encode() + b"\r", limit):
-            raise can.CanOperationError(f"the adapter took no command within {OPEN_TIMEOUT:g} s (is it hung? "
-                                        "its buffer is full)")
+            raise can.CanOperationError(f"the adapter took no command within {self._open_timeout:g} s (is it "
+                                        "hung? its buffer is full)")
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        """Write `msg`'s line; CanOperationError (errno EAGAIN) if the adapter takes none of it within `timeout`."""
+        """Write `msg`'s line; CanOperationError (errno EAGAIN) if the adapter takes none of it within `timeout`
+        (None: at once; nothing here waits without a bound)."""
         if not self._put(frame_line(msg), 0.0 if timeout is None else timeout):
             raise can.CanOperationError("the adapter is not taking data (its buffer is full)",
                                         error_code=errno.EAGAIN)
