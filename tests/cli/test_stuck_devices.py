@@ -124,7 +124,7 @@ def test_a_slow_adapter_keeps_its_link_and_is_said_once(adapter: SlcanAdapter) -
 
         sent_before = len(adapter.sent)
         adapter.listening.set()  # it reads again: the gateway's frames reach it again
-        wait_for(lambda: run.said("takes what we send again"), 15)
+        wait_for(lambda: run.said("CAN device takes what we send again"), 15)
         radio.write(b"".join(cobs.encode(Message(Op.PUT, 8, 88, 1, 40))))
         wait_for(lambda: any(isinstance(f, can.Message) and f.data[:2] == b"\x00\x08"
                              for f in adapter.sent[sent_before:]), 15)
