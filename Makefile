@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 CORE_STAMP := $(VENV)/.installed-core
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck layers pytest docs bench sysdeps clean fuzz soak supervised
+.PHONY: demo test lint typecheck layers pytest docs bench sysdeps clean fuzz soak supervised chaos
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -58,9 +58,11 @@ test: lint typecheck layers docs pytest
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 
-# The long runs (not part of `make test`). FUZZ_RUNS inputs per parser; SOAK_SECONDS of gateway traffic.
+# The long runs (not part of `make test`). FUZZ_RUNS inputs per parser; SOAK_SECONDS of gateway traffic;
+# CHAOS_SECONDS of three federated gateways under a fault every 30 s (`make test` runs 120 s of it).
 FUZZ_RUNS ?= 1000000
 SOAK_SECONDS ?= 600
+CHAOS_SECONDS ?= 1800
 FUZZ_STAMP := $(VENV)/.fuzz-installed
 
 $(FUZZ_STAMP): $(STAMP)
@@ -77,6 +79,9 @@ soak: $(STAMP)
 SUPERVISED_SECONDS ?= 1800
 supervised: $(STAMP)
 	$(BIN)/python tests/soak/supervised.py --seconds $(SUPERVISED_SECONDS)
+
+chaos: $(STAMP)
+	$(BIN)/python tests/chaos/run.py --seconds $(CHAOS_SECONDS)
 
 clean:
 	rm -rf $(VENV) build site *.egg-info .pytest_cache .mypy_cache .ruff_cache

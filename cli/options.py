@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar
 import click
 
 from vstig_hw.capture.records import READABLE_EXTENSIONS, CaptureError, line_capture_at, sniff_suffix
-from vstig_hw.outputs import LinkedOutput, drop_setid, refuse_symlink
+from vstig_hw.outputs import LinkedOutput, SpecialOutput, drop_setid, refuse_special, refuse_symlink
 from vstig_hw.wire import KEY_MAX
 
 if TYPE_CHECKING:
@@ -203,10 +203,12 @@ def overwrite_option(target: str) -> Callable[..., Any]:
 
 
 def refuse_link(path: str | Path) -> None:
-    """A usage error naming `path` if it is a symbolic link (dangling or not)."""
+    """A usage error naming `path` if it is a symbolic link (dangling or not), or not a file to write into
+    (a FIFO, a terminal, a socket: `vstig_hw.outputs`)."""
     try:
         refuse_symlink(path)
-    except LinkedOutput as error:
+        refuse_special(path)
+    except (LinkedOutput, SpecialOutput) as error:
         raise click.UsageError(str(error)) from None
 
 
@@ -218,11 +220,11 @@ def refuse_links_in(folder: Path, names: tuple[str, ...]) -> None:
 
 
 def refuse_to_replace(path: str | Path, overwrite: bool, otherwise: str = "") -> None:
-    """A usage error naming `path` if it is a symbolic link, or if it holds something and --overwrite was
-    not given.
+    """A usage error naming `path` if it is a symbolic link or not a file to write into (a FIFO...), or if it
+    holds something and --overwrite was not given.
 
     `otherwise` adds the command's other way out (record: ", --append adds to it"). An empty file holds
-    nothing to lose, and a device (/dev/null) is not replaced by writing to it.
+    nothing to lose, and the null device is not replaced by writing to it.
     """
     refuse_link(path)
     if not overwrite and os.path.isfile(path) and os.path.getsize(path) > 0:

@@ -14,7 +14,15 @@ from ..config import ConfiguredCommand, config_options
 from ..live import foxglove_option, live_view
 from ..ops.metrics import metrics_option, metrics_served
 from ..options import Address, Finite, GuardChoice, guard_options, take_warnings
-from ..running import LINK, build_links, describe_links, print_counters, reports_errors, run_until_stopped
+from ..running import (
+    LINK,
+    build_links,
+    describe_links,
+    opened,
+    print_counters,
+    reports_errors,
+    run_until_stopped,
+)
 
 
 def _raw_note(robot_id: int | None) -> str:
@@ -92,7 +100,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
             click.echo(f"\r\x1b[K{line}", nl=False, err=True)
 
     with (stop_on_signals() as stop, live_view(node, foxglove, larger_value_wins=larger, viewers=foxglove_viewers),
-          metrics_served(node, metrics), node):
+          metrics_served(node, metrics), opened(node, stop)):
         click.echo(f"bridging {', '.join(link.name for link in node.links)} "
                    f"({_raw_note(robot_id) if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
         describe_links(node)

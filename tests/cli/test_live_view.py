@@ -199,8 +199,9 @@ def test_foxglove_client_decodes_every_channel_of_a_sniffer(
             return any(m["data"]["key"] == 1 and m["data"]["converged_after"] is not None
                        for m in viewer.messages("/vstig/writes"))
 
-        viewer.until(lambda: spread_done() and _table_row(viewer, 2) is not None and any(
-            m["data"]["links"] for m in viewer.messages("/vstig/stats")), step=step)
+        viewer.until(lambda: spread_done() and _table_row(viewer, 2) is not None and any(  # counters come 10 times
+            m["data"]["links"] and m["data"]["engine"].get("stored", 0) >= 2  # a second: wait for those after
+            for m in viewer.messages("/vstig/stats")), step=step)       # the writes (the adapter opens at once)
         assert b.value(1) == 111  # robot 4 learnt the write from robot 3 over the bus
 
         # The sniffer's own rows name the links: the CAN one names senders, the radio does not.
