@@ -61,17 +61,6 @@ def build_wheel(folder: Path) -> Path:
     return wheel
 
 
-def build_sdist(folder: Path) -> Path:
-    """An sdist of this tree, built from a clean copy under `folder` (`python -m build --sdist`)."""
-    source = clean_copy(folder / "source")
-    done = subprocess.run([sys.executable, "-m", "build", "--sdist", "--outdir", str(folder / "dist"), str(source)],
-                          capture_output=True, text=True, timeout=PIP_TIMEOUT, check=False)
-    if done.returncode:
-        raise RuntimeError(f"python -m build --sdist failed:\n{done.stdout[-2000:]}{done.stderr[-4000:]}")
-    (sdist,) = (folder / "dist").glob("vstig_hw-*.tar.gz")
-    return sdist
-
-
 def wheelhouse(folder: Path, *requirements: str) -> tuple[str, ...]:
     """Every wheel `requirements` need, fetched or built into `folder` once; returns the pip options
     that make an install read that folder alone (nothing downloaded while it is timed)."""

@@ -1,7 +1,8 @@
 """The core install alone (the wheel, no extras, a fresh venv) runs the gateway, and loads no extra's library.
 
 The wheel carries the compiled data path (this machine compiles): the session runs on it, and the install stays
-within its size goal (25 MB, `make bench`'s install group). The sdist installs where nothing compiles, pure.
+within its size goal (25 MB, `make bench`'s install group). The sdist installs where nothing compiles, pure
+(tests/cli/test_sdist.py).
 
 A lab's gateway PC installs `pip install vstig-hw`: bridge, sniff, record, replay,
 decode, put and get must work there against real robots' media (a pty radio,
@@ -22,7 +23,7 @@ from typing import Any
 import click
 import pytest
 from core_session import EXTRAS_LIBRARIES
-from installs import build_sdist, build_wheel, fresh_venv, install, installed_bytes, installed_modules, site_packages
+from installs import build_wheel, fresh_venv, install, installed_bytes, installed_modules, site_packages
 
 import vstig_hw.native
 from vstig_cli.main import cli
@@ -58,40 +59,6 @@ def test_the_wheel_is_this_platforms_and_carries_the_compiled_data_path(wheel: P
 @pytest.mark.slow
 def test_the_core_install_stays_within_its_size_goal(core_python: Path) -> None:
     assert installed_bytes(core_python) <= CORE_MB * 1e6
-
-
-@pytest.mark.slow
-def test_the_sdist_installs_pure_where_nothing_compiles(tmp_path: Path) -> None:
-    """No compiler (CC=false): the install says why and goes on; the gateway relays on the pure-Python path."""
-    python = fresh_venv(tmp_path / "venv")
-    install(python, str(build_sdist(tmp_path)), env={"CC": "false", "VSTIG_BUILD_NATIVE": ""})
-    assert not list(site_packages(python).glob("vstig_hw/_vstig*.so"))
-    done = subprocess.run([str(python), "-c", _RELAY_ONE], capture_output=True, text=True, timeout=60, check=False,
-                          cwd=tmp_path)  # not this tree, whose vstig_hw `python -c` would import
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.splitlines() == ["the compiled data path is not built here (No module named 'vstig_hw._vstig')",
-                                        "Message(PUT, key=1, value=2, timestamp=3, robot=4)"]
-
-
-# One message from one python-can virtual bus to another through an engine Node; prints why the path is pure.
-_RELAY_ONE = """
-import can
-from vstig_hw import Message, Op
-from vstig_hw.framing.can import CanFraming, CanIdScheme
-from vstig_hw.gateway.node import Node
-from vstig_hw.links import parse
-from vstig_hw.native import why_pure
-print(why_pure)
-links = [parse(spec).build() for spec in ("can:virtual:a", "can:virtual:b")]
-robot, far = can.Bus(interface="virtual", channel="a"), can.Bus(interface="virtual", channel="b")
-framing = CanFraming(CanIdScheme(), sender=4)
-with Node(links, 9, budget=None) as node:
-    robot.send(framing.encode(Message(Op.PUT, 1, 2, 3, 4))[0])
-    heard = []
-    node.run(until=lambda: heard.extend(framing.feed(f) for f in iter(lambda: far.recv(0), None)) or heard,
-             duration=10)
-print(heard[0][0])
-"""
 
 
 def _session(python: Path, folder: Path) -> dict[str, Any]:
