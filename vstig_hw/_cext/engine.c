@@ -109,6 +109,10 @@ static void use_rule(vx_engine_t *self) {
 
 /* ---- the data path's calls ----------------------------------------------------------- */
 
+int vx_engine_calls_python(const vx_engine_t *self) {
+    return self->engine.onconflict == python_rule || self->onconflictlost != Py_None;
+}
+
 vstig_outcome_t vx_engine_receive(vx_engine_t *self, const vstig_msg_t *msg) {
     uint16_t before = self->engine.size;
     vstig_outcome_t outcome = vstig_engine_receive(&self->engine, msg);

@@ -18,6 +18,8 @@ struct vx_engine {
  * Python callback raised, as the Python engine raises it). */
 vstig_outcome_t vx_engine_receive(vx_engine_t *self, const vstig_msg_t *msg);
 int vx_engine_raise(vx_engine_t *self, vstig_outcome_t outcome);
+/* Whether a conflict may call Python (a rule of the user's, or onconflictlost). */
+int vx_engine_calls_python(const vx_engine_t *self);
 
 /* A list of Messages; OutQueue.drain's budget argument. */
 PyObject *vx_drain_list(const vstig_msg_t *out, size_t n);

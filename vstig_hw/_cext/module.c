@@ -1,7 +1,32 @@
 /* vstig_hw._vstig: the module, `setup`, and the conversions every type shares. See ext.h. */
 #include "ext.h"
+#include "path.h"
 
 vx_python_t vx_py;
+vx_names_t vx_n;
+
+static int intern_names(void) {
+    struct {
+        PyObject **slot;
+        const char *name;
+    } names[] = {
+        {&vx_n.in, "in"}, {&vx_n.out, "out"}, {&vx_n.tx, "tx"}, {&vx_n.tx_bytes, "tx_bytes"}, {&vx_n.rx, "rx"},
+        {&vx_n.rx_bytes, "rx_bytes"}, {&vx_n.superseded, "superseded"}, {&vx_n.drop_overflow, "drop_overflow"},
+        {&vx_n.not_echoed, "not_echoed"}, {&vx_n.drop_write_error, "drop_write_error"},
+        {&vx_n.drop_intake, "drop_intake"}, {&vx_n.unsent_at_close, "unsent_at_close"},
+        {&vx_n.drop_jump, "drop_jump"}, {&vx_n.dropped_at_stop, "dropped_at_stop"},
+        {&vx_n.a_fd, "_fd"}, {&vx_n.a_fresh, "_fresh"}, {&vx_n.a_preamble, "preamble"}, {&vx_n.a_device, "_device"},
+        {&vx_n.a_outage, "_outage"}, {&vx_n.a_idle, "idle"}, {&vx_n.a_turns, "turns"}, {&vx_n.a_socket, "socket"},
+        {&vx_n.m_submit, "submit"}, {&vx_n.m_room, "room"}, {&vx_n.m_push, "push"}, {&vx_n.m_drain, "drain"},
+        {&vx_n.m_close, "close"}, {&vx_n.m_units_of, "units_of"}, {&vx_n.m_fileno, "fileno"},
+        {&vx_n.m_acquire, "acquire"}, {&vx_n.m_release, "release"},
+    };
+    size_t i;
+    for (i = 0; i < sizeof names / sizeof names[0]; i++) {
+        if ((*names[i].slot = vx_name(names[i].name)) == NULL) return -1;
+    }
+    return 0;
+}
 
 PyObject *vx_name(const char *name) {
     PyObject *key = PyUnicode_InternFromString(name), *found;
@@ -164,8 +189,12 @@ PyMODINIT_FUNC PyInit__vstig(void) {
         if (name == NULL) goto fail;
         PyTuple_SET_ITEM(vx_py.drop_names, reason, Py_NewRef(name));
     }
+    if (intern_names() < 0) goto fail;
     if (add_type(module, &vx_EngineType, "Engine") < 0 || add_type(module, &vx_JumpGuardType, "JumpGuard") < 0 ||
-        add_type(module, &vx_ReceiverType, "Receiver") < 0 || add_type(module, &vx_EncoderType, "Encoder") < 0)
+        add_type(module, &vx_ReceiverType, "Receiver") < 0 || add_type(module, &vx_EncoderType, "Encoder") < 0 ||
+        add_type(module, &vx_WindowType, "Window") < 0 || add_type(module, &vx_OutletType, "Outlet") < 0 ||
+        add_type(module, &vx_SeatType, "Seat") < 0 || add_type(module, &vx_RelayType, "Relay") < 0 ||
+        add_type(module, &vx_PathType, "Path") < 0)
         goto fail;
     if (PyModule_AddIntConstant(module, "KEYS", VSTIG_KEYS) < 0) goto fail;
     return module;

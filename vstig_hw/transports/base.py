@@ -202,6 +202,12 @@ class DeviceTransport(Generic[Unit, Device]):
         if self._outage and self._device is not None:
             self._recovered()
 
+    def failed(self, reason: str) -> None:
+        """A call on the device made outside this transport failed with `reason` (the compiled data path reads a
+        SocketCAN socket itself, and a socket tells its error once): the outage starts as if this transport's own
+        call had failed."""
+        self._lose(reason)
+
     def _lose(self, reason: str) -> None:
         """The device failed: drop it; report the outage once, then reopen it with backoff from read/write."""
         self._drop_device()
