@@ -1,24 +1,27 @@
 """CAN -> CAN relays on SocketCAN: `vstig bridge` beside python-can's own `can.bridge`, in one run.
 
-A sender on vcan0 puts COUNT vstig PUT frames (distinct keys, so an engine relays
-every one) at RATE_HZ; a receiver on vcan1 notes each key's first arrival. Between
+A sender on vcan0 puts vstig PUT frames (distinct keys, so an engine relays every
+one) at a steady pace; a receiver on vcan1 notes each key's first arrival. Between
 them one relay at a time, in alternating order: `python -m can.bridge` (python-can
 4.6's bridge of two buses: a Notifier thread per bus and a RedirectReader, the
 relay a user would run instead), then `vstig bridge --raw` and the engine bridge,
-each on the compiled data path and on the pure-Python one (VSTIG_PURE=1). The
-figure is each relay process's CPU per message (the kernel's process CPU clock,
-every thread), beside can.bridge's; and how many arrived.
+each on the compiled data path and on the pure-Python one (VSTIG_PURE=1).
 
 vcan exists only inside User-Mode Linux here (tests/socketcan/uml.py), so the run
-boots a guest unless this host has vcan0 and vcan1. A guest's system calls are
-slow (every one traps to the host), so both relays' CPU is higher than on a real
-machine; the ratio is what the gateway's own work adds or saves.
+boots a guest unless this host has vcan0 and vcan1. A guest accounts CPU time in
+whole 10 ms jiffies (it charged can.bridge 2 jiffies for 3,000 relayed frames), so
+the figure per relay is the user-space instructions it executed per message, under
+callgrind (`callgrind_control -e Ir`, read once the relay relays and again after
+COUNT messages): what the bench's pty relays count too, and the same on a busy or an
+idle machine. Every relay also makes its system calls (a guest's are slow alike for
+all of them); instructions are what the relays' own code adds.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -31,14 +34,16 @@ import can
 from vstig_hw import Message, Op
 from vstig_hw.wire import encode
 
+from .guest import run_in_guest
 from .registry import Result, benchmark
 
-COUNT = 3000
-RATE_HZ = 300  # a guest keeps this pace with every relay; each frame is read alone (no batching flatters anyone)
-ROUNDS = 2  # every relay runs this many times, the rounds alternating; the least CPU of each is kept
+COUNT = 1000
+RATE_HZ = 100  # slow enough for a relay under callgrind (~50x slower) in a guest to take each frame alone
 _REPO = Path(__file__).resolve().parents[1]
 _SENDER = 5
 _CHANNELS = ("vcan0", "vcan1")
+_PROBE = 0x7FFF
+
 
 def _relays() -> dict[str, tuple[list[str], dict[str, str]]]:
     """Each relay's argv and extra environment, in the order they run."""
@@ -55,11 +60,6 @@ def _relays() -> dict[str, tuple[list[str], dict[str, str]]]:
         "engine": (engine, {}),
         "engine_pure": (engine, pure),
     }
-
-
-def _cpu(pid: int) -> float:
-    """CPU seconds of every thread of process `pid` so far (the kernel's process CPU clock)."""
-    return time.clock_gettime((~pid << 3) | 2)  # MAKE_PROCESS_CPUCLOCK(pid, CPUCLOCK_SCHED)
 
 
 def _frame(key: int) -> can.Message:
@@ -89,72 +89,68 @@ class _Arrivals:
         self.bus.shutdown()
 
 
-def _relay_run(argv: list[str], env: dict[str, str]) -> tuple[float, int]:
-    """(CPU seconds per message, delivered) of one relay from vcan0 to vcan1."""
+def _instructions(pid: int) -> int:
+    """The user-space instructions callgrind counted so far in process `pid`, every thread's."""
+    shown = subprocess.run(["callgrind_control", "-e", "Ir", str(pid)], capture_output=True, text=True,
+                           timeout=60, check=True).stdout
+    threads = re.findall(r"^\s*Th\s+\d+\s+([\d,]+)\s*$", shown, flags=re.M)
+    if not threads:
+        raise RuntimeError(f"callgrind_control showed no Ir for {pid}: {shown}")
+    return sum(int(count.replace(",", "")) for count in threads)
+
+
+def _relay_run(argv: list[str], env: dict[str, str], out: Path) -> tuple[float, int]:
+    """(instructions per message, delivered) of one relay from vcan0 to vcan1, under callgrind."""
     sender = can.Bus(interface="socketcan", channel=_CHANNELS[0])
-    out = _Arrivals(_CHANNELS[1])
-    process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env={**os.environ, **env})
+    arrivals = _Arrivals(_CHANNELS[1])
+    callgrind = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out / 'callgrind.%p'}"]
+    process = subprocess.Popen([*callgrind, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               env={**os.environ, **env})
     try:
-        probe = 0x7FFF
-        for _ in range(300):  # until it relays
-            sender.send(_frame(probe))
-            time.sleep(0.1)
-            if probe in out.keys:
+        for _ in range(600):  # until it relays (a Python start under callgrind in a guest takes a while)
+            sender.send(_frame(_PROBE))
+            time.sleep(0.5)
+            if _PROBE in arrivals.keys:
                 break
         else:
             raise RuntimeError(f"{argv[:3]} never relayed")
-        frames = [_frame(key) for key in range(COUNT)]
-        cpu0 = _cpu(process.pid)
+        time.sleep(1.0)  # the probes still on their way
+        before = _instructions(process.pid)
         start = time.perf_counter()
-        for i, frame in enumerate(frames):
-            delay = start + i / RATE_HZ - time.perf_counter()
+        for key in range(COUNT):
+            delay = start + key / RATE_HZ - time.perf_counter()
             if delay > 0:
                 time.sleep(delay)
-            sender.send(frame)
-        end = time.monotonic() + 10
-        while len(out.keys) <= COUNT and time.monotonic() < end:
-            time.sleep(0.05)
-        cpu = _cpu(process.pid) - cpu0
+            sender.send(_frame(key))
+        end = time.monotonic() + 60
+        while len(arrivals.keys - {_PROBE}) < COUNT and time.monotonic() < end:
+            time.sleep(0.1)
+        after = _instructions(process.pid)
     finally:
         process.terminate()
-        process.wait(30)
-        out.close()
+        process.wait(120)
+        arrivals.close()
         sender.shutdown()
-    return cpu / COUNT, len(out.keys - {0x7FFF})
+    return (after - before) / COUNT, len(arrivals.keys - {_PROBE})
 
 
 def guest(out: Path) -> None:
-    """The relays, alternated, on this machine's vcan0 and vcan1: figures.json in `out`.
-
-    A guest's CPU accounting is noisy (its every system call is the host's work too), so each relay runs ROUNDS
-    times, one round after the other, and its least CPU is kept (with the fewest delivered of its rounds).
-    """
+    """The relays, alternated, on this machine's vcan0 and vcan1: figures.json in `out`."""
     figures: dict[str, dict[str, float]] = {}
-    for _ in range(ROUNDS):
-        for name, (argv, env) in _relays().items():
-            cpu, delivered = _relay_run(argv, env)
-            print(f"{name}: {cpu * 1e6:.1f} us/msg, {delivered} of {COUNT}", flush=True)
-            best = figures.setdefault(name, {"cpu": cpu, "delivered": delivered})
-            best["cpu"], best["delivered"] = min(best["cpu"], cpu), min(best["delivered"], delivered)
+    for name, (argv, env) in _relays().items():
+        instructions, delivered = _relay_run(argv, env, out)
+        print(f"{name}: {instructions:,.0f} instructions/msg, {delivered} of {COUNT}", flush=True)
+        figures[name] = {"instructions": instructions, "delivered": delivered}
     (out / "figures.json").write_text(json.dumps(figures))
-
-
-def _in_guest(out: Path) -> dict[str, dict[str, float]]:
-    sys.path.insert(0, str(_REPO / "tests" / "socketcan"))
-    import uml  # type: ignore[import-not-found]
-
-    reason = uml.unavailable_reason()
-    if reason:
-        raise RuntimeError(f"no vcan here and no User-Mode Linux to make one: {reason}")
-    run = uml.run([], out, program=[sys.executable, "-m", "benchmarks.bench_can_relay", str(out)], timeout=600)
-    if run.exit_code != 0:
-        raise RuntimeError(run.explain())
-    figures: dict[str, dict[str, float]] = json.loads((out / "figures.json").read_text())
-    return figures
 
 
 @benchmark("can_relay")
 def can_to_can_cost() -> list[Result]:
+    import shutil
+
+    if shutil.which("valgrind") is None:
+        print("can_relay.can_to_can_cost: needs valgrind (apt-get install valgrind)", file=sys.stderr)
+        return []
     with tempfile.TemporaryDirectory(prefix="vstig-bench-can-relay-") as tmp:
         out = Path(tmp)
         try:
@@ -162,18 +158,21 @@ def can_to_can_cost() -> list[Result]:
                 guest(out)
                 figures = json.loads((out / "figures.json").read_text())
             else:
-                figures = _in_guest(out)
+                figures = run_in_guest("bench_can_relay", out, timeout=1800)
         except RuntimeError as error:
             print(f"can_relay.can_to_can_cost: not run: {error}", file=sys.stderr)
             return []
-    anchor = figures["can.bridge"]["cpu"] * 1e6
+    anchor = figures["can.bridge"]["instructions"]
     results = []
     for name in ("raw", "engine"):
-        compiled, pure = figures[name]["cpu"] * 1e6, figures[f"{name}_pure"]["cpu"] * 1e6
+        compiled, pure = figures[name]["instructions"], figures[f"{name}_pure"]["instructions"]
         results += [
-            Result(f"can_relay.{name}_cpu_per_msg", compiled, "us", "python-can can.bridge CPU/msg", anchor),
-            Result(f"can_relay.{name}_pure_cpu_per_msg", pure, "us", "python-can can.bridge CPU/msg", anchor),
-            Result(f"can_relay.{name}_compiled_vs_pure", compiled, "us", "the pure-Python path CPU/msg", pure),
+            Result(f"can_relay.{name}_instructions_per_msg", compiled, "instr", "python-can can.bridge instr/msg",
+                   anchor),
+            Result(f"can_relay.{name}_pure_instructions_per_msg", pure, "instr", "python-can can.bridge instr/msg",
+                   anchor),
+            Result(f"can_relay.{name}_instructions_compiled_vs_pure", compiled, "instr",
+                   "the pure-Python path instr/msg", pure),
         ]
         for variant in (name, f"{name}_pure"):
             results.append(Result(f"can_relay.{variant}_delivered", figures[variant]["delivered"] / COUNT * 100, "%",
