@@ -294,8 +294,8 @@ def _tell(told: list[tuple[Any, ...]], *change: Any) -> None:
 
 
 seat_calls = st.one_of(
-    st.tuples(st.just("take"), st.integers(0, 2), st.lists(messages, max_size=8),
-              st.sampled_from([None, None, "peer-a", "peer-b"])),
+    st.tuples(st.just("take"), st.integers(0, 2), st.lists(messages, max_size=30),
+              st.sampled_from([None, None, "peer-a", "peer-b"]), st.sampled_from([0, 0, 1]) | st.integers(-5, 40)),
     st.tuples(st.just("tick")),
     st.tuples(st.just("put"), st.integers(0, 3), st.integers(0, 9)),
     st.tuples(st.just("get"), st.integers(0, 3)),
@@ -304,12 +304,18 @@ seat_calls = st.one_of(
 )
 
 
+_MANY = [Message(Op.PUT, key, 1, 1, 1) for key in range(12)]
+
+
 @EXAMPLES
-@given(intake=st.none() | st.integers(1, 10), listening=st.booleans(), script=st.lists(seat_calls, max_size=40))
-def test_seat_equals_the_python_seat(compiled: ModuleType, intake: int | None, listening: bool,
+@example(intake=1, period=0.1, listening=False, script=[("take", 0, _MANY, None, 0), ("take", 0, _MANY, "peer-a", 0)])
+@given(intake=st.none() | st.integers(1, 10), period=st.sampled_from([0.1, 0.25, 1.0]), listening=st.booleans(),
+       script=st.lists(seat_calls, max_size=40))
+def test_seat_equals_the_python_seat(compiled: ModuleType, intake: int | None, period: float, listening: bool,
                                      script: list[tuple[Any, ...]]) -> None:
-    """The engine's intake per source and tick (a link, or one of its peers), what a one-domain link heard kept off
-    it, change listeners told of every change: the same queues, counters and calls."""
+    """The engine's intake per source (a link, or one of its peers; a token bucket refilled by the batches' read
+    times, which step back now and then), what a one-domain link heard kept off it, change listeners told of every
+    change: the same queues, counters and calls."""
     sides = []
     for compiled_side in (False, True):
         links = _links()
@@ -319,15 +325,18 @@ def test_seat_equals_the_python_seat(compiled: ModuleType, intake: int | None, l
         engine = Stigmergy(9) if not compiled_side else compiled.Engine(9)
         told: list[tuple[Any, ...]] = []
         listeners = (functools.partial(_tell, told),) if listening else ()
-        seat = (compiled.Seat if compiled_side else Seat)(engine, links, outlets, None, listeners, intake)
+        seat = (compiled.Seat if compiled_side else Seat)(engine, links, outlets, None, listeners, intake, period)
         sides.append((seat, outlets, told))
+    t = 1_700_000_000.0
     try:
         for name, *args in script:
             results = []
+            if name == "take":
+                t += args[3] / 64  # whole 64ths of a second and their sums: the same floats on both sides
             for seat, outlets, _ in sides:
                 if name == "take":
-                    index, batch, sub = args
-                    admitted = seat.admit(index, sub, list(batch))
+                    index, batch, sub, _step = args
+                    admitted = seat.admit(index, sub, list(batch), t) if intake is not None else list(batch)
                     results.append((admitted, seat.take(index, admitted, 7, sub)))
                 else:
                     results.append(getattr(seat, name)(*args))

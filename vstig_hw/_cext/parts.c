@@ -11,6 +11,8 @@
 #include <string.h>
 #include <structmember.h>
 
+#define VX_INTAKE_BURST_TICKS 10 /* parts.INTAKE_BURST_TICKS: a quiet source may give this many periods at once */
+
 /* ---- shared ----------------------------------------------------------------------------- */
 
 static int outlets_of(PyObject *outlets) {
@@ -270,49 +272,62 @@ int vx_seat_take(vx_seat_t *s, Py_ssize_t index, const vstig_msg_t *msgs, size_t
     return receive(s, index, msgs, n, one_domain(s, index));
 }
 
-int vx_seat_admit(vx_seat_t *s, Py_ssize_t index, PyObject *sub, size_t n, size_t *admitted) {
-    long taken, room;
-    PyObject *key = NULL, *count;
+int vx_seat_admit(vx_seat_t *s, Py_ssize_t index, PyObject *sub, size_t n, double t, size_t *admitted) {
+    /* Seat.admit: the source's bucket refilled since its last batch (at `rate`, up to `burst`), then spent */
+    PyObject *key = NULL, *got, *value;
+    double left = s->burst, since = 0.0;
+    int known;
     *admitted = n;
-    if (s->intake < 0) return 0;
-    if (sub == Py_None) { /* the link as one source: its count by index (the hot path) */
-        taken = s->taken_by_link[index];
-        if (taken + (long)n <= s->intake) {
-            s->taken_by_link[index] = taken + (long)n;
-            return 0;
+    if (sub == Py_None) {
+        known = s->known[index];
+        if (known) {
+            left = s->left[index];
+            since = s->since[index];
         }
     } else {
-        key = Py_BuildValue("(nO)", index, sub);
-        count = key == NULL ? NULL : PyDict_GetItemWithError(s->taken, key);
-        if (key == NULL || (count == NULL && PyErr_Occurred())) {
-            Py_XDECREF(key);
+        if ((key = Py_BuildValue("(nO)", index, sub)) == NULL) return -1;
+        got = PyDict_GetItemWithError(s->allowed, key);
+        if (got == NULL && PyErr_Occurred()) {
+            Py_DECREF(key);
             return -1;
         }
-        taken = count == NULL ? 0 : PyLong_AsLong(count);
+        known = got != NULL;
+        if (known) {
+            left = PyFloat_AsDouble(PyTuple_GET_ITEM(got, 0));
+            since = PyFloat_AsDouble(PyTuple_GET_ITEM(got, 1));
+        }
     }
-    room = s->intake - taken > 0 ? s->intake - taken : 0;
-    if (room < (long)n) {
+    if (known && t > since) {
+        double refilled = left + (t - since) * s->rate;
+        left = s->burst <= refilled ? s->burst : refilled;
+    }
+    if ((double)n > left) {
+        size_t room = (size_t)left; /* int(): left is never below 0 */
         PyObject *counters = PyObject_GetAttrString(PyList_GET_ITEM(s->links, index), "counters");
-        int status = counters == NULL ? -1 : vx_count(counters, vx_n.drop_intake, (Py_ssize_t)n - room);
+        int status = counters == NULL ? -1 : vx_count(counters, vx_n.drop_intake, (Py_ssize_t)(n - room));
         Py_XDECREF(counters);
         if (status < 0) {
             Py_XDECREF(key);
             return -1;
         }
-        *admitted = (size_t)room;
+        *admitted = n = room;
     }
+    left -= (double)n;
     if (key == NULL) {
-        s->taken_by_link[index] = taken + (long)*admitted;
-        return 0;
-    }
-    count = PyLong_FromLong(taken + (long)*admitted);
-    if (count == NULL || PyDict_SetItem(s->taken, key, count) < 0) {
-        Py_XDECREF(count);
+        s->known[index] = 1;
+        s->left[index] = left;
+        s->since[index] = t;
+    } else {
+        value = Py_BuildValue("(dd)", left, t);
+        if (value == NULL || PyDict_SetItem(s->allowed, key, value) < 0) {
+            Py_XDECREF(value);
+            Py_DECREF(key);
+            return -1;
+        }
+        Py_DECREF(value);
         Py_DECREF(key);
-        return -1;
     }
-    Py_DECREF(count);
-    Py_DECREF(key);
+    if (t > s->latest) s->latest = t;
     return 0;
 }
 
@@ -424,12 +439,14 @@ int vx_seat_queue_out(vx_seat_t *s) {
 /* ---- Seat: the Python type ------------------------------------------------------------------- */
 
 static PyObject *Seat_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
-    static char *kwlist[] = {"engine", "links", "outlets", "guard", "on_change", "intake", NULL};
+    static char *kwlist[] = {"engine", "links", "outlets", "guard", "on_change", "intake", "period", NULL};
     PyObject *engine, *links, *outlets, *guard, *on_change = NULL, *intake = Py_None;
+    double period = 0.1;
+    long intake_value = 0;
     vx_seat_t *self;
     Py_ssize_t i;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!O!OO|OO", kwlist, &vx_EngineType, &engine, &PyList_Type, &links,
-                                     &outlets, &guard, &on_change, &intake) ||
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O!O!OO|OOd", kwlist, &vx_EngineType, &engine, &PyList_Type, &links,
+                                     &outlets, &guard, &on_change, &intake, &period) ||
         outlets_of(outlets) < 0)
         return NULL;
     if (intake != Py_None && (PyLong_AsLong(intake) < 1 || PyErr_Occurred())) {
@@ -446,17 +463,22 @@ static PyObject *Seat_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     self->guard = Py_NewRef(guard);
     self->on_change = on_change == NULL ? PyTuple_New(0) : Py_NewRef(on_change);
     self->intake_obj = Py_NewRef(intake);
-    self->intake = intake == Py_None ? -1 : PyLong_AsLong(intake);
+    if (intake != Py_None) intake_value = PyLong_AsLong(intake);
+    self->rate = intake == Py_None ? 0.0 : (double)intake_value / period; /* messages a second a source may give */
+    self->burst = intake == Py_None ? 0.0 : (double)(intake_value * VX_INTAKE_BURST_TICKS);
     self->nlinks = PyList_GET_SIZE(links);
-    self->taken_by_link = PyMem_Calloc((size_t)(self->nlinks ? self->nlinks : 1), sizeof *self->taken_by_link);
-    self->taken = PyDict_New();
+    self->left = PyMem_Calloc((size_t)(self->nlinks ? self->nlinks : 1), sizeof *self->left);
+    self->since = PyMem_Calloc((size_t)(self->nlinks ? self->nlinks : 1), sizeof *self->since);
+    self->known = PyMem_Calloc((size_t)(self->nlinks ? self->nlinks : 1), sizeof *self->known);
+    self->allowed = PyDict_New();
     self->one_domain = PyList_New(self->nlinks);
     self->source_link = VX_LOCAL;
     self->source_sub = Py_NewRef(Py_None);
     self->note_link = PyMem_Malloc(VSTIG_KEYS * sizeof *self->note_link);
     self->note_msg = PyMem_Malloc(VSTIG_KEYS * sizeof *self->note_msg);
     self->noted = PyMem_Malloc(VSTIG_KEYS * sizeof *self->noted);
-    if (self->on_change == NULL || self->taken_by_link == NULL || self->taken == NULL || self->one_domain == NULL ||
+    if (self->on_change == NULL || self->left == NULL || self->since == NULL || self->known == NULL ||
+        self->allowed == NULL || self->one_domain == NULL ||
         self->note_link == NULL || self->note_msg == NULL || self->noted == NULL) {
         Py_DECREF(self);
         return PyErr_NoMemory();
@@ -481,7 +503,7 @@ static int Seat_traverse(vx_seat_t *self, visitproc visit, void *arg) {
     Py_VISIT(self->outlets);
     Py_VISIT(self->guard);
     Py_VISIT(self->on_change);
-    Py_VISIT(self->taken);
+    Py_VISIT(self->allowed);
     Py_VISIT(self->source_sub);
     return 0;
 }
@@ -492,7 +514,7 @@ static int Seat_clear(vx_seat_t *self) {
     Py_CLEAR(self->outlets);
     Py_CLEAR(self->guard);
     Py_CLEAR(self->on_change);
-    Py_CLEAR(self->taken);
+    Py_CLEAR(self->allowed);
     Py_CLEAR(self->source_sub);
     Py_CLEAR(self->intake_obj);
     Py_CLEAR(self->one_domain);
@@ -502,7 +524,9 @@ static int Seat_clear(vx_seat_t *self) {
 static void Seat_dealloc(vx_seat_t *self) {
     PyObject_GC_UnTrack(self);
     Seat_clear(self);
-    PyMem_Free(self->taken_by_link);
+    PyMem_Free(self->left);
+    PyMem_Free(self->since);
+    PyMem_Free(self->known);
     PyMem_Free(self->note_link);
     PyMem_Free(self->note_msg);
     PyMem_Free(self->noted);
@@ -583,18 +607,42 @@ static PyObject *Seat_take(vx_seat_t *self, PyObject *args, PyObject *kwds) {
 static PyObject *Seat_admit(vx_seat_t *self, PyObject *args) {
     PyObject *sub, *messages;
     Py_ssize_t index, n;
+    double t;
     size_t admitted;
-    if (!PyArg_ParseTuple(args, "nOO:admit", &index, &sub, &messages)) return NULL;
+    if (!PyArg_ParseTuple(args, "nOOd:admit", &index, &sub, &messages, &t)) return NULL;
     if (index < 0 || index >= self->nlinks) return PyErr_Format(PyExc_IndexError, "no link %zd", index);
-    if ((n = PyObject_Length(messages)) < 0 || vx_seat_admit(self, index, sub, (size_t)n, &admitted) < 0) return NULL;
+    if ((n = PyObject_Length(messages)) < 0 || vx_seat_admit(self, index, sub, (size_t)n, t, &admitted) < 0)
+        return NULL;
     if ((Py_ssize_t)admitted == n) return Py_NewRef(messages);
     return PySequence_GetSlice(messages, 0, (Py_ssize_t)admitted);
 }
 
 static PyObject *Seat_tick(vx_seat_t *self, PyObject *unused) {
+    /* Seat.tick: forget the sources whose allowance has refilled whole since they last gave (as good as new) */
+    Py_ssize_t i, known = 0, pos = 0;
+    PyObject *key, *value, *stale;
+    double old;
     (void)unused;
-    PyDict_Clear(self->taken);
-    memset(self->taken_by_link, 0, (size_t)self->nlinks * sizeof *self->taken_by_link);
+    for (i = 0; i < self->nlinks; i++) known += self->known[i];
+    if (known + PyDict_GET_SIZE(self->allowed) <= self->nlinks) Py_RETURN_NONE;
+    old = self->latest - (self->rate != 0.0 ? self->burst / self->rate : 0.0);
+    for (i = 0; i < self->nlinks; i++) {
+        if (self->known[i] && self->since[i] < old) self->known[i] = 0;
+    }
+    if ((stale = PyList_New(0)) == NULL) return NULL;
+    while (PyDict_Next(self->allowed, &pos, &key, &value)) {
+        if (PyFloat_AsDouble(PyTuple_GET_ITEM(value, 1)) < old && PyList_Append(stale, key) < 0) {
+            Py_DECREF(stale);
+            return NULL;
+        }
+    }
+    for (i = 0; i < PyList_GET_SIZE(stale); i++) {
+        if (PyDict_DelItem(self->allowed, PyList_GET_ITEM(stale, i)) < 0) {
+            Py_DECREF(stale);
+            return NULL;
+        }
+    }
+    Py_DECREF(stale);
     Py_RETURN_NONE;
 }
 
@@ -609,8 +657,8 @@ static PyMethodDef Seat_methods[] = {
     {"get", (PyCFunction)Seat_get, METH_O, NULL},
     {"ask", (PyCFunction)Seat_ask, METH_O, "Queue an empty GET for key on every link."},
     {"take", (PyCFunction)(void (*)(void))Seat_take, METH_VARARGS | METH_KEYWORDS, "Judge what link `index` heard."},
-    {"admit", (PyCFunction)Seat_admit, METH_VARARGS, "What the engine takes within the source's intake this tick."},
-    {"tick", (PyCFunction)Seat_tick, METH_NOARGS, "A new tick: every source may give `intake` messages again."},
+    {"admit", (PyCFunction)Seat_admit, METH_VARARGS, "What the engine takes of a batch read at t, within its intake."},
+    {"tick", (PyCFunction)Seat_tick, METH_NOARGS, "Forget the sources whose allowance has refilled whole."},
     {"queue_out", (PyCFunction)Seat_queue_out, METH_NOARGS, "Copy the engine's outbox into every outlet."},
     {NULL, NULL, 0, NULL},
 };
@@ -628,7 +676,7 @@ static PyMemberDef Seat_members[] = {
 PyTypeObject vx_SeatType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "vstig_hw._vstig.Seat",
-    .tp_doc = "Seat(engine, links, outlets, guard, on_change=(), intake=None): Seat in C.",
+    .tp_doc = "Seat(engine, links, outlets, guard, on_change=(), intake=None, period=0.1): Seat in C.",
     .tp_basicsize = sizeof(vx_seat_t),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
     .tp_new = Seat_new,

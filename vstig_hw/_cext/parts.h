@@ -18,11 +18,13 @@ typedef struct {
     PyObject_HEAD
     vx_engine_t *engine;
     PyObject *links, *outlets, *guard, *on_change; /* on_change: the Node's listeners (a sequence) */
-    PyObject *intake_obj;                           /* None, or the intake per source and tick */
-    long intake;                                    /* -1: none */
+    PyObject *intake_obj;                           /* None, or the intake per source and period */
     Py_ssize_t nlinks;
-    long *taken_by_link;  /* per link, messages the engine took from it (sub None) this tick */
-    PyObject *taken;      /* (link, sub) -> the same, for a link's peers (a dict) */
+    /* the intake: a token bucket per source (Seat._allowed), refilled by the batches' read times */
+    double rate, burst, latest;
+    double *left, *since; /* per link as one source: messages it may still give, as of when */
+    char *known;          /* per link: it gave since it was last forgotten */
+    PyObject *allowed;    /* (link, sub) -> (left, since), for a link's peers (a dict) */
     PyObject *one_domain; /* per link: True when every robot there hears every frame (Link.one_domain) */
     long source_link;     /* the source (link, sub) that caused the messages in the engine's outbox */
     PyObject *source_sub;
@@ -37,7 +39,7 @@ extern PyTypeObject vx_SeatType;
 extern PyTypeObject vx_RelayType;
 
 /* Seat.admit over C messages: how many of the first n the engine takes (the rest are counted drop_intake). */
-int vx_seat_admit(vx_seat_t *s, Py_ssize_t index, PyObject *sub, size_t n, size_t *admitted);
+int vx_seat_admit(vx_seat_t *s, Py_ssize_t index, PyObject *sub, size_t n, double t, size_t *admitted);
 /* Seat.take and Relay.take over C messages (without change listeners: the caller checks); 0 or -1. */
 int vx_seat_take(vx_seat_t *s, Py_ssize_t index, const vstig_msg_t *msgs, size_t n, PyObject *sub);
 int vx_seat_queue_out(vx_seat_t *s);

@@ -96,8 +96,8 @@ static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, s
     vx_link_t *link = &p->links[index];
     PyObject *part = p->part;
     if (n == 0) return 0;
-    if (part != Py_None && PyObject_TypeCheck(part, &vx_SeatType) &&
-        vx_seat_admit((vx_seat_t *)part, index, Py_None, n, &n) < 0) /* the engine's intake, before any other work */
+    if (part != Py_None && PyObject_TypeCheck(part, &vx_SeatType) && ((vx_seat_t *)part)->intake_obj != Py_None &&
+        vx_seat_admit((vx_seat_t *)part, index, Py_None, n, t, &n) < 0) /* the engine's intake, before any other work */
         return -1;
     if (n && p->guard != Py_None) {
         if (PyObject_TypeCheck(p->guard, &vx_JumpGuardType)) {
