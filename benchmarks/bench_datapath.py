@@ -41,6 +41,7 @@ VSTIG = str(Path(sys.executable).with_name("vstig"))
 _TICK = os.sysconf("SC_CLK_TCK")
 RATE_HZ = 2000
 COUNT = 10_000  # 5 s at RATE_HZ: enough CPU ticks (10 ms each) for a figure per message
+ROUNDS = 2  # the pty relays' CPU: each relay's least of this many runs, the runs alternating
 
 
 class _Pty:
@@ -272,7 +273,14 @@ _RELAYS: dict[str, tuple[Callable[[str, str], list[str]], bool, dict[str, str]]]
 
 @benchmark("datapath")
 def relay_cost() -> Iterator[Result]:
-    runs = {name: _relay_run(*relay) for name, relay in _RELAYS.items()}
+    """Every relay, the bare hop included, runs ROUNDS times, round after round; each keeps the run with its least
+    CPU (a shared VM's load moves one run of the bare hop by half: 10 to 17 us a message)."""
+    runs: dict[str, tuple[float, float, tuple[float, ...], int]] = {}
+    for _ in range(ROUNDS):
+        for name, relay in _RELAYS.items():
+            run = _relay_run(*relay)
+            if name not in runs or run[0] < runs[name][0]:
+                runs[name] = run
     bare, floor = runs["bare"], runs["floor"]
     for name, run in ((name, runs[name]) for name in ("raw", "raw_pure", "engine", "engine_pure")):
         yield Result(f"datapath.relay_{name}_cpu_per_msg", run[0] * 1e6, "us", "bare pty hop CPU/msg", bare[0] * 1e6)

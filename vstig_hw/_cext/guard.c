@@ -57,9 +57,9 @@ static void Guard_dealloc(vx_guard_t *self) {
 }
 
 uint32_t vx_guard_units(double now) {
-    double units = floor(now * VX_GUARD_UNITS);
-    /* modulo 2^32, as libvstig compares times: wall-clock seconds since 1970 need 41 bits */
-    return (uint32_t)(uint64_t)(int64_t)fmod(units, 4294967296.0);
+    /* modulo 2^32 (an integer's conversion to uint32_t), as libvstig compares times: wall-clock seconds since
+     * 1970 need 41 bits of 1/1024 s */
+    return (uint32_t)(int64_t)floor(now * VX_GUARD_UNITS);
 }
 
 uint8_t vx_guard_passes(vx_guard_t *self, const vstig_msg_t *msg, uint32_t now) {
