@@ -1,5 +1,8 @@
 /* vstig_hw._vstig: the module, `setup`, and the conversions every type shares. See ext.h. */
 #include "ext.h"
+
+#include <string.h>
+
 #include "path.h"
 
 vx_python_t vx_py;
@@ -120,7 +123,9 @@ long vx_field(const char *name, long limit, PyObject *value) {
 }
 
 int vx_harvest_drops(vstig_drops_t *drops, PyObject *counters) {
+    static const vstig_drops_t none;
     int reason;
+    if (memcmp(drops, &none, sizeof none) == 0) return 0; /* the common case: a read with nothing dropped */
     for (reason = 0; reason < VSTIG_DROP_REASONS; reason++) {
         uint16_t n = drops->count[reason];
         if (n == 0) continue;

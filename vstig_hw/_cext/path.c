@@ -380,12 +380,19 @@ static PyObject *pump_serial(vx_path_t *p, Py_ssize_t index, double timeout) {
     Py_DECREF(fd_obj);
     if (fd < 0) return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
     if (link->buf == NULL && (link->buf = PyMem_Malloc(READ_SIZE)) == NULL) return PyErr_NoMemory();
-    ready = wait_readable((int)fd, timeout);
-    if (ready == 0 || (ready < 0 && errno == EINTR)) return PyLong_FromLong(0);
-    if (ready != 1) return Py_NewRef(Py_None);
-    Py_BEGIN_ALLOW_THREADS
-    got = read((int)fd, link->buf, READ_SIZE);
-    Py_END_ALLOW_THREADS
+    {
+        struct pollfd want;
+        want.fd = (int)fd;
+        want.events = POLLIN;
+        want.revents = 0;
+        got = -1;
+        Py_BEGIN_ALLOW_THREADS /* the wait and the read, without the GIL once */
+        ready = poll(&want, 1, (int)(timeout * 1000.0 + 0.5));
+        if (ready > 0 && !(want.revents & (POLLERR | POLLNVAL))) got = read((int)fd, link->buf, READ_SIZE);
+        Py_END_ALLOW_THREADS
+        if (ready == 0 || (ready < 0 && errno == EINTR)) return PyLong_FromLong(0);
+        if (ready < 0 || (want.revents & (POLLERR | POLLNVAL))) return Py_NewRef(Py_None);
+    }
     if (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) return PyLong_FromLong(0);
     if (got <= 0) return Py_NewRef(Py_None); /* readable yet nothing: the transport's read tells it as lost */
     if ((t = wall_clock()) == -1.0 && PyErr_Occurred()) return NULL;
