@@ -127,8 +127,19 @@ class CommandFolder(click.Group):
                                 for name in names])
 
 
+def _version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    """--version: the version, and which data path this install runs (the compiled one, or pure Python and why)."""
+    if not value or ctx.resilient_parsing:
+        return
+    from vstig_hw.native import why_pure
+
+    click.echo(f"vstig {__version__} (data path: {f'pure Python: {why_pure}' if why_pure else 'compiled'})")
+    ctx.exit()
+
+
 @click.group(cls=CommandFolder, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="vstig")
+@click.option("--version", is_flag=True, expose_value=False, is_eager=True, callback=_version,
+              help="Show the version and which data path runs (compiled, or pure Python and why), and exit.")
 @click.option("--debug", is_flag=True, help="On failure, show the traceback too.")
 @click.pass_context
 def cli(ctx: click.Context, debug: bool) -> None:

@@ -63,6 +63,9 @@ class LinkWriter:
         self._queued = 0  # messages in _queue
         self._rest: tuple[Any, int] | None = None  # the tail of a unit the loop began
         self._busy = False  # the thread is in a device write
+        # Nothing queued or being written: the loop's write goes straight to the device (the compiled outlets
+        # look at this alone). Changed only under the lock, in one step, so it is never True while a unit waits.
+        self.idle = True
         self._closing = False
         self._dropped_in_episode = 0
         self._lock = threading.Lock()  # entered directly on the hot path (a Condition's `with` is Python code)
@@ -123,6 +126,7 @@ class LinkWriter:
             if done == len(units) and self._rest is None:
                 return
             self._enqueue(units[done:], [base + (i < extra) for i in range(done, len(units))])
+            self.idle = False
             self._start()
             self._cond.notify()
 
@@ -172,6 +176,7 @@ class LinkWriter:
                 if room_again:
                     self._full = False
                 if not self._queue and self._rest is None:
+                    self.idle = True
                     if self._told:
                         log.warning("%s: the device takes what we send again (%d messages dropped meanwhile: "
                                     "tx_overflow)", self.link.name, self._dropped_in_episode)

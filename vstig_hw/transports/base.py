@@ -219,6 +219,12 @@ class DeviceTransport(Generic[Unit, Device]):
                               "and the link stays up", self.name, self.device_word, counter)
         self._slow_drops += units
 
+    def failed(self, reason: str) -> None:
+        """A call on the device made outside this transport failed with `reason` (the compiled data path reads a
+        SocketCAN socket itself, and a socket tells its error once): the outage starts as if this transport's own
+        call had failed."""
+        self._lose(reason)
+
     def _lose(self, reason: str) -> None:
         """The device failed: drop it; report the outage once, then reopen it with backoff from read/write."""
         self._drop_device()
