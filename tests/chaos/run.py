@@ -23,7 +23,10 @@ lost if never settled, excused only where the fault touched its path (a gateway
 stopped, a cable pulled, a robot's radio deaf or unplugged): noise, lies and floods
 excuse nothing. After each fault that heals, every robot must hold every key's
 timestamp of that moment within the time left before the next fault. Resident memory
-of each gateway is sampled every 2 s; each stop is timed. One table at the end; the
+of each gateway is sampled every 2 s; each stop is timed. Each gateway runs under a
+played systemd (tests/played_systemd.py, as `make supervised`): a notify socket,
+READY=1 awaited, WatchdogSec --watchdog (a gateway whose pings stop that long is ended
+with SIGABRT, which fails the run), the longest gap between pings reported. One table at the end; the
 run fails on any lost pair, a stop over 2 s or that did not end cleanly, a heal that
 did not converge, a gateway that died by itself, or more than --max-growth MB grown.
 """
@@ -49,7 +52,9 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the played systemd, shared with `make supervised`
 
+from played_systemd import PlayedSystemd
 from proxy import Cable
 from swarm import LATE_S, serve
 
@@ -89,13 +94,16 @@ class Life:
     """One run of a gateway process: its resident memory over time (seconds since the run began, MB)."""
 
     started: float
+    manager: PlayedSystemd
     rss: list[tuple[float, float]] = field(default_factory=list)
 
 
 class Gateway:
-    def __init__(self, index: int, argv: list[str]) -> None:
+    def __init__(self, index: int, argv: list[str], folder: str, watchdog: float) -> None:
         self.index = index
         self.argv = argv
+        self.folder = Path(folder)
+        self.watchdog = watchdog
         self.process: subprocess.Popen[str] | None = None
         self.log: list[str] = []
         self.lives: list[Life] = []
@@ -103,21 +111,26 @@ class Gateway:
 
     def start(self, now: float, wait: float = 60.0) -> None:
         self.log = []
-        process = subprocess.Popen(self.argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        manager = PlayedSystemd(self.folder / f"notify-{self.index}-{len(self.lives)}", self.watchdog)
+        process = subprocess.Popen(self.argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                   env={**os.environ, **manager.env()})
+        manager.watch(process)
         self.process = process
         log = self.log
         threading.Thread(target=lambda: log.extend(process.stderr or ()), daemon=True).start()
         end = time.monotonic() + wait
-        while not any("Ctrl-C stops" in line for line in log):
+        while not (manager.ready and any("Ctrl-C stops" in line for line in log)):
             if process.poll() is not None or time.monotonic() > end:
-                raise RuntimeError(f"gateway {self.index} did not start: {''.join(log)[-2000:]}")
+                raise RuntimeError(f"gateway {self.index} did not start (READY=1 {manager.ready}): "
+                                   f"{''.join(log)[-2000:]}")
             time.sleep(0.02)
-        self.lives.append(Life(now))
+        self.lives.append(Life(now, manager))
 
     def stop(self, signum: int = signal.SIGTERM) -> tuple[float, int, bool]:
         """Signal it and wait: (seconds it took, exit status, whether it printed its counters)."""
         process = self.process
         assert process is not None
+        self.lives[-1].manager.stopping()
         started = time.monotonic()
         process.send_signal(signum)
         try:
@@ -179,7 +192,8 @@ class Chaos:
             dials = [self.cables[pair].port for pair in CABLES if pair[0] == g]
             if dials:
                 zenoh += "&connect=" + ",".join(f"tcp/127.0.0.1:{port}" for port in dials)
-            self.gateways.append(Gateway(g, [VSTIG, "bridge", *specs, zenoh, "--robot-id", str(200 + g)]))
+            self.gateways.append(Gateway(g, [VSTIG, "bridge", *specs, zenoh, "--robot-id", str(200 + g)], folder,
+                                         args.watchdog))
         self.faults: list[Fault] = []
         self.stops: list[tuple[str, float, int, bool]] = []  # (which, seconds, status, counters printed)
 
@@ -365,6 +379,13 @@ class Chaos:
                     growth = max(growth, grown)
                     print(f"  gateway {gateway.index} from {life.started:5.0f} s: RSS {warm[0][1]:.1f} -> "
                           f"{warm[-1][1]:.1f} MB ({grown:+.1f}) over {warm[-1][0] - warm[0][0]:.0f} s")
+            watched = [life.manager for life in gateway.lives]
+            gaps = [m.longest_gap for m in watched]
+            print(f"  gateway {gateway.index} supervised: {len(watched)} lives, READY=1 in each, "
+                  f"{sum(len(m.pings) for m in watched):,} watchdog pings, longest gap {max(gaps, default=0):.2f} s "
+                  f"(WatchdogSec {args.watchdog:g}), watchdog fired {sum(m.fired.is_set() for m in watched)}")
+            problems += [f"gateway {gateway.index}: the watchdog fired (no ping for {args.watchdog:g} s)"
+                         for m in watched if m.fired.is_set()]
             problems += gateway.deaths
             problems += [f"gateway {gateway.index}: {line.strip()}" for line in gateway.log if "Traceback" in line]
         if growth > args.max_growth:
@@ -374,6 +395,9 @@ class Chaos:
                    "converged": [f.converged_s for f in self.faults],
                    "stops": [took for _, took, _, _ in self.stops],
                    "stops_clean": all(s == 0 and c for _, _, s, c in self.stops), "rss_growth_mb": growth,
+                   "watchdog_longest_gap_s": max((life.manager.longest_gap for g in self.gateways for life in g.lives),
+                                                 default=0.0),
+                   "watchdog_fired": sum(life.manager.fired.is_set() for g in self.gateways for life in g.lives),
                    "problems": problems}
         if args.summary:
             Path(args.summary).write_text(json.dumps(summary, indent=1))
@@ -404,6 +428,8 @@ def main() -> int:
     parser.add_argument("--drain", type=float, default=5.0, help="seconds of quiet before the judge's last look")
     parser.add_argument("--warmup", type=float, default=20.0, help="seconds of a gateway's life before RSS counts")
     parser.add_argument("--max-growth", type=float, default=30.0, help="MB of resident growth that fails the run")
+    parser.add_argument("--watchdog", type=float, default=5.0, help="WatchdogSec of the systemd played for each "
+                        "gateway (a notify socket; a gateway whose pings stop this long is ended with SIGABRT)")
     parser.add_argument("--summary", help="write the figures as JSON here")
     args = parser.parse_args()
     if args.active is None:

@@ -3,7 +3,8 @@
 The run is tests/chaos/run.py with a fault every 11 s: three real gateway processes
 federated over Zenoh, five pty radios and an slcan adapter on a pty, 800 PUTs a second.
 It must lose no (write, robot) pair on a healthy path, stop every gateway cleanly within
-2 s, converge after every heal, and keep every gateway's resident memory within 30 MB.
+2 s, converge after every heal, and keep every gateway's resident memory within 30 MB, each
+gateway under a played systemd (notify socket, WatchdogSec 5) whose watchdog never fires.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ def test_two_minutes_of_chaos(tmp_path: Path) -> None:
     assert figures["stops_clean"] and max(figures["stops"]) <= 2.0, figures["stops"]
     assert None not in figures["converged"], figures
     assert figures["rss_growth_mb"] <= 30, figures
+    assert figures["watchdog_fired"] == 0 and 0 < figures["watchdog_longest_gap_s"] < 5.0, figures  # supervised
     assert not figures["problems"] and done.returncode == 0, figures["problems"]
 
 
