@@ -2,7 +2,7 @@
 
 The neighbour is a python-can handle on the same virtual bus as the swarm's link:
 the time measured is from calling put to the neighbour holding the frame. Through
-the API the put crosses to the gateway thread (`Node.call_soon`) and back; through
+the API the put crosses to the gateway thread (`Node.submit`) and back; through
 the Node it is a plain call on the thread that owns it.
 
 Watch throughput is changes per second a consumer thread takes out of a watch:

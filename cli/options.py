@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar
 import click
 
 from vstig_hw.capture.records import READABLE_EXTENSIONS, CaptureError, line_capture_at, sniff_suffix
-from vstig_hw.outputs import LinkedOutput, refuse_symlink
+from vstig_hw.outputs import LinkedOutput, SpecialOutput, drop_setid, refuse_special, refuse_symlink
 from vstig_hw.wire import KEY_MAX
 
 if TYPE_CHECKING:
@@ -203,10 +203,12 @@ def overwrite_option(target: str) -> Callable[..., Any]:
 
 
 def refuse_link(path: str | Path) -> None:
-    """A usage error naming `path` if it is a symbolic link (dangling or not)."""
+    """A usage error naming `path` if it is a symbolic link (dangling or not), or not a file to write into
+    (a FIFO, a terminal, a socket: `vstig_hw.outputs`)."""
     try:
         refuse_symlink(path)
-    except LinkedOutput as error:
+        refuse_special(path)
+    except (LinkedOutput, SpecialOutput) as error:
         raise click.UsageError(str(error)) from None
 
 
@@ -214,18 +216,20 @@ def refuse_links_in(folder: Path, names: tuple[str, ...]) -> None:
     """refuse_link for each file a command names itself inside its output folder."""
     for name in names:
         refuse_link(folder / name)
+        drop_setid(folder / name)
 
 
 def refuse_to_replace(path: str | Path, overwrite: bool, otherwise: str = "") -> None:
-    """A usage error naming `path` if it is a symbolic link, or if it holds something and --overwrite was
-    not given.
+    """A usage error naming `path` if it is a symbolic link or not a file to write into (a FIFO...), or if it
+    holds something and --overwrite was not given.
 
     `otherwise` adds the command's other way out (record: ", --append adds to it"). An empty file holds
-    nothing to lose, and a device (/dev/null) is not replaced by writing to it.
+    nothing to lose, and the null device is not replaced by writing to it.
     """
     refuse_link(path)
     if not overwrite and os.path.isfile(path) and os.path.getsize(path) > 0:
         raise click.UsageError(f"{path} exists: --overwrite replaces it{otherwise}")
+    drop_setid(path)  # what replaces it is not a program to run as its owner
 
 
 # -- The capture files decode and analyze read: by extension, else (-, a pipe, <(...)) by first bytes.
@@ -406,8 +410,11 @@ def _guard_option_list() -> list[Callable[[Callable[..., Any]], Callable[..., An
                           "see --source-rate."),
         click.option("--source-rate", type=Finite(0.0, min_open=True), metavar="N",
                      help="At most N messages per second from each real source, whatever ids it claims: a serial or "
-                          "CAN link is one source, a zenoh peer's session (the id zenoh stamps on its samples) is one; "
-                          "excess counted drop_source_rate."),
+                          "CAN link is one source; on zenoh, each session connected to ours (by the id stamped on its "
+                          "samples); samples stamped with no connected session's id (unstamped, made up, relayed by a "
+                          "router) share one more. On open loopback any local user can connect sessions: only "
+                          "authenticated zenoh keeps them out; every source also gets only its fair share of each "
+                          "link. Excess counted drop_source_rate."),
         click.option("--trust", multiple=True, metavar="LINK=IDS", callback=_pairs(SENDER.high, "ids"),
                      help="Accept on LINK only these sender ids, e.g. can0=1-20,33, or XBee modules' 64-bit "
                           "addresses, radio=0x0013A20040A1B2C3 (drop_untrusted). Repeatable."),

@@ -6,6 +6,9 @@ set -u
 want=()
 command -v gcc >/dev/null || want+=(gcc)
 command -v make >/dev/null || want+=(make)  # libvstig's Makefile (firmware_spec/libvstig)
+# Python's headers, for the compiled data path (vstig_hw._vstig) that `make test` builds
+python3 -c 'import os, sysconfig; raise SystemExit(not os.path.exists(sysconfig.get_paths()["include"] + "/Python.h"))' \
+  2>/dev/null || want+=(python3-dev)
 command -v avr-gcc >/dev/null || want+=(gcc-avr binutils-avr)  # libvstig for the Kilobot's ATmega328P
 [ -e /usr/lib/avr/include/avr/io.h ] || want+=(avr-libc)
 [ -e /usr/include/simavr/sim_avr.h ] || want+=(libsimavr-dev)  # the simulated AVR robot's board (tests/cli)

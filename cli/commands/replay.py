@@ -21,7 +21,7 @@ from vstig_hw.links.can import CanSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ..options import VALUE_TYPE_HELP, Finite, echo_skipped, filter_options, skip_bad_option
-from ..running import LINK, StatusLine, build_links, lossless, reports_errors
+from ..running import LINK, StatusLine, build_links, lossless, open_unless_stopped, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 
@@ -201,9 +201,12 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     bad: list[CaptureError] = []  # what the last pass skipped
     try:
         with stop_on_signals() as stop:  # before the links open: a signal while they do is a clean stop too
-            for link in targets.values():
-                link.open()
-                opened.append(link)
+            def open_links() -> None:
+                for link in targets.values():
+                    link.open()
+                    opened.append(link)
+
+            open_unless_stopped(open_links, stop)  # a stop while they open: nothing is sent, none waited for
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
                 bad = []

@@ -96,7 +96,7 @@ class GatewayCollector:
         node = self.node
         stats = node.stats()  # one consistent view of the counters: the Node takes them under its lock
         keys = node.engine.size() if node.engine is not None else None
-        up = {link.name: bool(getattr(link.transport, "connected", True)) for link in node.links}
+        up = {link.name: link.transport.connected for link in node.links}
         buckets, total = self.latency.buckets(), self.latency.total
         clocks = {peer: trip for link in node.links if (clock := getattr(link.transport, "clock", None)) is not None
                   for peer, trip in clock.estimates().items()}

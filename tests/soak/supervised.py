@@ -15,21 +15,20 @@ every 10 ms, robot B gets them every control step. Checked at the end, after SIG
 from __future__ import annotations
 
 import argparse
-import itertools
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cli"))  # the tests' peers and robots
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from peers import VSTIG
+from played_systemd import PlayedSystemd
 from robots import PtyRobot
 
 KEYS = range(1, 11)
@@ -44,34 +43,13 @@ def main() -> int:
     a, b = PtyRobot(1), PtyRobot(2, watch=KEYS)
     config = folder / "lab.toml"
     config.write_text(f'links = ["{a.spec}", "{b.spec}"]\nrobot-id = 200\n')
-    manager = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    manager.bind(str(folder / "notify"))
-    manager.settimeout(0.5)
-    env = {**os.environ, "NOTIFY_SOCKET": str(folder / "notify"), "WATCHDOG_USEC": str(int(args.watchdog * 1e6))}
-    gateway = subprocess.Popen([VSTIG, "bridge", "--config", str(config)], env=env, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE, text=True)
-    heard: list[tuple[float, str]] = []
-    fired = threading.Event()
-
-    def listen() -> None:
-        last = time.monotonic()
-        while gateway.poll() is None:
-            try:
-                text = manager.recv(4096).decode()
-            except TimeoutError:
-                text = ""
-            now = time.monotonic()
-            if text:
-                heard.append((now, text))
-            if "WATCHDOG=1" in text.split("\n"):
-                last = now
-            elif any("READY=1" in t for _, t in heard) and now - last > args.watchdog and not fired.is_set():
-                fired.set()  # systemd's WatchdogSec: the service is ended with SIGABRT
-                gateway.send_signal(signal.SIGABRT)
-
-    threading.Thread(target=listen, daemon=True).start()
+    manager = PlayedSystemd(folder / "notify", args.watchdog)
+    gateway = subprocess.Popen([VSTIG, "bridge", "--config", str(config)], env={**os.environ, **manager.env()},
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    manager.watch(gateway)
+    fired = manager.fired
     end = time.monotonic() + 30
-    while not any("READY=1" in t for _, t in heard):
+    while not manager.ready:
         if time.monotonic() > end or gateway.poll() is not None:
             gateway.kill()
             print(f"FAIL: no READY=1 within 30 s: {gateway.communicate()[1][-2000:]}", file=sys.stderr)
@@ -95,6 +73,7 @@ def main() -> int:
         b.step()
         time.sleep(0.05)
     asked = time.monotonic()
+    manager.stopping()
     gateway.send_signal(signal.SIGTERM)
     try:
         _, err = gateway.communicate(timeout=15)
@@ -102,11 +81,10 @@ def main() -> int:
         gateway.kill()
         _, err = gateway.communicate()
     took = time.monotonic() - asked
-    pings = [t for t, text in heard if "WATCHDOG=1" in text.split("\n")]
-    gap = max((q - p for p, q in itertools.pairwise(pings)), default=0.0)
+    pings, gap = manager.pings, manager.longest_gap
     lost = {k: (v, b.value(k)) for k, v in last.items() if b.value(k) != v}
     drops = re.findall(r"\b((?:drop_\w+|tx_overflow|tx_dropped|lost)=\d+)", err)
-    stopping = any("STOPPING=1" in text for _, text in heard)
+    stopping = manager.said("STOPPING=1")
     print(f"writes {sent}, pings {len(pings)}, longest gap {gap:.2f} s (limit {args.watchdog:.1f}), watchdog fired "
           f"{fired.is_set()}, lost {len(lost)} {lost or ''}, drop counters {drops or 'none'}, STOPPING=1 {stopping}, "
           f"exit {gateway.returncode} in {took:.2f} s", file=sys.stderr)

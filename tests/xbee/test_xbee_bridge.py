@@ -135,7 +135,8 @@ def test_a_module_that_stops_reading_and_one_buried_in_noise_cost_only_their_own
     assert statistics.median(delays) < 0.050, f"p50 {statistics.median(delays) * 1e3:.1f} ms"
     assert sum(1 for key in out.arrived if 30000 <= key < 30100) > 50  # the noisy module's good frames got through
     stuck = _counters(err, names["deaf"])
-    assert stuck.get("tx_overflow", 0) > 0, stuck  # its oldest were dropped, counted, and nothing else was held
+    # what the deaf module could not take waits in its own link's lines (one message per key: bounded), counted
+    assert stuck.get("queued", 0) > 1000, stuck
     loud = _counters(err, names["noisy"])
     assert loud["drop_noise"] > 0 and loud["drop_checksum"] > 0 and loud["drop_truncated"] > 0, loud
 
@@ -247,10 +248,15 @@ def test_a_stop_while_the_bridge_asks_a_silent_module_ends_within_the_at_timeout
             listener.close()
             radio.close()
     assert took < 2.0, took  # at most the 1 s the module is given
-    assert bridge.returncode == 1 and err.strip().splitlines()[-1] == (
-        f"Error: XBee module on {silent.path}: no answer to AT commands within 1 s at 230400 baud: the module must "
-        "run API mode 1 (AP=1) at that speed (BD); set it with XCTU, or give baud= and api= to match it "
-        "(docs/how-to/xbee.md)")
+    # A stop that lands while the module is asked ends the bridge at once, as asked (exit 0: the open is left
+    # to the process's end); one that lands after the 1 s finds the open failed, and says why (exit 1).
+    if bridge.returncode == 0:
+        assert "Traceback" not in err, err
+    else:
+        assert bridge.returncode == 1 and err.strip().splitlines()[-1] == (
+            f"Error: XBee module on {silent.path}: no answer to AT commands within 1 s at 230400 baud: the module "
+            "must run API mode 1 (AP=1) at that speed (BD); set it with XCTU, or give baud= and api= to match it "
+            "(docs/how-to/xbee.md)")
 
 
 def test_sniff_shows_each_message_with_its_module_and_what_trusting_one_module_refuses() -> None:
