@@ -13,13 +13,12 @@ Both libraries come with the `mcap` extra (`pip install 'vstig-hw[mcap]'`).
 from __future__ import annotations
 
 import functools
-import re
-import struct
 from collections.abc import Callable, Iterator
 from typing import IO, Any
 
 from ..counters import Counters
 from ..extras import install_hint
+from ..framing.ros2 import cdr_message, ros_name  # MSGDEF in CDR, packed by struct (no rosbags)
 from ..wire import Message, Op
 from .decoded import Decoder
 from .records import MESSAGE_FRAMING, CaptureError, Record, cut_short
@@ -40,22 +39,7 @@ uint16 robot
 int32 sender
 """
 TOPIC_PREFIX = "/vstig/"
-NO_SENDER = -1
 _MAGIC = b"\x89MCAP0\r\n"  # an MCAP file starts and, once closed, ends with it
-_TOPIC_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
-# MSGDEF in CDR, little-endian: the encapsulation header, then each field at its natural alignment
-# (a pad byte after `op`, two before `sender`). Packed by struct: the live view sends one per message
-# heard, and it needs no rosbags; tests/unit hold it equal to rosbags' serialize_cdr.
-_CDR = struct.Struct("<4sBxHHHHxxi")
-_CDR_LE = b"\x00\x01\x00\x00"
-
-
-def cdr_message(message: Message, sender: int | None) -> bytes:
-    """`message` as a CDR-encoded `vstig_msgs/msg/Message` (sender -1 where the medium names none)."""
-    return _CDR.pack(_CDR_LE, message[0] >> 15, message[0] & 0x7FFF, message[1], message[2], message[3],
-                     NO_SENDER if sender is None else sender)
-
-
 def _needs_extra(path: str) -> CaptureError:
     return CaptureError(path, None, f"reading or writing .mcap needs the mcap extra: {install_hint('mcap')}")
 
@@ -79,8 +63,7 @@ def _our_typestore() -> Any:
 
 def topic_for(link: str) -> str:
     """A valid ROS 2 topic for a link name (letters, digits, underscores; no leading digit)."""
-    token = _TOPIC_UNSAFE.sub("_", link) or "link"
-    return TOPIC_PREFIX + ("link_" + token if token[0].isdigit() else token)
+    return TOPIC_PREFIX + ros_name(link)
 
 
 class McapCaptureWriter:

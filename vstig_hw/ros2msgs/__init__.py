@@ -105,7 +105,7 @@ def load() -> ModuleType:
     BuildError (one line) when it cannot be built: no compiler, no Python headers, no rosidl.
     """
     with contextlib.suppress(ImportError):
-        return importlib.import_module(PACKAGE)
+        return _imported()
     folder = cache_folder()
     _ensure_built(folder)
     # rcl loads a type support library by its bare name, searching the library path the process started with;
@@ -115,4 +115,12 @@ def load() -> ModuleType:
     if str(folder) not in sys.path:
         sys.path.append(str(folder))
     importlib.invalidate_caches()
-    return importlib.import_module(PACKAGE)
+    return _imported()
+
+
+def _imported() -> ModuleType:
+    """The package with its msg and srv modules imported."""
+    package = importlib.import_module(PACKAGE)
+    for kind in ("msg", "srv"):
+        importlib.import_module(f"{PACKAGE}.{kind}")
+    return package
