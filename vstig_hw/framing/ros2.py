@@ -1,14 +1,10 @@
 """ROS 2 framing: `vstig_msgs` messages in CDR, the encoding ROS 2 topics and our MCAP captures carry.
 
-This module is the one owner of the CDR layouts (the types: vstig_hw/ros2msgs/*.idl):
-
-    vstig_msgs/msg/Message   op, key, value, timestamp, robot (u8, u16 x4), sender (i32; -1: none)
-    vstig_msgs/msg/Change    key (the topic's key), has_old, old and new Entry (key, value,
-                             timestamp, robot: u16 x4 each), link (string), sender (i32)
-
-Little-endian CDR: a 4-byte encapsulation header, then each field at its natural
-alignment. Packed with struct (~0.3 us a message, no ROS 2 library), and held equal
-to rclpy's own serializer and to rosbags' by tests.
+This module is the one owner of the CDR layout of `vstig_msgs/msg/Message` (op, key,
+value, timestamp, robot: u8 and u16 x4; sender: i32, -1 for none; the type is
+vstig_hw/ros2msgs/msg/Message.idl): little-endian CDR, a 4-byte encapsulation header,
+then each field at its natural alignment. Packed with struct (~0.3 us a message, no
+ROS 2 library), and held equal to rclpy's own serializer and to rosbags' by tests.
 
 `Ros2Framing` turns what ROS 2 nodes publish on a gateway's `write` topic into
 Messages, and the gateway's broadcasts into samples. A PUT written with timestamp
@@ -25,19 +21,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..counters import Counters
-from ..engine import Entry
 from ..timestamps import TS_NONE
 from ..wire import KEY_MAX, Message, Op
 
-__all__ = ["NO_SENDER", "Ros2Framing", "Ros2Sample", "cdr_change", "cdr_message", "message_of_cdr", "ros_name"]
+__all__ = ["NO_SENDER", "Ros2Framing", "Ros2Sample", "cdr_message", "message_of_cdr", "ros_name"]
 
 NO_SENDER = -1
 _LE = b"\x00\x01\x00\x00"  # CDR, little-endian
 # Message: the header, op, a pad byte, four u16, two pad bytes, sender
 _MESSAGE = struct.Struct("<4sBxHHHHxxi")
-# Change up to its link: the header, key, has_old, a pad byte, two Entry (u16 x4 each), the link's length
-_CHANGE_HEAD = struct.Struct("<4sHBxHHHHHHHHI")
-_I32 = struct.Struct("<i")
 _new = tuple.__new__
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
 
@@ -62,15 +54,6 @@ def message_of_cdr(data: bytes) -> tuple[Message, int] | None:
     if op > 1 or key > KEY_MAX:
         return None
     return _new(Message, ((op << 15) | key, value, timestamp, robot)), sender
-
-
-def cdr_change(key: int, old: Entry | None, new: Entry, link: str | None, sender: int | None) -> bytes:
-    """A table change as a CDR-encoded `vstig_msgs/msg/Change` (link "" for the gateway's own write)."""
-    name = (link or "").encode() + b"\0"
-    old_fields = (key, *old) if old is not None else (0, 0, 0, 0)
-    head = _CHANGE_HEAD.pack(_LE, key, old is not None, *old_fields, key, *new, len(name))
-    pad = b"\0" * (-len(name) % 4)  # the link string ends anywhere; sender starts on a 4-byte boundary
-    return head + name + pad + _I32.pack(NO_SENDER if sender is None else sender)
 
 
 @dataclass(frozen=True, slots=True)

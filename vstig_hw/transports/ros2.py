@@ -7,27 +7,28 @@ readers), from the executor's thread; what the gateway broadcasts is published o
 what a gateway answers (`serve`, called by `gateway.ros2`):
 
     <ns>/heard/<link>   vstig_msgs/Message   every message each link heard
-    <ns>/changes        vstig_msgs/Change    keyed by key, reliable, transient-local, depth 1 a key:
+    <ns>/changes        vstig_msgs/Change    keyed by `key`, reliable, transient-local, depth 1 a key:
                                              a late subscriber gets the newest change of every key
     <ns>/put, get, table                     services (vstig_msgs/srv/Put, Get, Table)
     /diagnostics        diagnostic_msgs/DiagnosticArray: the gateway's counters, once a second
 
 Never on the data path's critical side: rclpy's executor (services, the write
-topic, the diagnostics timer) runs on threads of its own; topics are published
+topic's intake, the diagnostics timer) runs on threads of its own; topics are published
 where the gateway's event happens, raw CDR on KEEP_LAST writers, which never wait
 for a slow or absent subscriber (Fast DDS keeps the newest `depth` samples per
-subscriber and drops the oldest). What ROS 2 nodes write is bounded twice: the
-subscription keeps `depth` samples (what a flooding writer sends beyond is lost in
-Fast DDS, counted from the writers' sequence numbers: `rx_lost`), and at most
-`write_rate` writes a second are taken (`rx_throttled` beyond).
+subscriber and drops the oldest). What ROS 2 nodes write is taken at a bounded
+pace: at most `write_rate` writes a second, every WRITE_POLL seconds, the
+subscription keeping `depth` samples in between; what a flooding writer sends
+beyond is dropped inside Fast DDS, never seen by Python, and counted from the
+writers' sequence numbers (`rx_lost`).
 
 Discovery is set for the whole process when the first ros2: link opens (Fast DDS
 reads its profile once): on this PC only by default (a Fast DDS profile that
 listens on loopback and shared memory alone), or the LAN (`discovery=subnet`:
 Fast DDS's defaults), or the user's profile file.
 
-Counters: `rx`, `tx` (samples), `rx_throttled`, `rx_lost`, `tx_dropped`, `published` (heard and
-changes samples), `put`, `put_busy`, `get`, `table`.
+Counters: `rx`, `tx` (samples), `rx_lost`, `tx_dropped`, `published` (heard and changes samples),
+`put`, `put_busy`, `get`, `table`.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from typing import Any, Protocol
 
 from ..counters import Counters
 from ..engine import Entry
-from ..framing.ros2 import Ros2Sample, cdr_change, cdr_message, ros_name
+from ..framing.ros2 import NO_SENDER, Ros2Sample, cdr_message, ros_name
 from ..wakeup import Wakeup
 from ..wire import Message
 from .base import DeviceTransport, TransportError, one_line
@@ -56,10 +57,11 @@ log = logging.getLogger(__name__)
 DISCOVERY = ("localhost", "subnet")
 INBOX_LIMIT = 4096  # samples queued for `read` when nobody takes them as they arrive (a transport used alone)
 DIAGNOSTICS_PERIOD = 1.0  # seconds between two /diagnostics samples
+WRITE_POLL = 0.02  # seconds between two takes from the write topic: what a ROS 2 write may wait
 PUTS_AT_ONCE = 2  # confirmed puts in flight; one more is answered at once (put_busy)
 _EXECUTOR_THREADS = PUTS_AT_ONCE + 1  # a put waits on its thread: one is always left for the rest
 _PROFILE = "fastdds_loopback.xml"
-_DROPS = ("drop_", "rx_lost", "rx_throttled", "rx_overflow", "tx_dropped", "tx_overflow", "put_busy")
+_DROPS = ("drop_", "rx_lost", "rx_overflow", "tx_dropped", "tx_overflow", "put_busy")
 _process_discovery: str | None = None  # what this process's Fast DDS was set up with (it reads that once)
 _setup = threading.Lock()
 
@@ -100,6 +102,8 @@ class _Session:
         self.thread = threading.Thread(target=self._spin, name=f"ros2-{node.get_name()}", daemon=True)
         self.broadcast: Any = None
         self.changes: Any = None
+        self.intake: Any = None  # the node that holds the write subscription, which no executor spins
+        self.writes: Any = None
         self.heard: dict[str, Any] = {}
         self.failure: str | None = None
 
@@ -108,6 +112,18 @@ class _Session:
             self.executor.spin()
         except Exception as exc:  # the context shut down under it, or rclpy broke: the transport reports it
             self.failure = one_line(exc)
+
+
+def _ignored(_: object) -> None:
+    """The write subscription's callback: never called, no executor spins its node."""
+
+
+def rclpy_node(name: str, namespace: str, context: Any) -> Any:
+    """A node that takes no global ROS arguments and offers no parameter or log services (a gateway has none)."""
+    import rclpy
+
+    return rclpy.create_node(name, namespace=namespace, context=context, use_global_arguments=False,
+                             enable_rosout=False, start_parameter_services=False)
 
 
 def _configure_process(options: Ros2Options) -> None:
@@ -194,12 +210,19 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Session]):
         self.counters["published"] += len(messages)
 
     def publish_change(self, key: int, old: Entry | None, new: Entry, link: str | None, sender: int | None) -> None:
-        """One change of the table on `changes` (keyed: Fast DDS keeps the newest per key for late subscribers)."""
+        """One change of the table on `changes` (keyed: Fast DDS keeps the newest per key for late subscribers).
+
+        Published as a message, not raw CDR: Fast DDS takes a sample's key from the message, and a serialized
+        one would land every key in one instance (a late subscriber would get one change, not the table).
+        """
         session = self._device
         if session is None or session.changes is None:
             return
+        types = self._types.msg
         try:
-            session.changes.publish(cdr_change(key, old, new, link, sender))
+            session.changes.publish(types.Change(
+                key=key, has_old=old is not None, old_entry=self._entry(key, old), new_entry=self._entry(key, new),
+                link=link or "", sender=NO_SENDER if sender is None else sender))
         except Exception:
             self.counters["tx_dropped"] += 1
             return
@@ -222,8 +245,7 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Session]):
         try:
             rclpy.init(context=context, domain_id=self.options.domain,
                        signal_handler_options=SignalHandlerOptions.NO)  # our commands own their signals
-            node = rclpy.create_node(self.node_name, namespace=self.options.namespace, context=context,
-                                     use_global_arguments=False, enable_rosout=False, start_parameter_services=False)
+            node = rclpy_node(self.node_name, self.options.namespace, context)
         except Exception as exc:
             if context.ok():
                 context.try_shutdown()
@@ -249,7 +271,12 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Session]):
         table = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
         session.broadcast = node.create_publisher(msg.Message, "broadcast", stream)
-        node.create_subscription(msg.Message, "write", self._written, stream, raw=True)
+        # What ROS 2 nodes write is taken at a bounded pace, not as it comes: the executor would run Python for
+        # every sample of a flood, holding the GIL from the gateway's readers. Its subscription sits on a node
+        # no executor spins; a timer takes what `write_rate` allows, and Fast DDS drops the rest (rx_lost).
+        session.intake = rclpy_node(f"{self.node_name}_write", options.namespace, session.context)
+        session.writes = session.intake.create_subscription(msg.Message, "write", _ignored, stream, raw=True)
+        node.create_timer(WRITE_POLL, lambda: self._take_writes(session.writes))
         session.heard = {link: node.create_publisher(msg.Message, f"heard/{ros_name(link)}", stream)
                          for link in self._links}
         served = self._served
@@ -268,6 +295,8 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Session]):
         try:
             device.executor.shutdown(timeout_sec=2.0)
             device.node.destroy_node()
+            if device.intake is not None:
+                device.intake.destroy_node()
         except Exception as exc:  # a node whose context is gone may complain: it is closed either way
             log.debug("%s: error while closing: %s", self.name, exc)
         finally:
@@ -291,34 +320,47 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Session]):
         self._sent()
 
     # -- on the executor's threads ------------------------------------------------
-    def _written(self, payload: bytes, info: Any) -> None:
-        """A sample of the write topic: counted against the writer's sequence, throttled, handed on."""
-        gid = info.get("publisher_gid") if isinstance(info, dict) else None
-        source = bytes(gid["data"]).hex() if isinstance(gid, dict) and "data" in gid else None
-        sequence = info.get("publication_sequence_number") if isinstance(info, dict) else None
-        if source is not None and isinstance(sequence, int):
-            last = self._sequences.get(source)
-            if last is not None and sequence > last + 1:
-                self.counters["rx_lost"] += sequence - last - 1
-            self._sequences[source] = sequence
+    def _take_writes(self, subscription: Any) -> None:
+        """Take what ROS 2 nodes wrote, as many as `write_rate` allows since the last time; hand them on."""
         now = time.monotonic()
         rate = self.options.write_rate
         self._tokens = min(float(rate), self._tokens + (now - self._refilled) * rate)
         self._refilled = now
-        if self._tokens < 1.0:
-            self.counters["rx_throttled"] += 1
+        taken: list[Ros2Sample] = []
+        while self._tokens >= 1.0:
+            with subscription.handle:  # rclpy's executor takes a sample this way (Subscription.handle)
+                sample = subscription.handle.take_message(subscription.msg_type, True)
+            if sample is None:
+                break
+            self._tokens -= 1.0
+            payload, info = sample
+            taken.append(Ros2Sample(payload, self._writer_of(info)))
+        if not taken:
             return
-        self._tokens -= 1.0
-        self.counters["rx"] += 1
-        sample = Ros2Sample(payload, source)
+        self.counters["rx"] += len(taken)
         deliver = self._deliver
         if deliver is not None:
-            deliver([sample])
+            deliver(taken)
             return
-        if len(self._inbox) == INBOX_LIMIT:
-            self.counters["rx_overflow"] += 1
-        self._inbox.append(sample)
+        dropped = len(self._inbox) + len(taken) - INBOX_LIMIT
+        if dropped > 0:
+            self.counters["rx_overflow"] += dropped
+        self._inbox.extend(taken)
         self._arrived.set()
+
+    def _writer_of(self, info: Any) -> str | None:
+        """The writer's GID (hex), counting the samples of it Fast DDS dropped before we took them (rx_lost)."""
+        gid = info.get("publisher_gid") if isinstance(info, dict) else None
+        if not isinstance(gid, dict) or "data" not in gid:
+            return None
+        source = bytes(gid["data"]).hex()
+        sequence = info.get("publication_sequence_number")
+        if isinstance(sequence, int):
+            last = self._sequences.get(source)
+            if last is not None and sequence > last + 1:
+                self.counters["rx_lost"] += sequence - last - 1
+            self._sequences[source] = sequence
+        return source
 
     def _entry(self, key: int, entry: Entry | None) -> Any:
         found = self._types.msg.Entry()
