@@ -1,4 +1,4 @@
-"""Network namespaces: each zenoh gateway on its own interface, cut and healed at will; DDS kept on a host of its own.
+"""Network namespaces for the federation tests: each gateway on its own interface, cut and healed at will.
 
 As root, `Lan` builds a hub namespace holding a Linux bridge and one namespace
 per gateway, joined to the hub by a veth pair, with 10.77.0.<n>/24 addresses.
@@ -85,41 +85,3 @@ class Lan:
         while self._made:
             subprocess.run(["ip", "netns", "del", self._made.pop()], capture_output=True, timeout=20, check=False)
 
-
-class Host:
-    """A namespace of our own standing for one host: `lo` up and nothing else, or joined to another by `cable`.
-
-    For DDS (the ros2: link tests), whose discovery multicasts on every interface it finds: in a namespace
-    with only `lo` nothing can leave the machine. `interfaces()` lists what the namespace holds.
-    """
-
-    def __init__(self, role: str) -> None:
-        self.name = f"vstig-{os.getpid() % 100000:05d}-{role}"
-        _ip("netns", "add", self.name)
-        try:
-            _ip("-n", self.name, "link", "set", "lo", "up")
-        except BaseException:
-            self.close()
-            raise
-
-    def command(self) -> list[str]:
-        return ["ip", "netns", "exec", self.name]
-
-    def interfaces(self) -> list[str]:
-        shown = subprocess.run(["ip", "-n", self.name, "-o", "link", "show"], capture_output=True, text=True,
-                               timeout=20, check=True).stdout
-        return [line.split(":")[1].strip().split("@")[0] for line in shown.splitlines()]
-
-    def cable(self, other: Host, subnet: str = "10.78.0") -> tuple[str, str]:
-        """A veth pair between the two, with addresses and a multicast route each; (our address, theirs)."""
-        ours, theirs = f"{self.name[-12:]}a".replace("-", ""), f"{self.name[-12:]}b".replace("-", "")
-        _ip("link", "add", ours, "netns", self.name, "type", "veth", "peer", "name", theirs, "netns", other.name)
-        for host, device, address in ((self, ours, f"{subnet}.1"), (other, theirs, f"{subnet}.2")):
-            _ip("-n", host.name, "addr", "add", f"{address}/24", "dev", device)
-            _ip("-n", host.name, "link", "set", device, "up")
-            _ip("-n", host.name, "route", "add", "224.0.0.0/4", "dev", device)
-        self.device = ours
-        return f"{subnet}.1", f"{subnet}.2"
-
-    def close(self) -> None:
-        subprocess.run(["ip", "netns", "del", self.name], capture_output=True, timeout=20, check=False)

@@ -2,16 +2,15 @@
 
 Every DDS participant runs in a network namespace of its own with only `lo`, so
 nothing can leave the machine (each test checks the namespace first), on a ROS
-domain of this run's own (Fast DDS's shared memory is seen across namespaces, the
-domain keeps concurrent runs apart). The robots are real engines on ptys (cobs8)
+domain of this run's own (tests/dds.py). The robots are real engines on ptys (cobs8)
 and behind an slcan adapter, in this process.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
-import random
 import re
 import select
 import shutil
@@ -24,12 +23,12 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import dds
 import pytest
-from netns import Host, netns_unavailable
+from dds import Host
 from peers import VSTIG, PtyPeer, wait_for
 from robots import CanRobot, PtyRobot, Robot
 
-from vstig_hw.extras import missing
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.links import parse
 from vstig_hw.wire import Message, Op
@@ -38,27 +37,18 @@ pytestmark = pytest.mark.slow
 
 PEER = str(Path(__file__).with_name("ros2_peer.py"))
 NAMESPACE = "/vstig/lab"
-DOMAIN = str(random.Random(os.getpid()).randint(1, 100))  # this run's own: SHM discovery crosses namespaces
 STEP = 0.1
-
-
-def _unavailable() -> str | None:
-    if missing(["rclpy"]):
-        return "the ros2 extra is not installed (pip install 'vstig-hw[ros2]')"
-    return netns_unavailable()
 
 
 @pytest.fixture(scope="module")
 def ros2_env() -> dict[str, str]:
     """The environment a ROS 2 process of the tests runs with: the interfaces importable, this run's domain."""
-    reason = _unavailable()
+    reason = dds.unavailable()
     if reason:
         if os.environ.get("VSTIG_REQUIRE_PEERS") == "1":
             pytest.fail(f"VSTIG_REQUIRE_PEERS=1 but {reason}")
-        pytest.skip(f"a ROS 2 node runs in a namespace of its own: {reason}")
-    from vstig_hw import ros2msgs
-
-    return {**os.environ, **ros2msgs.environment(), "ROS_DOMAIN_ID": DOMAIN}
+        pytest.skip(reason)
+    return dds.environment()
 
 
 @pytest.fixture
@@ -101,10 +91,8 @@ class Process:
     def stop(self) -> str:
         if self.process.stdin is not None:  # a peer ends when its commands do (rclpy takes SIGTERM for itself)
             self.process.stdin.close()
-            try:
+            with contextlib.suppress(subprocess.TimeoutExpired):
                 self.process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                pass
         if self.process.poll() is None:
             self.process.terminate()
         try:
