@@ -5,7 +5,7 @@ tests (and of the docs' examples) runs in a network namespace holding `lo` alone
 (`Host`; `cable` joins two for the tests that play a second host). Fast DDS's
 shared memory is seen across namespaces, so each run takes its own domain id
 (`DOMAIN`), which keeps concurrent runs apart. `environment()` is what such a
-process runs with: this run's domain and the vstig_msgs interfaces importable.
+process adds to its environment: this run's domain and the vstig_msgs interfaces importable.
 """
 
 from __future__ import annotations
@@ -31,10 +31,11 @@ def unavailable() -> str | None:
 
 
 def environment() -> dict[str, str]:
-    """This environment, on this run's domain, with the vstig_msgs interfaces importable (built if needed)."""
+    """The variables a ROS 2 process adds to this environment: this run's domain, the vstig_msgs interfaces
+    importable (built if needed)."""
     from vstig_hw import ros2msgs
 
-    return {**os.environ, **ros2msgs.environment(), "ROS_DOMAIN_ID": DOMAIN}
+    return {**ros2msgs.environment(), "ROS_DOMAIN_ID": DOMAIN}
 
 
 def _ip(*args: str) -> None:

@@ -48,7 +48,7 @@ def ros2_env() -> dict[str, str]:
         if os.environ.get("VSTIG_REQUIRE_PEERS") == "1":
             pytest.fail(f"VSTIG_REQUIRE_PEERS=1 but {reason}")
         pytest.skip(reason)
-    return dds.environment()
+    return {**os.environ, **dds.environment()}
 
 
 @pytest.fixture
@@ -323,3 +323,26 @@ def test_by_default_a_ros2_node_on_the_lan_cannot_reach_the_gateway(two_hosts: t
     assert reached == (discovery == "subnet"), remote.lines
     packets = [line for line in capture.lines if line.strip()]
     assert bool(packets) == (discovery == "subnet"), packets[:5]
+
+
+def _page_block(page: Path, mark: str) -> str:
+    """The Python block under `mark` on a docs page."""
+    text = page.read_text(encoding="utf-8")
+    after = text[text.index(mark):]
+    return after.split("```python\n", 1)[1].split("```", 1)[0]
+
+
+def test_the_how_tos_task_board_node_assigns_tasks_through_the_swarm(lab: Callable[..., Lab], tmp_path: Path) -> None:
+    """docs/how-to/ros2.md's ROS 2 node, run as written against a gateway and two pty robots."""
+    page = Path(__file__).resolve().parents[2] / "docs" / "how-to" / "ros2.md"
+    script = tmp_path / "task_board.py"
+    script.write_text(_page_block(page, "<!-- tested-by: tests/cli/test_ros2.py -->"))
+    robots: list[Robot] = [PtyRobot(1, watch=(101,)), PtyRobot(2, watch=(102,))]
+    run = lab(robots)
+    board = Process([*run.host.command(), sys.executable, str(script)], run.env)
+    run.run_until(lambda: board.process.poll() is not None, 60)
+    time.sleep(0.1)
+    assert board.process.returncode == 0, "".join(board.errors)[-2000:]
+    assert {"robot 1: task 7 taken\n", "robot 2: task 3 taken\n", "key 101 = 7 (robot 200, via the gateway)\n",
+            "key 102 = 3 (robot 200, via the gateway)\n"} <= set(board.lines), board.lines
+    run.run_until(lambda: robots[0].value(101) == 7 and robots[1].value(102) == 3)
