@@ -315,6 +315,10 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Session]):
             taken.append(self._inbox.popleft())
         return taken
 
+    def write_nowait(self, unit: Ros2Sample) -> None:
+        """Publish now (a gateway's writer needs no thread of its own for this link): KEEP_LAST never waits."""
+        self.write(unit)
+
     def _write_device(self, device: _Session, unit: Ros2Sample) -> None:
         device.broadcast.publish(unit.payload)  # KEEP_LAST: never waits for a subscriber
         self._sent()
