@@ -9,7 +9,8 @@ line, with one JSON line each on stdout, and prints every change it hears
     get KEY              the get service's answer
     table                the table service's entries
     write KEY VALUE ROBOT   one sample on the write topic (timestamp 0: the gateway stamps it)
-    flood SECONDS        writes as fast as rclpy publishes, then {"flooded": N}
+    flood SECONDS [TOPIC]   writes as fast as rclpy publishes (on TOPIC under the namespace: default
+                         write), then {"flooded": N}
     quit
 
 It subscribes to `changes` as a late joiner would (reliable, transient-local,
@@ -87,9 +88,10 @@ def main(namespace: str, wait: float) -> None:
         elif command == "flood":
             sample, end, sent = Message(op=Message.PUT, key=9, value=1, timestamp=0, robot=999, sender=-1), \
                 time.monotonic() + float(args[0]), 0
+            target = writes if len(args) < 2 else node.create_publisher(Message, f"{namespace}/{args[1]}", 100)
             while time.monotonic() < end:
                 sample.value = sent & 0xFFFF
-                writes.publish(sample)
+                target.publish(sample)
                 sent += 1
             say({"flooded": sent})
     executor.shutdown()

@@ -259,19 +259,22 @@ def _radio_to_radio(sender: PtyPeer, receiver: PtyPeer, key: int, count: int) ->
 
 
 def test_a_ros2_flood_does_not_delay_radio_to_radio_traffic(lab: Callable[..., Lab]) -> None:
+    """A ROS 2 node floods the write topic as fast as rclpy publishes. It takes a core of this machine, so the
+    anchor is the same flood on a topic the gateway does not subscribe to: what the gateway adds shows apart."""
     a, b = PtyRobot(1), PtyRobot(2)  # their radios only: the test writes and reads the frames itself
     run = lab([a, b])
     peer = run.peer()
-    quiet = statistics.median(_radio_to_radio(a.radio, b.radio, 20, 60))
-    peer.send("flood 8")
-    time.sleep(1.0)
-    flooded = statistics.median(_radio_to_radio(a.radio, b.radio, 21, 60))
-    wait_for(lambda: bool(peer.records("flooded")), 30)
+    p50 = {}
+    for n, topic in enumerate(("elsewhere", "write")):
+        peer.send(f"flood 5 {topic}")
+        time.sleep(1.0)
+        p50[topic] = statistics.median(_radio_to_radio(a.radio, b.radio, 20 + n, 50))
+        wait_for(lambda n=n: len(peer.records("flooded")) > n, 30)
     sent = peer.records("flooded")[-1]
     seen = counters(run.close(), "ros2-lab")
-    print(f"radio -> radio p50: {quiet * 1000:.2f} ms quiet, {flooded * 1000:.2f} ms flooded; {seen}")
-    assert flooded < max(2 * quiet, quiet + 0.002), f"p50 {quiet * 1000:.2f} ms quiet, {flooded * 1000:.2f} flooded"
-    assert seen["rx"] <= 500 * 10, seen  # write_rate=500 a second, over the flood's ~8 s
+    shown = f"p50 {p50['elsewhere'] * 1000:.2f} ms flooding elsewhere, {p50['write'] * 1000:.2f} flooding write; {seen}"
+    assert p50["write"] < 1.5 * p50["elsewhere"] + 0.0005, shown
+    assert seen["rx"] <= 500 * 7, seen  # write_rate=500 a second, over the flood's ~5 s
     assert seen["rx_lost"] > sent / 2, seen  # dropped inside Fast DDS, and counted
     assert seen["rx"] + seen["rx_lost"] <= sent
 

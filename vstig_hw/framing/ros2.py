@@ -24,12 +24,13 @@ from ..counters import Counters
 from ..timestamps import TS_NONE
 from ..wire import KEY_MAX, Message, Op
 
-__all__ = ["NO_SENDER", "Ros2Framing", "Ros2Sample", "cdr_message", "message_of_cdr", "ros_name"]
+__all__ = ["CDR_SIZE", "NO_SENDER", "Ros2Framing", "Ros2Sample", "cdr_message", "message_of_cdr", "ros_name"]
 
 NO_SENDER = -1
 _LE = b"\x00\x01\x00\x00"  # CDR, little-endian
 # Message: the header, op, a pad byte, four u16, two pad bytes, sender
 _MESSAGE = struct.Struct("<4sBxHHHHxxi")
+CDR_SIZE = _MESSAGE.size  # bytes of one CDR vstig_msgs/Message
 _new = tuple.__new__
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
 

@@ -6,12 +6,13 @@ owns what they carry, in the Node's terms:
 * every message a link heard, after the guard, goes to that link's `heard/<link>`
   topic (`messages` listener: one call per unit, no `Heard` built);
 * every change of the table goes to `changes` (`change` listener);
+* the counters go to /diagnostics, once a second (`tick` listener);
 * `put` is a confirmed write (`oneshot.ConfirmedPut`, as `vstig put` makes it): the
   service answers the entry a neighbour took, or why not and what the swarm holds;
   `get` reads the table (sending nothing), `table` all of it;
 * a PUT a ROS 2 node writes with timestamp 0 gets the timestamp after our entry.
 
-The services run on the transport's executor threads and reach the Node as any
+The services run on the transport's request threads and reach the Node as any
 other thread does; a confirmed write is started on the loop's thread and stepped
 at every tick. Whoever builds a Node with ros2: links composes this part in with
 `serve_ros2(node)` before opening it (`vstig bridge`, `vstig sniff`, `vstig_hw.join`), as the
@@ -24,7 +25,6 @@ import concurrent.futures
 import time
 from typing import TYPE_CHECKING, Any
 
-from ..counters import Counters
 from ..engine import Entry
 from ..framing.ros2 import Ros2Framing
 from ..links.link import Link
@@ -60,13 +60,13 @@ class Ros2Part:
         self.transport = transport
         self._puts: list[tuple[ConfirmedPut, concurrent.futures.Future[PutResult]]] = []  # the loop's thread only
         self._where = ", ".join(other.name for other in node.links)
-        self.transport.serve(self, [other.name for other in node.links])
+        transport.serve(self if node.engine is not None else None, [other.name for other in node.links])
         node.on_messages.append(self._heard)
+        node.on_tick.append(self._tick)
         if node.engine is not None:
             if isinstance(link.framing, Ros2Framing):
                 link.framing.stamp = self._stamp
             node.on_change.append(self._changed)
-            node.on_tick.append(self._step_puts)
 
     # -- what the Node tells (under its lock, on whichever thread did the work) ----------
     def _heard(self, link: str, t: float, sender: int | None, messages: list[Message]) -> None:
@@ -80,7 +80,7 @@ class Ros2Part:
         entry = engine.entry(key) if engine is not None else None
         return next_timestamp(entry.timestamp) if entry is not None else 1
 
-    # -- served, on the transport's executor threads ----------------------------------
+    # -- served, on the transport's request threads ----------------------------------
     def put(self, key: int, value: int) -> PutAnswer:
         node = self.node
         if key > KEY_MAX:
@@ -111,9 +111,6 @@ class Ros2Part:
         with self.node.lock:  # the table must not change while it is copied
             return list(engine.entries())
 
-    def stats(self) -> dict[str, Counters]:
-        return self.node.stats()
-
     # -- confirmed writes, on the loop's thread ------------------------------------------
     def _start(self, key: int, value: int, done: concurrent.futures.Future[PutResult]) -> None:
         put = ConfirmedPut(self.node, key, value, learn=0.0, wait=PUT_WAIT, tries=PUT_TRIES)
@@ -129,9 +126,12 @@ class Ros2Part:
         else:
             self._puts.append((put, done))
 
-    def _step_puts(self, node: Node) -> None:
-        if not self._puts:
-            return
+    def _tick(self, node: Node) -> None:
+        self.transport.publish_stats(node.stats())  # for /diagnostics (the transport sends one a second)
+        if self._puts:
+            self._step_puts()
+
+    def _step_puts(self) -> None:
         now = time.monotonic()
         going = []
         for put, done in self._puts:

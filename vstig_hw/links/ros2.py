@@ -129,6 +129,7 @@ def ros2_link_from_spec(spec: Ros2Spec, name: str, *, robot_id: int = 0, listen_
                     "(ROS 2 authenticates nobody unless SROS2 is set up; see docs/how-to/ros2.md)", name)
     options = Ros2Options(namespace=spec.full_namespace, domain=spec.domain, discovery=spec.discovery,
                           reliable=spec.reliable, depth=spec.depth, write_rate=spec.write_rate, profile=spec.profile)
-    transport = Ros2Transport(options, name=name, node_name=f"vstig_{spec.swarm}_{robot_id}")
+    sender = 0 if listen_only else robot_id
+    transport = Ros2Transport(options, name=name, node_name=f"vstig_{spec.swarm}_{robot_id}", robot_id=sender)
     # Every ROS 2 node subscribed to `write` hears every sample on it: a PUT heard there is not broadcast back.
-    return Link(name, transport, Ros2Framing(0 if listen_only else robot_id), one_domain=True)
+    return Link(name, transport, Ros2Framing(sender), one_domain=True)
