@@ -46,7 +46,13 @@ $(NODE_STAMP): tests/live/package.json | sysdeps
 	    || echo "npm install in tests/live failed: the live view's client tests will skip"; \
 	else echo "npm is missing: the live view's client tests will skip"; fi
 
-pytest: $(STAMP) sysdeps $(NODE_STAMP)
+# The vstig_msgs ROS 2 interfaces, built once per machine into ~/.cache/vstig-hw (~10 s; needs g++, sysdeps).
+ROS2_STAMP := $(VENV)/.ros2-interfaces
+
+$(ROS2_STAMP): $(STAMP) $(wildcard vstig_hw/ros2msgs/*/*.idl) vstig_hw/ros2msgs/build.py | sysdeps
+	$(BIN)/python -m vstig_hw.ros2msgs env >/dev/null && touch $@
+
+pytest: $(STAMP) sysdeps $(NODE_STAMP) $(ROS2_STAMP)
 	$(BIN)/pytest
 
 # The docs site, strict: a broken link, anchor or API reference fails. Browse it from site/index.html.

@@ -82,8 +82,8 @@ def _radio_to_ros2(ros: _Dds) -> tuple[float, ...]:
 
 def _bare(ros: _Dds) -> tuple[float, ...]:
     """(p50, p90, p99) seconds from a bare rclpy publisher to a subscriber, same type, rate and count."""
-    subscriber = ros.peer("receive", "/bench/bare", str(LATENCY_COUNT), "60")
-    publisher = ros.peer("publish", "/bench/bare", str(LATENCY_COUNT), str(LATENCY_RATE))
+    publisher = ros.peer("publish", "/bench/bare", str(LATENCY_COUNT), str(LATENCY_RATE))  # waits for it:
+    subscriber = ros.peer("receive", "/bench/bare", str(LATENCY_COUNT), "60")  # ready once they match
     sent = _result(publisher)
     arrived = _result(subscriber)
     assert isinstance(sent, list) and isinstance(arrived, dict)

@@ -36,7 +36,10 @@ def receive(node: object, topic: str, count: int, seconds: float) -> None:
         if len(arrived) >= count:
             done.set()
 
-    node.create_subscription(Message, topic, heard, STREAM)  # type: ignore[attr-defined]
+    subscription = node.create_subscription(Message, topic, heard, STREAM)  # type: ignore[attr-defined]
+    while subscription.get_publisher_count() == 0:  # matched: nothing sent from now on is missed
+        time.sleep(0.01)
+    time.sleep(0.5)
     print("ready", flush=True)
     done.wait(seconds)
     print(json.dumps(arrived), flush=True)
