@@ -1,7 +1,7 @@
 """A plain ROS 2 node for the ros2: link tests: rclpy and the vstig_msgs types, none of vstig-hw's code.
 
-Run as `python ros2_peer.py NAMESPACE [WAIT]`; once the gateway's services are found (within WAIT
-seconds, default 20) it prints {"ready": true}, else {"error": ...} and ends. It answers commands read from stdin, one a
+Run as `python ros2_peer.py NAMESPACE [WAIT]`; once the gateway's services are found and its changes
+matched (within WAIT seconds, default 20) it prints {"ready": true}, else {"error": ...} and ends. It answers commands read from stdin, one a
 line, with one JSON line each on stdout, and prints every change it hears
 (`{"change": ...}`) as it comes, stamped with the wall-clock time it arrived:
 
@@ -53,7 +53,7 @@ def main(namespace: str, wait: float) -> None:
                         "old": entry(change.old_entry) if change.has_old else None,
                         "link": change.link, "sender": change.sender}, "t": time.time()})
 
-    node.create_subscription(Change, f"{namespace}/changes", changed, table_qos)
+    changes = node.create_subscription(Change, f"{namespace}/changes", changed, table_qos)
     writes = node.create_publisher(Message, f"{namespace}/write", 100)
     clients = {name: node.create_client(kind, f"{namespace}/{name}")
                for name, kind in (("put", Put), ("get", Get), ("table", Table))}
@@ -64,6 +64,9 @@ def main(namespace: str, wait: float) -> None:
         if not client.wait_for_service(timeout_sec=wait):
             say({"error": f"no service {client.srv_name}"})
             return
+    end = time.monotonic() + wait
+    while changes.get_publisher_count() == 0 and time.monotonic() < end:  # matched: no change is missed
+        time.sleep(0.01)
     say({"ready": True})
     for line in sys.stdin:
         words = line.split()

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from ..engine import Entry
@@ -114,9 +115,20 @@ class Ros2Part:
     # -- confirmed writes, on the loop's thread ------------------------------------------
     def _start(self, key: int, value: int, done: concurrent.futures.Future[PutResult]) -> None:
         put = ConfirmedPut(self.node, key, value, learn=0.0, wait=PUT_WAIT, tries=PUT_TRIES)
+        self._step(put, done, put.start)
+
+    def _tick(self, node: Node) -> None:
+        self.transport.publish_stats(node.stats())  # for /diagnostics (the transport sends one a second)
+        puts, self._puts = self._puts, []
+        for put, done in puts:
+            self._step(put, done, put.step)
+
+    def _step(self, put: ConfirmedPut, done: concurrent.futures.Future[PutResult],
+              step: Callable[[float], bool]) -> None:
+        """Start or step one put; settle its Future when it is done or failed (nothing may end the loop)."""
         try:
-            finished = put.start(time.monotonic())
-        except Exception as error:  # nothing may end the loop: the service answers why
+            finished = step(time.monotonic())
+        except Exception as error:  # HearsItself, or a link that broke: the service answers why
             put.detach()
             done.set_exception(error)
             return
@@ -125,26 +137,3 @@ class Ros2Part:
             done.set_result(put.result())
         else:
             self._puts.append((put, done))
-
-    def _tick(self, node: Node) -> None:
-        self.transport.publish_stats(node.stats())  # for /diagnostics (the transport sends one a second)
-        if self._puts:
-            self._step_puts()
-
-    def _step_puts(self) -> None:
-        now = time.monotonic()
-        going = []
-        for put, done in self._puts:
-            try:
-                finished = put.step(now)
-            except HearsItself as error:
-                put.detach()
-                done.set_exception(error)
-                continue
-            if finished:
-                put.detach()
-                done.set_result(put.result())
-            else:
-                going.append((put, done))
-        self._puts = going
-
