@@ -1,9 +1,9 @@
 """A plain ROS 2 node for the ros2: link tests: rclpy and the vstig_msgs types, none of vstig-hw's code.
 
 Run as `python ros2_peer.py NAMESPACE [WAIT]`; once the gateway's services are found and its changes
-matched (within WAIT seconds, default 20) it prints {"ready": true}, else {"error": ...} and ends. It answers commands read from stdin, one a
-line, with one JSON line each on stdout, and prints every change it hears
-(`{"change": ...}`) as it comes, stamped with the wall-clock time it arrived:
+matched (within WAIT seconds, default 20) it prints {"ready": true}, else {"error": ...} and ends. It
+answers commands read from stdin, one a line, with one JSON line each on stdout, and prints every
+change it hears (`{"change": ...}`) as it comes, stamped with the wall-clock time it arrived:
 
     put KEY VALUE        the put service's answer
     get KEY              the get service's answer
