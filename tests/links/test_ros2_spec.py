@@ -85,6 +85,8 @@ ros2 = pytest.mark.skipif(bool(missing(["rclpy"])) and os.environ.get("VSTIG_REQ
 
 @pytest.fixture(scope="module")
 def types() -> Any:
+    import rclpy.serialization  # noqa: F401  (loaded once here: the first import takes longer than a deadline)
+
     from vstig_hw import ros2msgs
 
     return ros2msgs.load()
