@@ -9,6 +9,7 @@ change it hears (`{"change": ...}`) as it comes, stamped with the wall-clock tim
     get KEY              the get service's answer
     table                the table service's entries
     write KEY VALUE ROBOT   one sample on the write topic (timestamp 0: the gateway stamps it)
+    listen TOPIC         subscribes to TOPIC under the namespace (vstig_msgs/Message), then {"listening": TOPIC}
     flood SECONDS [TOPIC]   writes as fast as rclpy publishes (on TOPIC under the namespace: default
                          write), then {"flooded": N}
     quit
@@ -88,6 +89,9 @@ def main(namespace: str, wait: float) -> None:
             writes.publish(Message(op=Message.PUT, key=args[0], value=args[1], timestamp=0, robot=args[2],
                                    sender=-1))
             say({"written": args[:2]})
+        elif command == "listen":
+            node.create_subscription(Message, f"{namespace}/{args[0]}", lambda _: None, 10)
+            say({"listening": args[0]})
         elif command == "flood":
             sample, end, sent = Message(op=Message.PUT, key=9, value=1, timestamp=0, robot=999, sender=-1), \
                 time.monotonic() + float(args[0]), 0

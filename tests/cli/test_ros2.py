@@ -14,6 +14,7 @@ import os
 import re
 import select
 import shutil
+import signal
 import statistics
 import subprocess
 import sys
@@ -30,6 +31,7 @@ from peers import VSTIG, PtyPeer, wait_for
 from robots import CanRobot, PtyRobot, Robot
 
 from vstig_hw.framing import make_serial_framing
+from vstig_hw.framing.ros2 import ros_name
 from vstig_hw.links import parse
 from vstig_hw.wire import Message, Op
 
@@ -349,3 +351,50 @@ def test_the_how_tos_task_board_node_assigns_tasks_through_the_swarm(lab: Callab
     assert {"robot 1: task 7 taken\n", "robot 2: task 3 taken\n", "key 101 = 7 (robot 200, via the gateway)\n",
             "key 102 = 3 (robot 200, via the gateway)\n"} <= set(board.lines), board.lines
     run.run_until(lambda: robots[0].value(101) == 7 and robots[1].value(102) == 3)
+
+
+def test_a_stopped_subscriber_does_not_delay_radio_to_radio_traffic(lab: Callable[..., Lab]) -> None:
+    """A ROS 2 node subscribed to what a radio hears, frozen (SIGSTOP): it acknowledges nothing, and the gateway's
+    writers keep their newest samples for it without waiting, so the radios' relay goes on as before."""
+    a, b = PtyRobot(1), PtyRobot(2)
+    run = lab([a, b])
+    peer = run.peer()
+    peer.send(f"listen heard/{ros_name(parse(a.spec).name)}")
+    wait_for(lambda: bool(peer.records("listening")))
+    time.sleep(0.5)
+    before = statistics.median(_radio_to_radio(a.radio, b.radio, 30, 40))
+    peer.process.send_signal(signal.SIGSTOP)
+    try:
+        stopped = statistics.median(_radio_to_radio(a.radio, b.radio, 31, 300))
+    finally:
+        peer.process.send_signal(signal.SIGCONT)
+    seen = counters(run.close(), "ros2-lab")
+    assert stopped < 1.5 * before + 0.0005, f"p50 {before * 1000:.2f} ms, {stopped * 1000:.2f} ms stopped; {seen}"
+    assert seen["published"] >= 340, seen  # every message heard on the radio went to its topic
+    assert seen.get("drop_behind", 0) == 0, seen
+
+
+def test_a_python_program_joins_with_a_ros2_link(host: Host, ros2_env: dict[str, str]) -> None:
+    """`vstig_hw.join(..., "ros2:lab")`: its puts reach a ROS 2 node's changes and get service."""
+    program = Process([*host.command(), sys.executable, "-c", """
+import sys, time
+import vstig_hw
+with vstig_hw.join("can:virtual:api", "ros2:lab", robot_id=200) as swarm:
+    swarm.put(5, 55)
+    print("joined", flush=True)
+    sys.stdin.read()
+"""], ros2_env, stdin=True)
+    try:
+        wait_for(lambda: "joined\n" in program.lines or program.process.poll() is not None, 60)
+        assert "joined\n" in program.lines, "".join(program.errors)[-2000:]
+        peer = Process([*host.command(), sys.executable, PEER, NAMESPACE], ros2_env, stdin=True)
+        try:
+            wait_for(lambda: bool(peer.records("ready") or peer.records("error")), 60)
+            peer.send("get 5")
+            wait_for(lambda: bool(peer.records("get")))
+            assert peer.records("get")[-1] == {"found": True, "entry": [5, 55, 1, 200]}
+            assert [c["change"]["new"] for c in peer.records("change")] == [[5, 55, 1, 200]]
+        finally:
+            peer.stop()
+    finally:
+        program.stop()
