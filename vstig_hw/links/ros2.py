@@ -10,8 +10,8 @@ broadcasts goes out on `broadcast`. Topics, types and QoS: docs/how-to/ros2.md.
 Closed by default, as the zenoh: links: Fast DDS listens on loopback and shared
 memory only, so ROS 2 nodes on this PC find the gateway and nothing beyond it can;
 `discovery=subnet` opens it to the LAN, with a warning (ROS 2 nodes authenticate
-nobody unless SROS2 is set up). rclpy is imported when a link is built, not when a
-spec is parsed.
+nobody unless SROS2 is set up). The node runs in a process of its own, started as the
+link opens (transports/ros2.py); the gateway's process never imports rclpy.
 """
 
 from __future__ import annotations

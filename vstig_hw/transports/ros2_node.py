@@ -154,7 +154,8 @@ class Ros2Node:
     # -- from the gateway (our stdin, on the main thread) ------------------------------------
     def serve(self, stdin: IO[bytes]) -> None:
         """Publish what the gateway sends until it closes our stdin."""
-        threading.Thread(target=self._spin, name="ros2-executor", daemon=True).start()
+        self._spinning = threading.Thread(target=self._spin, name="ros2-executor", daemon=True)
+        self._spinning.start()
         read = stdin.read
         msg = self._types.msg
         while True:
@@ -293,7 +294,12 @@ class Ros2Node:
             publisher.publish(array)
 
     def close(self) -> None:
+        """Stop the executor and wait for its thread (a thread still in rclpy as Python exits aborts it), then
+        the node, the context and our last counters."""
         self.executor.shutdown(timeout_sec=2.0)
+        spinning = getattr(self, "_spinning", None)
+        if spinning is not None:
+            spinning.join(timeout=5.0)
         self.intake.destroy_node()
         self.node.destroy_node()
         self.context.try_shutdown()
