@@ -22,6 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from .guest import run_in_guest
 from .registry import Result, benchmark
 
 # name: (frames, cangen gap in ms, frames per gap)
@@ -84,27 +85,13 @@ def _all_loads(out: Path) -> dict[str, dict[str, float]]:
     return figures
 
 
-def _in_guest(out: Path) -> dict[str, dict[str, float]]:
-    sys.path.insert(0, str(_REPO / "tests" / "socketcan"))
-    import uml
-
-    reason = uml.unavailable_reason()
-    if reason:
-        raise RuntimeError(f"no vcan here and no User-Mode Linux to make one: {reason}")
-    program = [sys.executable, "-m", "benchmarks.bench_socketcan", str(out)]
-    run = uml.run([], out, program=program, timeout=240)
-    if run.exit_code != 0:
-        raise RuntimeError(run.explain())
-    figures: dict[str, dict[str, float]] = json.loads((out / "figures.json").read_text())
-    return figures
-
-
 @benchmark("socketcan")
 def record_saturated_bus() -> list[Result]:
     with tempfile.TemporaryDirectory(prefix="vstig-bench-socketcan-") as tmp:
         out = Path(tmp)
         try:
-            loads = _all_loads(out) if Path(f"/sys/class/net/{_CHANNEL}").exists() else _in_guest(out)
+            loads = _all_loads(out) if Path(f"/sys/class/net/{_CHANNEL}").exists() else \
+                run_in_guest("bench_socketcan", out, timeout=240)
         except RuntimeError as error:
             print(f"socketcan.record_saturated_bus: not run: {error}", file=sys.stderr)
             return []

@@ -18,14 +18,13 @@ An option given on the command line replaces the file's (a repeatable one's whol
 from __future__ import annotations
 
 import json
-import tomllib
 from collections.abc import Callable, Iterable
 from typing import Any
 
 import click
 from click.core import ParameterSource
 
-from vstig_hw.inputs import InputFileError, read_regular, toml_line
+from vstig_hw.inputs import InputFileError, parse_toml, read_regular, toml_line
 
 __all__ = ["CONFIG_MAX_BYTES", "ConfiguredCommand", "config_options"]
 
@@ -91,9 +90,9 @@ def _load(ctx: click.Context, _param: click.Parameter, path: str | None) -> None
         line = data.count(b"\n", 0, error.start) + 1
         raise click.UsageError(f"{path}:{line}: not UTF-8 text") from None
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise click.UsageError(f"{path}: not valid TOML: {error}") from None
+        doc = parse_toml(text, path)
+    except InputFileError as error:
+        raise click.UsageError(str(error)) from None
     keys = config_keys(ctx.command, ctx)
     values: dict[str, Any] = {}
     for key, value in doc.items():

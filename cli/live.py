@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from vstig_hw.live.view import LiveView
 
 DOCS = "docs/how-to/live-view.md"
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> Address | None:
@@ -32,15 +33,26 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> A
     return address
 
 
-foxglove_option = click.option(
-    "--foxglove", "foxglove", metavar="[HOST:]PORT", callback=_address,
-    help=f"Serve the live view to Foxglove on PORT (8765 is Foxglove's default), on {LOOPBACK} unless HOST "
-         f"is given. Needs the live extra. Channels and layout: {DOCS}.")
+VIEWERS = 16  # vstig_hw.live.server.VIEWERS, not imported: the live extra may be missing
+MAX_VIEWERS = 1000  # each viewer the server holds may cost it ~0.4 MB (its queue of BACKLOG messages)
+
+
+def foxglove_option(fn: F) -> F:
+    """--foxglove [HOST:]PORT and --foxglove-viewers N, for `live_view`."""
+    fn = click.option(
+        "--foxglove-viewers", "foxglove_viewers", type=click.IntRange(1, MAX_VIEWERS), default=VIEWERS,
+        show_default=True, metavar="N",
+        help="With --foxglove: at most N viewers at once; one more is closed with the reason (WebSocket close "
+             "1013, try again later) and counted as viewers_refused.")(fn)
+    return click.option(
+        "--foxglove", "foxglove", metavar="[HOST:]PORT", callback=_address,
+        help=f"Serve the live view to Foxglove on PORT (8765 is Foxglove's default), on {LOOPBACK} unless HOST "
+             f"is given. Needs the live extra. Channels and layout: {DOCS}.")(fn)
 
 
 @contextlib.contextmanager
 def live_view(node: Node, address: Address | None, *, value_type: ValueType = "uint16",
-              larger_value_wins: bool = False) -> Iterator[LiveView | None]:
+              larger_value_wins: bool = False, viewers: int = VIEWERS) -> Iterator[LiveView | None]:
     """Serve `node`'s traffic at `address` for the duration (nothing when None); its counters on exit.
 
     Enter it before the node opens: a port in use or a bad host fails before any link opens.
@@ -51,7 +63,7 @@ def live_view(node: Node, address: Address | None, *, value_type: ValueType = "u
     from vstig_hw.live.view import LIVE_STATS, LiveView
 
     host, port = address
-    view = LiveView(node, host, port, value_type=value_type, larger_value_wins=larger_value_wins)
+    view = LiveView(node, host, port, value_type=value_type, larger_value_wins=larger_value_wins, viewers=viewers)
     try:
         view.open()
     except RuntimeError as error:  # the SDK's FoxgloveError: cannot bind, cannot resolve the host

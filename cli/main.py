@@ -13,25 +13,70 @@ with one line naming the extra, before its module is imported.
 Every command, loaded here, goes through `reports_errors`, and `main` is the
 one place a run ends: usage errors exit 2, runtime failures 1 (one line each),
 Ctrl-C 130 quietly (a shell's status for SIGINT), a closed output pipe 0 quietly (`| head`).
+
+A stop (SIGINT, SIGTERM, SIGHUP) is taken over before anything heavy is imported: click,
+the library and a command's python-can or zenoh take 0.2-0.5 s, and a SIGTERM then used to
+kill vstig with no word. One that comes while vstig starts is kept and acted on once `run`
+begins; from then until a command takes the signals over itself (`stop_on_signals`), a
+stop ends the command as Ctrl-C does: status 0 for the commands that run until stopped
+(they were asked to stop, and stopped), 130 for the others.
 """
 
 from __future__ import annotations
 
-import ast
-import contextlib
-import importlib
-import pkgutil
+import os
+import signal
 import sys
-from pathlib import Path
+from types import FrameType
 
-import click
 
-from vstig_hw import __version__
-from vstig_hw.extras import MissingExtra, require
+class _EarlyStop:
+    """Until `run` is under way a stop is only kept; from then on it interrupts (KeyboardInterrupt), as Ctrl-C."""
 
-from .running import flush_streams, guard_streams, reports_errors
+    def __init__(self) -> None:
+        self.signum: int | None = None  # the first stop that came
+        self.armed = False  # `run` is under way: a stop interrupts at once
+        self.pid = os.getpid()  # a process forked from this one (sim's workers) keeps the signals' defaults
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        if os.getpid() != self.pid:
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
+        if self.signum is None:
+            self.signum = signum
+        if self.armed:
+            raise KeyboardInterrupt
+
+    def install(self) -> None:
+        for name in ("SIGINT", "SIGTERM", "SIGHUP"):  # SIGHUP: not on Windows; under nohup it stays ignored
+            signum = getattr(signal, name, None)
+            if signum is not None and signal.getsignal(signum) is not signal.SIG_IGN:
+                signal.signal(signum, self)
+
+
+_EARLY_STOP = _EarlyStop()
+# Only when this process is the `vstig` program (its console script, or `python -m vstig_cli.main`): a program
+# that imports the CLI (a test runner) keeps its own handlers.
+if __name__ == "__main__" or os.path.basename(sys.argv[0]).removesuffix(".exe") == "vstig":
+    _EARLY_STOP.install()
+
+import ast  # noqa: E402  (the imports come after the handlers: that is the point)
+import contextlib  # noqa: E402
+import importlib  # noqa: E402
+import pkgutil  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import click  # noqa: E402
+
+from vstig_hw import __version__  # noqa: E402
+from vstig_hw.extras import MissingExtra, require  # noqa: E402
+
+from .running import flush_streams, guard_streams, reports_errors  # noqa: E402
 
 INTERRUPTED = 128 + 2  # the shell's status for a command ended by SIGINT
+# The commands whose normal end is a stop: they exit 0 on one, from the moment they start (docs/how-to/bridge.md).
+RUN_UNTIL_STOPPED = frozenset({"bridge", "sniff", "record", "replay", "demo"})
 
 # Commands beyond the core install: the extra each needs, and which of its modules the command loads
 # as it starts (None: all of them). Checked before the command's module is imported.
@@ -82,8 +127,19 @@ class CommandFolder(click.Group):
                                 for name in names])
 
 
+def _version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    """--version: the version, and which data path this install runs (the compiled one, or pure Python and why)."""
+    if not value or ctx.resilient_parsing:
+        return
+    from vstig_hw.native import why_pure
+
+    click.echo(f"vstig {__version__} (data path: {f'pure Python: {why_pure}' if why_pure else 'compiled'})")
+    ctx.exit()
+
+
 @click.group(cls=CommandFolder, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="vstig")
+@click.option("--version", is_flag=True, expose_value=False, is_eager=True, callback=_version,
+              help="Show the version and which data path runs (compiled, or pure Python and why), and exit.")
 @click.option("--debug", is_flag=True, help="On failure, show the traceback too.")
 @click.pass_context
 def cli(ctx: click.Context, debug: bool) -> None:
@@ -99,9 +155,19 @@ def _report_errors(command: click.Command) -> None:
         _report_errors(sub)
 
 
+def _interrupted(args: list[str] | None) -> int:
+    """The status of a command a stop interrupted before it took the signals over (see the module's docstring)."""
+    words = sys.argv[1:] if args is None else args
+    name = next((word for word in words if not word.startswith("-")), None)
+    return 0 if name in RUN_UNTIL_STOPPED else INTERRUPTED
+
+
 def run(args: list[str] | None = None) -> int:
     """Run the CLI and return its exit status; no exception escapes."""
     try:
+        _EARLY_STOP.armed = True
+        if _EARLY_STOP.signum is not None:  # asked while vstig was starting
+            raise KeyboardInterrupt
         result = cli.main(args, standalone_mode=False)
         flush_streams()
     except click.ClickException as error:  # usage errors (2), runtime failures and failed output (1)
@@ -111,11 +177,11 @@ def run(args: list[str] | None = None) -> int:
         return end.exit_code
     except click.Abort as abort:  # click's form of Ctrl-C (or a declined prompt)
         if isinstance(abort.__context__, KeyboardInterrupt):
-            return INTERRUPTED
+            return _interrupted(args)
         click.echo("Aborted!", err=True)
         return 1
     except KeyboardInterrupt:
-        return INTERRUPTED
+        return _interrupted(args)
     finally:
         with contextlib.suppress(click.ClickException, click.exceptions.Exit):
             flush_streams()  # after a failure we already report: do not replace it

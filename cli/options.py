@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar
 import click
 
 from vstig_hw.capture.records import READABLE_EXTENSIONS, CaptureError, line_capture_at, sniff_suffix
-from vstig_hw.outputs import LinkedOutput, refuse_symlink
-from vstig_hw.wire import KEY_MAX, U16_MAX
+from vstig_hw.outputs import LinkedOutput, SpecialOutput, drop_setid, refuse_special, refuse_symlink
+from vstig_hw.wire import KEY_MAX
 
 if TYPE_CHECKING:
     from vstig_hw.gateway.guard import Guard, IdSet
@@ -113,6 +113,7 @@ class WireKey(click.ParamType):  # type: ignore[type-arg]  # generic only from c
     """A stigmergy key, 0..32767, written as VALUE may be: 23, 0x17, 0o27, 0b10111."""
 
     name = "KEY"
+    high = KEY_MAX
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> int:
         if isinstance(value, int):
@@ -122,12 +123,21 @@ class WireKey(click.ParamType):  # type: ignore[type-arg]  # generic only from c
                 number = int(str(value), 0)
             except ValueError:
                 self.fail(f"{value!r} is not an integer (e.g. 23 or 0x17)", param, ctx)
-        if not 0 <= number <= KEY_MAX:
-            self.fail(f"{value} is outside 0..{KEY_MAX} ({KEY_MAX:#x})", param, ctx)
+        if not 0 <= number <= self.high:
+            self.fail(f"{value} is outside 0..{self.high} ({self.high:#x})", param, ctx)
         return number
 
 
+class SenderId(WireKey):
+    """The node that sent a unit: a CAN node id, a zenoh gateway id, or an XBee module's 64-bit address
+    (0x0013A20040A1B2C3), so up to 2**64 - 1, in decimal or hex."""
+
+    name = "ID"
+    high = 0xFFFF_FFFF_FFFF_FFFF
+
+
 KEY = WireKey()
+SENDER = SenderId()
 
 
 class NegativeNumbersAreArguments(click.Command):
@@ -193,10 +203,12 @@ def overwrite_option(target: str) -> Callable[..., Any]:
 
 
 def refuse_link(path: str | Path) -> None:
-    """A usage error naming `path` if it is a symbolic link (dangling or not)."""
+    """A usage error naming `path` if it is a symbolic link (dangling or not), or not a file to write into
+    (a FIFO, a terminal, a socket: `vstig_hw.outputs`)."""
     try:
         refuse_symlink(path)
-    except LinkedOutput as error:
+        refuse_special(path)
+    except (LinkedOutput, SpecialOutput) as error:
         raise click.UsageError(str(error)) from None
 
 
@@ -204,18 +216,20 @@ def refuse_links_in(folder: Path, names: tuple[str, ...]) -> None:
     """refuse_link for each file a command names itself inside its output folder."""
     for name in names:
         refuse_link(folder / name)
+        drop_setid(folder / name)
 
 
 def refuse_to_replace(path: str | Path, overwrite: bool, otherwise: str = "") -> None:
-    """A usage error naming `path` if it is a symbolic link, or if it holds something and --overwrite was
-    not given.
+    """A usage error naming `path` if it is a symbolic link or not a file to write into (a FIFO...), or if it
+    holds something and --overwrite was not given.
 
     `otherwise` adds the command's other way out (record: ", --append adds to it"). An empty file holds
-    nothing to lose, and a device (/dev/null) is not replaced by writing to it.
+    nothing to lose, and the null device is not replaced by writing to it.
     """
     refuse_link(path)
     if not overwrite and os.path.isfile(path) and os.path.getsize(path) > 0:
         raise click.UsageError(f"{path} exists: --overwrite replaces it{otherwise}")
+    drop_setid(path)  # what replaces it is not a program to run as its owner
 
 
 # -- The capture files decode and analyze read: by extension, else (-, a pipe, <(...)) by first bytes.
@@ -324,8 +338,9 @@ def filter_options(fn: F) -> F:
                      help="Only this key (repeatable)."),
         click.option("--robot", "only_robots", multiple=True, type=click.IntRange(0, U16_MAX),
                      help="Only entries written by this robot (repeatable)."),
-        click.option("--sender", "only_senders", multiple=True, type=click.IntRange(0, U16_MAX),
-                     help="Only messages sent by this node: a CAN frame's sender field (repeatable)."),
+        click.option("--sender", "only_senders", multiple=True, type=SENDER,
+                     help="Only messages sent by this node: a CAN frame's sender field, an XBee module's 64-bit "
+                          "address (0x0013A200...) (repeatable)."),
         click.option("--op", "only_ops", multiple=True, type=click.Choice(["PUT", "GET"], case_sensitive=False),
                      help="Only PUTs or only GETs."),
         click.option("--link", "only_links", multiple=True, help="Only this link, by name (repeatable)."),
@@ -395,11 +410,15 @@ def _guard_option_list() -> list[Callable[[Callable[..., Any]], Callable[..., An
                           "see --source-rate."),
         click.option("--source-rate", type=Finite(0.0, min_open=True), metavar="N",
                      help="At most N messages per second from each real source, whatever ids it claims: a serial or "
-                          "CAN link is one source, a zenoh peer's session (the id zenoh stamps on its samples) is one; "
-                          "excess counted drop_source_rate."),
-        click.option("--trust", multiple=True, metavar="LINK=IDS", callback=_pairs(U16_MAX, "ids"),
-                     help="Accept on LINK only these sender ids, e.g. can0=1-20,33 (drop_untrusted). Repeatable."),
-        click.option("--deny", multiple=True, metavar="LINK=IDS", callback=_pairs(U16_MAX, "ids"),
+                          "CAN link is one source; on zenoh, each session connected to ours (by the id stamped on its "
+                          "samples); samples stamped with no connected session's id (unstamped, made up, relayed by a "
+                          "router) share one more. On open loopback any local user can connect sessions: only "
+                          "authenticated zenoh keeps them out; every source also gets only its fair share of each "
+                          "link. Excess counted drop_source_rate."),
+        click.option("--trust", multiple=True, metavar="LINK=IDS", callback=_pairs(SENDER.high, "ids"),
+                     help="Accept on LINK only these sender ids, e.g. can0=1-20,33, or XBee modules' 64-bit "
+                          "addresses, radio=0x0013A20040A1B2C3 (drop_untrusted). Repeatable."),
+        click.option("--deny", multiple=True, metavar="LINK=IDS", callback=_pairs(SENDER.high, "ids"),
                      help="Refuse on LINK what these robots send or wrote (relayed by others too): "
                           "drop_untrusted. Repeatable."),
         click.option("--keys", multiple=True, metavar="LINK=RANGE", callback=_pairs(KEY_MAX, "keys"),
@@ -440,7 +459,7 @@ class GuardChoice:
                     raise click.UsageError(f"{flag} {name}: no such link (links here: {', '.join(names)})")
                 if option == "trust" and name in anonymous:
                     raise click.UsageError(f"{flag} {name}: this medium does not name its senders "
-                                           "(only CAN does); use --deny, --keys or --read-only on it")
+                                           "(CAN, zenoh and XBee do); use --deny, --keys or --read-only on it")
                 fields = policies.setdefault(name, {})
                 if option in fields:
                     raise click.UsageError(f"{flag} {name} given twice: join them with commas")

@@ -4,6 +4,7 @@ stopped. The gateway and the links load only when a command uses them: decode im
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import io
 import os
@@ -11,7 +12,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
@@ -225,6 +226,51 @@ def lossless(spec: LinkSpec, opening: float | None = None) -> LinkSpec:
     if not isinstance(spec, ZenohSpec):
         return spec
     return replace(spec, block=True, peer_wait=spec.peer_wait if opening is None else opening)
+
+
+OPEN_POLL = 0.05  # seconds between two looks at the stop while links open
+
+
+def open_unless_stopped(open_links: Callable[[], None], stop: threading.Event) -> bool:
+    """Run `open_links` in a thread of its own and wait for it, or for `stop`: True once it is done (its failure
+    raised here), False when a stop came first.
+
+    A device may take long to open (a Zenoh peer that does not answer, a robot's TCP port, an adapter that hangs in
+    its driver) and no bound on one call holds for every driver; so a stop does not wait for the open. What the
+    thread opens after that is left to the process's end: the command stops at once, with its counters.
+    """
+    done = threading.Event()
+    failure: list[BaseException] = []
+
+    def opening() -> None:
+        try:
+            open_links()
+        except BaseException as error:  # raised on the command's thread, unless a stop came first
+            failure.append(error)
+        finally:
+            done.set()
+
+    threading.Thread(target=opening, name="open-links", daemon=True).start()
+    while not done.wait(OPEN_POLL):
+        if stop.is_set():
+            return False
+    if failure:
+        raise failure[0]
+    return True
+
+
+@contextlib.contextmanager
+def opened(node: Node, stop: threading.Event) -> Iterator[Node]:
+    """`with node:` for a command under `stop_on_signals`: a stop while the links open does not wait for them
+    (`open_unless_stopped`): the block then runs with `stop` set, and the node is not closed (the process is about
+    to end, and the opening thread may still hold it)."""
+    if not open_unless_stopped(node.open, stop):
+        yield node
+        return
+    try:
+        yield node
+    finally:
+        node.close()
 
 
 def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, duration: float | None = None) -> None:

@@ -6,6 +6,9 @@ set -u
 want=()
 command -v gcc >/dev/null || want+=(gcc)
 command -v make >/dev/null || want+=(make)  # libvstig's Makefile (firmware_spec/libvstig)
+# Python's headers, for the compiled data path (vstig_hw._vstig) that `make test` builds
+python3 -c 'import os, sysconfig; raise SystemExit(not os.path.exists(sysconfig.get_paths()["include"] + "/Python.h"))' \
+  2>/dev/null || want+=(python3-dev)
 command -v avr-gcc >/dev/null || want+=(gcc-avr binutils-avr)  # libvstig for the Kilobot's ATmega328P
 [ -e /usr/lib/avr/include/avr/io.h ] || want+=(avr-libc)
 [ -e /usr/include/simavr/sim_avr.h ] || want+=(libsimavr-dev)  # the simulated AVR robot's board (tests/cli)
@@ -16,6 +19,7 @@ command -v linux.uml >/dev/null || [ -x /usr/bin/linux.uml ] || want+=(user-mode
 command -v modprobe >/dev/null || [ -x /sbin/modprobe ] || want+=(kmod)
 command -v cansend >/dev/null || want+=(can-utils)
 command -v tshark >/dev/null || want+=(tshark)
+command -v text2pcap >/dev/null || want+=(wireshark-common)  # pcaps of XBee frames for the dissector (tests/spec, docs/how-to/xbee.md)
 command -v ip >/dev/null || want+=(iproute2)  # network namespaces for the zenoh federation tests
 command -v node >/dev/null || want+=(nodejs)  # Foxglove's WebSocket client, the live view's viewer in tests
 command -v npm >/dev/null || want+=(npm)

@@ -207,6 +207,10 @@ class Analyzer:
         self._active: set[int] = set()  # sender << 40 | slot (see _activity_code)
         self._origin: float | None = None  # activity slots count from here
         self._sender_links: set[int] = set()
+        # Senders by index, as the codes below hold them: they pack a sender into a few bits, and an XBee
+        # module's sender is its 64-bit address. Index i stands for _senders[i]; NO_SENDER stays itself.
+        self._senders: list[int] = []
+        self._sender_index: dict[int, int] = {}
         self._pending: list[tuple[float, int, int, Message]] = []
         self._timelines: dict[int, list[tuple[I64, I64]]] = defaultdict(list)  # link -> (slots, counts) parts
         self._timeline_start: float | None = None
@@ -237,10 +241,21 @@ class Analyzer:
         self.add(Batch(np.array(t, dtype=np.float64), np.array(link, dtype=np.int64),
                        np.array(sender, dtype=np.int64), head >> 15, head & KEY_MAX, value, ts, robot))
 
+    def _indexed(self, sender: I64) -> I64:
+        """The senders as indices into `_senders` (NO_SENDER stays), registering new ones."""
+        values, inverse = np.unique(sender, return_inverse=True)
+        index, senders = self._sender_index, self._senders
+        for value in values.tolist():
+            if value != NO_SENDER and value not in index:
+                index[value] = len(senders)
+                senders.append(value)
+        return np.array([index.get(v, NO_SENDER) for v in values.tolist()], dtype=np.int64)[inverse]
+
     def add(self, batch: Batch) -> None:
         if not len(batch):
             return
-        t, link, sender, op = batch.t, batch.link, batch.sender, batch.op
+        sender = indexed = self._indexed(batch.sender)
+        t, link, op = batch.t, batch.link, batch.op
         self._messages += len(batch)
         low, high = float(t.min()), float(t.max())
         self._start = low if self._start is None else min(self._start, low)
@@ -288,7 +303,7 @@ class Analyzer:
         self._count_over_time(batch.t, batch.link)
         named = batch.sender >= 0
         self._sender_links.update(np.unique(batch.link[named]).tolist())
-        self._active.update(np.unique(self._activity_code(batch.sender[named], batch.t[named])).tolist())
+        self._active.update(np.unique(self._activity_code(indexed[named], batch.t[named])).tolist())
 
     def _count_over_time(self, t: F64, link: I64) -> None:
         """Add the batch to each link's messages per slot (slots count from the first message read)."""
@@ -372,7 +387,7 @@ class Analyzer:
         return Report(
             start=self._start, end=self._end, messages=self._messages, window=self.window,
             conflict=self.conflict, writes=writes, links={name: t for name, t in links.items() if t.messages},
-            senders=dict(sorted(senders.items())),
+            senders=dict(sorted((self._senders[index], traffic) for index, traffic in senders.items())),
             first_copies=len(self._put_entries), rebroadcasts=self._puts - len(self._put_entries),
             conflicts=sum(n for n in same_slot.values() if n > 1),
             links_without_sender=[name for i, name in enumerate(self.links)
@@ -413,7 +428,7 @@ class Analyzer:
             behind_mask = is_active & np.isnan(after)
             for row, code in enumerate(block):
                 caught = np.sort(after[row][is_active[row] & ~behind_mask[row]]).tolist()
-                behind = [senders[column] for column in np.flatnonzero(behind_mask[row]).tolist()]
+                behind = sorted(self._senders[senders[column]] for column in np.flatnonzero(behind_mask[row]).tolist())
                 first, link, value = self._writes[code]
                 yield code, WriteReport(key, value, (code >> 16) & 0xFFFF, code & 0xFFFF, first, self.links[link],
                                         len(caught) + len(behind), tuple(caught), tuple(behind),

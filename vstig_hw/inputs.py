@@ -2,7 +2,9 @@
 a regular file, read whole up to a bound, opened so that a FIFO or a device cannot hold the command.
 
 Errors name the file; `toml_line` finds the line a TOML key is set on (tomllib keeps no positions), so an
-error about a value can name its line too.
+error about a value can name its line too. `parse_toml` is tomllib with both its failures named: bad TOML, and
+arrays or tables nested deeper than Python's recursion limit (100,000 deep was "maximum recursion depth
+exceeded", naming nothing).
 """
 
 from __future__ import annotations
@@ -10,8 +12,10 @@ from __future__ import annotations
 import os
 import re
 import stat
+import tomllib
+from typing import Any
 
-__all__ = ["InputFileError", "read_regular", "toml_line"]
+__all__ = ["InputFileError", "parse_toml", "read_regular", "toml_line"]
 
 
 class InputFileError(ValueError):
@@ -46,3 +50,13 @@ def toml_line(text: str, key: str) -> str:
     name = rf"(?:{re.escape(key)}|\"{re.escape(key)}\"|'{re.escape(key)}')"
     match = re.search(rf"^[ \t]*(?:{name}[ \t]*=|\[\[?[ \t]*{name}[ \t]*\])", text, re.MULTILINE)
     return f":{text.count(chr(10), 0, match.start()) + 1}" if match else ""
+
+
+def parse_toml(text: str, source: str) -> dict[str, Any]:
+    """tomllib.loads(text); InputFileError naming `source` if it is not TOML or nests too deeply to read."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise InputFileError(f"{source}: not valid TOML: {error}") from None
+    except RecursionError:  # tomllib recurses once per nested array or inline table
+        raise InputFileError(f"{source}: arrays or tables nested too deeply to read") from None

@@ -15,7 +15,15 @@ from ..config import ConfiguredCommand, config_options
 from ..live import foxglove_option, live_view
 from ..ops.metrics import metrics_option, metrics_served
 from ..options import Address, Finite, GuardChoice, guard_options, take_warnings
-from ..running import LINK, build_links, describe_links, print_counters, reports_errors, run_until_stopped
+from ..running import (
+    LINK,
+    build_links,
+    describe_links,
+    opened,
+    print_counters,
+    reports_errors,
+    run_until_stopped,
+)
 
 
 def _raw_note(robot_id: int | None) -> str:
@@ -31,7 +39,7 @@ def _raw_note(robot_id: int | None) -> str:
 @click.option("--tick", type=Finite(0.001, 60), default=DEFAULT_PERIOD, show_default=True,
               help="Control period in seconds.")
 @click.option("--budget", type=click.IntRange(1, 1_000_000), default=DEFAULT_BUDGET, show_default=True,
-              help="Messages per link per tick.")
+              help="Messages per link per tick, shared fairly among their sources.")
 @click.option("--raw", is_flag=True, help="Relay every frame between links, translating framings, with no engine.")
 @click.option("--larger-value-wins", "larger", is_flag=True,
               help="Resolve conflicts by the larger value (the paper's Figure 1) instead of the higher robot id.")
@@ -45,7 +53,7 @@ def _raw_note(robot_id: int | None) -> str:
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
-            larger: bool, refresh: bool, duration: float | None, foxglove: Address | None,
+            larger: bool, refresh: bool, duration: float | None, foxglove: Address | None, foxglove_viewers: int,
             metrics: Address | None, guard: GuardChoice) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
@@ -59,6 +67,11 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     default; --learn, --rate, --source-rate, --trust, --deny, --keys, --read-only and --flap add
     policies. LINK names are those printed at start (the device's name: can0, ttyUSB0...). Refusals
     are counted per link (drop_jump, drop_rate, drop_source_rate, drop_untrusted, drop_key).
+
+    Every link's --budget is shared fairly among the sources of what it carries (each link, each
+    zenoh session connected to ours, the bridge itself), so a flooding radio or zenoh peer delays
+    only its own messages; the engine takes at most 16 ticks of budget per source and tick,
+    on average, with bursts of ten times that (drop_intake).
 
     \b
     Many PCs: add a zenoh link on each (vstig links lists its options), e.g.
@@ -88,8 +101,8 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
         if live:
             click.echo(f"\r\x1b[K{line}", nl=False, err=True)
 
-    with (stop_on_signals() as stop, live_view(node, foxglove, larger_value_wins=larger),
-          metrics_served(node, metrics), node):
+    with (stop_on_signals() as stop, live_view(node, foxglove, larger_value_wins=larger, viewers=foxglove_viewers),
+          metrics_served(node, metrics), opened(node, stop)):
         click.echo(f"bridging {', '.join(link.name for link in node.links)} "
                    f"({_raw_note(robot_id) if raw else f'robot {robot_id}'}); Ctrl-C stops", err=True)
         describe_links(node)

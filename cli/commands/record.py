@@ -38,6 +38,7 @@ from ..running import (
     build_links,
     describe_links,
     must_hear,
+    opened,
     print_counters,
     reports_errors,
     run_until_stopped,
@@ -145,7 +146,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
 
     node.on_tick.append(flush)
     try:
-        with stop_on_signals() as stop, metrics_served(node, metrics), node:
+        with stop_on_signals() as stop, metrics_served(node, metrics), opened(node, stop):
             capture = RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
                                       append=append)
             with node.lock:  # the readers write under it: the early units go first, in order

@@ -21,13 +21,14 @@ from vstig_hw.links.can import CanSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 
 from ..options import VALUE_TYPE_HELP, Finite, echo_skipped, filter_options, skip_bad_option
-from ..running import LINK, StatusLine, build_links, lossless, reports_errors
+from ..running import LINK, StatusLine, build_links, lossless, open_unless_stopped, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 
 
 def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
-    """Write a record as is when the medium and framing match; otherwise re-encode its messages.
+    """Write a record as is when the medium and framing match (for XBee, frames we sent); otherwise re-encode its
+    messages.
 
     A CAN capture is read with the default ID scheme (11-bit, base 0x600); a target that asks for
     another (id_base, extended, stigmergy) gets the messages re-encoded in its own IDs.
@@ -38,7 +39,10 @@ def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
                    and onto.stigmergy == 0)
 
     def send(record: Record) -> None:
-        same = (record.framing == CAN_FRAMING and default_ids) if is_can else (record.framing == link.framing.name)
+        same = (record.framing == CAN_FRAMING and default_ids) if is_can else (
+            record.framing == link.framing.name
+            # a module takes Transmit Requests: the Receive Packets it handed over are re-encoded
+            and (record.direction == "tx" or getattr(link.framing, "replays_received", True)))
         if same:
             link.transport.write(_fresh(record.unit) if is_can else record.unit)
             link.counters["out_units"] += 1
@@ -197,9 +201,12 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     bad: list[CaptureError] = []  # what the last pass skipped
     try:
         with stop_on_signals() as stop:  # before the links open: a signal while they do is a clean stop too
-            for link in targets.values():
-                link.open()
-                opened.append(link)
+            def open_links() -> None:
+                for link in targets.values():
+                    link.open()
+                    opened.append(link)
+
+            open_unless_stopped(open_links, stop)  # a stop while they open: nothing is sent, none waited for
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
                 bad = []

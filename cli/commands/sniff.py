@@ -23,7 +23,16 @@ from ..config import ConfiguredCommand, config_options
 from ..live import foxglove_option, live_view
 from ..ops.metrics import metrics_option, metrics_served
 from ..options import VALUE_TYPE_HELP, Address, Finite, GuardChoice, filter_options, guard_options, take_warnings
-from ..running import LINK, build_links, describe_links, must_hear, print_counters, reports_errors, run_until_stopped
+from ..running import (
+    LINK,
+    build_links,
+    describe_links,
+    must_hear,
+    opened,
+    print_counters,
+    reports_errors,
+    run_until_stopped,
+)
 
 _TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
 
@@ -70,7 +79,8 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
-            hide_refused: bool, foxglove: Address | None, metrics: Address | None, keep: Filter,
+            hide_refused: bool, foxglove: Address | None, foxglove_viewers: int, metrics: Address | None,
+            keep: Filter,
             guard: GuardChoice) -> None:
     """Decode what each LINK hears live, per key; passive: never transmits.
 
@@ -135,8 +145,9 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
 
         listeners.append(emit)
         node.on_tick.append(lambda _node: _warn(firewall))
-        with (stop_on_signals() as stop, live_view(node, foxglove, value_type=value_type, larger_value_wins=larger),
-              metrics_served(node, metrics), node):
+        with (stop_on_signals() as stop,
+              live_view(node, foxglove, value_type=value_type, larger_value_wins=larger, viewers=foxglove_viewers),
+              metrics_served(node, metrics), opened(node, stop)):
             describe_links(node)
             run_until_stopped(node, stop, duration=duration)
         _warn(firewall)
@@ -145,8 +156,9 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
     from rich.live import Live
 
     # The live view first, then the node: a port that cannot be bound or opened is the one line said
-    with (stop_on_signals() as stop, live_view(node, foxglove, value_type=value_type, larger_value_wins=larger),
-          metrics_served(node, metrics), node):
+    with (stop_on_signals() as stop,
+          live_view(node, foxglove, value_type=value_type, larger_value_wins=larger, viewers=foxglove_viewers),
+          metrics_served(node, metrics), opened(node, stop)):
         if not sys.stdout.isatty():
             click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
                        "(--jsonl streams every message instead)", err=True)

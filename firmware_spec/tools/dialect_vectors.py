@@ -27,6 +27,9 @@ SRC_ARGOS = f"{BZ} src/buzz/argos/buzz_controller.cpp (ProcessOutMsgs, ProcessIn
 SRC_ROSBUZZ = ("MISTLab/ROSBuzz@ce38cb6 src/buzz_utility.cpp:112-169 (obt_out_msg), "
                "src/roscontroller.cpp:712-772 (payload64 header words)")
 SRC_XBEE = "MISTLab/XbeeMav@a360a8d src/PacketsHandler.cpp:339-347 (bytes[7 - i] = word >> 8i: big-endian words)"
+SRC_XBEEMAV = ("MISTLab/XbeeMav@a360a8d src/PacketsHandler.cpp:82-115 (S under 250 bytes, else F fragments of 250), "
+               "336-369 (serialized: sysid, msgid, words; the F header), 658-686 (the 0x10 frame), "
+               "src/SerialDevice.cpp:188-226 (0x90 read at fixed offsets); ROSBuzz@ce38cb6 roscontroller.cpp:712-772")
 SRC_BBZ_MSG = (f"{BB} src/bittybuzz/bbzoutmsg.c:96-118 (type, rid, key, obj, lamport), "
                "src/bittybuzz/bbzmsg.c:50-53 (obj = mdata + u16), src/bittybuzz/bbzmsg.h:13-14 (htons = identity)")
 SRC_BBZ_IN = f"{BB} src/bittybuzz/bbzinmsg.c:7-54 (bbzinmsg_queue_append: other types dropped)"
@@ -172,6 +175,7 @@ def buzz_vectors() -> dict[str, object]:
         "other": other,
         "invalid": invalid,
         "frames": buzz_frames(),
+        "xbeemav": xbeemav_vectors(),
     }
 
 
@@ -209,6 +213,36 @@ def buzz_frames() -> list[dict[str, object]]:
          "source": SRC_ROSBUZZ},
         {"name": "the same block as XbeeMav sends it: each 64-bit word big-endian", "transport": "xbee",
          "hex": xbee.hex(), "sender": 5, "messages": [b1.hex()], "source": SRC_XBEE},
+    ]
+
+
+def _api_frame(frame_data: bytes) -> bytes:
+    """An XBee API mode 1 frame (what XbeeMav runs): 0x7E, u16 length, frame data, 0xFF - sum."""
+    return b"\x7e" + len(frame_data).to_bytes(2, "big") + frame_data + bytes([0xFF - (sum(frame_data) & 0xFF)])
+
+
+def xbeemav_vectors() -> list[dict[str, object]]:
+    """ROSBuzz's block F4 from drone 5 as its XbeeMav sends it, and what our module hands us: 0x90 frames."""
+    b1 = buzz_message("PUT", 1, S("x"), N(42), 1, 5)
+    rosbuzz = h("0300 0500 1000 0200 | 0103 0001 7801 0000 | 002A 0001 0005 0000")
+    # payload64: header (type 2, message number 3, time 0), ROS time 0, latitude, longitude, altitude 0, the block
+    words = [2 | 3 << 16, 0, 0, 0, 0] + [int.from_bytes(rosbuzz[i:i + 8], "little") for i in range(0, 24, 8)]
+    serialized = bytes([5, 3]) + b"".join(w.to_bytes(8, "big") for w in words)
+    assert serialized[2 + 5 * 8:] == h("0002 0010 0005 0003 | 0000 0178 0100 0301 | 0000 0500 0100 2A00")  # F5
+    source = 0x0013A20040000005
+    header = bytes([0x90]) + source.to_bytes(8, "big") + h("FFFE 02")
+    single = _api_frame(header + b"S" + serialized)
+    padded = serialized + bytes(8 * 31)  # 314 bytes: XbeeMav sends two fragments, then a ping
+    fragments = [b"F" + bytes([3, 5, i]) + (250 * i).to_bytes(2, "big") + padded[250 * i:250 * i + 250]
+                 for i in range(2)]
+    assert [len(f) for f in fragments] == [256, 70]
+    ping = b"P" + bytes([3, 5, 2])
+    return [
+        {"name": "drone 5's S packet (sysid 5, msgid 3) in a Receive Packet from its module", "api1": single.hex(),
+         "sender": f"{source:016x}", "serialized": serialized.hex(), "messages": [b1.hex()], "source": SRC_XBEEMAV},
+        {"name": "the same message padded to 314 bytes: two F fragments and a P ping",
+         "api1_frames": [_api_frame(header + rf).hex() for rf in (*fragments, ping)], "sender": f"{source:016x}",
+         "serialized": padded.hex(), "messages": [b1.hex()], "source": SRC_XBEEMAV},
     ]
 
 

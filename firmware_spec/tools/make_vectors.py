@@ -769,6 +769,194 @@ def ohc_vectors() -> dict[str, object]:
 
 
 # --------------------------------------------------------------------------
+# xbee.json (SPEC.md section 6.9): Digi's API frames, from Digi's published frame format
+# --------------------------------------------------------------------------
+XBEE_SPECIAL = (0x7E, 0x7D, 0x11, 0x13)  # what API mode 2 escapes
+XBEE_MAX_FRAME_DATA = 512
+XBEE_SOURCE = 0x0013A20040A1B2C3
+
+
+def xbee_checksum(frame_data: bytes) -> int:
+    total = 0
+    for byte in frame_data:
+        total = (total + byte) & 0xFF
+    return 0xFF - total
+
+
+def xbee_frame(frame_data: bytes, escaped: bool) -> bytes:
+    body = bytes([len(frame_data) >> 8, len(frame_data) & 0xFF]) + frame_data + bytes([xbee_checksum(frame_data)])
+    if escaped:
+        stuffed = bytearray()
+        for byte in body:
+            stuffed += bytes([0x7D, byte ^ 0x20]) if byte in XBEE_SPECIAL else bytes([byte])
+        body = bytes(stuffed)
+    return b"\x7e" + body
+
+
+# Digi's own worked examples (its XBee user guides): an AT Command NJ, a Transmit Request carrying "TxData0A",
+# and the frame its API mode 2 section escapes.
+assert xbee_frame(bytes.fromhex("08014e4a"), False) == bytes.fromhex("7e000408014e4a5e")
+assert xbee_frame(bytes.fromhex("10010013a200400a0127fffe0000") + b"TxData0A", False) == bytes.fromhex(
+    "7e0016100100" "13a200400a0127fffe0000" "5478446174613041" "13")
+assert xbee_frame(bytes.fromhex("2311"), True) == bytes.fromhex("7e0002237d31cb")
+
+
+def xbee_transmit(frame_id: int, rf: bytes, dest: int = 0xFFFF) -> bytes:
+    return bytes([0x10, frame_id]) + dest.to_bytes(8, "big") + bytes.fromhex("fffe0000") + rf
+
+
+def xbee_receive(source: int, rf: bytes) -> bytes:
+    return bytes([0x90]) + source.to_bytes(8, "big") + bytes.fromhex("fffe02") + rf
+
+
+def _xbee_stream(name: str, mode: int, stream: bytes, frames: list[tuple[int, list[bytes]]],
+                 drops: dict[str, int]) -> dict[str, object]:
+    return {"name": name, "api": mode, "stream": stream.hex(),
+            "frames": [{"sender": f"{sender:016x}", "messages": [m.hex() for m in msgs]} for sender, msgs in frames],
+            "drops": drops}
+
+
+def xbee_vectors() -> dict[str, object]:
+    a, b, c = (bytes.fromhex(h) for _, h, _ in WIRE_BY_HAND[4:7])
+    escapes = pack("PUT", 0x117E, 0x7D13, 0x137E, 0x7D11)  # every byte mode 2 escapes, in every field
+    transmit = []
+    for name, rf in (("one message", a), ("three messages in one frame", a + b + c),
+                     ("bytes mode 2 escapes", escapes)):
+        data = xbee_transmit(1, rf)
+        transmit.append({"name": name, "frame_id": 1, "dest": "000000000000ffff", "messages": [
+            rf[i:i + 8].hex() for i in range(0, len(rf), 8)], "frame_data": data.hex(),
+            "api1": xbee_frame(data, False).hex(), "api2": xbee_frame(data, True).hex()})
+    rx = xbee_receive(XBEE_SOURCE, a + escapes)
+    other = xbee_receive(0x0013A20040000002, b)
+    streams = []
+    for mode in (1, 2):
+        esc = mode == 2
+        good, good2 = xbee_frame(rx, esc), xbee_frame(other, esc)
+        # Damage is made of `other` (no 0x7E in it: in mode 1 a 0x7E in a bad frame's data may start false frames).
+        bad_sum = good2[:-1] + bytes([good2[-1] ^ 0x01])
+        assert b"\x7e" not in good2[1:] and bad_sum[-1] not in XBEE_SPECIAL
+        streams += [
+            _xbee_stream("one receive packet", mode, good, [(XBEE_SOURCE, [a, escapes])], {}),
+            _xbee_stream("two senders back to back", mode, good + good2,
+                         [(XBEE_SOURCE, [a, escapes]), (0x0013A20040000002, [b])], {}),
+            _xbee_stream("noise before a frame: one drop per run", mode, b"noise!" + good,
+                         [(XBEE_SOURCE, [a, escapes])], {"noise": 1}),
+            _xbee_stream("a wrong checksum, then the next frame", mode, bad_sum + good,
+                         [(XBEE_SOURCE, [a, escapes])], {"checksum": 1}),
+            _xbee_stream("a length of 0", mode, bytes.fromhex("7e0000ff") + good, [(XBEE_SOURCE, [a, escapes])],
+                         {"frame_length": 1}),
+            _xbee_stream("a length above 512", mode, bytes.fromhex("7e020190") + good,
+                         [(XBEE_SOURCE, [a, escapes])], {"frame_length": 1}),
+            _xbee_stream("a frame type a link does not use (0x95)", mode,
+                         xbee_frame(bytes.fromhex("95") + bytes(12), esc) + good,
+                         [(XBEE_SOURCE, [a, escapes])], {"unknown_type": 1}),
+            _xbee_stream("RF data that is not whole messages", mode,
+                         xbee_frame(xbee_receive(XBEE_SOURCE, a[:7]), esc), [], {"bad_length": 1}),
+            _xbee_stream("a receive packet too short for its header", mode, xbee_frame(bytes(range(0x90, 0x95)), esc),
+                         [], {"bad_length": 1}),
+            _xbee_stream("the module's own reports (TX status, modem status, AT response) are no drops", mode,
+                         xbee_frame(bytes.fromhex("8b01fffe000000"), esc) + xbee_frame(bytes.fromhex("8a00"), esc)
+                         + xbee_frame(bytes.fromhex("8801" "4e50" "00" "0100"), esc) + good,
+                         [(XBEE_SOURCE, [a, escapes])], {}),
+            _xbee_stream("the stream ends inside a frame (the line went quiet)", mode, good + good2[:9],
+                         [(XBEE_SOURCE, [a, escapes])], {"truncated": 1}),
+        ]
+    good2 = xbee_frame(rx, True)
+    streams += [
+        _xbee_stream("mode 2: a frame cut short by the next 0x7E", 2, good2[:12] + good2,
+                     [(XBEE_SOURCE, [a, escapes])], {"truncated": 1}),
+        _xbee_stream("mode 2: 0x7D before a byte it never escapes", 2, bytes.fromhex("7e00057d41") + good2,
+                     [(XBEE_SOURCE, [a, escapes])], {"escape": 1}),
+        _xbee_stream("mode 2: 0x11 left unescaped", 2, bytes.fromhex("7e0002231174") + good2,
+                     [(XBEE_SOURCE, [a, escapes])], {"escape": 1}),
+        _xbee_stream("mode 1: 0x7E, 0x7D, 0x11, 0x13 inside a frame are data", 1, xbee_frame(rx, False),
+                     [(XBEE_SOURCE, [a, escapes])], {}),
+        _xbee_stream("mode 1: a corrupted length claims 300 bytes; the frames inside them are still read", 1,
+                     bytes.fromhex("7e012c90") + xbee_frame(rx, False), [(XBEE_SOURCE, [a, escapes])],
+                     {"truncated": 1}),
+    ]
+    for case in streams:
+        assert _xbee_receive_model(bytes.fromhex(str(case["stream"])), case["api"] == 2) == (
+            case["frames"], case["drops"]), case["name"]
+    return {
+        "description": "XBee API frames (SPEC.md section 6.9): 0x7E | length (u16 BE) | frame data | checksum "
+                       "0xFF - (sum of frame data & 0xFF); API mode 2 escapes 0x7E 0x7D 0x11 0x13 after the 0x7E "
+                       "as 0x7D, byte ^ 0x20. `checksums`: Digi's worked examples. `transmit`: what a sender "
+                       "writes to its module for these messages (a Transmit Request 0x10, frame id 1, broadcast), "
+                       "in both modes. `messages_per_frame`: NP (the module's maximum RF payload) -> messages a "
+                       "frame carries. `streams`: what a module hands its host -> each Receive Packet's sender "
+                       "(64-bit source) and messages, in order, and drops by reason.",
+        "checksums": [
+            {"source": "Digi: AT Command NJ", "frame_data": "08014e4a", "api1": "7e000408014e4a5e"},
+            {"source": "Digi: Transmit Request 'TxData0A'", "frame_data": "10010013a200400a0127fffe0000"
+             + b"TxData0A".hex(), "api1": xbee_frame(bytes.fromhex("10010013a200400a0127fffe0000") + b"TxData0A",
+                                                      False).hex()},
+            {"source": "Digi: API mode 2 example", "frame_data": "2311", "api2": "7e0002237d31cb"},
+        ],
+        "max_frame_data": XBEE_MAX_FRAME_DATA,
+        "transmit": transmit,
+        "messages_per_frame": [{"np": np, "messages": max(1, np // 8)} for np in (5, 8, 64, 73, 84, 100, 256)],
+        "streams": streams,
+    }
+
+
+def _xbee_receive_model(stream: bytes, escaped: bool) -> tuple[list[dict[str, object]], dict[str, int]]:
+    """SPEC.md 6.9's receive procedure, step by step (confirms the hand-stated outcomes)."""
+    frames: list[dict[str, object]] = []
+    drops: dict[str, int] = {}
+    pos, counted = 0, False
+
+    def drop(reason: str) -> None:
+        drops[reason] = drops.get(reason, 0) + 1
+
+    while pos < len(stream):
+        start = stream.find(b"\x7e", pos)
+        if (len(stream) if start < 0 else start) > pos and not counted:
+            drop("noise")
+            counted = True
+        if start < 0:
+            break
+        body, i, verdict = bytearray(), start + 1, None
+        while verdict is None:
+            want = 2 if len(body) < 2 else (body[0] << 8 | body[1]) + 3
+            if len(body) == 2 and not 0 < want - 3 <= XBEE_MAX_FRAME_DATA:
+                verdict = "frame_length"
+            elif len(body) >= want:
+                verdict = "ok" if xbee_checksum(bytes(body[2:-1])) == body[-1] else "checksum"
+            elif i >= len(stream) or (escaped and stream[i] == 0x7E):
+                verdict = "truncated"
+            elif escaped and stream[i] == 0x7D:
+                if i + 1 >= len(stream):
+                    verdict = "truncated"
+                elif stream[i + 1] ^ 0x20 not in XBEE_SPECIAL:
+                    verdict = "escape"
+                else:
+                    body.append(stream[i + 1] ^ 0x20)
+                    i += 2
+            elif escaped and stream[i] in (0x11, 0x13):
+                verdict = "escape"
+            else:
+                body.append(stream[i])
+                i += 1
+        if verdict != "ok":
+            drop(str(verdict))
+            counted, pos = True, start + 1
+            continue
+        counted, pos = False, i
+        data = bytes(body[2:-1])
+        if data[0] in (0x88, 0x8A, 0x8B):
+            continue
+        if data[0] != 0x90:
+            drop("unknown_type")
+        elif len(data) < 12 or len(data) == 12 or (len(data) - 12) % 8:
+            drop("bad_length")
+        else:
+            rf = data[12:]
+            frames.append({"sender": data[1:9].hex(), "messages": [rf[k:k + 8].hex() for k in range(0, len(rf), 8)]})
+    return frames, drops
+
+
+# --------------------------------------------------------------------------
 # can_frames.json (the ID scheme is SPEC.md section 6.5; can.json from the CAN framing is the
 # reference for its drops, this file feeds the DBC and dissector tests)
 # --------------------------------------------------------------------------
@@ -821,6 +1009,7 @@ def main(argv: list[str]) -> int:
         "kilobot.json": kilobot_vectors(),
         "ohc.json": ohc_vectors(),
         "can_frames.json": can_vectors(),
+        "xbee.json": xbee_vectors(),
     }
     # The dialects' vectors live beside this script; -I leaves its folder off sys.path.
     sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -1,4 +1,5 @@
--- Wireshark dissector for vstig-hw virtual stigmergy messages on CAN (firmware_spec/SPEC.md 6.5).
+-- Wireshark dissector for vstig-hw virtual stigmergy messages on CAN (firmware_spec/SPEC.md 6.5) and in XBee API
+-- frames (6.9, at the end of this file).
 --
 --   wireshark -X lua_script:firmware_spec/wireshark/vstig.lua capture.pcap
 --   tshark -X lua_script:firmware_spec/wireshark/vstig.lua -r candump.log -T fields -e vstig.key
@@ -103,3 +104,119 @@ for id = BASE_11, BASE_11 + 0x1FF do
     can_table:add(id, vstig)
 end
 vstig:register_heuristic("can", heuristic)
+
+-- XBee API frames (SPEC.md 6.9), one per packet: what `vstig record` writes per line for an XBee link, turned into
+-- a pcap of link type USER0 (147), e.g. with text2pcap -l 147 (docs/how-to/xbee.md). API mode 2 frames are
+-- unescaped first (a frame whose length does not match its size as it stands). Receive Packets (0x90) and
+-- Transmit Requests (0x10) carry N messages each; the 64-bit source of a 0x90 is the sender (vstig.xbee_sender).
+
+local xbee = Proto("vstig_xbee", "XBee API frame (vstig-hw)")
+
+local frame_types = { [0x10] = "Transmit Request", [0x90] = "Receive Packet", [0x8B] = "Transmit Status",
+    [0x8A] = "Modem Status", [0x08] = "AT Command", [0x09] = "AT Command (queued)", [0x88] = "AT Command Response" }
+
+local xf = xbee.fields
+xf.escaped = ProtoField.bool("vstig_xbee.escaped", "API mode 2 (escaped)")
+xf.length = ProtoField.uint16("vstig_xbee.length", "Length", base.DEC)
+xf.frame_type = ProtoField.uint8("vstig_xbee.frame_type", "Frame type", base.HEX, frame_types)
+xf.frame_id = ProtoField.uint8("vstig_xbee.frame_id", "Frame id", base.DEC)
+xf.dest = ProtoField.uint64("vstig_xbee.dest", "64-bit destination", base.HEX)
+xf.source = ProtoField.uint64("vstig_xbee.source", "64-bit source", base.HEX)
+xf.options = ProtoField.uint8("vstig_xbee.options", "Options", base.HEX)
+xf.checksum = ProtoField.uint8("vstig_xbee.checksum", "Checksum", base.HEX)
+f.xbee_sender = ProtoField.uint64("vstig.xbee_sender", "Sender (XBee 64-bit source)", base.HEX)
+
+local e_sum = ProtoExpert.new("vstig_xbee.checksum_bad", "frame data and checksum do not sum to 0xFF (dropped)",
+    expert.group.CHECKSUM, expert.severity.WARN)
+local e_xlen = ProtoExpert.new("vstig_xbee.bad_length", "RF data is not a whole number of 8-byte messages (dropped)",
+    expert.group.MALFORMED, expert.severity.WARN)
+local e_frame = ProtoExpert.new("vstig_xbee.not_a_frame", "not one whole API frame (dropped)",
+    expert.group.MALFORMED, expert.severity.WARN)
+xbee.experts = { e_sum, e_xlen, e_frame }
+
+-- The frame with mode 2's escapes undone, as a new tvb; nil when it holds a bad escape.
+local function unescaped(tvb)
+    local bytes = ByteArray.new()
+    bytes:append(tvb(0, 1):bytes())
+    local i, n = 1, tvb:len()
+    while i < n do
+        local b = tvb(i, 1):uint()
+        if b == 0x7D then
+            if i + 1 >= n then return nil end
+            bytes:append(ByteArray.new(string.format("%02x", bit.bxor(tvb(i + 1, 1):uint(), 0x20))))
+            i = i + 2
+        else
+            bytes:append(tvb(i, 1):bytes())
+            i = i + 1
+        end
+    end
+    return bytes:tvb("Unescaped frame")
+end
+
+-- The messages in the RF data from `offset` of a frame's data; a summary for the Info column.
+local function messages(data, offset, root, sender)
+    local size = data:len() - offset
+    if size == 0 or size % 8 ~= 0 then
+        root:add_proto_expert_info(e_xlen)
+        return "bad length " .. size
+    end
+    local info = {}
+    for i = 0, size / 8 - 1 do
+        local m = data(offset + i * 8, 8)
+        local head = m(0, 2):uint()
+        local op, key = bit.rshift(head, 15), bit.band(head, 0x7FFF)
+        local value, ts, robot = m(2, 2):uint(), m(4, 2):uint(), m(6, 2):uint()
+        local sub = root:add(vstig, m, string.format("%s key=%d value=%d ts=%d robot=%d", ops[op], key, value, ts, robot))
+        if sender then sub:add(f.xbee_sender, sender):set_generated() end
+        sub:add(f.op, m(0, 1), op)
+        sub:add(f.key, m(0, 2), key)
+        sub:add(f.value, m(2, 2))
+        sub:add(f.timestamp, m(4, 2))
+        sub:add(f.robot, m(6, 2))
+        info[#info + 1] = string.format("%s k=%d v=%d ts=%d r=%d", ops[op], key, value, ts, robot)
+    end
+    return table.concat(info, "; ")
+end
+
+function xbee.dissector(tvb, pinfo, tree)
+    if tvb:len() < 5 or tvb(0, 1):uint() ~= 0x7E then return 0 end
+    pinfo.cols.protocol = "VSTIG-XBEE"
+    local root = tree:add(xbee, tvb())
+    local frame, escaped = tvb, false
+    if tvb(1, 2):uint() + 4 ~= tvb:len() then
+        frame, escaped = unescaped(tvb), true
+        if frame == nil or frame:len() < 5 or frame(1, 2):uint() + 4 ~= frame:len() then
+            root:add_proto_expert_info(e_frame)
+            return tvb:len()
+        end
+    end
+    root:add(xf.escaped, escaped):set_generated()
+    local length = frame(1, 2):uint()
+    root:add(xf.length, frame(1, 2))
+    local data = frame(3, length)
+    local kind = data(0, 1):uint()
+    root:add(xf.frame_type, data(0, 1))
+    local sum = 0
+    for i = 0, length do sum = sum + frame(3 + i, 1):uint() end
+    root:add(xf.checksum, frame(3 + length, 1))
+    if bit.band(sum, 0xFF) ~= 0xFF then
+        root:add_proto_expert_info(e_sum)
+        pinfo.cols.info = "XBee frame: bad checksum"
+        return tvb:len()
+    end
+    if kind == 0x90 and length >= 12 then
+        local source = data(1, 8):uint64()
+        root:add(xf.source, data(1, 8))
+        root:add(xf.options, data(11, 1))
+        pinfo.cols.info = string.format("XBee from %s: %s", source:tohex(), messages(data, 12, root, source))
+    elseif kind == 0x10 and length >= 14 then
+        root:add(xf.frame_id, data(1, 1))
+        root:add(xf.dest, data(2, 8))
+        pinfo.cols.info = string.format("XBee to %s: %s", data(2, 8):uint64():tohex(), messages(data, 14, root, nil))
+    else
+        pinfo.cols.info = string.format("XBee %s", frame_types[kind] or string.format("frame type 0x%02X", kind))
+    end
+    return tvb:len()
+end
+
+DissectorTable.get("wtap_encap"):add(wtap.USER0, xbee)

@@ -6,14 +6,10 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
-from peers import STARTED
+from peers import kill_what_tests_left_running
 
 
 @pytest.fixture(autouse=True)
 def _no_process_outlives_its_test() -> Iterator[None]:
     yield
-    while STARTED:
-        process = STARTED.pop()
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
+    kill_what_tests_left_running()

@@ -25,6 +25,7 @@ import can
 from robots import PtyRobot, Robot
 
 import vstig_hw
+import vstig_hw.native
 from vstig_cli.main import run
 from vstig_hw.framing.can import CanFraming, CanIdScheme
 from vstig_hw.wire import Message
@@ -110,6 +111,7 @@ def session(folder: Path) -> dict[str, Any]:
         "runs": runs,
         "radio": {str(key): radio.value(key) for key in (1, 2, 3)},
         "package": vstig_hw.__file__,
+        "pure": vstig_hw.native.why_pure,  # "": the compiled data path ran
         "imported": sorted(name for name in EXTRAS_LIBRARIES if name in sys.modules),
     }
 

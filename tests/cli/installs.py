@@ -9,6 +9,7 @@ and cache are the machine's.
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -18,9 +19,10 @@ import venv
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-# What the wheel is built from. Copied to a clean folder first: an old build/ in the tree
-# can put files that no longer exist into a wheel.
-SOURCES = ("pyproject.toml", "README.md", "vstig_hw", "cli")
+# What the wheel and the sdist are built from (setup.py builds the compiled data path from libvstig in
+# firmware_spec/). Copied to a clean folder first: an old build/ in the tree can put files that no longer exist
+# into a wheel, and a compiled module built in place would go in as it is.
+SOURCES = ("pyproject.toml", "setup.py", "MANIFEST.in", "README.md", "vstig_hw", "cli", "firmware_spec")
 PIP_TIMEOUT = 600.0
 
 
@@ -30,9 +32,10 @@ def core_dependencies() -> list[str]:
     return list(project["dependencies"])
 
 
-def _pip(*args: str) -> subprocess.CompletedProcess[str]:
+def _pip(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     done = subprocess.run([sys.executable, "-m", "pip", "--disable-pip-version-check", *args],
-                          capture_output=True, text=True, timeout=PIP_TIMEOUT, check=False)
+                          capture_output=True, text=True, timeout=PIP_TIMEOUT, check=False,
+                          env=None if env is None else {**os.environ, **env})
     if done.returncode:
         raise RuntimeError(f"pip {' '.join(args)} failed:\n{done.stdout[-2000:]}{done.stderr[-4000:]}")
     return done
@@ -42,7 +45,8 @@ def clean_copy(source: Path, names: tuple[str, ...] = SOURCES) -> Path:
     """The files and folders `names` of this tree copied into `source`, without bytecode or build folders."""
     for name in names:
         if (ROOT / name).is_dir():
-            shutil.copytree(ROOT / name, source / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "build"))
+            shutil.copytree(ROOT / name, source / name,
+                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "build", "*.so"))
         else:
             source.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / name, source / name)
@@ -70,10 +74,12 @@ def fresh_venv(path: Path) -> Path:
     return path / "bin" / "python"
 
 
-def install(python: Path, *requirements: str, pip_args: tuple[str, ...] = ()) -> float:
-    """pip-install `requirements` into the venv of `python`; returns the seconds it took."""
+def install(python: Path, *requirements: str, pip_args: tuple[str, ...] = (),
+            env: dict[str, str] | None = None) -> float:
+    """pip-install `requirements` into the venv of `python` (with `env` added to the environment: CC=false, no
+    compiler); returns the seconds it took."""
     start = time.perf_counter()
-    _pip("--python", str(python), "install", "--quiet", *pip_args, *requirements)
+    _pip("--python", str(python), "install", "--quiet", *pip_args, *requirements, env=env)
     return time.perf_counter() - start
 
 

@@ -31,6 +31,7 @@ import socket
 import struct
 import sys
 import time
+from collections.abc import Iterator
 
 PUT, QUERY = 2, 3
 STIG, KEY = 1, b"leader"
@@ -104,6 +105,27 @@ def parse(data: bytes) -> tuple[int, int, object, object, int, int]:
     if pos + 4 != len(data):
         raise ValueError("length")
     return data[0], stig, key, value, ts, robot
+
+
+def parse_or_say_bad(data: bytes) -> tuple[int, int, object, object, int, int] | None:
+    """`parse`, or None after printing `bad HEX` for a vstig message that does not parse to its exact end."""
+    try:
+        return parse(data)
+    except (ValueError, struct.error, IndexError):
+        print(f"bad {data.hex()}", flush=True)
+        return None
+
+
+def messages_in(frame: bytes, pos: int, end: int) -> Iterator[bytes]:
+    """The messages of a Buzz frame from `pos`: [u16 length, little-endian][message]..., until a zero length or less
+    than a length is left before `end` (buzz_utility.c:413-439)."""
+    while end - pos > 2:
+        (length,) = struct.unpack_from("<H", frame, pos)
+        pos += 2
+        if length == 0 or length > end - pos:
+            return
+        yield frame[pos:pos + length]
+        pos += length
 
 
 class Robot:
@@ -189,20 +211,12 @@ def main() -> int:
             if time.monotonic() < hearing_from:
                 continue
             (sender,) = struct.unpack_from("<H", frame)
-            pos = 2
-            while size - pos > 2:
-                (length,) = struct.unpack_from("<H", frame, pos)
-                pos += 2
-                if length == 0 or length > size - pos:
-                    break
-                data = frame[pos:pos + length]
-                pos += length
+            for data in messages_in(frame, 2, size):
                 if data[0] in (PUT, QUERY):
-                    try:
-                        kind, stig, key, value, ts, writer = parse(data)
-                    except (ValueError, struct.error, IndexError):
-                        print(f"bad {data.hex()}", flush=True)
+                    parsed = parse_or_say_bad(data)
+                    if parsed is None:
                         continue
+                    kind, stig, key, value, ts, writer = parsed
                     if trace:
                         name = key.decode() if isinstance(key, bytes) else key
                         print(f"heard {sender} {'put' if kind == PUT else 'query'} {name} {show(value)} {ts} {writer}",

@@ -48,6 +48,34 @@ class PtyPeer:
         os.close(self.slave)
 
 
+class Listener:
+    """The far end of a cobs8 radio that does read: the time each message (by key) first arrived, and how many
+    messages arrived in all."""
+
+    def __init__(self, radio: PtyPeer) -> None:
+        from vstig_hw.framing import make_serial_framing
+
+        self.radio = radio
+        self.arrived: dict[int, float] = {}
+        self.heard = 0
+        self._framing = make_serial_framing("cobs8")
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        while not self._stop.is_set():
+            data = self.radio.read(0.05)
+            stamp = time.perf_counter()
+            for msg in self._framing.feed(data) if data else ():
+                self.heard += 1
+                self.arrived.setdefault(msg.key, stamp)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
 class SlcanAdapter(PtyPeer):
     """The adapter side of slcan: frames the driver sends land in `sent`; `inject` puts frames on its bus."""
 
@@ -55,13 +83,24 @@ class SlcanAdapter(PtyPeer):
         super().__init__()
         self.sent: list[can.Message] = []
         self.commands: list[str] = []
+        self.listening = threading.Event()  # cleared: the adapter reads nothing (a hung adapter), still sends
+        self.listening.set()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._serve, daemon=True)
         self._thread.start()
 
+    def deafen(self) -> int:
+        """Stop reading, and fill the line to us until the host's writes would block, as a hung USB adapter
+        leaves it; the bytes written to fill it."""
+        self.listening.clear()
+        return fill(self.path)
+
     def _serve(self) -> None:
         buffer = b""
         while not self._stop.is_set():
+            if not self.listening.is_set():
+                time.sleep(0.02)
+                continue
             buffer += self.read(0.02)
             *lines, buffer = buffer.split(b"\r")
             for raw in lines:
@@ -88,7 +127,32 @@ class SlcanAdapter(PtyPeer):
         super().close()
 
 
+def fill(path: str) -> int:
+    """Write to the terminal at `path` (its slave side) until it takes no more: what the host writes after this
+    waits until the far end reads. The bytes written."""
+    fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK | os.O_NOCTTY)
+    written = 0
+    try:
+        while True:
+            try:
+                written += os.write(fd, b"x" * 4096)
+            except BlockingIOError:  # the line discipline moves what it holds on: full only once it stays so
+                if not select.select([], [fd], [], 0.3)[1]:
+                    return written
+    finally:
+        os.close(fd)
+
+
 STARTED: list[subprocess.Popen[str]] = []  # what start_vstig started: conftest kills what a test left running
+
+
+def kill_what_tests_left_running() -> None:
+    """Kill any `vstig` a test started and left running (the conftests call it after every test)."""
+    while STARTED:
+        process = STARTED.pop()
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
 
 
 def _as_from_a_terminal() -> None:

@@ -69,6 +69,7 @@ def test_the_command_line_overrides_the_file_and_print_config_reads_back(tmp_pat
     ("[bridge]\nraw = true", "lab.toml:2: 'bridge' is not an option"),
     ("raw = [true]", "lab.toml:2: raw: a list is not a value this option takes"),
     ("tick = = 1", "lab.toml: not valid TOML: Invalid value (at line 2"),
+    ("trust = " + "[" * 100_000 + "]" * 100_000, "lab.toml: arrays or tables nested too deeply to read"),
 ])
 def test_a_bad_value_is_refused_naming_the_file_line_and_option(tmp_path: Path, body: str, said: str) -> None:
     config = _write(tmp_path / "lab.toml", f'links = ["serial:/dev/ttyUSB0"]\n{body}\n')

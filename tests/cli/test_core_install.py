@@ -1,5 +1,9 @@
 """The core install alone (the wheel, no extras, a fresh venv) runs the gateway, and loads no extra's library.
 
+The wheel carries the compiled data path (this machine compiles): the session runs on it, and the install stays
+within its size goal (25 MB, `make bench`'s install group). The sdist installs where nothing compiles, pure
+(tests/cli/test_sdist.py).
+
 A lab's gateway PC installs `pip install vstig-hw`: bridge, sniff, record, replay,
 decode, put and get must work there against real robots' media (a pty radio,
 python-can's virtual bus), and a command that needs an extra must say which in
@@ -19,20 +23,42 @@ from typing import Any
 import click
 import pytest
 from core_session import EXTRAS_LIBRARIES
-from installs import build_wheel, fresh_venv, install, installed_modules, site_packages
+from installs import build_wheel, fresh_venv, install, installed_bytes, installed_modules, site_packages
 
+import vstig_hw.native
 from vstig_cli.main import cli
 from vstig_hw.capture.decoded import FAST_PATH_BYTES
 
 SESSION = Path(__file__).with_name("core_session.py")
+CORE_MB = 25  # the core install's size goal (benchmarks/bench_install.py)
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build_wheel(tmp_path_factory.mktemp("wheel"))
 
 
 @pytest.fixture(scope="module")  # a wheel built and installed once: the tests that use it are slow
-def core_python(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("core-install")
-    python = fresh_venv(folder / "venv")
-    install(python, str(build_wheel(folder)))
+def core_python(wheel: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    python = fresh_venv(tmp_path_factory.mktemp("core-install") / "venv")
+    install(python, str(wheel))
     return python
+
+
+@pytest.mark.slow
+def test_the_wheel_is_this_platforms_and_carries_the_compiled_data_path(wheel: Path) -> None:
+    import zipfile
+
+    assert wheel.name.endswith(f"-cp{sys.version_info.major}{sys.version_info.minor}-"
+                               f"cp{sys.version_info.major}{sys.version_info.minor}-linux_x86_64.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    assert [n for n in names if n.startswith("vstig_hw/_vstig.") and n.endswith(".so")]
+    assert not [n for n in names if n.endswith(".c")]  # the sdist carries the sources, not the wheel
+
+
+@pytest.mark.slow
+def test_the_core_install_stays_within_its_size_goal(core_python: Path) -> None:
+    assert installed_bytes(core_python) <= CORE_MB * 1e6
 
 
 def _session(python: Path, folder: Path) -> dict[str, Any]:
@@ -73,6 +99,7 @@ def test_the_gateway_commands_run_and_load_no_extras_library(venv: str, request:
     assert result["radio"]["3"] == 4242
     assert runs["get"]["out"] == "key=2 value=777 timestamp=1 robot=21\n"
     assert result["imported"] == []
+    assert result["pure"] == ("" if venv == "core" else vstig_hw.native.why_pure)  # the wheel's compiled path ran
 
 
 @pytest.mark.slow

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -25,6 +26,18 @@ def test_installed_console_script_runs() -> None:
     assert vstig.exists(), f"the vstig console script is not installed beside {sys.executable}"
     done = subprocess.run([vstig, "--version"], capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 0 and __version__ in done.stdout
+
+
+def test_version_says_which_data_path_runs_and_vstig_pure_turns_the_compiled_one_off() -> None:
+    from vstig_hw.native import why_pure
+
+    vstig = Path(sys.executable).with_name("vstig")
+    done = subprocess.run([vstig, "--version"], capture_output=True, text=True, timeout=60, check=False)
+    said = "compiled" if not why_pure else f"pure Python: {why_pure}"
+    assert done.stdout == f"vstig {__version__} (data path: {said})\n"
+    pure = subprocess.run([vstig, "--version"], capture_output=True, text=True, timeout=60, check=False,
+                          env={**os.environ, "VSTIG_PURE": "1"})
+    assert pure.stdout == f"vstig {__version__} (data path: pure Python: VSTIG_PURE=1)\n"
 
 
 def test_cli_folder_is_not_installed_as_top_level_cli() -> None:

@@ -155,3 +155,21 @@ def test_an_output_folder_that_is_a_link_is_fine(tmp_path: Path, log: Path) -> N
     code, output = _vstig("decode", str(log), "-o", str(tmp_path / "linked" / "copy.log"))
     assert code == 0, output
     assert len(list(read_capture(str(real / "copy.log")))) == 3
+
+
+@pytest.mark.parametrize("bits", [0o4755, 0o2755, 0o6755])
+def test_a_file_replaced_never_keeps_its_setuid_or_setgid_bit(tmp_path: Path, log: Path, bits: int) -> None:
+    """What replaces it holds bytes robots sent: with the bits, anyone could run them as its owner (root keeps
+    them when it writes; Linux clears them for everyone else)."""
+    import stat
+
+    from peers import run_vstig
+
+    out = tmp_path / "run.log"  # a candump log, as robots' frames are kept
+    out.write_bytes(PRECIOUS)
+    out.chmod(bits)
+    done = run_vstig("decode", str(log), "-o", str(out), "--overwrite")
+    assert done.returncode == 0, done.stderr
+    mode = out.stat().st_mode
+    assert not mode & (stat.S_ISUID | stat.S_ISGID) and stat.S_IMODE(mode) == 0o755  # the rest as it was
+    assert out.read_bytes() != PRECIOUS

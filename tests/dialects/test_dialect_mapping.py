@@ -218,3 +218,19 @@ def test_a_wrapped_timestamp_is_not_handed_to_buzz() -> None:
     assert buzz.drops["buzz_wrap"] == 1
     assert buzz.from_ours(Message(Op.PUT, 1, 6, 65531, 200)) is not None
     assert buzz.from_ours(Message(Op.GET, 1, 5, 40000, 200)) is not None  # old, not wrapped: Buzz answers it
+
+
+@pytest.mark.parametrize("nested", ["[" * 100_000 + "]" * 100_000, "{ a = " * 100_000 + "1" + " }" * 100_000])
+def test_a_deployment_nested_too_deeply_is_named_not_a_recursion_error(tmp_path: Path, nested: str) -> None:
+    import subprocess
+    import sys
+
+    deployment = tmp_path / "lab.toml"
+    deployment.write_text(f"[keys]\nx = {nested}\n")
+    with pytest.raises(DeploymentError, match=f"^{deployment}: arrays or tables nested too deeply to read$"):
+        load_deployment(deployment)
+    vstig = str(Path(sys.executable).with_name("vstig"))  # and from the command line: one line, a usage error
+    done = subprocess.run([vstig, "sniff", f"serial:/dev/ptmx?framing=kilobot&dialect=bittybuzz&deployment="
+                           f"{deployment}", "--for", "1"], capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 2 and done.stderr.strip().splitlines()[-1] == (
+        f"Error: serial:ptmx: {deployment}: arrays or tables nested too deeply to read"), done.stderr

@@ -33,10 +33,12 @@ from vstig_hw.counters import Counters
 from vstig_hw.dialects.bittybuzz import BbzDecodeError, decode_bittybuzz
 from vstig_hw.dialects.buzz import BuzzDecodeError, decode_buzz
 from vstig_hw.dialects.buzz_packets import xbee_packet
-from vstig_hw.dialects.framing import BittyBuzzKilobotFraming, BuzzKh4Framing, RosBuzzDecoder
+from vstig_hw.dialects.framing import BittyBuzzKilobotFraming, BuzzKh4Framing, RosBuzzDecoder, XbeeMavFraming
 from vstig_hw.dialects.mapping import DeploymentError, parse_deployment
+from vstig_hw.dialects.xbeemav import fragment_packets
 from vstig_hw.framing import TransmitOnlyError, make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.framing.xbee import api_frame, receive_packet
 from vstig_hw.gateway.guard import Guard, IdSet, LinkPolicy
 from vstig_hw.links import examples
 from vstig_hw.links import parse as parse_spec
@@ -76,6 +78,38 @@ def _serial(name: str) -> Target:
                 framing.tick()
     target.__name__ = name.replace("-", "_")
     return target
+
+
+_STREAM_REASONS = {"noise", "escape", "frame_length", "truncated", "checksum"}
+
+
+def xbee(data: bytes) -> None:
+    """A module's byte stream (API mode 1 or 2, by the first byte's low bit) cut into reads: the transport's
+    units are whole frames, so the framing finds nothing wrong with their framing, only with their contents."""
+    from vstig_hw.transports.xbee import XBeeTransport
+
+    api = 1 + (data[0] & 1) if data else 1
+    transport = XBeeTransport("unopened", api=api)
+    framing = make_serial_framing("xbee-api2" if api == 2 else "xbee")
+    units = [unit for chunk in _reads(data) for unit in transport.cut(chunk)] + transport.quiet()
+    for unit in units:
+        messages = framing.feed(unit)
+        assert all(type(m) is Message for m in messages)
+        sender = framing.sender_of(unit)  # type: ignore[attr-defined]
+        assert sender is None or 0 <= sender < 1 << 64
+    assert not _STREAM_REASONS & {name for name, n in framing.drops.items() if n}, framing.drops
+
+
+def xbeemav(data: bytes) -> None:
+    """XbeeMav packets from a few modules (the first byte of each 40-byte piece picks the module), each in a
+    good Receive Packet, with a tick now and then: reassembly stays bounded, nothing raises."""
+    framing = XbeeMavFraming(_DEPLOYMENT)
+    for i in range(0, len(data), 40):
+        piece = data[i:i + 40]
+        framing.feed(api_frame(receive_packet(0x0013A200_00000000 | piece[0] % 3, piece[1:])))
+        if piece[0] & 0x80:
+            framing.tick()
+        assert framing.reassembler.pending <= 8
 
 
 def kilobot_ohc(data: bytes) -> None:
@@ -348,7 +382,21 @@ def seeds() -> dict[str, list[bytes]]:
                           for frame in BuzzKh4Framing(_DEPLOYMENT, frame_size=64).encode(Message(0, 1, 5, 3, 7))]
                          + [payload[:9] for payload in _bbz_payloads()],
         "deployment": [_DEPLOYMENT_TEXT.encode()],
+        "xbee": [bytes([n]) + b"".join(api_frame(receive_packet(0x0013A20040A1B2C3, encode(m)), n % 2 == 1)
+                                       for m in msgs) for n in (0, 3, 14)],
+        "xbeemav": _xbeemav_seeds(),
     }
+
+
+def _xbeemav_seeds() -> list[bytes]:
+    """S packets, then F fragments and a P ping, each in a 40-byte piece: a module byte, then RF data."""
+    words = [2, 0, 0, 0, 0] + [int.from_bytes(b.ljust(8, b"\0")[i:i + 8], "little")
+                               for b in RosBuzzDecoder(_DEPLOYMENT, robot_id=3).encode_batch([Message(0, 1, 5, 3, 7)])
+                               for i in range(0, len(b), 8)]
+    serialized = bytes((3, 1)) + b"".join(w.to_bytes(8, "big") for w in words)
+    pieces = [b"S" + serialized[:38]]
+    pieces += [f[:39] for f in fragment_packets(serialized + bytes(300), 1, 3)] + [b"P\x01\x03\x02"]
+    return [b"".join(bytes([k]) + p.ljust(39, b"\0") for k, p in enumerate(pieces))]
 
 
 TARGETS: dict[str, Target] = {
@@ -369,4 +417,6 @@ TARGETS: dict[str, Target] = {
     "buzz-framings": buzz_framings,
     "buzz-messages": buzz_messages,
     "deployment": deployment,
+    "xbee": xbee,
+    "xbeemav": xbeemav,
 }

@@ -313,7 +313,7 @@ def test_a_raising_transport_costs_its_batch_not_the_loop() -> None:
     link: Link[can.Message] = Link("broken", BrokenTransport(), can_framing_for(1))
     outlet = Outlet(link, budget=10, period=1.0)
     for key in range(4):
-        outlet.push(Message(Op.PUT, key, key, 1, 1))
+        outlet.push([Message(Op.PUT, key, key, 1, 1)])
     assert outlet.flush(0.0) is None  # everything left the queue, none of it the device
     outlet.close()  # the link's writer thread met the exploding device
     assert link.counters["drop_write_error"] == 4 and link.counters["out"] == 0 and not len(outlet)

@@ -8,27 +8,13 @@ from C. The rows pinned by vector tests (tests/spec) run against C through the v
 
 from __future__ import annotations
 
-import importlib.util
 import re
 from collections.abc import Callable
-from pathlib import Path
 from types import ModuleType
 
 import pytest
+from buzz_rows import ENGINE_TESTS, PINNED, ROOT, with_twins
 from clib import COutQueue, CStigmergy, Lib
-
-ROOT = Path(__file__).resolve().parents[2]
-_TEST = re.compile(r"`(tests/[\w/]+\.py)::(\w+)`")
-
-
-def _pinned() -> list[tuple[str, str]]:
-    text = (ROOT / "firmware_spec" / "DECISIONS.md").read_text(encoding="utf-8")
-    section = text.split("## Differences from Buzz", 1)[1].split("\n## ", 1)[0]
-    return sorted(set(_TEST.findall(section)))
-
-
-PINNED = _pinned()
-ENGINE_TESTS = [(path, name) for path, name in PINNED if path.startswith("tests/unit/")]
 
 
 def test_every_row_runs_against_libvstig() -> None:
@@ -44,15 +30,7 @@ def test_every_row_runs_against_libvstig() -> None:
 
 
 def _with_libvstig(path: str, lib: Lib) -> ModuleType:
-    spec = importlib.util.spec_from_file_location(f"libvstig_twin_{Path(path).stem}", ROOT / path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    if hasattr(module, "Stigmergy"):
-        module.Stigmergy = CStigmergy.on(lib)  # type: ignore[attr-defined]
-    if hasattr(module, "OutQueue"):
-        module.OutQueue = COutQueue.on(lib)  # type: ignore[attr-defined]
-    return module
+    return with_twins(path, "libvstig_twin_", Stigmergy=CStigmergy.on(lib), OutQueue=COutQueue.on(lib))
 
 
 @pytest.mark.parametrize(("path", "name"), ENGINE_TESTS, ids=[name for _, name in ENGINE_TESTS])

@@ -145,7 +145,8 @@ def test_a_blabbermouth_spec() -> None:
 @pytest.mark.parametrize(("spec", "says"), [
     ("serial:/dev/ttyUSB0?framing=kilobot&dialect=bittybuzz", "needs deployment"),
     ("serial:/dev/ttyUSB0?framing=cobs8&dialect=bittybuzz&deployment=x.toml", "framing=kilobot"),
-    ("serial:/dev/ttyUSB0?framing=kilobot&dialect=buzz&deployment=x.toml", "dialect='buzz'"),
+    ("serial:/dev/ttyUSB0?framing=kilobot&dialect=lua&deployment=x.toml", "dialect='lua'"),
+    ("serial:/dev/ttyUSB0?framing=kilobot&dialect=buzz&deployment=x.toml", "XbeeMav's packets on XBee radios"),
     ("serial:/dev/ttyUSB0?framing=kilobot&deployment=x.toml", "goes with dialect"),
 ])
 def test_bad_bittybuzz_specs_say_what_is_wrong(spec: str, says: str) -> None:

@@ -76,7 +76,8 @@ def test_every_scheme_names_a_medium_with_a_parser_and_help(scheme: str) -> None
 
 
 def test_help_text_lists_every_kind_once_in_the_order_of_the_registry() -> None:
-    assert list(examples()) == ["can", "serial", "kilobot-ohc", "bittybuzz", "blabbermouth", "zenoh", "ros2"]
+    assert list(examples()) == ["can", "serial", "kilobot-ohc", "bittybuzz", "xbee", "rosbuzz", "blabbermouth", "zenoh",
+                                "ros2"]
     assert list(notes()) == list(examples())
     assert grammar()[0].startswith("can:") and grammar()[-1].startswith("ros2:")
 

@@ -14,7 +14,15 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vstig_hw.extras import missing
-from vstig_hw.framing.ros2 import Ros2Framing, Ros2Sample, cdr_message, message_of_cdr, ros_name
+from vstig_hw.framing.ros2 import (
+    Ros2Framing,
+    Ros2Sample,
+    cdr_message,
+    message_of_cdr,
+    ros_name,
+    sender_of_wire,
+    wire_sender,
+)
 from vstig_hw.links import parse
 from vstig_hw.links.ros2 import Ros2Spec
 from vstig_hw.wire import Message, Op
@@ -94,17 +102,21 @@ def types() -> Any:
 
 @ros2
 @given(op=st.sampled_from(Op), key=st.integers(0, 0x7FFF), value=st.integers(0, 0xFFFF),
-       timestamp=st.integers(0, 0xFFFF), robot=st.integers(0, 0xFFFF), sender=st.none() | st.integers(0, 0xFFFF))
+       timestamp=st.integers(0, 0xFFFF), robot=st.integers(0, 0xFFFF),
+       sender=st.none() | st.integers(0, 0xFFFF) | st.integers(0, (1 << 64) - 2))  # CAN ids; XBee addresses
 def test_our_cdr_is_what_rclpy_serializes_and_reads_back(types: Any, op: Op, key: int, value: int, timestamp: int,
                                                          robot: int, sender: int | None) -> None:
+    """Every sender from CAN ids to 64-bit XBee addresses (all ones is the broadcast address, never a sender: as
+    -1 on the wire, it would read back as none)."""
     from rclpy.serialization import deserialize_message, serialize_message
 
     message = Message(op, key, value, timestamp, robot)
     theirs = types.msg.Message(op=int(op), key=key, value=value, timestamp=timestamp, robot=robot,
-                               sender=-1 if sender is None else sender)
+                               sender=wire_sender(sender))
     ours = cdr_message(message, sender)
     assert deserialize_message(ours, types.msg.Message) == theirs
-    assert message_of_cdr(serialize_message(theirs)) == (message, -1 if sender is None else sender)
+    decoded = message_of_cdr(serialize_message(theirs))
+    assert decoded is not None and decoded[0] == message and sender_of_wire(decoded[1]) == sender
 
 
 @ros2

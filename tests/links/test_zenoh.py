@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -93,61 +95,6 @@ def test_by_default_it_listens_on_loopback_only_and_does_not_scout() -> None:
     assert config.get_json("scouting/multicast/enabled") == "false"
     assert config.get_json("mode") == '"peer"'
     assert exposure(config) is None
-
-
-def test_listening_beyond_loopback_or_scouting_without_auth_is_an_exposure() -> None:
-    assert exposure(zenoh_config(parse("zenoh:lab?listen=tcp/0.0.0.0:7447"))) == "listens on tcp/0.0.0.0:7447"
-    assert exposure(zenoh_config(parse("zenoh:lab?scout=1"))) == "scouts the LAN by multicast"
-    assert exposure(zenoh_config(parse("zenoh:lab?listen=tcp/127.0.0.1:7447,unixsock-stream//tmp/z"))) is None
-
-
-OPEN_DESPITE_AUTH_SETTINGS = {  # each lets a plain session in: mutual TLS covers TLS links only; a key size is no key
-    "mtls-on-tcp": "{ transport: { link: { tls: { enable_mtls: true } } } }",
-    "key-size-only": "{ transport: { auth: { pubkey: { key_size: 512 } } } }",
-}
-
-
-@pytest.mark.parametrize("name", sorted(OPEN_DESPITE_AUTH_SETTINGS))
-def test_auth_settings_that_let_plain_sessions_in_are_an_exposure_and_they_do_let_one_in(
-        name: str, tmp_path: Path) -> None:
-    import json
-
-    import zenoh
-
-    from vstig_hw.links.zenoh import _free_loopback_port
-
-    file = tmp_path / f"{name}.json5"
-    file.write_text(OPEN_DESPITE_AUTH_SETTINGS[name])
-    assert exposure(zenoh_config(parse(f"zenoh:lab?config={file}&listen=tcp/0.0.0.0:7447"))) \
-        == "listens on tcp/0.0.0.0:7447"
-    endpoint = f"tcp/127.0.0.1:{_free_loopback_port()}"  # the same settings on loopback, to try them
-    gateway = parse(f"zenoh:lab?config={file}&listen={endpoint}").build(robot_id=201)
-    gateway.open()
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    intruder = zenoh.open(config)
-    try:
-        def injected() -> bool:
-            intruder.put("vstig/lab/0/66", encode(MESSAGES[0]))
-            return any(h.message == MESSAGES[0] for h in gateway.receive(0.2))
-
-        _until(injected)
-    finally:
-        intruder.close()  # type: ignore[no-untyped-call]
-        gateway.close()
-
-
-def test_auth_that_every_peer_must_pass_is_not_an_exposure(tmp_path: Path) -> None:
-    for name, text in (("known-keys", "{ transport: { auth: { pubkey: { known_keys_file: 'k.pem' } } } }"),
-                       ("mtls-on-tls", "{ transport: { link: { tls: { enable_mtls: true } } } }")):
-        file = tmp_path / f"{name}.json5"
-        file.write_text(text)
-        assert exposure(zenoh_config(parse(f"zenoh:lab?config={file}&listen=tls/0.0.0.0:7447"))) is None, name
-    file = tmp_path / "mtls-scouting.json5"
-    file.write_text("{ transport: { link: { tls: { enable_mtls: true } } } }")
-    assert exposure(zenoh_config(parse(f"zenoh:lab?config={file}&listen=tls/0.0.0.0:7447&scout=1"))) \
-        == "scouts the LAN by multicast"  # scouting may still reach peers over plain TCP
 
 
 def test_a_config_file_passes_through_and_the_spec_overrides_only_what_it_names(tmp_path: Path) -> None:
@@ -427,9 +374,26 @@ def test_a_client_opened_before_its_router_joins_when_the_router_comes_up() -> N
         router.close()  # type: ignore[attr-defined]
 
 
-def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_others_keep_theirs() -> None:
+def _honest_gateway_and_stock_session(gateway: Link[Any]) -> tuple[Link[Any], Any]:
+    """Beside an open zenoh link: another gateway's link (gateway 202) and a stock Zenoh session, both connected to
+    it, once the stock session hears its subscription."""
     import json
 
+    import zenoh
+
+    [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
+    honest = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
+    honest.open()
+    config = zenoh.Config()
+    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    stock = zenoh.open(config)
+    _until(lambda: stock.info.peers_zid())
+    time.sleep(0.5)  # the gateway's subscription reaches the stock session just after the session opens
+    return honest, stock
+
+
+def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_others_keep_theirs() -> None:
     import zenoh
 
     from vstig_hw.gateway import Mode, Node
@@ -441,16 +405,8 @@ def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_o
     heard: list[Heard] = []
     node.on_heard.append(heard.append)
     with node:
-        [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
-        honest = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
-        honest.open()
-        config = zenoh.Config()  # a stock session: it stamps nothing, and claims a new gateway id per sample
-        config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-        config.insert_json5("scouting/multicast/enabled", "false")
-        attacker = zenoh.open(config)
-        try:
-            _until(lambda: attacker.info.peers_zid())
-            time.sleep(0.5)  # the gateway's subscription reaches the attacker just after the session opens
+        honest, attacker = _honest_gateway_and_stock_session(gateway)  # the stock session claims a new gateway id
+        try:                                                             # per sample, and stamps nothing
             for i in range(1000):
                 attacker.put(f"vstig/lab/0/{1000 + i}", encode(Message(Op.PUT, 1, i, i + 1, 1000 + i)),
                              congestion_control=zenoh.CongestionControl.BLOCK)
@@ -473,6 +429,46 @@ def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_o
     assert refused() == 1000 - len(from_attacker), dict(gateway.counters)
     assert gateway.counters["drop_source_rate"] >= 1000 - len(from_attacker) - 10
     assert [h.message.value for h in heard if h.message.key == 2] == list(range(20))  # another session: its own
+
+
+def test_a_peer_stamping_a_fresh_session_id_on_every_sample_is_held_to_one_source_rate() -> None:
+    """The stock API stamps any id per sample (`put(timestamp=...)`): a made-up id names no session connected to
+    ours, so every such sample shares the link's one bucket, while a connected session keeps its own."""
+    import datetime
+
+    import zenoh
+
+    from vstig_hw.gateway import Mode, Node
+    from vstig_hw.gateway.guard import Guard
+
+    gateway = parse("zenoh:lab").build(robot_id=201)
+    node = Node([gateway], mode=Mode.LISTEN, guard=Guard(source_rate=100))
+    passed: dict[int, int] = {1: 0, 2: 0}
+    node.on_messages.append(lambda _link, _t, _sender, msgs: passed.update(
+        {key: passed[key] + sum(m.key == key for m in msgs) for key in passed}))
+    with node:
+        honest, forger = _honest_gateway_and_stock_session(gateway)
+        try:
+            start = time.monotonic()
+            sent = 0
+            while time.monotonic() - start < 2.0:  # ~2 s of forged samples, each with a new session id
+                stamp = zenoh.Timestamp(datetime.datetime.now(datetime.UTC),
+                                        zenoh.TimestampId(os.urandom(16)))
+                forger.put(f"vstig/lab/0/{1000 + sent % 1000}", encode(Message(Op.PUT, 1, sent, 1 + sent % 255, 7)),
+                           timestamp=stamp, congestion_control=zenoh.CongestionControl.BLOCK)
+                sent += 1
+                if sent % 50 == 0:  # the honest session: 25 messages a second, well within its own 100
+                    honest.send_many([Message(Op.PUT, 2, sent // 50, sent // 50, 202)])
+                    time.sleep(0.04)
+            took = time.monotonic() - start
+            node.run(duration=0.5)
+        finally:
+            forger.close()  # type: ignore[no-untyped-call]
+            honest.close()
+    assert sent > 1000, sent  # the forger sent far beyond the rate
+    assert passed[1] <= 1.5 * 100 * (1 + took), (passed, took)  # a burst of 100, then 100 a second: at most 1.5x
+    assert gateway.counters["drop_source_rate"] >= sent - passed[1] - 10
+    assert passed[2] == sent // 50, passed  # the connected session's own bucket: every honest message
 
 
 def test_a_gateway_closes_at_once_while_a_peer_floods_it_through_zenohs_callback() -> None:
@@ -524,3 +520,43 @@ def test_a_gateway_closes_at_once_while_a_peer_floods_it_through_zenohs_callback
     assert threads and not any(name.startswith("read-") for name in threads)  # from zenoh's thread, not our reader
     time.sleep(0.3)
     assert gateway.counters["in"] == heard  # nothing handled after close
+
+
+# -- what a peer can make the gateway hold: bounded in the config we build ------------------------------------
+def test_the_config_we_build_bounds_a_peers_sample_and_shares_no_memory() -> None:
+    from vstig_hw.links.zenoh import HEADROOM
+
+    config = zenoh_config(ZenohSpec("lab"))
+    assert config.get_json("transport/link/rx/max_message_size") == str(64 * 1024 + HEADROOM)
+    assert config.get_json("transport/shared_memory/enabled") == "false"
+    bigger = zenoh_config(parse("zenoh:lab?max_sample=1048576"))  # derived from max_sample
+    assert bigger.get_json("transport/link/rx/max_message_size") == str(1048576 + HEADROOM)
+
+
+def test_a_config_file_that_loosens_our_bounds_keeps_its_values_and_is_warned_about(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    file = tmp_path / "lab.json5"
+    file.write_text("{\n  transport: {\n    link: { rx: { max_message_size: 1073741824 } },\n"
+                    "    shared_memory: { enabled: true },\n  },\n}\n")
+    with caplog.at_level(logging.WARNING):
+        link = parse(f"zenoh:lab?config={file}").build(robot_id=1)
+    config = zenoh_config(parse(f"zenoh:lab?config={file}"))
+    assert config.get_json("transport/link/rx/max_message_size") == "1073741824"  # the user's, as written
+    assert config.get_json("transport/shared_memory/enabled") == "true"
+    assert [r.getMessage() for r in caplog.records] == [
+        f"zenoh-lab: {file}:3 sets transport/link/rx/max_message_size to 1073741824 (vstig's default: 131072): "
+        "one peer's sample can take that much of this PC's memory",
+        f"zenoh-lab: {file}:4 sets transport/shared_memory/enabled to true (vstig's default: false): each local "
+        "peer's shared memory may stay mapped here after it leaves"]
+    assert link.name == "zenoh-lab"
+    caplog.clear()
+    file.write_text("{ transport: { link: { rx: { max_message_size: 100000 } } } }")  # tighter: kept, silently
+    with caplog.at_level(logging.WARNING):
+        parse(f"zenoh:lab?config={file}").build(robot_id=1)
+    assert caplog.records == []
+    assert zenoh_config(parse(f"zenoh:lab?config={file}")).get_json("transport/link/rx/max_message_size") == "100000"
+    file.write_text("{ transport: { link: { tx: { lease: 2500 } } } }")  # the file sets neither: ours, silently
+    with caplog.at_level(logging.WARNING):
+        parse(f"zenoh:lab?config={file}").build(robot_id=1)
+    assert caplog.records == []
+    assert zenoh_config(parse(f"zenoh:lab?config={file}")).get_json("transport/shared_memory/enabled") == "false"

@@ -29,5 +29,12 @@ def epuck_reassembler(expiry_ticks: int) -> Any:
     return EpuckReassembler(Counters(), expiry_ticks=expiry_ticks)
 
 
+def xbee_receiver(api: int) -> tuple[Any, Any]:
+    """(the XBee transport's stream cutting, never opened: `.cut(chunk)`, `.quiet()`, `.counters`; the framing)."""
+    from vstig_hw.transports.xbee import XBeeTransport
+
+    return XBeeTransport("unopened", api=api), make_serial_framing("xbee-api2" if api == 2 else "xbee")
+
+
 def nonzero(counters: Counters) -> dict[str, int]:
     return {name: count for name, count in counters.items() if count}

@@ -96,6 +96,20 @@ def test_buzz_frames(vector: dict[str, Any]) -> None:
         assert [f"{w:016x}" for w in rosbuzz_payload64(raw)[5:]] == vector["payload64"]
 
 
+@pytest.mark.parametrize("vector", load("buzz.json")["xbeemav"], ids=lambda v: v["name"])
+def test_xbeemav_packets(vector: dict[str, Any]) -> None:
+    """What a drone's XbeeMav sends, as its module hands it to us: the framing finds the same Buzz messages."""
+    from vstig_hw.dialects.framing import XbeeMavFraming
+    from vstig_hw.dialects.mapping import parse_deployment
+
+    framing = XbeeMavFraming(parse_deployment('[buzz]\nstigmergy = 1\n[keys]\nx = { key = 1, type = "int16" }\n'))
+    units = [bytes.fromhex(u) for u in vector.get("api1_frames", [vector.get("api1")])]
+    heard = [(m, framing.sender_of(unit)) for unit in units for m in framing.feed(unit)]
+    buzz = [decode_buzz(bytes.fromhex(m)) for m in vector["messages"]]
+    assert heard == [(framing.rosbuzz.translator.to_ours(b), int(vector["sender"], 16)) for b in buzz]  # type: ignore[arg-type]
+    assert {name for name, n in framing.drops.items() if n} <= {"xbeemav_control"}  # the ping, when there is one
+
+
 @pytest.mark.parametrize("vector", load("bittybuzz.json")["messages"], ids=lambda v: v["name"])
 def test_bittybuzz_messages(vector: dict[str, Any]) -> None:
     raw, fields = bytes.fromhex(vector["hex"]), vector["fields"]

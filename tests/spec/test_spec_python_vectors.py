@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from adapters import epuck_reassembler, nonzero, serial_framing
+from adapters import epuck_reassembler, nonzero, serial_framing, xbee_receiver
 from conftest import load
 
 from vstig_hw import DecodeError, Message, Op, Outcome, Stigmergy, decode, encode
@@ -143,3 +143,46 @@ def test_ohc_packets() -> None:
     for packet in vectors["packets"]:
         framing = serial_framing("kilobot-ohc", mode=modes[packet["packet_type"]])
         assert [p.hex() for p in framing.encode(decode(bytes.fromhex(packet["message"])))] == [packet["packet"]]
+
+
+def test_xbee_transmit_requests() -> None:
+    vectors = load("xbee.json")
+    for api in (1, 2):
+        for case in vectors["transmit"]:
+            framing = serial_framing("xbee-api2" if api == 2 else "xbee")
+            messages = [decode(bytes.fromhex(m)) for m in case["messages"]]
+            assert [f.hex() for f in framing.encode_batch(messages)] == [case[f"api{api}"]], case["name"]
+    for case in vectors["messages_per_frame"]:
+        from vstig_hw.framing.xbee import ModuleInfo
+
+        framing = serial_framing("xbee")
+        framing.use_module(ModuleInfo(max_payload=case["np"]))
+        assert framing.per_frame == case["messages"]
+
+
+def test_xbee_checksums() -> None:
+    from vstig_hw.framing.xbee import api_frame
+
+    for case in load("xbee.json")["checksums"]:
+        data = bytes.fromhex(case["frame_data"])
+        for api in (1, 2):
+            if f"api{api}" in case:
+                assert api_frame(data, api == 2).hex() == case[f"api{api}"], case["source"]
+
+
+@pytest.mark.parametrize("case", load("xbee.json")["streams"], ids=lambda c: f"api{c['api']}: {c['name']}")
+def test_xbee_streams(case: dict[str, object]) -> None:
+    stream = bytes.fromhex(str(case["stream"]))
+    for chunks in ([stream], [stream[i:i + 1] for i in range(len(stream))]):  # whole, then byte by byte
+        transport, framing = xbee_receiver(int(case["api"]))  # type: ignore[call-overload]
+        units = [unit for chunk in chunks for unit in transport.cut(chunk)] + transport.quiet()
+        frames = []
+        for unit in units:
+            messages = framing.feed(unit)
+            if messages:
+                frames.append({"sender": f"{framing.sender_of(unit):016x}",
+                               "messages": [encode(m).hex() for m in messages]})
+        drops = {name.removeprefix("drop_"): n for name, n in nonzero(transport.counters).items()
+                 if name.startswith("drop_")}
+        drops.update(nonzero(framing.drops))
+        assert (frames, drops) == (case["frames"], case["drops"])

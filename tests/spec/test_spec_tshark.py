@@ -110,3 +110,79 @@ def test_malformed_frames_are_flagged(tmp_path: Path) -> None:
                            "-e", "_ws.expert.message"], capture_output=True, text=True, timeout=120, check=True)
     assert done.stdout.splitlines() == ["op bit differs from the ID's op (dropped by receivers)",
                                         "length is not a whole number of 8-byte messages (dropped)"]
+
+
+# -- XBee API frames (SPEC.md 6.9): one per packet of link type USER0, made by text2pcap as a user would ------------
+
+XBEE_FIELDS = ["vstig_xbee.frame_type", "vstig_xbee.escaped", "vstig.xbee_sender", "vstig.op", "vstig.key",
+               "vstig.value", "vstig.timestamp", "vstig.robot", "_ws.expert.message"]
+
+
+def _xbee_frames() -> list[bytes]:
+    """Receive Packets built by Digi's digi-xbee, Transmit Requests by our framing, in both API modes, and bad ones."""
+    from digi.xbee.models.address import XBee16BitAddress, XBee64BitAddress
+    from digi.xbee.models.mode import OperatingMode
+    from digi.xbee.packets.common import ReceivePacket
+
+    from vstig_hw import Message, Op, encode
+    from vstig_hw.framing import make_serial_framing
+    from vstig_hw.framing.xbee import api_frame, receive_packet
+
+    rng = random.Random(34)
+    frames = []
+    for escaped in (False, True):
+        for _ in range(40):
+            batch = [Message(Op(rng.getrandbits(1)), rng.getrandbits(15), rng.getrandbits(16), rng.getrandbits(16),
+                             rng.getrandbits(16)) for _ in range(rng.randrange(1, 6))]
+            source = 0x0013A200_00000000 | rng.getrandbits(32)
+            packet = ReceivePacket(XBee64BitAddress.from_hex_string(f"{source:016X}"),
+                                   XBee16BitAddress.from_hex_string("FFFE"), 0x02,
+                                   rf_data=bytearray(b"".join(encode(m) for m in batch)),
+                                   op_mode=OperatingMode.ESCAPED_API_MODE if escaped else OperatingMode.API_MODE)
+            frames.append(bytes(packet.output(escaped=escaped)))
+            frames += make_serial_framing("xbee-api2" if escaped else "xbee").encode_batch(batch)
+    bad_sum = bytearray(api_frame(receive_packet(0x0013A20040A1B2C3, bytes(8))))
+    bad_sum[-1] ^= 1
+    return [*frames, api_frame(receive_packet(0x0013A20040A1B2C3, bytes(7))), bytes(bad_sum),
+            api_frame(bytes.fromhex("8b01fffe000000"))]
+
+
+def _xbee_expected(frame: bytes) -> list[str]:
+    """What our framing reads in one frame, as tshark's fields show it."""
+    from digi.xbee.packets.base import XBeePacket
+
+    from vstig_hw.framing import make_serial_framing
+
+    escaped = (frame[1] << 8 | frame[2]) + 4 != len(frame)
+    plain = bytes(XBeePacket.unescape_data(bytearray(frame))) if escaped else frame
+    framing = make_serial_framing("xbee-api2" if escaped else "xbee")
+    msgs = framing.feed(frame)
+    sender = framing.sender_of(frame)  # type: ignore[attr-defined]
+    column = lambda values: ",".join(str(v) for v in values)  # noqa: E731
+    expert = {"checksum": "frame data and checksum do not sum to 0xFF (dropped)",
+              "bad_length": "RF data is not a whole number of 8-byte messages (dropped)"}
+    return [f"0x{plain[3]:02x}", str(int(escaped)), column(f"0x{sender:016x}" for _ in msgs) if sender else "",
+            column(int(m.op) for m in msgs), column(m.key for m in msgs), column(m.value for m in msgs),
+            column(m.timestamp for m in msgs), column(m.robot for m in msgs),
+            ",".join(text for reason, text in expert.items() if framing.drops[reason])]
+
+
+def test_xbee_frames_from_a_capture(tmp_path: Path) -> None:
+    text2pcap = require_tool("text2pcap", "wireshark-common")
+    tshark = require_tool("tshark")
+    frames = _xbee_frames()
+    dump = tmp_path / "radio.txt"
+    dump.write_text("".join("".join(f"{i:06x} {frame[i:i + 16].hex(' ')}\n" for i in range(0, len(frame), 16)) + "\n"
+                            for frame in frames))
+    pcap = tmp_path / "radio.pcap"
+    subprocess.run([text2pcap, "-q", "-l", "147", str(dump), str(pcap)], check=True, capture_output=True, timeout=60)
+    command = [tshark, "-X", f"lua_script:{LUA}", "-r", str(pcap), "-T", "fields",
+               "-E", "separator=/t", "-E", "occurrence=a", "-E", "aggregator=,"]
+    for name in XBEE_FIELDS:
+        command += ["-e", name]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0 and "Lua" not in done.stderr and "rror" not in done.stderr, done.stderr
+    rows = [line.split("\t") for line in done.stdout.splitlines()]
+    assert len(rows) == len(frames)
+    for frame, row in zip(frames, rows, strict=True):
+        assert row == _xbee_expected(frame), frame.hex()

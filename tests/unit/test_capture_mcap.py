@@ -147,7 +147,7 @@ def test_topics_are_valid_ros_names() -> None:
 
 @given(op=st.sampled_from(list(Op)), key=st.integers(0, 0x7FFF), value=st.integers(0, 0xFFFF),
        timestamp=st.integers(0, 0xFFFF), robot=st.integers(0, 0xFFFF),
-       sender=st.none() | st.integers(0, 0x7FFFFFFF))
+       sender=st.none() | st.integers(0, 0x7FFF_FFFF_FFFF_FFFF))
 def test_cdr_message_is_what_rosbags_serializes(op: Op, key: int, value: int, timestamp: int, robot: int,
                                                  sender: int | None) -> None:
     """The struct-packed CDR (MCAP captures and the live view) is byte for byte rosbags' encoding of MSGDEF."""
@@ -158,3 +158,29 @@ def test_cdr_message_is_what_rosbags_serializes(op: Op, key: int, value: int, ti
                                                           robot=robot, sender=-1 if sender is None else sender),
                                    TYPE_NAME)
     assert cdr_message(Message(op, key, value, timestamp, robot), sender) == bytes(expected)
+
+
+def test_files_whose_sender_is_an_int32_still_read(tmp_path: Path) -> None:
+    """Captures written before senders could be 64-bit XBee addresses declare `int32 sender`: read as such."""
+    from mcap.writer import Writer
+
+    from vstig_hw.capture.rosbag import _MSGDEF_INT32, _our_typestore
+
+    old = _our_typestore(_MSGDEF_INT32)
+    path = tmp_path / "old.mcap"
+    with open(path, "wb") as file:
+        writer = Writer(file)
+        writer.start(profile="ros2", library="vstig-hw")
+        schema = writer.register_schema(name=TYPE_NAME, encoding="ros2msg", data=_MSGDEF_INT32.encode())
+        channel = writer.register_channel(topic="/vstig/can0", message_encoding="cdr", schema_id=schema,
+                                          metadata={"link": "can0"})
+        for i, sender in enumerate((3, -1)):
+            data = old.serialize_cdr(old.types[TYPE_NAME](op=0, key=7, value=1234, timestamp=1 + i, robot=3,
+                                                          sender=sender), TYPE_NAME)
+            writer.add_message(channel, log_time=i, data=bytes(data), publish_time=i)
+        writer.finish()
+    assert [(r.unit[0].timestamp, r.unit[1]) for r in read_capture(str(path))] == [(1, 3), (2, None)]
+    new = McapCaptureWriter(str(tmp_path / "new.mcap"))
+    new.write_message(T0, "radio", 0x0013A20040A1B2C3, Message(Op.PUT, 1, 2, 3, 4))
+    new.close()
+    assert [r.unit[1] for r in read_capture(str(tmp_path / "new.mcap"))] == [0x0013A20040A1B2C3]

@@ -19,7 +19,7 @@ from ..capture.records import CAN_FRAMING, Record
 from ..framing.can import CanFraming
 from ..gateway.node import Node
 from ..links.link import Link
-from ..outputs import refuse_symlink
+from ..outputs import drop_setid, refuse_symlink
 
 __all__ = ["Recording", "link_medium"]
 
@@ -43,6 +43,7 @@ class Recording:
         refuse_symlink(path)  # even with overwrite: a link would be written through
         if os.path.lexists(path) and not overwrite:
             raise FileExistsError(f"{path} exists: a capture is never replaced unless overwrite=True")
+        drop_setid(path)
         if medium == "mcap":
             from ..extras import require
 

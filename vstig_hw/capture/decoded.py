@@ -13,7 +13,8 @@ line. Every other capture type goes record by record through the framings.
 `RecordFilter` keeps a unit whose messages pass: a CAN frame when any of its
 messages passes (a classic frame holds one), while a serial chunk, whose bytes
 need not align with frames, is decoded and its passing messages re-encoded in
-the same framing.
+the same framing; an XBee frame is rebuilt with its own header (its sender) and
+the messages that passed.
 """
 
 from __future__ import annotations
@@ -118,6 +119,10 @@ class Decoder:
             total.update(framing.drops)
         return total
 
+    def framing_of(self, record: Record) -> Any:
+        """The framing instance that decodes this record's link, framing and direction."""
+        return self._framing(record)
+
     def _framing(self, record: Record) -> Any:
         slot = (record.link, record.framing, record.direction)
         framing = self._framings.get(slot)
@@ -185,6 +190,10 @@ class RecordFilter:
             payload = b"".join(encode(d.message) for d in passed)
             sample = ZenohSample(record.unit.key, payload)
             return [Record(record.t, record.link, record.framing, sample, record.direction)] if payload else []
+        narrow = getattr(self.decoder.framing_of(record), "narrow", None)
+        if narrow is not None:  # a unit that names its sender (an XBee frame) keeps it, with what passed
+            unit = narrow(record.unit, [d.message for d in passed]) if passed else None
+            return [Record(record.t, record.link, record.framing, unit, record.direction)] if unit else []
         encoder = self._encoder(record.framing)
         chunk = b"".join(unit for d in passed for unit in encoder.encode(d.message))
         return [Record(record.t, record.link, record.framing, chunk, record.direction)] if chunk else []

@@ -18,7 +18,7 @@ from typing import IO, Any
 
 from ..counters import Counters
 from ..extras import install_hint
-from ..framing.ros2 import cdr_message, ros_name  # MSGDEF in CDR, packed by struct (no rosbags)
+from ..framing.ros2 import cdr_message, ros_name, sender_of_wire  # MSGDEF in CDR, packed by struct (no rosbags)
 from ..wire import Message, Op
 from .decoded import Decoder
 from .records import MESSAGE_FRAMING, CaptureError, Record, cut_short
@@ -36,10 +36,14 @@ uint16 key
 uint16 value
 uint16 timestamp
 uint16 robot
-int32 sender
+int64 sender
 """
+# Files written before XBee links (whose senders are 64-bit addresses) carry `int32 sender`: still read.
+_MSGDEF_INT32 = MSGDEF.replace("int64 sender", "int32 sender")
 TOPIC_PREFIX = "/vstig/"
 _MAGIC = b"\x89MCAP0\r\n"  # an MCAP file starts and, once closed, ends with it
+
+
 def _needs_extra(path: str) -> CaptureError:
     return CaptureError(path, None, f"reading or writing .mcap needs the mcap extra: {install_hint('mcap')}")
 
@@ -52,13 +56,18 @@ def _typestore(path: str) -> Any:
 
 
 @functools.cache
-def _our_typestore() -> Any:
-    """Built once per process: parsing the message definition takes ~10 ms, more than reading a small capture."""
+def _our_typestore(definition: str = MSGDEF) -> Any:
+    """Built once per process and definition: parsing one takes ~10 ms, more than reading a small capture."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.EMPTY)
-    store.register(get_types_from_msg(MSGDEF, TYPE_NAME))
+    store.register(get_types_from_msg(definition, TYPE_NAME))
     return store
+
+
+def _store_for(schema: Any, store: Any) -> Any:
+    """The typestore for a file's schema: ours, or the one of files whose sender is an int32."""
+    return _our_typestore(_MSGDEF_INT32) if b"int32 sender" in bytes(schema.data) else store
 
 
 def topic_for(link: str) -> str:
@@ -142,7 +151,7 @@ def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None 
             for schema, channel, raw in make_reader(file).iter_messages(log_time_order=True):
                 if schema is None or schema.name != TYPE_NAME:
                     continue  # another type on another topic: not ours
-                yield _record(store, channel, raw)
+                yield _record(_store_for(schema, store), channel, raw)
     except CaptureError:
         raise
     except Exception as error:  # a damaged file surfaces as any of McapError, zstd, lz4, CDR, struct errors...
@@ -153,7 +162,8 @@ def _record(store: Any, channel: Any, raw: Any) -> Record:
     m = store.deserialize_cdr(raw.data, TYPE_NAME)
     link = channel.metadata.get("link") or channel.topic.removeprefix(TOPIC_PREFIX)
     message = Message(Op(m.op), m.key, m.value, m.timestamp, m.robot)
-    return Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, None if m.sender < 0 else m.sender))
+    sender = sender_of_wire(m.sender)
+    return Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, sender))
 
 
 def _has_footer(file: IO[bytes]) -> bool:
@@ -194,7 +204,7 @@ def _recover(path: str, file: IO[bytes], store: Any, skip_bad: bool,
                 schema = schemas.get(channel.schema_id)
                 if schema is not None and schema.name == TYPE_NAME:
                     kept += 1
-                    yield _record(store, channel, item)
+                    yield _record(_store_for(schema, store), channel, item)
     lost = file.seek(0, 2) - end
     cut_short(path, kept, f"messages in {chunks} chunks",
               f"the {lost} bytes after them are incomplete" if lost else "it has no summary or footer", skip_bad, bad)

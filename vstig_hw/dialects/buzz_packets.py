@@ -101,11 +101,12 @@ def unpack_frame(data: bytes, order: ByteOrder = "little") -> BuzzFrame:
     return _split(view[_LEN:], order, BuzzFrame(int.from_bytes(view[:_LEN], order)))
 
 
-def pack_rosbuzz_block(robot: int, messages: Sequence[bytes]) -> tuple[bytes, int]:
-    """ROSBuzz's Buzz block (whole 8-byte words, at most 190 bytes); (block, how many messages)."""
+def pack_rosbuzz_block(robot: int, messages: Sequence[bytes], limit: int = ROSBUZZ_MAX_BLOCK) -> tuple[bytes, int]:
+    """ROSBuzz's Buzz block (whole 8-byte words, at most `limit` bytes before padding: 190 as ROSBuzz's);
+    (block, how many messages)."""
     out = bytearray(4)
     out[2:4] = robot.to_bytes(2, "little")
-    packed = _fill(out, messages, ROSBUZZ_MAX_BLOCK, "little")
+    packed = _fill(out, messages, limit, "little")
     words = -(-len(out) // 8)
     out[0:2] = words.to_bytes(2, "little")
     return bytes(out.ljust(words * 8, b"\0")), packed

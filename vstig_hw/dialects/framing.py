@@ -11,7 +11,9 @@ translator of one deployment inside:
 - `BuzzKh4Framing`: BuzzKH4's fixed-size frames (a Khepera IV swarm through the
   `blabbermouth` transport), several Buzz messages per frame;
 - `RosBuzzDecoder`: ROSBuzz's Buzz blocks, from `payload64` words or XbeeMav packets
-  (for captures: there is no live ROS link).
+  (for captures: there is no live ROS link);
+- `XbeeMavFraming`: ROSBuzz drones on their XBee radios, as MISTLab's XbeeMav puts their
+  blocks into XBee API frames (`S` packets, `F` fragments reassembled: dialects/xbeemav.py).
 
 Counters (a link shows them as drop_<name>): `unmapped` and the guards of
 `translate`, `bbz_other` for BittyBuzz messages that are not vstig (broadcasts),
@@ -24,11 +26,14 @@ it would block the queue as it blocks BuzzKH4's).
 
 from __future__ import annotations
 
+import struct
+from collections.abc import Sequence
 from typing import Literal
 
 from ..counters import Counters
 from ..framing.cobsframe import DELIMITER, CobsFrameReader, encode_frame
 from ..framing.kilobot_ohc import OHC_FORWARDMSG, OHC_FORWARDMSGSINGLE, TransmitOnlyError, ohc_packet
+from ..framing.xbee import BROADCAST, XBeeFraming
 from ..wire import Message
 from .bittybuzz import BBZ_KILOBOT_TYPE, BBZ_MESSAGE_SIZE, BbzOther, decode_bittybuzz, encode_bittybuzz
 from .buzz import BuzzDecodeError, BuzzOther, decode_buzz, encode_buzz
@@ -38,17 +43,21 @@ from .buzz_packets import (
     pack_frame,
     pack_rosbuzz_block,
     rosbuzz_block_from_payload64,
+    rosbuzz_payload64,
     unpack_frame,
     unpack_rosbuzz_block,
+    xbee_packet,
     xbee_payload64,
 )
 from .mapping import Deployment
 from .translate import BittyBuzzTranslator, BuzzTranslator
+from .xbeemav import DEFAULT_EXPIRY_TICKS, XbeeMavReassembler
 
 __all__ = ["DIALECT_FRAMINGS", "BittyBuzzKilobotFraming", "BittyBuzzOhcFraming", "BuzzKh4Framing",
-           "RosBuzzDecoder", "make_dialect_framing"]
+           "RosBuzzDecoder", "XbeeMavApi2Framing", "XbeeMavFraming", "make_dialect_framing"]
 
 _PAYLOAD = BBZ_MESSAGE_SIZE + 1  # message_t data[9] + type: what kilolib's CRC covers
+_HEADER_ROOM = 3 + 8 * 5  # an XbeeMav S packet's 'S', sysid and msgid, and ROSBuzz's five header words
 
 
 def _message_t(translator: BittyBuzzTranslator, msg: Message) -> bytes | None:
@@ -123,8 +132,9 @@ class BuzzKh4Framing:
     name = "blabbermouth"
     transmit_only = False
 
-    def __init__(self, deployment: Deployment, robot_id: int = 0, frame_size: int = 0xFFFF) -> None:
-        self.drops = Counters()
+    def __init__(self, deployment: Deployment, robot_id: int = 0, frame_size: int = 0xFFFF, *,
+                 drops: Counters | None = None) -> None:
+        self.drops = Counters() if drops is None else drops
         self.translator = BuzzTranslator(deployment, self.drops)
         self.dialect = deployment.buzz_dialect
         self.robot_id = robot_id
@@ -204,27 +214,103 @@ class RosBuzzDecoder(BuzzKh4Framing):
         """One unfragmented XbeeMav packet ('S', sysid, msgid, big-endian words)."""
         return self.feed_payload64(xbee_payload64(packet)[2])
 
-    def encode_batch(self, messages: list[Message]) -> list[bytes]:
-        """Buzz blocks (at most 190 bytes each) carrying our messages under our robot id."""
-        pending = self._buzz_bytes(messages, ROSBUZZ_MAX_BLOCK - 2)  # its header is 4 bytes, not 2
+    def encode_batch(self, messages: list[Message], limit: int = ROSBUZZ_MAX_BLOCK) -> list[bytes]:
+        """Buzz blocks (at most `limit` bytes each, 190 as ROSBuzz's) carrying our messages under our robot id."""
+        pending = self._buzz_bytes(messages, limit - 2)  # its header is 4 bytes, not 2
         blocks = []
         while pending:
-            block, packed = pack_rosbuzz_block(self.robot_id, pending)
+            block, packed = pack_rosbuzz_block(self.robot_id, pending, limit)
             blocks.append(block)
             pending = pending[packed:]
         return blocks
 
 
-DIALECT_FRAMINGS = ("bittybuzz-kilobot", "bittybuzz-ohc", "blabbermouth")  # the names their captures carry
+class XbeeMavFraming(XBeeFraming):
+    """ROSBuzz's Buzz blocks in XbeeMav packets in XBee API frames (mode 1, as XbeeMav; mode 2 beside it).
+
+    Needs the deployment that maps the swarm's Buzz keys and values (dialects/mapping.py); sends
+    under `robot_id` (ROSBuzz ids are 0..255: XbeeMav's sysid is one byte). Counters as
+    `XBeeFraming`'s, `RosBuzzDecoder`'s and the reassembler's, plus `xbeemav_control` (A, P, L
+    packets), `xbeemav_unknown` (another first byte), `xbeemav_malformed` (a message that is not
+    sysid, msgid and whole words) and `rosbuzz_other` (a Mavlink message that is no Buzz block:
+    ROSBuzz's code updates).
+    """
+
+    name = "xbeemav"
+    default_baud = 230400  # XbeeMav's module profiles (BD=8)
+    default_max_payload = 256  # the NP of the modules XbeeMav runs on (900HP, SX), until the module says its own
+
+    def __init__(self, deployment: Deployment, robot_id: int = 0, dest: int = BROADCAST,
+                 expiry_ticks: int = DEFAULT_EXPIRY_TICKS) -> None:
+        if not 0 <= robot_id <= 0xFF:
+            raise ValueError(f"ROSBuzz robot ids are 0..255 (XbeeMav's sysid is one byte), got {robot_id}")
+        super().__init__(dest)
+        self.rosbuzz = RosBuzzDecoder(deployment, robot_id, drops=self.drops)
+        self.reassembler = XbeeMavReassembler(self.drops, expiry_ticks)
+        self._number = 0  # ROSBuzz's message counter: the header's and XbeeMav's msgid
+
+    def _payloads(self, messages: Sequence[Message]) -> list[bytes]:
+        """`S` packets, each a ROSBuzz Buzz block as large as ROSBuzz's 190 bytes and the module's NP allow."""
+        room = (self.max_payload - _HEADER_ROOM) // 8 * 8
+        packets = []
+        for block in self.rosbuzz.encode_batch(list(messages), min(ROSBUZZ_MAX_BLOCK, room)):
+            self._number = (self._number + 1) & 0xFFFF
+            words = rosbuzz_payload64(block, self._number)  # ROS time and position: 0 (a gateway has neither)
+            packets.append(xbee_packet(self.rosbuzz.robot_id, self._number, words))
+        return packets
+
+    def _messages(self, rf_data: bytes, source: int | None) -> list[Message]:
+        kind = rf_data[:1]
+        if kind == b"S":
+            return self._buzz(rf_data[1:])
+        if kind == b"F":
+            whole = self.reassembler.fragment(source, rf_data)
+            return [] if whole is None else self._buzz(whole)
+        if kind in (b"P", b"A", b"L"):
+            self.drops["xbeemav_control"] += 1
+            whole = self.reassembler.ping(source, rf_data) if kind == b"P" else None
+            return [] if whole is None else self._buzz(whole)
+        self.drops["xbeemav_unknown"] += 1
+        return []
+
+    def _buzz(self, serialized: bytes) -> list[Message]:
+        """Our messages from one serialized Mavlink message: u8 sysid, u8 msgid, big-endian words."""
+        count, rest = divmod(len(serialized) - 2, 8)
+        if count < 0 or rest:
+            self.drops["xbeemav_malformed"] += 1
+            return []
+        block = rosbuzz_block_from_payload64(struct.unpack_from(f">{count}Q", serialized, 2))
+        if block is None:
+            self.drops["rosbuzz_other"] += 1
+            return []
+        return self.rosbuzz.feed(block)
+
+    def narrow(self, unit: bytes, messages: object) -> bytes | None:
+        """A frame of Buzz blocks cannot be cut to some of its messages: kept whole."""
+        return unit
+
+    def tick(self) -> None:
+        super().tick()
+        self.reassembler.tick()
+
+
+class XbeeMavApi2Framing(XbeeMavFraming):
+    """XbeeMav's packets over a module in API mode 2 (XbeeMav itself runs mode 1)."""
+
+    name = "xbeemav-api2"
+    escaped = True
+
+
+# The names their captures carry, and how to make each from a deployment.
+_BY_NAME: dict[str, type[BittyBuzzKilobotFraming | BittyBuzzOhcFraming | BuzzKh4Framing | XbeeMavFraming]] = {
+    framing.name: framing for framing in (BittyBuzzKilobotFraming, BittyBuzzOhcFraming, BuzzKh4Framing,
+                                          XbeeMavFraming, XbeeMavApi2Framing)}
+DIALECT_FRAMINGS = tuple(_BY_NAME)
 
 
 def make_dialect_framing(name: str, deployment: Deployment) -> BittyBuzzKilobotFraming | BittyBuzzOhcFraming | \
-        BuzzKh4Framing:
+        BuzzKh4Framing | XbeeMavFraming:
     """A fresh dialect framing by the name a capture records (to decode or replay it)."""
-    if name == "bittybuzz-kilobot":
-        return BittyBuzzKilobotFraming(deployment)
-    if name == "bittybuzz-ohc":
-        return BittyBuzzOhcFraming(deployment)
-    if name == "blabbermouth":
-        return BuzzKh4Framing(deployment)
+    if name in _BY_NAME:
+        return _BY_NAME[name](deployment)
     raise ValueError(f"unknown dialect framing {name!r}; one of {', '.join(DIALECT_FRAMINGS)}")

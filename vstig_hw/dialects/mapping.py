@@ -36,12 +36,11 @@ from __future__ import annotations
 
 import math
 import struct
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, get_args
 
-from ..inputs import InputFileError, read_regular, toml_line
+from ..inputs import InputFileError, parse_toml, read_regular, toml_line
 from ..values import from_raw, to_raw
 from ..wire import KEY_MAX
 from .bittybuzz import BbzType, bbzfloat_from_float, bbzfloat_to_float
@@ -240,9 +239,9 @@ def _int(table: dict[str, Any], name: str, where: str, low: int, high: int, defa
 def parse_deployment(text: str, source: str = "<deployment>", base: Path | None = None) -> Deployment:
     """A Deployment from TOML text; `source` names it in errors, `base` anchors a relative symbols path."""
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise DeploymentError(f"{source}: not valid TOML: {error}") from None
+        doc = parse_toml(text, source)
+    except InputFileError as error:
+        raise DeploymentError(str(error)) from None
     unknown = sorted(set(doc) - {"buzz", "bittybuzz", "keys"})
     if unknown:
         raise DeploymentError(f"{source}: unknown section(s) {', '.join(unknown)}; expected buzz, bittybuzz, keys")

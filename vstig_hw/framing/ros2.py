@@ -1,7 +1,7 @@
 """ROS 2 framing: `vstig_msgs` messages in CDR, the encoding ROS 2 topics and our MCAP captures carry.
 
 This module is the one owner of the CDR layout of `vstig_msgs/msg/Message` (op, key,
-value, timestamp, robot: u8 and u16 x4; sender: i32, -1 for none; the type is
+value, timestamp, robot: u8 and u16 x4; sender: i64, -1 for none; the type is
 vstig_hw/ros2msgs/msg/Message.idl): little-endian CDR, a 4-byte encapsulation header,
 then each field at its natural alignment. Packed with struct (~0.3 us a message, no
 ROS 2 library), and held equal to rclpy's own serializer and to rosbags' by tests.
@@ -24,15 +24,29 @@ from ..counters import Counters
 from ..timestamps import TS_NONE
 from ..wire import KEY_MAX, Message, Op
 
-__all__ = ["CDR_SIZE", "NO_SENDER", "Ros2Framing", "Ros2Sample", "cdr_message", "message_of_cdr", "ros_name"]
+__all__ = ["CDR_SIZE", "NO_SENDER", "Ros2Framing", "Ros2Sample", "cdr_message", "message_of_cdr", "ros_name",
+           "sender_of_wire", "wire_sender"]
 
 NO_SENDER = -1
 _LE = b"\x00\x01\x00\x00"  # CDR, little-endian
-# Message: the header, op, a pad byte, four u16, two pad bytes, sender
-_MESSAGE = struct.Struct("<4sBxHHHHxxi")
+# Message: the header, op, a pad byte, four u16, six pad bytes (sender's alignment), sender
+_MESSAGE = struct.Struct("<4sBxHHHH6xq")
 CDR_SIZE = _MESSAGE.size  # bytes of one CDR vstig_msgs/Message
 _new = tuple.__new__
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
+_TWO64 = 1 << 64
+_HIGH_BIT = 1 << 63
+
+
+def wire_sender(sender: int | None) -> int:
+    """A sender as the int64 of `vstig_msgs` (-1: none; a 64-bit XBee address from 2**63 up, which no XBee
+    has, as its two's complement)."""
+    return NO_SENDER if sender is None else sender - _TWO64 if sender >= _HIGH_BIT else sender
+
+
+def sender_of_wire(value: int) -> int | None:
+    """`wire_sender` undone."""
+    return None if value == NO_SENDER else value + _TWO64 if value < 0 else value
 
 
 def ros_name(text: str) -> str:
@@ -42,13 +56,14 @@ def ros_name(text: str) -> str:
 
 
 def cdr_message(message: Message, sender: int | None) -> bytes:
-    """`message` as a CDR-encoded `vstig_msgs/msg/Message` (sender -1 where the medium names none)."""
+    """`message` as a CDR-encoded `vstig_msgs/msg/Message` (sender as `wire_sender` has it)."""
     return _MESSAGE.pack(_LE, message[0] >> 15, message[0] & KEY_MAX, message[1], message[2], message[3],
-                         NO_SENDER if sender is None else sender)
+                         wire_sender(sender))
 
 
 def message_of_cdr(data: bytes) -> tuple[Message, int] | None:
-    """A CDR `vstig_msgs/msg/Message` as (Message, sender); None when it is not one (size, encoding, op)."""
+    """A CDR `vstig_msgs/msg/Message` as (Message, its wire sender); None when it is not one (size, encoding,
+    op)."""
     if len(data) != _MESSAGE.size or data[:4] != _LE:
         return None
     _, op, key, value, timestamp, robot, sender = _MESSAGE.unpack(data)

@@ -45,7 +45,8 @@ def check_swarm(swarm: str) -> str:
 @dataclass(frozen=True, slots=True)
 class ZenohSample:
     """One Zenoh sample as the link sees it: the key it was published under, its payload, and the id of the
-    session that stamped it (its publisher's, where that session stamps samples; None if unstamped)."""
+    session it came from, where the transport can tell (its stamp names a session connected to ours; None: it
+    cannot, and the sample's link is its only source)."""
 
     key: str
     payload: bytes
@@ -138,7 +139,8 @@ class ZenohFraming:
         return self.space.gateway_of(unit.key)
 
     def source_of(self, unit: ZenohSample) -> str | None:
-        """The publishing session: a peer may claim any gateway id in its keys, not another session's stamp."""
+        """The publishing session, if connected to ours: a peer may claim any gateway id in its keys, and any id in
+        its stamps, but it cannot make up a session connected to ours per sample (transports/zenoh.py)."""
         return unit.source
 
     def tick(self) -> None:

@@ -17,7 +17,9 @@ Checks, in this order; a refused message is counted once, under the first reason
 2. `source_rate`: the real source's token bucket is empty (`source_rate`
    messages per second, same burst). A sender id is a claim anyone can change per
    message; a source is what the gateway itself knows sent it: the link for serial
-   and CAN, the publishing session (the id zenoh stamps on a sample) for zenoh.
+   and CAN; for zenoh, the session connected to ours that stamped the sample (a
+   stamp naming no connected session is no source: such samples share the link's
+   bucket; transports/zenoh.py).
 3. `rate`: the sender's token bucket is empty (`rate` messages per second, a
    burst of one second's worth, at least one message). Senders are what the medium names (CAN node
    ids, zenoh gateway ids); where it names nobody the link is one sender.

@@ -44,9 +44,10 @@ from ..framing.kilobot_ohc import TransmitOnlyError
 from ..links.link import Heard, Link
 from ..wakeup import Wakeup
 from ..wire import Message
+from .compiled import compiled_for, jump_guard, receiver_for
 from .guard import Guard
 from .outlet import Outlet
-from .parts import ChangeListener, RawRelay, Seat
+from .parts import INTAKE_TICKS, ChangeListener, RawRelay, Seat
 from .readers import READ_TIMEOUT, LinkReaders
 
 __all__ = ["DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "favour_latency"]
@@ -115,9 +116,15 @@ class Node:
             raise ValueError("a raw bridge needs at least two links")
         self.mode = mode
         self.period = period
-        self.guard = guard  # what links hear passes it before the engine, a relay or a listener sees it
+        # A relaying Node's parts are compiled where this install has the compiled path (`compiled`): the same
+        # interfaces, so everything below works on either; VSTIG_PURE=1 keeps them Python.
+        compiled = compiled_for(mode is not Mode.LISTEN, self.links)
+        self.guard = guard if compiled is None else jump_guard(guard)  # what links hear passes it first
+        self._wake = Wakeup()  # one token wakes the waiting loop (a call, a window or a slow device's room opening)
+        make_outlet = Outlet if compiled is None else compiled.outlet
         self.outlets = [] if mode is Mode.LISTEN else [
-            Outlet(link, budget, period, keep_all=mode is Mode.RAW) for link in self.links
+            make_outlet(link, budget, period, keep_all=mode is Mode.RAW, on_room=self._wake.set)
+            for link in self.links
         ]
         self.on_unit: list[UnitListener] = []
         self.on_heard: list[HeardListener] = []
@@ -132,15 +139,31 @@ class Node:
         self.seat: Seat | None = None  # the engine's part: ENGINE, or LISTEN with count_outcomes
         self.part: Seat | RawRelay | None = None  # what handles the messages links heard (None: nothing)
         if mode is Mode.RAW:
-            self.part = RawRelay(self.outlets, guard)
+            self.part = (RawRelay if compiled is None else compiled.relay)(self.outlets, self.guard)
         elif mode is Mode.ENGINE or count_outcomes:
-            self.engine = Stigmergy(robot_id, onconflict=onconflict)
-            self.part = self.seat = Seat(self.engine, self.links, self.outlets, guard, self.on_change)
+            self.engine = Stigmergy(robot_id, onconflict) if compiled is None else \
+                compiled.engine(robot_id, onconflict)
+            intake = INTAKE_TICKS * budget if mode is Mode.ENGINE and budget is not None else None
+            self.part = self.seat = (Seat if compiled is None else compiled.seat)(
+                self.engine, self.links, self.outlets, self.guard, self.on_change, intake, period)
         self.ticks = 0
         self._calls: collections.deque[Callable[[], None]] = collections.deque()  # `call_soon`'s, for the loop
         self.lock = threading.RLock()  # whoever works on the Node holds it: a reader thread, the loop, a caller
-        self._readers = LinkReaders(self.links, self._deliver)
-        self._wake = Wakeup()  # one token wakes the waiting loop
+        # Each link's decoding: its framing's, or its compiled Receiver's (which then decodes for both deliveries).
+        receivers = [None if compiled is None else receiver_for(link) for link in self.links]
+        self._decode: list[Callable[[Any], list[Message]]] = [
+            link.framing.feed if receiver is None else receiver.feed
+            for link, receiver in zip(self.links, receivers, strict=True)]
+        self._tickers: list[Callable[[], None]] = [
+            link.tick if receiver is None else receiver.tick for link, receiver in zip(self.links, receivers,
+                                                                                      strict=True)]
+        # The compiled delivery (`compiled`): it takes a batch whole while no listener wants each unit or message
+        # (it looks at these lists), and hands it to `_deliver` otherwise.
+        self._path = None if compiled is None else compiled.path(
+            self, self.lock, self._deliver, self.links, receivers, self.part, self.guard, self.outlets,
+            [self.on_unit, self.on_heard, self.on_refused, self.on_messages, self.on_change], self.on_delivered)
+        self._readers = LinkReaders(self.links, self._deliver if self._path is None else self._deliver_compiled,
+                                    self._path)
         self._sleep_until = 0.0  # when the waiting loop looks again by itself (0: it is not waiting)
         self._wake_on_arrival = False  # the loop has an `until` to check after every batch
         self._loop_thread = 0  # ident of the thread in `run`, of the reader handling a batch (0: none)
@@ -302,13 +325,21 @@ class Node:
         if self._wake_on_arrival or (retry is not None and retry < self._sleep_until):
             self._wake.set()
 
+    def _deliver_compiled(self, index: int, t: float, units: list[Any]) -> None:
+        """`_deliver` for what a transport's own read returned, by the compiled delivery where it can."""
+        path = self._path
+        assert path is not None
+        if not path.deliver(index, t, units):
+            self._deliver(index, t, units)
+
     def _arrive(self, index: int, t: float, units: list[Any]) -> None:
         link = self.links[index]
-        feed = link.framing.feed
+        feed = self._decode[index]
         sender_of = link.sender_of
         source_of = link.source_of
         part = self.part
         guard = self.guard
+        admit = self.seat.admit if self.seat is not None and self.seat.intake is not None else None
         heard_count = 0
         for unit in units:
             for listener in self.on_unit:
@@ -321,11 +352,15 @@ class Node:
             if not messages:
                 continue
             heard_count += len(messages)
+            source = source_of(unit) if source_of is not None else None  # which of the link's peers sent it
+            if admit is not None:  # the engine's intake per source, before any other work
+                messages = admit(index, source, messages, t)
+                if not messages:
+                    continue
             sender = sender_of(unit) if guard is not None or self.on_heard or self.on_change or self.on_messages \
                 else None
             told = False
             if guard is not None:
-                source = source_of(unit) if source_of is not None else None
                 if self.on_refused:
                     messages, told = self._judge_and_tell(guard, link, sender, source, messages, t), True
                 else:
@@ -339,7 +374,7 @@ class Node:
                 for m_listener in self.on_messages:
                     m_listener(link.name, t, sender, messages)
             if part is not None and messages:
-                part.take(index, messages, sender)
+                part.take(index, messages, sender, source)
         link.counters["in"] += heard_count
 
     def _judge_and_tell(self, guard: Guard, link: Link[Any], sender: int | None, source: str | None,
@@ -382,8 +417,10 @@ class Node:
     def _tick(self, now: float) -> None:
         self.ticks += 1
         self._next_tick = max(self._next_tick + self.period, now)  # no catch-up burst after a stall
-        for link in self.links:
-            link.tick()
+        for tick in self._tickers:  # each link's framing (its compiled Receiver's, where it has one)
+            tick()
+        if self.part is not None:
+            self.part.tick()
         for listener in self.on_tick:
             listener(self)
 

@@ -13,29 +13,47 @@ window allows, so a quiet gateway relays across media within the time it takes
 to wake a thread, instead of waiting up to a whole tick; a busy one is held to
 the same bandwidth the tick-aligned drain would allow.
 
+The queue shares the link among the sources of what it carries (`fairshare`): one
+line per source, served in turn, so a source that floods waits for its own messages
+and every other source's go first.
+
 What leaves the window goes to the link's `LinkWriter`: written at once while the
-device takes it, else queued (bounded) for that link's own thread, so a device that
-stops taking data never holds up the loop or another link.
+device takes it, else queued for that link's own thread, so a device that stops
+taking data never holds up the loop or another link. The writer holds at most
+`WRITER_HOLD` messages the device has not taken; the rest wait here, in their
+sources' lines, so the share also decides what a slow device gets next.
 """
 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable, Hashable
 from typing import Any
 
 from ..counters import Counters
 from ..links.link import Link
-from ..outqueue import OutQueue
 from ..wire import Message
+from .fairshare import LOCAL, FairFifo, FairQueue
 from .writer import TX_QUEUE_LIMIT, LinkWriter
 
 __all__ = ["Outlet", "SendWindow"]
 
-RAW_QUEUE_LIMIT = 10_000  # raw mode keeps every frame; beyond this the oldest are dropped and counted
+RAW_QUEUE_LIMIT = 10_000  # raw mode keeps every frame; beyond this a flooder's oldest are dropped and counted
+
+
+PACE_BURST = 4  # messages a backlogged outlet sends at once after a late wake-up (else one per period/budget)
 
 
 class SendWindow:
-    """At most `budget` sends in any `period` seconds (None: unlimited)."""
+    """At most `budget` sends in any `period` seconds (None: unlimited), evenly spaced while a backlog lasts.
+
+    After a quiet spell a burst leaves at once, up to the budget. While messages
+    wait beyond what the window allows (`record(..., backlog=True)`), they leave
+    one every period/budget (up to PACE_BURST at once after a late wake-up), not in
+    a burst each time the window reopens: so a message that joins a backlog, from
+    a source whose turn comes next (`fairshare`), waits about period/budget, not up
+    to a whole period.
+    """
 
     def __init__(self, budget: int | None, period: float) -> None:
         if budget is not None and budget < 1:
@@ -45,6 +63,8 @@ class SendWindow:
         self.budget = budget
         self.period = period
         self._sent: deque[float] = deque(maxlen=budget or 1)
+        self._spacing = period / budget if budget else 0.0
+        self._paced_to: float | None = None  # while backlogged: the time up to which the pace was spent
 
     def allowance(self, now: float) -> int:
         if self.budget is None:
@@ -52,78 +72,136 @@ class SendWindow:
         sent = self._sent
         while sent and sent[0] <= now - self.period:
             sent.popleft()
-        return self.budget - len(sent)
+        free = self.budget - len(sent)
+        if self._paced_to is None:
+            return free
+        return min(free, PACE_BURST, int((now - self._paced_to) / self._spacing))
 
-    def record(self, now: float, count: int) -> None:
-        if self.budget is not None:
-            if count == 1:
-                self._sent.append(now)
-            else:
-                self._sent.extend([now] * min(count, self.budget))
+    def record(self, now: float, count: int, backlog: bool = False) -> None:
+        """`count` messages left at `now`; `backlog`: others still wait (the sends are spaced from now on)."""
+        if self.budget is None:
+            return
+        if count == 1:
+            self._sent.append(now)
+        else:
+            self._sent.extend([now] * min(count, self.budget))
+        if not backlog:
+            self._paced_to = None
+        elif self._paced_to is None:  # a backlog starts: what just left was the burst
+            self._paced_to = now
+        else:
+            self._paced_to = max(self._paced_to, now - PACE_BURST * self._spacing) + count * self._spacing
 
     def next_free(self) -> float | None:
-        """When the window next opens, if it is full now."""
-        if self.budget is None or len(self._sent) < self.budget:
+        """When the window next lets a message go, if it does not now (None: it does, or there is no budget)."""
+        if self.budget is None:
             return None
-        return self._sent[0] + self.period
+        opens = self._sent[0] + self.period if len(self._sent) >= self.budget else None
+        if self._paced_to is None:
+            return opens
+        paced = self._paced_to + self._spacing
+        return paced if opens is None else max(opens, paced)
 
 
 class Outlet:
-    """A link, its send queue and its budget window."""
+    """A link, its send queue (one line per source: `fairshare`) and its budget window.
+
+    What is pushed while nothing waits is only held (`_held`), as it came, until the
+    next flush: if the window and the writer take it all, it goes out as it came
+    (what its source's line would have sent, in that order), and only what must
+    wait enters the lines. So a gateway that keeps up pays nothing for the share.
+
+    `on_room` is called from the link's writer thread when a device that was slow
+    takes data again: what waits here can go (a Node wakes its loop)."""
 
     def __init__(self, link: Link[Any], budget: int | None, period: float, *, keep_all: bool = False,
-                 tx_queue: int = TX_QUEUE_LIMIT) -> None:
+                 tx_queue: int = TX_QUEUE_LIMIT, on_room: Callable[[], None] | None = None) -> None:
         self.link = link
-        self.writer = LinkWriter(link, tx_queue)
+        self.writer = LinkWriter(link, tx_queue, on_room=on_room)
         self.window = SendWindow(budget, period)
-        self.keep_all = keep_all  # raw mode: a FIFO of every frame, not newest-per-key
-        self._newest = OutQueue()
-        self._fifo: deque[Message] = deque()
+        self.keep_all = keep_all  # raw mode: every frame kept, in order per source, not newest-per-key
+        self.queue: FairQueue | FairFifo = FairFifo(RAW_QUEUE_LIMIT) if keep_all else FairQueue()
+        # What a message not queued counts as: a raw queue dropped a flooder's oldest to make room; an engine
+        # queue had a message at least as new for its key pending.
+        self._not_queued = "drop_overflow" if keep_all else "superseded"
+        self._held: list[Message] = []  # one push's messages, pushed while nothing waited: see the docstring
+        self._held_link = LOCAL  # and their source
+        self._held_sub: Hashable = None
+        self._held_ours = False  # `_held` is a list of our own (a raw batch's units joined), not the caller's
 
     @property
     def counters(self) -> Counters:
         return self.link.counters
 
     def __len__(self) -> int:
-        return len(self._fifo) if self.keep_all else len(self._newest)
+        return len(self.queue) + len(self._held)
 
-    def push(self, msg: Message) -> None:
-        if not self.keep_all:
-            if not self._newest.push(msg):
-                self.counters["superseded"] += 1
+    def push(self, messages: list[Message], link: int = LOCAL, sub: Hashable = None) -> None:
+        """Queue `messages` from source (`link`, `sub`): `link` is the index of the link they came from (LOCAL:
+        this gateway's own), `sub` tells that link's peers apart where it can (None: the link as one source).
+        The list is kept as it is until sent: the caller must not change it."""
+        if not messages:
             return
-        if len(self._fifo) >= RAW_QUEUE_LIMIT:
-            self._fifo.popleft()
-            self.counters["drop_overflow"] += 1
-        self._fifo.append(msg)
+        held = self._held
+        if not held:
+            if not self.queue.turns:  # nothing waits
+                self._held, self._held_link, self._held_sub, self._held_ours = messages, link, sub, False
+                return
+        elif self.keep_all and link == self._held_link and sub == self._held_sub:  # a raw batch's next unit
+            if self._held_ours:
+                held.extend(messages)
+            else:
+                self._held, self._held_ours = held + messages, True
+            return
+        self._enqueue_held()
+        self._enqueue(messages, link, sub)
+
+    def _enqueue(self, messages: list[Message], link: int, sub: Hashable) -> None:
+        refused = self.queue.push(messages, link, sub)
+        if refused:
+            self.counters[self._not_queued] += refused
+
+    def _enqueue_held(self) -> None:
+        held = self._held
+        if held:
+            self._held = []
+            self._enqueue(held, self._held_link, self._held_sub)
 
     def flush(self, now: float) -> float | None:
-        """Send what the window allows; returns when to try again if messages wait."""
-        waiting = self._fifo if self.keep_all else self._newest
-        if not waiting:
-            return None
+        """Send what the window and the writer's room allow; returns when to try again if messages wait.
+
+        A writer without room calls `on_room` when it has some again: no retry time for that.
+        """
         window = self.window
-        if window.budget is None:  # no budget: everything, at once (a raw bridge's hot path)
-            if self.keep_all:
-                batch = list(self._fifo)
-                self._fifo.clear()
-            else:
-                batch = self._newest.drain()
-        else:
-            allowed = window.allowance(now)
+        writer = self.writer
+        held = self._held
+        if held:  # nothing else waits: all of it now, as it came, if the window and the writer take it all
+            room = writer.room()
+            if len(held) <= room and (window.budget is None or len(held) <= window.allowance(now)):
+                self._held = []
+                window.record(now, len(held))
+                self._submit(held)
+                return None
+            self._enqueue_held()
+        queue = self.queue
+        while queue.turns:
+            allowed = writer.room()
             if allowed <= 0:
-                return window.next_free()
-            if self.keep_all:
-                fifo = self._fifo
-                batch = [fifo.popleft() for _ in range(min(allowed, len(fifo)))]
-            else:
-                batch = self._newest.drain(allowed)
-            window.record(now, len(batch))
+                return None
+            if window.budget is not None:
+                allowed = min(allowed, window.allowance(now))
+                if allowed <= 0:
+                    return window.next_free()
+            batch = queue.drain(allowed)
+            window.record(now, len(batch), bool(queue.turns))
+            self._submit(batch)
+        return None
+
+    def _submit(self, batch: list[Message]) -> None:
         try:
             self.writer.submit(self.link.units_of(batch), len(batch))  # one unit for the batch on a byte stream
         except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
             self.counters["drop_write_error"] += len(batch)
-        return window.next_free() if waiting else None
 
     def close(self) -> None:
         """Let the device take what is queued (briefly), then stop the writer."""

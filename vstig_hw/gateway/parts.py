@@ -11,22 +11,31 @@ messages to a `Listener` the same way):
   every other link as is: no engine, no merging (RAW mode).
 * A listening Node has no part at all: nothing is judged or sent.
 
+Every batch comes with its source: the index of the link that heard it and, where
+the link tells its peers apart (a Zenoh session), which of them (`sub`). What a
+part queues on the outlets carries that source, so each outlet shares itself
+fairly among them (`fairshare`); the Seat's own messages are `LOCAL`.
+
 A part runs under `Node.lock`, on whichever thread handed it the batch.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from typing import Any
 
 from ..engine import Entry, Outcome, Stigmergy
 from ..links.link import Link
 from ..timestamps import TS_NONE
 from ..wire import GET_BIT, KEY_MAX, Message, Op
+from .fairshare import LOCAL
 from .guard import Guard
 from .outlet import Outlet
 
-__all__ = ["ChangeListener", "RawRelay", "Seat"]
+__all__ = ["INTAKE_BURST_TICKS", "INTAKE_TICKS", "ChangeListener", "RawRelay", "Seat"]
+
+INTAKE_TICKS = 16  # a source's messages the engine takes per tick: this many ticks of a link's budget
+INTAKE_BURST_TICKS = 10  # a source that was quiet may give this many ticks of intake at once (a backlog)
 
 # key, entry before (None: new key), entry after, link it came from (None: our own put), sender (None: unnamed)
 ChangeListener = Callable[[int, Entry | None, Entry, str | None, int | None], None]
@@ -41,17 +50,18 @@ class RawRelay:
         self._others = [[other for other in outlets if other is not outlet] for outlet in outlets]
         self._names = [outlet.link.name for outlet in outlets]
 
-    def take(self, index: int, messages: list[Message], sender: int | None) -> None:
+    def take(self, index: int, messages: list[Message], sender: int | None, sub: Hashable = None) -> None:
         guard = self.guard
         if guard is not None and guard.read_only(self._names[index]):  # heard, never passed on
             return
         for outlet in self._others[index]:
-            push = outlet.push
-            for msg in messages:
-                push(msg)
+            outlet.push(messages, index, sub)
 
     def queue_out(self) -> None:
         """Nothing of its own to send: `take` queued every message already."""
+
+    def tick(self) -> None:
+        """Nothing counted per tick."""
 
 
 class Seat:
@@ -60,40 +70,67 @@ class Seat:
     A PUT it stores is not echoed onto the link it came from when that link is one
     broadcast domain (`Link.one_domain`): every robot there heard the original.
     `on_change` (the Node's list, shared) hears of every entry that changed.
+
+    What the engine queues goes out under the source that caused it: what it stored
+    from a link, its answers to that link's GETs and the conflicts that link caused
+    carry the link (and its `sub`); the program's put/get/ask, `LOCAL`. The engine's
+    outbox is queued out whenever the source changes, so it never mixes two.
+
+    The engine takes at most `intake` messages a `period` from one source, measured
+    by the time each batch was read (a token bucket holding `INTAKE_BURST_TICKS`
+    periods' worth: a backlog after a stall, or a loop delayed by a loaded machine,
+    still gets in whole); the rest are dropped before it and counted as `drop_intake`
+    on the link: a flood costs the engine and the outlets no more than that, whatever
+    the medium carries. None: no bound (a seat that only judges, or a node without a
+    budget).
     """
 
     def __init__(self, engine: Stigmergy, links: list[Link[Any]], outlets: list[Outlet], guard: Guard | None,
-                 on_change: list[ChangeListener]) -> None:
+                 on_change: list[ChangeListener], intake: int | None = None, period: float = 0.1) -> None:
+        if intake is not None and intake < 1:
+            raise ValueError(f"the engine's intake per source and tick must be at least 1 message, got {intake}")
         self.engine = engine
         self.links = links
         self.outlets = outlets  # outlets[i] belongs to links[i]; none: the seat only judges
         self.guard = guard
         self.on_change = on_change
+        self.intake = intake
+        self._rate = 0.0 if intake is None else intake / period  # messages a second a source may give
+        self._burst = 0.0 if intake is None else float(intake * INTAKE_BURST_TICKS)
+        # source (a link's index, or (index, sub) for a link's peer) -> (messages it may still give, as of when)
+        self._allowed: dict[Hashable, tuple[float, float]] = {}
+        self._latest = 0.0  # the newest batch time seen: sources idle for a full refill are forgotten at `tick`
+        self._link: int = LOCAL  # the source (link, sub) that caused the messages in the engine's outbox
+        self._sub: Hashable = None
         # key -> (the PUT just stored, index of the one-domain link it came from), until the next queue_out
         self._heard_from: dict[int, tuple[Message, int]] = {}
 
     # -- the robot's program ---------------------------------------------------------
     def put(self, key: int, value: int) -> None:
         engine = self.engine
+        self._caused_by(LOCAL, None)
         old = engine.entry(key) if self.on_change else None
         engine.put(key, value)
         if self.on_change:
             self._tell(key, old, None, engine.robot_id)
 
     def get(self, key: int) -> int | None:
+        self._caused_by(LOCAL, None)
         value = self.engine.get(key)
         self._heard_from.pop(key, None)  # the GET may have merged into the key's pending PUT: send it everywhere
         return value
 
     def ask(self, key: int) -> None:
         """Queue an empty GET for `key` (timestamp 0) on every link: every neighbour holding it answers."""
-        ask = Message(Op.GET, key, 0, TS_NONE, self.engine.robot_id)
+        ask = [Message(Op.GET, key, 0, TS_NONE, self.engine.robot_id)]
         for outlet in self.outlets:
-            outlet.push(ask)  # a PUT already queued for the key says more and stays (SPEC section 5)
+            outlet.push(ask)  # (LOCAL) a PUT already queued for the key says more and stays (SPEC section 5)
 
     # -- what links heard ------------------------------------------------------------
-    def take(self, index: int, messages: list[Message], sender: int | None) -> None:
+    def take(self, index: int, messages: list[Message], sender: int | None, sub: Hashable = None) -> None:
         engine = self.engine
+        if index != self._link or sub != self._sub:
+            self._caused_by(index, sub)
         if self.on_change:
             self._receive_telling(index, messages, sender)
         elif self.outlets and self.links[index].one_domain:
@@ -101,6 +138,43 @@ class Seat:
         else:
             for msg in messages:
                 engine.receive(msg)
+
+    def _caused_by(self, link: int, sub: Hashable) -> None:
+        """What the engine queues next is caused by source (link, sub): queue out what another caused first."""
+        if link != self._link or sub != self._sub:
+            if self.engine.pending():
+                self.queue_out()
+            self._link, self._sub = link, sub
+
+    def admit(self, index: int, sub: Hashable, messages: list[Message], t: float) -> list[Message]:
+        """Of what link `index` (peer `sub`) handed over in the batch read at `t`, what the engine takes within
+        the source's intake; the rest are counted `drop_intake`. The Node asks before the guard, so a flood past
+        its intake costs no more than its decoding."""
+        source: Hashable = index if sub is None else (index, sub)
+        allowed = self._allowed.get(source)
+        if allowed is None:
+            left = self._burst
+        else:
+            left, since = allowed
+            if t > since:
+                left = min(self._burst, left + (t - since) * self._rate)
+        if len(messages) > left:
+            room = int(left)
+            self.links[index].counters["drop_intake"] += len(messages) - room
+            messages = messages[:room]
+        self._allowed[source] = (left - len(messages), t)
+        if t > self._latest:
+            self._latest = t
+        return messages
+
+    def tick(self) -> None:
+        """Forget the sources whose allowance has refilled whole since they last gave (as good as new)."""
+        allowed = self._allowed
+        if len(allowed) > len(self.links):
+            full_after = self._burst / self._rate if self._rate else 0.0
+            old = self._latest - full_after
+            for source in [source for source, (_, since) in allowed.items() if since < old]:
+                del allowed[source]
 
     def _receive_from_domain(self, index: int, messages: list[Message]) -> None:
         """Receive what link `index` (one broadcast domain) heard, noting each PUT stored from it.
@@ -141,31 +215,34 @@ class Seat:
 
     # -- what goes out -----------------------------------------------------------------
     def queue_out(self) -> None:
-        """Copy the engine's outbox into every link's outlet (none: the outbox is dropped unsent)."""
+        """Copy the engine's outbox into every link's outlet, under the source that caused it (none: the outbox
+        is dropped unsent)."""
         engine = self.engine
         if not engine.pending():
             return
         outgoing = engine.drain()
+        link, sub = self._link, self._sub
         guard = self.guard
         confined_to = guard.confined_to if guard is not None and guard.confines else None
         if confined_to is None and not self._heard_from:  # the common case: every message to every link
             for outlet in self.outlets:
-                push = outlet.push
-                for msg in outgoing:
-                    push(msg)
+                outlet.push(outgoing, link, sub)
         else:
-            self._push_where_due(outgoing, confined_to)
+            self._push_where_due(outgoing, confined_to, link, sub)
 
-    def _push_where_due(self, outgoing: list[Message], confined_to: Callable[[Message], str | None] | None) -> None:
+    def _push_where_due(self, outgoing: list[Message], confined_to: Callable[[Message], str | None] | None,
+                        link: int, sub: Hashable) -> None:
         """Queue each message on every link but the one-domain link it came from and those a guard keeps it off."""
         origins = self._origins(outgoing)
         for i, outlet in enumerate(self.outlets):
             name = outlet.link.name
+            due = []
             for msg, origin in zip(outgoing, origins, strict=True):
                 if origin == i:  # every robot on that link heard it already
                     outlet.link.counters["not_echoed"] += 1
                 elif confined_to is None or confined_to(msg) in (None, name):  # a read-only link's entries stay
-                    outlet.push(msg)
+                    due.append(msg)
+            outlet.push(due, link, sub)
 
     def _origins(self, outgoing: list[Message]) -> list[int]:
         """Per message, the one-domain link it was heard on (-1: none), and forget the notes."""

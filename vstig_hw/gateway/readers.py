@@ -21,9 +21,12 @@ import functools
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..links.link import Link
+
+if TYPE_CHECKING:
+    from .._vstig import Path
 
 __all__ = ["Arrival", "LinkReaders"]
 
@@ -35,9 +38,15 @@ Deliver = Callable[[int, float, list[Any]], None]
 
 
 class LinkReaders:
-    def __init__(self, links: list[Link[Any]], deliver: Deliver) -> None:
+    """One reader thread per link. With a compiled delivery (`path`), a link whose device it reads itself (a
+    serial port's fd, a SocketCAN socket: `path.pumps`) is read and delivered by it, one call per read; the
+    transport's own read takes a turn whenever the path hands it back (no fd now, a device failing, a listener
+    that wants python-can's own messages)."""
+
+    def __init__(self, links: list[Link[Any]], deliver: Deliver, path: Path | None = None) -> None:
         self.links = links
         self.deliver = deliver
+        self.path = path
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
 
@@ -48,11 +57,15 @@ class LinkReaders:
 
     def start(self) -> None:
         self._stop.clear()
+        if self.path is not None:
+            self.path.stopping = False
         for index, link in enumerate(self.links):
             deliver_to = getattr(link.transport, "deliver_to", None)
             if deliver_to is not None:
                 deliver_to(functools.partial(self._pushed, index))
-            thread = threading.Thread(target=self._read, args=(index, link), name=f"read-{link.name}", daemon=True)
+            pumped = self.path is not None and self.path.pumps(index)
+            thread = threading.Thread(target=self._pump if pumped else self._read, args=(index, link),
+                                      name=f"read-{link.name}", daemon=True)
             thread.start()
             self._threads.append(thread)
 
@@ -69,12 +82,32 @@ class LinkReaders:
             if units:
                 deliver(index, time.time(), units)
 
+    def _pump(self, index: int, link: Link[Any]) -> None:
+        """The compiled delivery reads the device in its own loop (`serve`) until `stop`; the transport's own
+        read takes the turns it hands back (`_read_once`)."""
+        path = self.path
+        assert path is not None
+        turn = functools.partial(self._read_once, index, link)
+        while not self._stop.is_set():
+            try:
+                path.serve(index, READ_TIMEOUT, turn)
+            except Exception:  # as `_read`: counted and retried
+                link.counters["read_error"] += 1
+                self._stop.wait(ERROR_BACKOFF)
+
+    def _read_once(self, index: int, link: Link[Any]) -> None:
+        units = link.transport.read(READ_TIMEOUT)
+        if units:
+            self.deliver(index, time.time(), units)
+
     def _pushed(self, index: int, units: list[Any]) -> None:
         """On the device's own thread (a transport's callback): what it heard, delivered as a read's would be."""
         self.deliver(index, time.time(), units)
 
     def stop(self) -> None:
         self._stop.set()
+        if self.path is not None:
+            self.path.stopping = True
         for link in self.links:
             deliver_to = getattr(link.transport, "deliver_to", None)
             if deliver_to is not None:

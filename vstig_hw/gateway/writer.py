@@ -9,9 +9,17 @@ depends on. So each link gets its own bounded queue and writer thread:
   publisher that drops under congestion), with no hand-off to another thread.
 * What the device does not take at once waits in this link's queue, and this
   link's thread alone waits for the device (its transport's blocking `write`).
-* The queue holds at most `limit` messages. When it is full the oldest queued
-  units are dropped and counted as `tx_overflow` (what is newest matters most to
-  a stigmergy), logged once when an episode starts and once when it ends.
+* The outlet hands over no more while `room` is spent: the writer holds at most
+  `hold` messages the device has not taken (`WRITER_HOLD`), and what else waits
+  stays in the outlet, shared fairly among its sources (`fairshare`). When the
+  device takes enough that room opens again, `on_room` is called (from this
+  link's thread) so the outlet is flushed again at once. A device that has left
+  no room for `STALL_TOLD_AFTER` seconds is logged once, and once when it takes
+  everything again.
+* The queue holds at most `limit` messages whoever submits. When it is full the
+  oldest queued units are dropped and counted as `tx_overflow` (what is newest
+  matters most to a stigmergy), logged once when an episode starts and once when
+  it ends.
 """
 
 from __future__ import annotations
@@ -20,30 +28,44 @@ import logging
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 from ..links.link import Link
 
-__all__ = ["TX_QUEUE_LIMIT", "LinkWriter"]
+__all__ = ["TX_QUEUE_LIMIT", "WRITER_HOLD", "LinkWriter"]
 
 log = logging.getLogger(__name__)
 
 TX_QUEUE_LIMIT = 1024  # messages waiting per link: ~1 s of a 115200-baud cobs8 radio
+WRITER_HOLD = 64  # messages held for a slow device before the outlet keeps the rest: ~70 ms of that radio
+STALL_TOLD_AFTER = 1.0  # seconds a device may leave no room before it is logged (a busy bus's brief spells are not)
 CLOSE_WAIT = 1.0  # seconds close() gives the device to take what is queued
 
 
 class LinkWriter:
-    def __init__(self, link: Link[Any], limit: int = TX_QUEUE_LIMIT) -> None:
+    def __init__(self, link: Link[Any], limit: int = TX_QUEUE_LIMIT, *, hold: int = WRITER_HOLD,
+                 on_room: Callable[[], None] | None = None) -> None:
         if limit < 1:
             raise ValueError(f"a link's send queue holds at least 1 message, got {limit}")
+        if hold < 1:
+            raise ValueError(f"a writer holds at least 1 message, got {hold}")
         self.link = link
         self.limit = limit
+        self.hold = hold
+        self._on_room = on_room
+        self._full = False  # `room` was spent: tell `on_room` when it opens again
+        self._full_since: float | None = None  # when room was first found spent in this episode
+        self._told = False  # the episode was logged (a long stall, or drops): its end is logged too
         self._write = link.transport.write
         self._write_nowait = getattr(link.transport, "write_nowait", None)
         self._queue: deque[tuple[Any, int]] = deque()  # (unit, messages it carries)
         self._queued = 0  # messages in _queue
         self._rest: tuple[Any, int] | None = None  # the tail of a unit the loop began
         self._busy = False  # the thread is in a device write
+        # Nothing queued or being written: the loop's write goes straight to the device (the compiled outlets
+        # look at this alone). Changed only under the lock, in one step, so it is never True while a unit waits.
+        self.idle = True
         self._closing = False
         self._dropped_in_episode = 0
         self._lock = threading.Lock()  # entered directly on the hot path (a Condition's `with` is Python code)
@@ -52,6 +74,28 @@ class LinkWriter:
 
     def __len__(self) -> int:
         return self._queued
+
+    def room(self) -> int:
+        """How many more messages the outlet may hand over now (at most `hold` wait for the device)."""
+        if not self._queued and self._rest is None:  # holds nothing (only this caller adds; the thread takes away)
+            return self.hold
+        with self._lock:  # as the writer's thread looks at `_full` after each write: no wake-up lost between
+            held = self._queued if self._rest is None else self._queued + self._rest[1]
+            room = self.hold - held
+            if room <= 0:
+                self._full = True
+                now = time.monotonic()
+                if self._full_since is None:
+                    self._full_since = now
+                elif now - self._full_since >= STALL_TOLD_AFTER:
+                    self._tell_stall()
+            return room
+
+    def _tell_stall(self) -> None:
+        if not self._told:
+            self._told = True
+            log.warning("%s: the device does not take what we send; its messages wait while the other links "
+                        "carry on", self.link.name)
 
     def submit(self, units: list[Any], messages: int) -> None:
         """Send `units` (carrying `messages` in all): now if the device takes them, else through the queue.
@@ -82,6 +126,7 @@ class LinkWriter:
             if done == len(units) and self._rest is None:
                 return
             self._enqueue(units[done:], [base + (i < extra) for i in range(done, len(units))])
+            self.idle = False
             self._start()
             self._cond.notify()
 
@@ -97,9 +142,7 @@ class LinkWriter:
             dropped += count
         if dropped:
             self.link.counters["tx_overflow"] += dropped
-            if not self._dropped_in_episode:
-                log.warning("%s: the device does not take what we send; dropping the oldest queued messages "
-                            "(tx_overflow) while the other links carry on", self.link.name)
+            self._tell_stall()
             self._dropped_in_episode += dropped
 
     def _start(self) -> None:
@@ -129,12 +172,18 @@ class LinkWriter:
                 self.link.counters["out"] += count
             with cond:
                 self._busy = False
+                room_again = self._full and self._queued < self.hold
+                if room_again:
+                    self._full = False
                 if not self._queue and self._rest is None:
-                    if self._dropped_in_episode:
-                        log.warning("%s: the device takes what we send again (%d messages dropped meanwhile)",
-                                    self.link.name, self._dropped_in_episode)
-                        self._dropped_in_episode = 0
+                    self.idle = True
+                    if self._told:
+                        log.warning("%s: the device takes what we send again (%d messages dropped meanwhile: "
+                                    "tx_overflow)", self.link.name, self._dropped_in_episode)
+                    self._told, self._full_since, self._dropped_in_episode = False, None, 0
                     cond.notify_all()
+            if room_again and self._on_room is not None:
+                self._on_room()
 
     def close(self, wait: float = CLOSE_WAIT) -> None:
         """Give the device up to `wait` seconds to take what is queued, then stop; what is left is counted."""

@@ -1,6 +1,7 @@
 """Serial links (`serial:` and `kilobot-ohc:` specs): one call to a Link, `serial_link("/dev/ttyUSB0", "epuck4")`.
 
 pyserial and the serial transport are imported when a link is built, not when a spec is parsed.
+`framing=xbee` puts a Digi XBee module in API mode behind the port (transports/xbee.py).
 """
 
 from __future__ import annotations
@@ -15,19 +16,24 @@ from .link import Link
 
 if TYPE_CHECKING:
     from ..framing import SerialFraming
+    from ..framing.xbee import XBeeFraming
+    from ..transports.xbee import XBeeTransport
 
 __all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "SerialSpec", "parse_ohc", "parse_serial", "serial_link",
            "serial_link_from_spec"]
 
-SERIAL_FRAMINGS = ("cobs8", "epuck4", "kilobot")
+SERIAL_FRAMINGS = ("cobs8", "epuck4", "kilobot", "xbee")
 DEFAULT_BAUD = 115200
 OHC_BAUD = 38400  # the Kilobot overhead controller's fixed rate
+XBEEMAV_BAUD = 230400  # XbeeMav's module profiles (BD=8)
 
 GRAMMAR = (
     "serial:<port or pyserial URL>[?baud=N&framing=cobs8|epuck4|kilobot&expiry_ticks=N]",
+    "serial:<port>?framing=xbee[&api=1|2&dest=<64-bit address, hex>&baud=N]",
     "kilobot-ohc:<port or pyserial URL>",
     "serial:<port>?framing=kilobot&dialect=bittybuzz&deployment=<file.toml>, kilobot-ohc:<port>?dialect=bittybuzz&"
     "deployment=<file.toml>",
+    "serial:<port>?framing=xbee&dialect=buzz&deployment=<file.toml>[&api=1|2&baud=N]",
 )
 EXAMPLES = {
     "serial": ("serial:/dev/ttyUSB0?baud=115200", "serial:socket://localhost:7000?framing=epuck4",
@@ -35,6 +41,9 @@ EXAMPLES = {
                "serial:/dev/ttyUSB1?framing=epuck4&expiry_ticks=5"),
     "kilobot-ohc": ("kilobot-ohc:/dev/ttyUSB0", "kilobot-ohc:/dev/ttyUSB0?dialect=bittybuzz&deployment=lab.toml"),
     "bittybuzz": ("serial:/dev/ttyUSB0?framing=kilobot&dialect=bittybuzz&deployment=lab.toml",),
+    "xbee": ("serial:/dev/ttyUSB0?framing=xbee&baud=230400", "serial:/dev/ttyUSB0?framing=xbee&api=2",
+             "serial:/dev/ttyUSB0?framing=xbee&dest=0013A20040A1B2C3"),
+    "rosbuzz": ("serial:/dev/ttyUSB0?framing=xbee&dialect=buzz&deployment=drones.toml",),
 }
 # For `vstig links`: what the options mean beyond the grammar.
 NOTES = {
@@ -46,6 +55,11 @@ NOTES = {
     "bittybuzz": "bittybuzz: Kilobots running BittyBuzz, through a bridge radio (framing=kilobot) or the overhead "
                  "controller; deployment= names the TOML file that maps their string ids and values to our keys "
                  "(firmware_spec/dialects.md section 5).",
+    "xbee": "xbee: a Digi XBee module in API mode (AP=1, or api=2 for AP=2) at the module's BD rate (default 9600, "
+            "Digi's factory setting); messages go in 0x10 frames broadcast (or to dest=), as many as the module's NP "
+            "holds; a 0x90's 64-bit source is its sender (docs/how-to/xbee.md).",
+    "rosbuzz": "rosbuzz: ROSBuzz drones on XBee radios, in MISTLab XbeeMav's packets (API mode 1 at 230400 baud unless "
+               "api=/baud= say otherwise); deployment= maps their Buzz keys and values to ours; --robot-id 0..255.",
 }
 _SERIAL_EXAMPLE = EXAMPLES["serial"][0]
 _OHC_EXAMPLE = EXAMPLES["kilobot-ohc"][0]
@@ -55,10 +69,12 @@ _OHC_EXAMPLE = EXAMPLES["kilobot-ohc"][0]
 class SerialSpec:
     port: str
     baud: int = DEFAULT_BAUD
-    framing: str = "cobs8"  # cobs8 | epuck4 | kilobot | kilobot-ohc
+    framing: str = "cobs8"  # cobs8 | epuck4 | kilobot | kilobot-ohc | xbee
     expiry_ticks: int | None = None  # epuck4 only: control periods a fragment waits for the rest
-    dialect: str | None = None  # "bittybuzz": the robots speak BittyBuzz, translated through `deployment`
+    dialect: str | None = None  # "bittybuzz" (Kilobots) or "buzz" (ROSBuzz over xbee), translated through `deployment`
     deployment: str | None = None  # the deployment TOML file of a dialect link
+    api: int = 1  # xbee only: the module's API mode (AP), 1 or 2 (escaped)
+    dest: int | None = None  # xbee only: a 64-bit destination instead of broadcast
 
     @property
     def kind(self) -> str:
@@ -70,27 +86,62 @@ class SerialSpec:
         return safe_name(tail.rsplit("/", 1)[-1] or tail)
 
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
-        """The Link (not yet open); `robot_id` and `listen_only` matter only to CAN (same signature as CanSpec)."""
-        return serial_link_from_spec(self, name or self.name)
+        """The Link (not yet open); `robot_id` is what a ROSBuzz link sends under, `listen_only` matters to CAN."""
+        return serial_link_from_spec(self, name or self.name, robot_id)
+
+    def check_sender(self, robot_id: int) -> None:
+        """ValueError when a ROSBuzz link cannot send under `robot_id` (XbeeMav's sysid is one byte)."""
+        if self.dialect == "buzz" and not 0 <= robot_id <= 0xFF:
+            raise ValueError(f"{robot_id} does not fit serial:{self.port}: ROSBuzz robot ids are 0..255 "
+                             "(XbeeMav's sysid is one byte)")
 
 
 _DIALECT_KEYS = ("dialect", "deployment")
+_DIALECT_FRAMINGS = {"bittybuzz": ("kilobot", "kilobot-ohc"), "buzz": ("xbee",)}  # what each dialect rides on
 
 
 def _dialect(spec: str, example: str, params: dict[str, str], framing: str) -> dict[str, Any]:
-    """`dialect=bittybuzz&deployment=FILE` of a Kilobot link; {} when the link speaks our own format.
+    """`dialect=bittybuzz|buzz&deployment=FILE` of a Kilobot or XBee link; {} when the link speaks our own format.
     The file is read when the link is built, as a port is opened then."""
     if "dialect" not in params:
         if "deployment" in params:
-            raise bad(spec, "deployment= goes with dialect=bittybuzz", example)
+            raise bad(spec, "deployment= goes with dialect=bittybuzz or dialect=buzz", example)
         return {}
-    if params["dialect"] != "bittybuzz":
-        raise bad(spec, f"dialect={params['dialect']!r}: a serial link speaks bittybuzz (or our own format)", example)
-    if framing not in ("kilobot", "kilobot-ohc"):
-        raise bad(spec, "dialect=bittybuzz rides on Kilobot messages: use framing=kilobot or kilobot-ohc:", example)
+    dialect = params["dialect"]
+    if dialect not in _DIALECT_FRAMINGS:
+        raise bad(spec, f"dialect={dialect!r}: a serial link speaks bittybuzz, buzz (or our own format)", example)
+    if framing not in _DIALECT_FRAMINGS[dialect]:
+        carriers = {"bittybuzz": "Kilobot messages: use framing=kilobot or kilobot-ohc:",
+                    "buzz": "XbeeMav's packets on XBee radios: use framing=xbee"}
+        raise bad(spec, f"dialect={dialect} rides on {carriers[dialect]}", example)
     if "deployment" not in params:
-        raise bad(spec, "dialect=bittybuzz needs deployment=<file.toml> (its keys and value types)", example)
-    return {"dialect": "bittybuzz", "deployment": params["deployment"]}
+        raise bad(spec, f"dialect={dialect} needs deployment=<file.toml> (its keys and value types)", example)
+    return {"dialect": dialect, "deployment": params["deployment"]}
+
+
+def _xbee(spec: str, example: str, params: dict[str, str], framing: str) -> dict[str, Any]:
+    """`api=1|2` and `dest=<hex>` of an xbee link."""
+    found = [key for key in ("api", "dest") if key in params]
+    if framing != "xbee":
+        if found:
+            raise bad(spec, f"{found[0]} is an xbee option, not one of framing={framing}", example)
+        return {}
+    options: dict[str, Any] = {}
+    if "api" in params:
+        if params["api"] not in ("1", "2"):
+            raise bad(spec, f"api={params['api']!r} must be 1 or 2 (the module's AP setting)", example)
+        options["api"] = int(params["api"])
+    if "dest" in params:
+        text = params["dest"].removeprefix("0x").removeprefix("0X")
+        try:
+            dest = int(text, 16)
+        except ValueError:
+            dest = -1
+        if not 0 <= dest <= 0xFFFF_FFFF_FFFF_FFFF or len(text) > 16:
+            raise bad(spec, f"dest={params['dest']!r} is not a 64-bit address in hex (16 digits, e.g. "
+                      "0013A20040A1B2C3; 000000000000FFFF broadcasts)", example)
+        options["dest"] = dest
+    return options
 
 
 # pyserial URL handlers' parameters that open a file for writing: spy:// truncates `file=` as it opens.
@@ -114,19 +165,33 @@ def _port(spec: str, example: str, port: str) -> str:
 def parse_serial(spec: str, body: str) -> SerialSpec:
     """`body` is the spec after `serial:`."""
     example = _SERIAL_EXAMPLE
-    port, params = split_query(spec, body, example, ("baud", "framing", "expiry_ticks", *_DIALECT_KEYS),
-                                 "://" in body)
+    port, params = split_query(spec, body, example, ("baud", "framing", "expiry_ticks", "api", "dest",
+                                                     *_DIALECT_KEYS), "://" in body)
     framing = params.get("framing", "cobs8")
     if framing not in SERIAL_FRAMINGS:
         raise bad(spec, f"framing={framing!r} is not one of {'|'.join(SERIAL_FRAMINGS)}", example)
-    baud = integer(spec, example, "baud", params["baud"], 1, 100_000_000) if "baud" in params else DEFAULT_BAUD
+    if framing == "xbee":
+        example = EXAMPLES["xbee"][0]
+    baud = integer(spec, example, "baud", params["baud"], 1, 100_000_000) if "baud" in params else None
     expiry_ticks = None
     if "expiry_ticks" in params:
         if framing != "epuck4":
             raise bad(spec, f"expiry_ticks is an epuck4 option, not one of framing={framing}", example)
         expiry_ticks = integer(spec, example, "expiry_ticks", params["expiry_ticks"], 1, 254)
+    dialect = _dialect(spec, example, params, framing)
+    if baud is None:
+        baud = _default_baud(framing, dialect.get("dialect"))
     return SerialSpec(port=_port(spec, example, port), baud=baud, framing=framing, expiry_ticks=expiry_ticks,
-                      **_dialect(spec, example, params, framing))
+                      **dialect, **_xbee(spec, example, params, framing))
+
+
+def _default_baud(framing: str, dialect: str | None) -> int:
+    """The line speed a link runs at unless told: its framing's radios' (an XBee's factory 9600, XbeeMav's 230400)."""
+    if framing != "xbee":
+        return DEFAULT_BAUD
+    from ..framing.xbee import XBeeFraming
+
+    return XBEEMAV_BAUD if dialect == "buzz" else XBeeFraming.default_baud
 
 
 def parse_ohc(spec: str, body: str) -> SerialSpec:
@@ -141,30 +206,64 @@ def serial_link(port: str, framing: str = "cobs8", baud: int | None = None, *, n
                 **framing_options: Any) -> Link[bytes]:
     """A Link over `port` (a device path or any pyserial URL) speaking `framing`.
 
-    `baud` defaults to the framing's own (38400 for kilobot-ohc, 115200 otherwise).
-    `transport_options` go to SerialTransport (parity, stopbits, rtscts, backoff_max...),
-    the other keyword options to the framing (e.g. expiry_ticks=5, msg_type=0x42).
+    `baud` defaults to the framing's own (38400 for kilobot-ohc, 9600 for xbee, 115200 otherwise).
+    `transport_options` go to SerialTransport (parity, stopbits, rtscts, backoff_max...; for xbee
+    and xbee-api2, an XBeeTransport: at_timeout too), the other keyword options to the framing
+    (e.g. expiry_ticks=5, msg_type=0x42, dest=0x0013A20040A1B2C3).
     With `connect` the port is opened now, so a bad port fails here with a TransportError.
     Unknown framings or options raise ValueError naming them.
     """
     from ..framing import make_serial_framing
+    from ..framing.xbee import XBeeFraming
     from ..transports.serial import SerialTransport
 
     codec = make_serial_framing(framing, **framing_options)
-    transport = SerialTransport(port, baud or codec.default_baud, name=name, preamble=codec.preamble,
-                                **dict(transport_options or {}))
+    transport: SerialTransport
+    if isinstance(codec, XBeeFraming):
+        transport = _xbee_transport(port, baud or codec.default_baud, codec, name, transport_options)
+    else:
+        transport = SerialTransport(port, baud or codec.default_baud, name=name, preamble=codec.preamble,
+                                    **dict(transport_options or {}))
     link: Link[bytes] = Link(name or port, transport, codec)
     if connect:
         link.open()
     return link
 
 
-def serial_link_from_spec(spec: SerialSpec, name: str) -> Link[Any]:
-    """A serial link never names its sender, so unlike CAN it needs no robot id."""
+def serial_link_from_spec(spec: SerialSpec, name: str, robot_id: int = 0) -> Link[Any]:
+    """The link a spec names; `robot_id` is what a ROSBuzz link (dialect=buzz) sends under."""
+    if spec.framing == "xbee":
+        return _xbee_link(spec, name, robot_id)
     if spec.dialect is not None:
         return _dialect_link(spec, name)
     options: dict[str, Any] = {} if spec.expiry_ticks is None else {"expiry_ticks": spec.expiry_ticks}
     return serial_link(spec.port, spec.framing, spec.baud, name=name, connect=False, **options)
+
+
+def _xbee_link(spec: SerialSpec, name: str, robot_id: int) -> Link[bytes]:
+    """An XBee module behind the port: our messages, or ROSBuzz's through XbeeMav's packets (dialect=buzz)."""
+    from ..framing.xbee import BROADCAST, XBeeApi2Framing, XBeeFraming
+
+    dest = BROADCAST if spec.dest is None else spec.dest
+    codec: XBeeFraming
+    if spec.dialect == "buzz":
+        from ..dialects.framing import XbeeMavApi2Framing, XbeeMavFraming
+        from ..dialects.mapping import load_deployment
+
+        rosbuzz = XbeeMavApi2Framing if spec.api == 2 else XbeeMavFraming
+        codec = rosbuzz(load_deployment(str(spec.deployment)), robot_id, dest)
+    else:
+        codec = (XBeeApi2Framing if spec.api == 2 else XBeeFraming)(dest)
+    return Link(name, _xbee_transport(spec.port, spec.baud, codec, name), codec)
+
+
+def _xbee_transport(port: str, baud: int, codec: XBeeFraming, name: str | None,
+                    options: Mapping[str, Any] | None = None) -> XBeeTransport:
+    """The module behind the port, in the framing's API mode; what it says at open sizes the framing's frames."""
+    from ..transports.xbee import XBeeTransport
+
+    return XBeeTransport(port, baud, api=2 if codec.escaped else 1, name=name, on_module=codec.use_module,
+                         **dict(options or {}))
 
 
 def _dialect_link(spec: SerialSpec, name: str) -> Link[bytes]:

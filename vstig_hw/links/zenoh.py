@@ -6,37 +6,42 @@ no multicast scouting unless the spec (`listen=`, `scout=1`) or the Zenoh config
 file says otherwise. The port is picked when the link is built and bound when its
 session opens; should another program take it in between, the session opens on a
 fresh one (Zenoh's Python API cannot report a port it picked itself from port 0,
-short of opening its admin space to every peer). A config file passes through unchanged: only the keys the
-spec names override it, and our closed defaults fill only what it leaves unset.
+short of opening its admin space to every peer). A config file (read under the file rules: zenoh_files) passes
+through: only the keys the spec names override it, and our closed defaults and bounds fill only what it leaves
+unset; where it loosens a bound (`bounds`: what one peer can make the gateway hold), one line says so.
 
-Opening a link that lets unauthenticated peers in from the network logs one
-warning line: a listener beyond loopback that is neither covered by user/password
-or known public keys nor a TLS/QUIC listener with mutual TLS, or multicast
-scouting without such authentication. The loopback default is open to every
-user of this PC (docs/how-to/many-pcs.md).
+Opening a link that lets unauthenticated peers in from beyond this PC logs one
+warning line (`exposure`): a listener not reachable from this PC alone, unless
+Zenoh makes every peer authenticate or it is a TLS/QUIC listener with mutual
+TLS, or multicast scouting without such authentication. The loopback default is
+open to every user of this PC (docs/how-to/many-pcs.md).
 
 The zenoh library is imported when a link is built, not when a spec is parsed.
 """
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import logging
+import re
 import socket
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ..framing.zenoh import MAX_SAMPLE, MAX_STIGMERGY, ZenohFraming, ZenohKeySpace, check_swarm
+from ..inputs import InputFileError
 from ..transports.base import TransportError, one_line
 from ..wire import MESSAGE_SIZE
 from .grammar import bad, flag, integer, safe_name, split_query
 from .link import Link
+from .zenoh_files import NAMED_FILES, ConfigFile, check_listen_path, read_config, read_named, users_in
 
 if TYPE_CHECKING:
     import zenoh
 
-__all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "ZenohSpec", "exposure", "parse_zenoh", "zenoh_config",
-           "zenoh_link_from_spec"]
+__all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "BuiltConfig", "ZenohSpec", "bounds", "build_config", "exposure",
+           "parse_zenoh", "zenoh_config", "zenoh_link_from_spec"]
 
 GRAMMAR = (
     "zenoh:<swarm>[?mode=peer|client&connect=<endpoint>[,...]&listen=<endpoint>[,...]&config=<zenoh json5 file>"
@@ -52,8 +57,9 @@ EXAMPLES = {
 NOTES = {
     "zenoh": "zenoh: gateways on many PCs as one swarm (key vstig/<swarm>/<stigmergy>/<gateway id>). Closed by "
              "default: listens on a free loopback port (printed once open), no multicast scouting; listen=, connect= "
-             "or scout=1 open it, config= passes a Zenoh config file (TLS, user/password, routers) through. A sample "
-             f"above max_sample= bytes (default {MAX_SAMPLE}) is refused unread and counted (rx_oversize). One "
+             "or scout=1 open it, config= passes a Zenoh JSON5 config file (TLS, user/password, routers) through. A "
+             f"sample above max_sample= bytes (default {MAX_SAMPLE}) is refused unread and counted (rx_oversize); "
+             "Zenoh holds none above max_sample + 64 KiB, and shares no memory with local peers. One "
              "broadcast domain: a PUT heard on zenoh is not published back onto it; echo=1 does (peers that do not "
              "all reach each other, with no router).",
 }
@@ -145,9 +151,23 @@ def parse_zenoh(spec: str, body: str) -> ZenohSpec:
 
 log = logging.getLogger(__name__)
 
-_LOCAL_HOSTS = ("127.", "[::1]", "localhost")
-_LOCAL_PROTOCOLS = ("unixsock-stream", "unixpipe", "vsock")
+_LOCAL_PROTOCOLS = ("unixsock-stream", "unixpipe")  # reached through this PC's file system only
 _TLS_PROTOCOLS = ("tls", "quic")  # the links mutual TLS authenticates
+_VSOCK_LOCAL = ("VMADDR_CID_LOCAL", "1")  # vsock's own-machine address; any other CID is reached from VMs
+HEADROOM = 64 * 1024  # beside a sample's payload: its key, timestamp, encoding, attachment
+
+
+def bounds(max_sample: int) -> dict[str, Any]:
+    """The Zenoh settings that bound what peers can make a gateway hold, for samples of `max_sample` payload
+    bytes at most (DECISIONS.md, "What a Zenoh peer can make a gateway hold")."""
+    return {
+        # Zenoh reassembles a fragmented sample up to this size (its default: 1 GiB), then drops it: one 900 MiB
+        # sample took a gateway to 958 MB, which stayed after the peer left; bounded, it stays near 34 MB.
+        "transport/link/rx/max_message_size": max_sample + HEADROOM,
+        # A local peer's shared-memory pool (16 MiB) is mapped by whoever reads from it, and stayed mapped after
+        # the peer left: +16-20 MB per peer that flooded and left. Off, local peers go through loopback.
+        "transport/shared_memory/enabled": False,
+    }
 
 
 def _free_loopback_port() -> int:
@@ -165,21 +185,35 @@ def _loopback_listener(protocol: str) -> list[str]:
     return [f"{protocol}/127.0.0.1:{_free_loopback_port()}"]
 
 
+@dataclass(frozen=True, slots=True)
+class BuiltConfig:
+    """A link's Zenoh config, and what building it found."""
+
+    config: zenoh.Config
+    ours: str | None  # the protocol of the loopback listener we chose for it (None if we chose none)
+    overridden: tuple[str, ...]  # why the config file's own values loosen our bounds, one line each
+
+
 def zenoh_config(spec: ZenohSpec) -> zenoh.Config:
     """The Zenoh configuration for `spec`: its file (if any), then the spec's keys, then our closed defaults."""
-    return _config_and_listener(spec)[0]
+    return build_config(spec).config
 
 
-def _config_and_listener(spec: ZenohSpec) -> tuple[zenoh.Config, str | None]:
-    """zenoh_config(spec), and the protocol of the loopback listener we chose for it (None if we chose none)."""
+def build_config(spec: ZenohSpec) -> BuiltConfig:
+    """The one place a link's Zenoh config is made: the config file read under the file rules (zenoh_files), the
+    spec's keys over it, our closed defaults and bounds where the file leaves them unset, and every file it names
+    and unix socket it listens on checked before Zenoh opens any. TransportError names what is wrong."""
     import zenoh
 
+    file = None
     if spec.config:
         try:
-            config = zenoh.Config.from_file(spec.config)
-        except (zenoh.ZError, OSError) as exc:
-            reason = one_line(exc).split(" at /", 1)[0]
-            raise TransportError(f"cannot read the Zenoh config file {spec.config}: {reason}") from None
+            file = read_config(spec.config)
+            config = zenoh.Config.from_json5(file.text)
+        except InputFileError as error:
+            raise TransportError(f"cannot read the Zenoh config file: {error}") from None
+        except zenoh.ZError as error:
+            raise TransportError(f"cannot read the Zenoh config file {_zenoh_error_at(file, error)}") from None
     else:
         config = zenoh.Config()
     zenoh_default = zenoh.Config()
@@ -201,7 +235,61 @@ def _config_and_listener(spec: ZenohSpec) -> tuple[zenoh.Config, str | None]:
         config.insert_json5("scouting/multicast/enabled", "false")
     if _json(config, "timestamping/enabled") is None:  # stamped samples name their session: --source-rate
         config.insert_json5("timestamping/enabled", "true")
-    return config, ours
+    overridden = []
+    for key, value in bounds(spec.max_sample).items():
+        if file is None or key not in file.keys:
+            config.insert_json5(key, json.dumps(value))
+        elif _json(config, key) > value:  # a larger size, or shared memory on (True > False): looser than ours
+            overridden.append(f"{file.where(key)} sets {key} to {config.get_json(key)} (vstig's default: "
+                              f"{json.dumps(value)}): {_LOOSENED[key]}")
+    _check_files(config, file)
+    return BuiltConfig(config, ours, tuple(overridden))
+
+
+_LOOSENED = {
+    "transport/link/rx/max_message_size": "one peer's sample can take that much of this PC's memory",
+    "transport/shared_memory/enabled": "each local peer's shared memory may stay mapped here after it leaves",
+}
+
+
+def _zenoh_error_at(file: ConfigFile | None, error: Exception) -> str:
+    """`path:line: why` for Zenoh's error about a config file (its parser's ` --> line:column`, or the line of
+    a field it names)."""
+    assert file is not None
+    text = str(error)
+    position = re.search(r"-->\s*(\d+):\d+", text)
+    reason = text.splitlines()[-1].lstrip(" =") if position else one_line(error).split(" at /", 1)[0]
+    line = f":{position.group(1)}" if position else file.line_of_field(text)
+    return f"{file.path}{line}: {reason}"
+
+
+def _check_files(config: zenoh.Config, file: ConfigFile | None) -> None:
+    """Every file the config names, read as vstig reads named files, and every unix socket path it listens on,
+    checked now: a device or FIFO there would hold or swamp Zenoh, a file there would be replaced."""
+    for key, what in NAMED_FILES.items():
+        path = _json(config, key)
+        if isinstance(path, str):
+            try:
+                read_named(path, what)
+            except InputFileError as error:
+                where = file.where(key) if file is not None else "the Zenoh config"
+                raise TransportError(f"{where}: {key}: {error}") from None
+    for side in ("listen", "connect"):
+        for endpoint in _endpoints(config, f"{side}/endpoints"):
+            _, _, settings = endpoint.partition("#")
+            for name, _, path in (item.partition("=") for item in settings.split(";")):
+                if name.endswith("_file") and path:
+                    try:
+                        read_named(path, f"the {name} of {endpoint.split('#', 1)[0]}")
+                    except InputFileError as error:
+                        raise TransportError(f"{side}={endpoint}: {error}") from None
+    for endpoint in _endpoints(config, "listen/endpoints"):
+        protocol, _, address = endpoint.partition("/")
+        if protocol == "unixsock-stream":
+            try:
+                check_listen_path(address.split("?", 1)[0].split("#", 1)[0])
+            except InputFileError as error:
+                raise TransportError(f"listen={endpoint}: {error}") from None
 
 
 def _loopback_protocol(config: zenoh.Config) -> str | None:
@@ -227,18 +315,47 @@ def _endpoints(config: zenoh.Config, key: str) -> list[str]:
     return [str(v) for v in value or []]
 
 
+def _host(address: str) -> str:
+    """The host of an endpoint's address (`host:port`, `[v6]:port`), its metadata and settings left off."""
+    address = address.split("?", 1)[0].split("#", 1)[0]
+    if address.startswith("["):
+        return address[1:].split("]", 1)[0]
+    return address.rsplit(":", 1)[0]
+
+
 def _is_local(endpoint: str) -> bool:
+    """Whether only this PC can reach `endpoint`: a loopback address written as one (127.0.0.0/8, ::1, an IPv4
+    loopback mapped into IPv6), `localhost` itself, a unix socket or pipe, vsock's local CID. A name is judged by
+    what it is, never resolved (`localhost.example` or `127.0.0.1.example` may resolve anywhere)."""
     protocol, _, address = endpoint.partition("/")
-    return protocol in _LOCAL_PROTOCOLS or address.startswith(_LOCAL_HOSTS)
+    if protocol in _LOCAL_PROTOCOLS:
+        return True
+    host = _host(address)
+    if protocol == "vsock":
+        return host in _VSOCK_LOCAL
+    if host.lower() == "localhost":
+        return True
+    try:
+        ip = ipaddress.ip_address(host.split("%", 1)[0])
+    except ValueError:
+        return False
+    mapped = ip.ipv4_mapped if isinstance(ip, ipaddress.IPv6Address) else None
+    return ip.is_loopback or (mapped is not None and mapped.is_loopback)
 
 
 def _every_peer_authenticates(config: zenoh.Config) -> bool:
-    """Whether every session, on any link, must authenticate: user/password (Zenoh then refuses a peer that
-    offers none), or public keys checked against a known-keys file (a key size alone lets any key in)."""
-    user = _json(config, "transport/auth/usrpwd/user")
-    dictionary = _json(config, "transport/auth/usrpwd/dictionary_file")
-    known_keys = _json(config, "transport/auth/pubkey/known_keys_file")
-    return bool(user or dictionary or known_keys)
+    """Whether Zenoh makes every session, on any link, authenticate (Zenoh 1.10, transport/auth): user/password
+    once this gateway has credentials of its own or a dictionary with at least one user (an empty one turns it
+    off), public keys once it has a key pair (Zenoh reads no known_keys_file: it is not a check)."""
+    usrpwd = "transport/auth/usrpwd/"
+    if _json(config, usrpwd + "user") is not None and _json(config, usrpwd + "password") is not None:
+        return True
+    dictionary = _json(config, usrpwd + "dictionary_file")
+    if isinstance(dictionary, str) and users_in(dictionary):
+        return True
+    pubkey = "transport/auth/pubkey/"
+    return any(_json(config, pubkey + f"public_key_{form}") is not None
+               and _json(config, pubkey + f"private_key_{form}") is not None for form in ("pem", "file"))
 
 
 def _mtls(config: zenoh.Config) -> bool:
@@ -251,7 +368,7 @@ def _client_certificate_needed(config: zenoh.Config, endpoint: str) -> bool:
 
 
 def exposure(config: zenoh.Config) -> str | None:
-    """Why this configuration lets unauthenticated peers in from the network, or None if it does not."""
+    """Why this configuration lets unauthenticated peers in from beyond this PC, or None if it does not."""
     if _every_peer_authenticates(config):
         return None
     reasons = []
@@ -274,7 +391,8 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
 
     space = ZenohKeySpace(spec.swarm, spec.stigmergy)
     framing = ZenohFraming(space, 0 if listen_only else robot_id)
-    first, ours = _config_and_listener(spec)  # read once now, so a bad file or value fails before anything opens
+    built = build_config(spec)  # read once now, so a bad file or value fails before anything opens
+    first, ours = built.config, built.ours
     connecting = _endpoints(first, "connect/endpoints")
     made = [first]
 
@@ -290,6 +408,8 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
         made.clear()
         return tuple(_loopback_listener(ours))
 
+    for why in built.overridden:
+        log.warning("%s: %s", name, why)
     open_to = exposure(first)
     if open_to:
         log.warning("%s: WARNING: this gateway %s with no authentication: anyone on the network can read "

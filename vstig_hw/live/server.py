@@ -12,7 +12,11 @@ Channels (docs/how-to/live-view.md lists their fields):
 * `/vstig/writes`: each write's spread as `analyze` measures it, live (JSON, `spread.LiveSpread`);
 * `/vstig/stats`: the link and engine counters, and the live view's own (JSON).
 
-Table and stats are sent at most `rate` times a second, and only while a viewer subscribes.
+Table and stats are sent at most `rate` times a second, and only while a viewer subscribes. JSON is strict: a
+number that is not finite (a float16 key holding NaN) is sent as null, which every JSON parser reads.
+
+At most `viewers` viewers at once (the SDK has no limit of its own: `sdklog`); one more is told why and closed.
+What the SDK logs reaches stderr escaped and rate-limited (`sdklog`): a viewer's bytes never do.
 
 A thread of ours encodes what the gateway sent and hands it to the SDK, which queues up to `backlog`
 messages per viewer and drops a slow viewer's oldest (a viewer that stops reading its control messages
@@ -22,8 +26,10 @@ is disconnected), in threads of its own. Viewers coming and going touch no link.
 from __future__ import annotations
 
 import collections
+import contextlib
 import heapq
 import json
+import math
 import signal
 import struct
 import sys
@@ -37,9 +43,10 @@ from ..gateway.swarmview import SwarmView
 from ..links.link import Heard
 from ..values import ValueType, from_raw
 from ..wire import Message
+from .sdklog import SdkLog
 from .spread import LiveSpread
 
-__all__ = ["LIVE_STATS", "LiveServer", "main"]
+__all__ = ["LIVE_STATS", "VIEWERS", "LiveServer", "main"]
 
 LIVE_STATS = "live"  # the live view's counters, beside the links' in /vstig/stats and on the gateway's exit
 
@@ -49,6 +56,7 @@ PUMP = 0.05  # seconds between two hand-overs: a message reaches Foxglove within
 TABLE_ROWS = 500  # keys per /vstig/table message: the most recently heard, in key order
 WRITE_ROWS = 50  # writes per /vstig/writes tick
 LINK_RATE = 2000.0  # messages a second per link channel: what a Foxglove panel can show, not all a bus can carry
+VIEWERS = 16  # viewers at once: a lab's screens, far below what costs the server its memory (~0.4 MB each)
 
 _INT = {"type": "integer"}
 _NUM = {"type": "number"}
@@ -63,8 +71,9 @@ def _object(**properties: Any) -> dict[str, Any]:
 TABLE_SCHEMA = _object(
     messages=_INT, keys_total=_INT,
     rows={"type": "array", "items": _object(
-        key=_INT, value=_NUM, timestamp=_INT, robot=_INT, last_seen=_NUM, last_seen_ago=_NUM, puts=_INT,
-        gets=_INT, conflicts=_INT, stale_senders=_INTS, refused=_INT, last_refused=_STR)})
+        key=_INT, value={"type": ["number", "null"]}, timestamp=_INT, robot=_INT, last_seen=_NUM,
+        last_seen_ago=_NUM, puts=_INT, gets=_INT, conflicts=_INT, stale_senders=_INTS, refused=_INT,
+        last_refused=_STR)})
 WRITE_SCHEMA = _object(
     key=_INT, value=_INT, timestamp=_INT, robot=_INT, first_heard=_NUM, link=_STR, senders_total=_INT,
     senders_caught_up=_INT, behind=_INTS, time_so_far=_NUM, converged_after={"type": ["number", "null"]},
@@ -79,7 +88,7 @@ class LiveServer:
 
     def __init__(self, links: list[str], host: str = "127.0.0.1", port: int = 8765, *,
                  value_type: ValueType = "uint16", larger_value_wins: bool = False, rate: float = 10.0,
-                 backlog: int = BACKLOG, link_rate: float = LINK_RATE) -> None:
+                 backlog: int = BACKLOG, link_rate: float = LINK_RATE, viewers: int = VIEWERS) -> None:
         self.link_names = links
         self.host, self.port = host, port
         self.value_type = value_type
@@ -89,7 +98,9 @@ class LiveServer:
         self._allowance: dict[str, float] = {}  # per link channel: messages it may still send (a token bucket)
         self._pumped = time.monotonic()
         # Each counter has one writer thread, and every name exists from the start: copying them is safe.
-        self.counters = Counters(drop_behind=0, sent=0, throttled=0, subscribed=0, subscriptions=0)
+        self.counters = Counters(drop_behind=0, sent=0, throttled=0, subscribed=0, subscriptions=0,
+                                 viewers_refused=0, log_dropped=0)
+        self.sdk_log = SdkLog(self.counters, viewers)  # installed as the server opens, before the SDK logs
         # (link, time heard, sender, messages, why refused or None), one per unit the gateway handled
         self._inbox: collections.deque[tuple[str, float, int | None, list[Message], str | None]] = \
             collections.deque()
@@ -125,6 +136,7 @@ class LiveServer:
             def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
                 counters["subscriptions"] -= 1
 
+        self.sdk_log.install()
         context = self._context = foxglove.Context()  # our channels go to our server only (kept: it holds them)
         self._server = foxglove.start_server(name="vstig-hw", host=self.host, port=self.port, context=context,
                                              server_listener=Viewers(), message_backlog_size=self.backlog)
@@ -152,6 +164,7 @@ class LiveServer:
         if self._server is not None:
             self._server.stop()
             self._server = None
+        self.sdk_log.uninstall()
 
     def __enter__(self) -> LiveServer:
         self.open()
@@ -252,7 +265,35 @@ class LiveServer:
 
 
 def _json(row: dict[str, Any]) -> bytes:
-    return json.dumps(row, separators=(",", ":")).encode()
+    """`row` as strict JSON: NaN and infinities (a float key's value) as null, not the `NaN` JSON.parse refuses."""
+    try:
+        return json.dumps(row, separators=(",", ":"), allow_nan=False).encode()
+    except ValueError:
+        return json.dumps(_finite(row), separators=(",", ":"), allow_nan=False).encode()
+
+
+def _finite(value: Any) -> Any:
+    """`value` with every float that is not finite, at any depth, replaced by None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _descriptors_to_the_hard_limit() -> None:
+    """Raise this process's open-file limit to its hard limit: the SDK stops accepting viewers for good at the
+    first accept() that fails, and a desktop's usual soft limit (1,024) is reached by that many connections."""
+    try:
+        import resource
+    except ImportError:  # not POSIX
+        return
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft != hard:
+        with contextlib.suppress(ValueError, OSError):
+            resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
 
 
 # -- the process: `python -m vstig_hw.live.server CONFIG` (CONFIG: JSON, see view.LiveView.open) --
@@ -267,7 +308,9 @@ def main(argv: list[str] | None = None) -> int:
     names: list[str] = config["links"]
     server = LiveServer(names, config["host"], config["port"], value_type=config["value_type"],
                         larger_value_wins=config["larger_value_wins"], backlog=config["backlog"],
-                        link_rate=config["link_rate"])
+                        link_rate=config["link_rate"], viewers=config["viewers"])
+    server.sdk_log.install(everything=True)  # this process's every log line, safe and rate-limited
+    _descriptors_to_the_hard_limit()
     out = sys.stdout
     try:
         server.open()

@@ -11,8 +11,11 @@ then fills and drops). Counters reach the server at most `rate` times a second.
 from __future__ import annotations
 
 import collections
+import contextlib
 import json
 import logging
+import os
+import select
 import subprocess
 import sys
 import threading
@@ -24,9 +27,9 @@ from ..gateway.node import Node
 from ..links.link import Heard
 from ..values import ValueType
 from ..wire import Message
-from .server import BACKLOG, FRAME, LINK_RATE, LIVE_STATS, RECORD
+from .server import BACKLOG, FRAME, LINK_RATE, LIVE_STATS, RECORD, VIEWERS
 
-__all__ = ["DEFAULT_PORT", "LIVE_STATS", "LiveView"]
+__all__ = ["DEFAULT_PORT", "LIVE_STATS", "VIEWERS", "LiveView"]
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +37,7 @@ DEFAULT_PORT = 8765  # Foxglove's default for a WebSocket connection
 INBOX = 65_536  # units heard and not yet shipped: ~1 s of a saturated gateway
 PUMP = 0.05  # seconds between two shipments: a message reaches Foxglove within ~50 ms
 START = 30.0  # seconds the server may take to start (import the SDK, bind)
+CLOSE_WAIT = 1.0  # seconds a stop gives the server to take what is left and say its counters
 
 Unit = tuple[str, float, "int | None", list[Message], "str | None"]  # link, heard at, sender, messages, refused
 
@@ -43,12 +47,13 @@ class LiveView:
 
     def __init__(self, node: Node, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *,
                  value_type: ValueType = "uint16", larger_value_wins: bool = False, rate: float = 10.0,
-                 inbox: int = INBOX, backlog: int | None = None, link_rate: float | None = None) -> None:
+                 inbox: int = INBOX, backlog: int | None = None, link_rate: float | None = None,
+                 viewers: int = VIEWERS) -> None:
         self.node = node
         self.host, self.port = host, port
         self._config = {"links": [link.name for link in node.links], "host": host, "value_type": value_type,
                         "larger_value_wins": larger_value_wins, "backlog": backlog or BACKLOG,
-                        "link_rate": link_rate or LINK_RATE}
+                        "link_rate": link_rate or LINK_RATE, "viewers": viewers}
         self.interval = 1.0 / rate
         self.counters = Counters(drop_behind=0)  # the server's join them on close()
         self._index = {link.name: i for i, link in enumerate(node.links)}
@@ -86,7 +91,10 @@ class LiveView:
         self._thread = threading.Thread(target=self._run, name="vstig-live-view", daemon=True)
         self._thread.start()
 
-    def close(self) -> None:
+    def close(self, wait: float = CLOSE_WAIT) -> None:
+        """Stop serving: the server gets `wait` seconds to take what is left and say its counters, then it is
+        ended. A server flooded by viewers (thousands of connections) may not read us for long: a stop of the
+        gateway never waits for it beyond that."""
         node = self.node
         if self._heard in node.on_messages:
             node.on_messages.remove(self._heard)
@@ -94,31 +102,29 @@ class LiveView:
             node.on_refused.remove(self._refused)
         if self._tick in node.on_tick:
             node.on_tick.remove(self._tick)
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join()
-            self._thread = None
+        deadline = time.monotonic() + wait
+        self._stop.set()  # the pump ships what is left and closes the server's input (see `_run`)
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(wait)
         server, self._server = self._server, None
         if server is None:
             return
-        self.flush()
-        assert server.stdout is not None
+        said = _read_until(server, deadline) if thread is None or not thread.is_alive() else b""
+        for line in said.decode(errors="replace").splitlines():
+            if line.startswith("counters "):
+                counters = json.loads(line.removeprefix("counters "))
+                self.counters.update({k: v for k, v in counters.items() if isinstance(v, int)})
+                self.server_cpu = counters["cpu_seconds"] - self._started_cpu
         try:
-            if self._pipe is not None:
-                self._pipe.close()
-        except OSError:
-            pass  # the server is gone: its counters are lost with it
-        self._pipe = None
-        try:
-            for line in server.stdout.read().decode(errors="replace").splitlines():
-                if line.startswith("counters "):
-                    self.counters.update({k: v for k, v in json.loads(line.removeprefix("counters ")).items()
-                                          if isinstance(v, int)})
-                    self.server_cpu = json.loads(line.removeprefix("counters "))["cpu_seconds"] - self._started_cpu
-            server.wait(timeout=10)
+            server.wait(max(deadline - time.monotonic(), 0.0))
         except subprocess.TimeoutExpired:
-            server.kill()
+            server.kill()  # also ends a pump stuck writing to it (EPIPE)
             server.wait()
+            log.warning("live view: its server did not end within %g s of the stop (flooded by viewers?); "
+                        "ended it", wait)
+        if thread is not None:
+            thread.join(wait)
 
     server_cpu = 0.0  # CPU seconds the server process spent serving (its start left out), once closed
     _started_cpu = 0.0
@@ -161,6 +167,11 @@ class LiveView:
     def _run(self) -> None:
         while not self._stop.wait(PUMP):
             self.flush()
+        self.flush()  # what is left, then the server's input ends: it says its counters and exits
+        pipe, self._pipe = self._pipe, None
+        if pipe is not None:
+            with contextlib.suppress(OSError):
+                pipe.close()
 
     def flush(self) -> None:
         """Ship what the gateway heard, and the latest counters, to the server now."""
@@ -194,5 +205,19 @@ class LiveView:
             except (BrokenPipeError, OSError, ValueError):  # the server died: the gateway goes on without it
                 self._pipe = None
                 self.counters["drop_behind"] += len(records) + len(refused)
+                if self._stop.is_set():  # ended by close(): it says so itself
+                    return
                 log.warning("live view: its server process ended; the gateway goes on without it (what it "
                             "hears from now on is counted under live: drop_behind)")
+
+
+def _read_until(server: subprocess.Popen[bytes], deadline: float) -> bytes:
+    """What the server writes on its stdout until it closes it or `deadline` (monotonic) passes."""
+    assert server.stdout is not None
+    fd, said = server.stdout.fileno(), b""
+    while (left := deadline - time.monotonic()) > 0 and select.select([fd], [], [], left)[0]:
+        chunk = os.read(fd, 65536)
+        if not chunk:
+            break
+        said += chunk
+    return said

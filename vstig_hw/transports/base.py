@@ -121,6 +121,8 @@ class DeviceTransport(Generic[Unit, Device]):
         self._lost_at = 0.0
         self._backoff = Backoff(*backoff)
         self._retrying = threading.Lock()  # one thread reopens at a time (the reader and a writer may both try)
+        self._closed = threading.Event()  # set by close(): a device call still waiting (an open's wait) gives up
+        self._slow_drops = 0  # units not taken in time since the device last took one: a slow episode, said once
 
     # -- the device calls: all a transport implements ----------------------------
     def _open_device(self) -> Device:
@@ -146,6 +148,7 @@ class DeviceTransport(Generic[Unit, Device]):
 
     def open(self) -> None:
         """Open the device now; TransportError (one line naming it) if it cannot be. Unreachable: retried later."""
+        self._closed.clear()
         try:
             self._device = self._open_device()
         except DeviceUnreachable as exc:
@@ -157,6 +160,7 @@ class DeviceTransport(Generic[Unit, Device]):
 
     def close(self) -> None:
         self._wanted = False
+        self._closed.set()
         self._drop_device()
 
     def read(self, timeout: float) -> list[Unit]:
@@ -197,14 +201,35 @@ class DeviceTransport(Generic[Unit, Device]):
 
     # -- for the device calls ------------------------------------------------------
     def _sent(self, units: int = 1) -> None:
-        """`units` went out: counted, and proof that a reopened device works."""
+        """`units` went out: counted, and proof that a reopened device works (or that a slow one takes data again)."""
         self.counters["tx"] += units
+        if self._slow_drops:
+            self._log.warning("%s: %s takes what we send again (%d not taken in time meanwhile)", self.name,
+                              self.device_word, self._slow_drops)
+            self._slow_drops = 0
         if self._outage and self._device is not None:
             self._recovered()
+
+    def _not_taken(self, counter: str, units: int = 1) -> None:
+        """The device did not take a write in time (slow, deaf or flow-controlled): counted under `counter`, and
+        the device kept: slow is not gone. Said once when such an episode starts; `_sent` says when it ends."""
+        self.counters[counter] += units
+        if not self._slow_drops:
+            self._log.warning("%s: %s is not taking what we send in time; what it does not take is dropped (%s) "
+                              "and the link stays up", self.name, self.device_word, counter)
+        self._slow_drops += units
+
+    def failed(self, reason: str) -> None:
+        """A call on the device made outside this transport failed with `reason` (the compiled data path reads a
+        SocketCAN socket itself, and a socket tells its error once): the outage starts as if this transport's own
+        call had failed."""
+        self._lose(reason)
 
     def _lose(self, reason: str) -> None:
         """The device failed: drop it; report the outage once, then reopen it with backoff from read/write."""
         self._drop_device()
+        if not self._wanted:  # a call that failed because close() took the device away: no outage
+            return
         if self._outage:  # the reopened device failed at once: still the same outage
             self.last_error = reason
             self._retry_later(reason)

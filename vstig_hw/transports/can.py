@@ -1,16 +1,20 @@
-"""CanTransport: a python-can bus that survives its adapter vanishing.
+"""CanTransport: a python-can bus that survives its adapter vanishing, and waits on no adapter.
 
-Any python-can interface works unchanged (socketcan, slcan, pcan, kvaser,
-virtual, udp_multicast, socketcand...): interface, channel, bitrate and any other
-option go to `can.Bus` as given. Units are `can.Message` frames, passed up as
+Any python-can interface works unchanged (socketcan, pcan, kvaser, virtual,
+udp_multicast, socketcand...): interface, channel, bitrate and any other
+option go to `can.Bus` as given. slcan adapters get our own driver of python-can's
+slcan interface (`slcan.SlcanBus`: reads in chunks, writes that cannot block, noise
+counted as `rx_garbage`). Units are `can.Message` frames, passed up as
 received (error frames too, so captures keep them; the framing counts them).
 
-Counters: `rx`, `tx`, `tx_dropped` (device gone or TX queue full), `bus_errors`
-(error frames and failed bus calls), `bus_off`, `lost` (outages) and `reconnects`
-(recoveries), and on SocketCAN `kernel_dropped` (frames the kernel dropped because
-our receive queue was full, as candump -d reports), `interface_dropped` (frames the
-interface dropped before any socket got them) and `unread_at_close`. An outage is
-logged once and its end once; meanwhile the bus is reopened with exponential
+Counters: `rx`, `tx`, `tx_dropped` (device gone), `tx_timeout` (not taken within
+`send_timeout`: a full TX queue or a slow adapter, which keeps its link: slow is not
+gone), `bus_errors` (error frames and failed bus calls), `bus_off`, `lost` (outages)
+and `reconnects` (recoveries), and on SocketCAN `kernel_dropped` (frames the kernel
+dropped because our receive queue was full, as candump -d reports),
+`interface_dropped` (frames the interface dropped before any socket got them) and
+`unread_at_close`. An outage is logged once and its end once, and so is a slow
+episode; meanwhile the bus is reopened with exponential
 backoff (0.1 s doubling to 2 s) from `read`/`write`, which never raise into the
 caller's loop. A bus that opens but fails at its first call (SocketCAN binds to an
 interface that is down, then reports ENETDOWN) has not come back: the outage goes
@@ -27,6 +31,7 @@ from typing import Any
 import can
 
 from .base import DeviceTransport, TransportError, errno_of, one_line
+from .slcan import SlcanBus
 from .socketcan_drops import count_kernel_drops
 
 __all__ = ["CanTransport"]
@@ -41,7 +46,7 @@ _STATE_POLL_S = 1.0  # how often to ask interfaces that report it (pcan, kvaser.
 # Send failures that mean "the bus is busy", not "the device is gone".
 _TRANSIENT_ERRNOS = frozenset({errno.ENOBUFS, errno.EAGAIN})
 # Interfaces whose send(timeout=0) returns at once (queue full: an error), so the gateway's loop may call it.
-_NONBLOCKING_SEND = frozenset({"socketcan", "virtual"})
+_NONBLOCKING_SEND = frozenset({"socketcan", "virtual", "slcan"})
 
 
 class CanTransport(DeviceTransport[can.Message, can.BusABC]):
@@ -85,6 +90,9 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
     # -- the device calls ------------------------------------------------------
     def _open_device(self) -> can.BusABC:
         try:
+            if self.interface == "slcan":  # our own reader and writer of the slcan line protocol (transports/slcan.py)
+                options = {k: v for k, v in self._bus_kwargs.items() if k != "interface"}
+                return SlcanBus(**options, counters=self.counters, abort=self._closed)
             return count_kernel_drops(can.Bus(**self._bus_kwargs), self.counters)
         except can.CanInterfaceNotImplementedError as exc:
             known = "" if self.interface in can.VALID_INTERFACES else f" (python-can knows: " \
@@ -155,12 +163,13 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
             device.send(unit, timeout=timeout)
         except self.device_errors as exc:
             busy = errno_of(exc) in _TRANSIENT_ERRNOS or "buffer full" in str(exc).lower()
-            if busy and not drop_when_busy:
-                return False
+            if busy:  # a full TX queue or a slow adapter: slow is not gone
+                if drop_when_busy:
+                    self._not_taken("tx_timeout")
+                return drop_when_busy
             self.counters["tx_dropped"] += 1
             self.counters["bus_errors"] += 1
-            if not busy:
-                self._lose(one_line(exc))
+            self._lose(one_line(exc))
             return True
         self._sent()
         return True

@@ -37,7 +37,7 @@ from typing import IO, Any, Protocol
 
 from ..counters import Counters
 from ..engine import Entry
-from ..framing.ros2 import NO_SENDER, Ros2Sample
+from ..framing.ros2 import Ros2Sample, wire_sender
 from ..wire import Message
 from .base import DeviceTransport, TransportError
 
@@ -47,9 +47,9 @@ log = logging.getLogger(__name__)
 
 # The pipe protocol: a frame is a kind byte and a payload length, then the payload.
 FRAME = struct.Struct("<cI")
-HEARD = struct.Struct("<HiHHHH")  # H records: link index, sender (-1: none), the message's four wire words
+HEARD = struct.Struct("<HqHHHH")  # H records: link index, sender (as wire_sender has it), the four wire words
 # C records: key, has_old, old and new entry (value, timestamp, robot), link index (NO_LINK: none), sender
-CHANGE = struct.Struct("<HBHHHHHHHi")
+CHANGE = struct.Struct("<HBHHHHHHHq")
 NO_LINK = 0xFFFF
 PIPE_BUF = 4096  # POSIX: a pipe write of at most this many bytes is never split nor interleaved
 START_TIMEOUT = 360.0  # seconds the child may take to start: the first on a machine builds the interfaces
@@ -135,7 +135,7 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
         index = self._links.get(link)
         if index is None:
             return
-        who = NO_SENDER if sender is None else sender
+        who = wire_sender(sender)
         pack = HEARD.pack
         self._send_records(b"H", b"".join([pack(index, who, *message) for message in messages]), HEARD.size)
 
@@ -144,7 +144,7 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
         old_fields = old if old is not None else (0, 0, 0)
         index = NO_LINK if link is None else self._links.get(link, NO_LINK)
         self._send_records(b"C", CHANGE.pack(key, old is not None, *old_fields, *new, index,
-                                             NO_SENDER if sender is None else sender), CHANGE.size)
+                                             wire_sender(sender)), CHANGE.size)
 
     def publish_stats(self, stats: dict[str, Counters]) -> None:
         """The gateway's counters, for /diagnostics: at most once a STATS_PERIOD."""

@@ -24,8 +24,11 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
 import os
 import select
+import struct
+import termios
 import time
 from typing import Any
 
@@ -33,12 +36,34 @@ import serial
 
 from .base import DeviceTransport, TransportError, errno_of
 
-__all__ = ["SerialTransport", "open_error"]
+__all__ = ["SerialTransport", "drain_briefly", "open_error"]
 
 _MISSING = {errno.ENOENT, errno.ENODEV, errno.ENXIO}
 _DENIED = {errno.EACCES, errno.EPERM}
 _BUSY = {errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK}
 _READ_SIZE = 65536  # bytes one read takes at most: all a pty or a USB adapter holds
+
+
+CLOSE_DRAIN = 0.5  # seconds a closing port gives the device to take what the kernel still holds for it
+
+
+def drain_briefly(fd: int, seconds: float = CLOSE_DRAIN) -> None:
+    """Let the device take what the kernel holds for it, for `seconds` at most, then drop the rest.
+
+    A terminal's close waits for its output to drain, on a real UART up to its `closing_wait`
+    (30 s by default) and for ever under flow control: a device that takes nothing would hold the
+    close, and with it a stop. What a working device takes within the moment still goes out.
+    """
+    end = time.monotonic() + seconds
+    with contextlib.suppress(OSError, termios.error):
+        while (unsent := _unsent(fd)) and time.monotonic() < end:
+            time.sleep(0.005)
+        if unsent:  # only then: a pty reports none, and flushing it could drop bytes on their way to the far end
+            termios.tcflush(fd, termios.TCOFLUSH)
+
+
+def _unsent(fd: int) -> int:
+    return int(struct.unpack("i", fcntl.ioctl(fd, termios.TIOCOUTQ, b"\0\0\0\0"))[0])
 
 
 def open_error(port: str, exc: BaseException) -> TransportError:
@@ -96,7 +121,9 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
         return port
 
     def _close_device(self, device: serial.Serial) -> None:
-        self._fd = None
+        fd, self._fd = self._fd, None
+        if fd is not None:
+            drain_briefly(fd)
         with contextlib.suppress(serial.SerialException, OSError):  # the device may be gone already
             device.close()
 
@@ -139,7 +166,7 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
             try:
                 device.write(unit)
             except serial.SerialTimeoutException:
-                self.counters["tx_timeout"] += 1  # flow control held us off: drop, the line stays ours
+                self._not_taken("tx_timeout")  # flow control held us off: drop, the line stays ours
                 self._fresh = bool(self.preamble)  # maybe half a frame went: the next one starts clean
                 return
             self._sent()
@@ -154,7 +181,7 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
             unit = rest
             left = None if deadline is None else deadline - time.monotonic()
             if (left is not None and left <= 0) or not select.select([], [fd], [], left)[1]:
-                self.counters["tx_timeout"] += 1  # flow control or a deaf device held us off: drop the rest
+                self._not_taken("tx_timeout")  # flow control or a deaf device held us off: drop the rest
                 self._fresh = bool(self.preamble)  # half a frame went: the next one starts clean
                 return
 

@@ -123,6 +123,20 @@ class KernelDropCountingBus:
             self.counters["interface_dropped"] += drops - self._interface_base
             self._interface_base = drops
 
+    # -- for a reader that takes frames from the socket itself (the compiled data path, vstig_hw/_cext/path.c) --
+    def read_elsewhere(self) -> None:
+        """Frames are read from this socket by another reader: what it leaves at close is a loss, as after `recv`."""
+        self._reading = True
+
+    def poll_counts(self) -> None:
+        """Poll the socket's and the interface's drop counts, as `recv` does at most once a second."""
+        self._poll_counts()
+
+    def note_kernel_drops(self, count: int) -> None:
+        """The kernel's running drop count for this socket, as a frame read elsewhere carried it (SO_RXQ_OVFL)."""
+        self._socket.drops = count
+        self._count_socket_drops()
+
     def recv(self, timeout: float | None = None) -> can.Message | None:
         from can.interfaces.socketcan.socketcan import capture_message
 

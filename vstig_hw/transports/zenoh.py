@@ -27,6 +27,15 @@ bytes, beyond which a flooding peer's samples are dropped (`rx_overflow`). Sampl
 handed over from the callback wait for no queue: a flood waits in Zenoh's own
 buffers, which drop under congestion.
 
+Who sent a sample (`ZenohSample.source`, what `--source-rate` and the outlets' fair
+share key on) is the id stamped on it, but only when that id is a session
+connected to ours: the stamp is the publisher's claim (the stock API sets any id
+per sample), while the sessions connected to ours are transports Zenoh opened
+(and authenticated, where the config asks), which a peer cannot make up per
+sample. A sample stamped with any other id (made up, unstamped and stamped here,
+or relayed through a router from a session beyond it) has no source of its own:
+None, the link as one source.
+
 Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session subscribed),
 `tx_dropped`, `rx_oversize`, `rx_overflow`, `lost`, `unreachable`, `reconnects`.
 """
@@ -34,7 +43,9 @@ Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session s
 from __future__ import annotations
 
 import collections
+import ctypes
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -48,7 +59,7 @@ from ..wire import MESSAGE_SIZE
 from .base import DeviceTransport, DeviceUnreachable, TransportError, one_line
 from .zenoh_clock import ZenohClock
 
-__all__ = ["ZenohTransport"]
+__all__ = ["MMAP_THRESHOLD", "ZenohTransport", "free_big_blocks_at_once"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +72,30 @@ _FIRST_PEER_WAIT_S = 3.0  # open() waits this long for a peer it was told to con
 _UNREACHABLE_MARK = "Unable to connect"  # Zenoh's words when a client finds no router at all
 _IN_USE_MARKS = ("Address already in use", "os error 10048")  # a listener's port taken (POSIX, Windows)
 _REBIND_TRIES = 5  # fresh ports tried after the picked one was taken, before giving up
+MMAP_THRESHOLD = 32 * 1024  # bytes: glibc maps blocks this large apart and unmaps them when freed
+_M_MMAP_THRESHOLD = -3  # mallopt's parameter number (malloc.h)
+_allocator_set = False
+
+
+def free_big_blocks_at_once() -> None:
+    """Have glibc's malloc return blocks of MMAP_THRESHOLD bytes or more to the system when they are freed, once
+    per process, before Zenoh's threads allocate (DECISIONS.md, "What a Zenoh peer can make a gateway hold").
+
+    glibc's own threshold starts at 128 KiB and climbs to 32 MiB after the first big block is freed, so a
+    flood's 64 KiB batches came from Zenoh's threads' arenas and stayed there after the peers left (+60 MB over
+    five floods of 60 kB samples; +13 MB with this). A user's MALLOC_MMAP_THRESHOLD_ is theirs; other C
+    libraries have no mallopt and are left as they are.
+    """
+    global _allocator_set
+    if _allocator_set:
+        return
+    _allocator_set = True
+    try:
+        glibc = os.confstr("CS_GNU_LIBC_VERSION") is not None
+    except (ValueError, OSError):  # not glibc, or not a POSIX system
+        glibc = False
+    if glibc and "MALLOC_MMAP_THRESHOLD_" not in os.environ:
+        ctypes.CDLL(None).mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)
 
 
 class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
@@ -101,6 +136,9 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         self._peer_wait = _FIRST_PEER_WAIT_S if peer_wait is None else peer_wait
         self._lock = threading.Lock()  # session changes (read thread) against publishing (loop thread)
         self._subscriber: Any = None
+        self._transports: Any = None  # the listener that keeps `_connected` up to date
+        self._connected: frozenset[str] = frozenset()  # ids of the sessions connected to ours: verified sources
+        self._connected_lock = threading.Lock()
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._inbox: collections.deque[ZenohSample] = collections.deque()  # appended by zenoh, read by `read`
         self._arrived = Wakeup()  # given with every sample appended: `read` waits for it
@@ -162,10 +200,22 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         self._subscriber = subscriber
         if self.clock is not None:
             self.clock.attach(session)
+        self._connected = frozenset()
+        self._transports = session.info.declare_transport_events_listener(self._transport_event, history=True)
         return session
+
+    def _transport_event(self, event: zenoh.TransportEvent) -> None:
+        """Zenoh's thread: a session connected to ours (or left): its id names a source from now on (or not)."""
+        zid = str(event.transport.zid)
+        with self._connected_lock:  # events may come from more than one of Zenoh's threads
+            if event.kind == zenoh.SampleKind.PUT:
+                self._connected = self._connected | {zid}
+            else:
+                self._connected = self._connected - {zid}
 
     def _open_session(self, *, may_rebind: bool) -> zenoh.Session | None:
         """A new session; None if the listener port picked for us was taken (`listening` is then a fresh one)."""
+        free_big_blocks_at_once()
         try:
             return zenoh.open(self._make_config())
         except zenoh.ZError as exc:
@@ -185,6 +235,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
     def _close_device(self, device: zenoh.Session) -> None:
         with self._lock:  # not while the loop thread publishes
             self._subscriber = None
+            self._transports = None
             self._publishers.clear()
             try:
                 device.close()  # type: ignore[no-untyped-call]  # zenoh's stub leaves close() untyped
@@ -209,8 +260,9 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
                             "others as rx_oversize", self.name, size, sample.key_expr, self.max_sample)
             return
         stamp = sample.timestamp  # the publishing session's id, where it stamps (ours do: vstig_hw.links.zenoh)
+        claimed = None if stamp is None else str(stamp.get_id())
         heard = ZenohSample(str(sample.key_expr), sample.payload.to_bytes(),
-                            None if stamp is None else str(stamp.get_id()))
+                            claimed if claimed in self._connected else None)
         deliver = self._deliver
         if deliver is not None:  # straight on, from this thread: it waits for the gateway, not a queue
             self.counters["rx"] += 1

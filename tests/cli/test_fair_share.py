@@ -1,0 +1,74 @@
+"""A fair share for every source (issue 33): robot A -> robot B through a `vstig bridge` with default options,
+while a hostile participant floods it, as real processes on pty radios and a loopback Zenoh session.
+
+Before the fair share, a radio flooding distinct keys within its baud held A's writes 0.7-0.9 s at the median
+(4 s at p99, some not there 3 s later), and a local Zenoh flood held them 9 s: everything the flooder sent was
+queued ahead of them in each radio's outlet.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+
+from attacks import Bridge, Radio, RadioFlood, honest_delays, quantile, wait_until_relaying, zenoh_flood
+from peers import wait_for
+
+from vstig_hw.links.zenoh import _free_loopback_port
+
+
+def _assert_a_reaches_b_in_time(delays: list[float | None], stderr: str) -> None:
+    missing = sum(d is None for d in delays)
+    assert not missing, f"{missing} of robot A's {len(delays)} writes never reached robot B; bridge: {stderr[-800:]}"
+    assert quantile(delays, 0.5) < 0.1 and quantile(delays, 0.9) < 0.5, (
+        f"A -> B p50 {quantile(delays, 0.5) * 1e3:.0f} ms, p90 {quantile(delays, 0.9) * 1e3:.0f} ms; "
+        f"bridge: {stderr[-800:]}")
+
+
+def test_a_radio_flooding_distinct_keys_within_its_baud_leaves_a_to_b_near_normal() -> None:
+    a, b, hostile = Radio(), Radio(), Radio()
+    try:
+        with Bridge(a.spec, b.spec, hostile.spec) as bridge:
+            wait_until_relaying(a, b)
+            with RadioFlood(hostile) as flood:
+                time.sleep(1.0)  # the flood fills every outlet first
+                delays = honest_delays(a, b)
+            assert flood.sent > 3000 and b.heard > 1000  # it flooded, and the bridge relayed the flood too
+        _assert_a_reaches_b_in_time(delays, bridge.stderr)
+    finally:
+        for radio in (a, b, hostile):
+            radio.close()
+
+
+def test_a_local_zenoh_flood_of_distinct_keys_leaves_a_to_b_near_normal() -> None:
+    endpoint = f"tcp/127.0.0.1:{_free_loopback_port()}"
+    a, b = Radio(), Radio()
+    try:
+        with Bridge(a.spec, b.spec, f"zenoh:lab?listen={endpoint}") as bridge:
+            wait_until_relaying(a, b)
+            with zenoh_flood(endpoint):
+                wait_for(lambda: b.heard > 500, 10.0)  # the flood reaches B's outlet
+                delays = honest_delays(a, b)
+        _assert_a_reaches_b_in_time(delays, bridge.stderr)
+        assert "drop_intake=" in bridge.stderr  # the engine took no more than its intake from the flood
+    finally:
+        for radio in (a, b):
+            radio.close()
+
+
+def test_a_zenoh_peer_stamping_a_new_session_on_every_sample_gets_at_most_its_source_rate() -> None:
+    """The stock API stamps any id per sample; before, each was a new source with a bucket of its own (79x the
+    rate got through). A stamp that names no session connected to the bridge is no source of its own."""
+    endpoint = f"tcp/127.0.0.1:{_free_loopback_port()}"
+    rate, seconds = 100, 3.0
+    radio = Radio()
+    try:
+        with Bridge(radio.spec, f"zenoh:lab?listen={endpoint}", "--source-rate", str(rate), "--no-refresh") as bridge:
+            time.sleep(0.5)
+            with zenoh_flood(endpoint, forge=True):
+                time.sleep(seconds)
+        stored = int(re.search(r"engine:.*\bstored=(\d+)", bridge.stderr).group(1))  # type: ignore[union-attr]
+    finally:
+        radio.close()
+    assert "drop_source_rate=" in bridge.stderr, bridge.stderr[-800:]
+    assert stored <= 1.5 * rate * (1 + seconds), (stored, bridge.stderr[-800:])  # a burst of N, then N a second

@@ -1,0 +1,74 @@
+/*
+ * vstig_hw._vstig: the gateway's compiled data path, a CPython extension over libvstig
+ * (firmware_spec/libvstig, built into it with every table at 32,768 places).
+ *
+ * Each type here is the twin of one Python class and has its interface; the Python is the
+ * reference, and tests/native holds the two equal on random traffic:
+ *
+ *   Engine     vstig_hw.engine.Stigmergy            (libvstig's engine)
+ *   JumpGuard  vstig_hw.gateway.guard.Guard         (max_jump and learn only; libvstig's guard)
+ *   Receiver   a link's framing, receiving side     (libvstig's serial and CAN receivers)
+ *   Encoder    a link's framing, sending side       (libvstig's serial and CAN encoders)
+ *
+ * Python objects the types hand out (Message, Entry, Outcome...) come from vstig_hw itself,
+ * given once by vstig_hw/native.py through `setup`: nothing here imports vstig_hw.
+ */
+#ifndef VSTIG_EXT_H
+#define VSTIG_EXT_H
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include "vstig.h"
+
+/* What vstig_hw/native.py hands over once (module state would cost a lookup per call). */
+typedef struct {
+    PyTypeObject *message; /* vstig_hw.wire.Message: a tuple of the four wire words */
+    PyTypeObject *entry;   /* vstig_hw.engine.Entry: (value, timestamp, robot) */
+    PyObject *outcomes;    /* tuple of vstig_hw.engine.Outcome, by value */
+    PyObject *rules;       /* tuple: higher_robot_wins, larger_value_wins, sum_merge (their C twins run) */
+    PyObject *drop_names;  /* tuple of str: "drop_" + SPEC's name, by vstig_drop_t */
+    PyObject *names;       /* dict of interned counter names (str -> str) */
+} vx_python_t;
+
+extern vx_python_t vx_py;
+
+/* The counter and attribute names the data path uses, interned once (module init). */
+typedef struct {
+    PyObject *in, *out, *tx, *tx_bytes, *rx, *rx_bytes, *superseded, *drop_overflow, *not_echoed, *drop_write_error,
+        *drop_intake, *unsent_at_close, *drop_jump, *dropped_at_stop;
+    PyObject *a_fd, *a_fresh, *a_preamble, *a_device, *a_outage, *a_idle, *a_turns, *a_socket;
+    PyObject *m_submit, *m_room, *m_push, *m_drain, *m_close, *m_units_of, *m_fileno, *m_acquire, *m_release;
+} vx_names_t;
+
+extern vx_names_t vx_n;
+
+/* A counter name, interned once ("in", "out", "drop_jump"...). */
+PyObject *vx_name(const char *name);
+
+/* counters[name] += n on a Counters (a dict subclass); -1 with an exception set on failure. */
+int vx_count(PyObject *counters, PyObject *name, Py_ssize_t n);
+
+/* A Message of msg's fields (new reference), built as tuple.__new__(Message, words) is. */
+PyObject *vx_message(const vstig_msg_t *msg);
+/* An Entry (new reference). */
+PyObject *vx_entry(const vstig_entry_t *entry);
+/* msg's fields from a Message (any tuple of four ints: its wire words); 0, or -1 with TypeError. */
+int vx_msg_of(PyObject *obj, vstig_msg_t *msg);
+
+/* An int in 0..limit that is not a bool, as vstig_hw.wire.check_field has it; else -1 and
+ * ValueError "<name> must be an integer in 0..<limit>, got <repr>". */
+long vx_field(const char *name, long limit, PyObject *value);
+
+/* Adds what `drops` counted to counters["drop_<reason>"] and clears it; -1 on failure. */
+int vx_harvest_drops(vstig_drops_t *drops, PyObject *counters);
+
+extern PyTypeObject vx_EngineType;
+extern PyTypeObject vx_JumpGuardType;
+extern PyTypeObject vx_ReceiverType;
+extern PyTypeObject vx_EncoderType;
+
+/* The engine inside an Engine object, for the other types of the data path. */
+typedef struct vx_engine vx_engine_t;
+
+#endif /* VSTIG_EXT_H */

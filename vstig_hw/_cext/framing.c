@@ -1,0 +1,385 @@
+/*
+ * Receiver and Encoder: a link's framing in C, libvstig's receivers and encoders with the Python
+ * framings' interface (feed, tick, reset; encode_batch), for cobs8, epuck4, kilobot and CAN.
+ *
+ * A Receiver counts its drops in the Python framing's own `drops` Counters (given when built), so
+ * a link's stats read the same whichever side decoded.
+ */
+#include "framing.h"
+
+#include <string.h>
+
+static const char *const FRAMINGS[VX_FRAMINGS] = {"cobs8", "epuck4", "kilobot", "can"};
+
+static int framing_kind(PyObject *name) {
+    int kind;
+    const char *text = PyUnicode_Check(name) ? PyUnicode_AsUTF8(name) : NULL;
+    for (kind = 0; text != NULL && kind < (int)VX_FRAMINGS; kind++) {
+        if (strcmp(text, FRAMINGS[kind]) == 0) return kind;
+    }
+    if (!PyErr_Occurred()) PyErr_Format(PyExc_ValueError, "no compiled framing %R (cobs8, epuck4, kilobot, can)", name);
+    return -1;
+}
+
+/* The CAN scheme's fields; 0, or -1 with ValueError naming what libvstig refused. */
+static int can_scheme(vstig_can_t *can, int extended, PyObject *base, int stigmergy, int sender, int fd, int brs) {
+    unsigned long base_value = VSTIG_CAN_DEFAULT_BASE;
+    if (base != Py_None) {
+        base_value = PyLong_AsUnsignedLong(base);
+        if (PyErr_Occurred()) return -1;
+    }
+    if (stigmergy < 0 || stigmergy > 255 || sender < 0 || sender > 0xFFFF ||
+        vstig_can_init(can, (uint8_t)(extended != 0), (uint32_t)base_value, (uint8_t)stigmergy, (uint16_t)sender,
+                       (uint8_t)(fd != 0), (uint8_t)(brs != 0)) != 0) {
+        PyErr_Format(PyExc_ValueError, "no such CAN scheme: extended=%d base=%R stigmergy=%d sender=%d", extended,
+                     base, stigmergy, sender);
+        return -1;
+    }
+    return 0;
+}
+
+/* ---- receiving ------------------------------------------------------------------------- */
+
+size_t vx_rx_bytes(vx_rx_t *rx, const uint8_t *data, size_t len, size_t *used, vstig_msg_t *out, size_t max) {
+    return vstig_serial_receive(&rx->serial, data, len, used, out, max);
+}
+
+size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8]) {
+    uint16_t sender;
+    return vstig_can_receive(&rx->can, frame, out, &sender);
+}
+
+int vx_rx_harvest(vx_rx_t *rx) {
+    if (rx->kind == VX_CAN) return vx_harvest_drops(&rx->can.drops, rx->drops);
+    if (vx_harvest_drops(&rx->serial.deframer.drops, rx->drops) < 0) return -1;
+    return rx->kind == VX_EPUCK4 ? vx_harvest_drops(&rx->epuck4.drops, rx->drops) : 0;
+}
+
+static PyObject *ATTR[6]; /* the python-can Message attributes a frame is read from */
+
+int vx_frame_of(PyObject *unit, vstig_can_frame_t *frame) {
+    static const char *const names[6] = {"arbitration_id", "is_extended_id", "is_fd", "is_remote_frame",
+                                         "is_error_frame", "data"};
+    PyObject *value[6] = {NULL, NULL, NULL, NULL, NULL, NULL};
+    Py_buffer data;
+    int i, status = -1;
+    unsigned long id;
+    for (i = 0; i < 6; i++) {
+        if (ATTR[i] == NULL && (ATTR[i] = PyUnicode_InternFromString(names[i])) == NULL) goto done;
+        if ((value[i] = PyObject_GetAttr(unit, ATTR[i])) == NULL) goto done;
+    }
+    id = PyLong_AsUnsignedLong(value[0]);
+    if (PyErr_Occurred()) goto done;
+    frame->id = (uint32_t)id;
+    frame->extended = (uint8_t)PyObject_IsTrue(value[1]);
+    frame->fd = (uint8_t)PyObject_IsTrue(value[2]);
+    frame->rtr = (uint8_t)PyObject_IsTrue(value[3]);
+    frame->error = (uint8_t)PyObject_IsTrue(value[4]);
+    frame->brs = 0;
+    if (PyObject_GetBuffer(value[5], &data, PyBUF_SIMPLE) < 0) goto done;
+    /* a frame longer than any CAN frame is kept too long, so that it is dropped as bad_dlc */
+    frame->len = (uint8_t)(data.len > 255 ? 255 : data.len);
+    memcpy(frame->data, data.buf, (size_t)(data.len > VSTIG_CAN_FD_MAX ? VSTIG_CAN_FD_MAX : data.len));
+    PyBuffer_Release(&data);
+    status = 0;
+done:
+    for (i = 0; i < 6; i++) Py_XDECREF(value[i]);
+    return status;
+}
+
+static PyObject *Receiver_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
+    static char *kwlist[] = {"framing", "drops", "expiry_ticks", "kilobot_type", "extended", "base", "stigmergy",
+                             NULL};
+    PyObject *name, *drops, *base = Py_None;
+    int expiry_ticks = 3, kilobot_type = VSTIG_KILOBOT_TYPE, extended = 0, stigmergy = 0, kind;
+    vx_receiver_t *self;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO!|$iipOi", kwlist, &name, &PyDict_Type, &drops, &expiry_ticks,
+                                     &kilobot_type, &extended, &base, &stigmergy))
+        return NULL;
+    if ((kind = framing_kind(name)) < 0) return NULL;
+    if (expiry_ticks < 1 || expiry_ticks > 254) {
+        PyErr_Format(PyExc_ValueError, "the compiled epuck4 receiver expires after 1..254 ticks, got %d", expiry_ticks);
+        return NULL;
+    }
+    self = (vx_receiver_t *)type->tp_alloc(type, 0);
+    if (self == NULL) return NULL;
+    self->rx.kind = (uint8_t)kind;
+    self->rx.drops = Py_NewRef(drops);
+    vstig_epuck4_init(&self->rx.epuck4, (uint8_t)expiry_ticks);
+    if (kind == VX_CAN) {
+        if (can_scheme(&self->rx.can, extended, base, stigmergy, 0, 0, 0) < 0) goto fail;
+    } else if (kilobot_type < 0 || kilobot_type >= 0x80 ||
+               vstig_serial_rx_init(&self->rx.serial, (uint8_t)kind, (uint8_t)kilobot_type, &self->rx.epuck4) != 0) {
+        PyErr_Format(PyExc_ValueError, "Kilobot message type must be a user type in 0..127, got %d", kilobot_type);
+        goto fail;
+    }
+    return (PyObject *)self;
+fail:
+    Py_DECREF(self);
+    return NULL;
+}
+
+static int Receiver_traverse(vx_receiver_t *self, visitproc visit, void *arg) {
+    Py_VISIT(self->rx.drops);
+    return 0;
+}
+
+static int Receiver_clear(vx_receiver_t *self) {
+    Py_CLEAR(self->rx.drops);
+    return 0;
+}
+
+static void Receiver_dealloc(vx_receiver_t *self) {
+    PyObject_GC_UnTrack(self);
+    Receiver_clear(self);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+#define FEED_BATCH 64u
+
+/* feed(unit) -> the messages it completes (bytes for a serial framing, a can.Message for CAN) */
+static PyObject *Receiver_feed(vx_receiver_t *self, PyObject *unit) {
+    vstig_msg_t out[FEED_BATCH];
+    PyObject *list = PyList_New(0);
+    size_t n, i;
+    if (list == NULL) return NULL;
+    if (self->rx.kind == VX_CAN) {
+        vstig_can_frame_t frame;
+        if (vx_frame_of(unit, &frame) < 0) goto fail;
+        n = vx_rx_frame(&self->rx, &frame, out);
+        for (i = 0; i < n; i++) {
+            PyObject *m = vx_message(&out[i]);
+            if (m == NULL || PyList_Append(list, m) < 0) {
+                Py_XDECREF(m);
+                goto fail;
+            }
+            Py_DECREF(m);
+        }
+    } else {
+        Py_buffer data;
+        size_t at = 0, used;
+        if (PyObject_GetBuffer(unit, &data, PyBUF_SIMPLE) < 0) goto fail;
+        while (at < (size_t)data.len) {
+            n = vx_rx_bytes(&self->rx, (const uint8_t *)data.buf + at, (size_t)data.len - at, &used, out, FEED_BATCH);
+            at += used;
+            for (i = 0; i < n; i++) {
+                PyObject *m = vx_message(&out[i]);
+                if (m == NULL || PyList_Append(list, m) < 0) {
+                    Py_XDECREF(m);
+                    PyBuffer_Release(&data);
+                    goto fail;
+                }
+                Py_DECREF(m);
+            }
+        }
+        PyBuffer_Release(&data);
+    }
+    if (vx_rx_harvest(&self->rx) < 0) goto fail;
+    return list;
+fail:
+    Py_DECREF(list);
+    return NULL;
+}
+
+static PyObject *Receiver_tick(vx_receiver_t *self, PyObject *unused) {
+    (void)unused;
+    if (self->rx.kind == VX_EPUCK4) {
+        vstig_epuck4_tick(&self->rx.epuck4);
+        if (vx_rx_harvest(&self->rx) < 0) return NULL;
+    }
+    Py_RETURN_NONE;
+}
+
+static PyObject *Receiver_reset(vx_receiver_t *self, PyObject *unused) {
+    /* forget a partial frame (the port was reopened), as CobsFrameReader.reset does */
+    (void)unused;
+    self->rx.serial.deframer.len = 0;
+    self->rx.serial.deframer.discarding = 0;
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef Receiver_methods[] = {
+    {"feed", (PyCFunction)Receiver_feed, METH_O, "The messages this unit completes; drops counted in `drops`."},
+    {"tick", (PyCFunction)Receiver_tick, METH_NOARGS, "One control period passed (expires epuck4 fragments)."},
+    {"reset", (PyCFunction)Receiver_reset, METH_NOARGS, "Forget any partial frame."},
+    {NULL, NULL, 0, NULL},
+};
+
+PyTypeObject vx_ReceiverType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "vstig_hw._vstig.Receiver",
+    .tp_doc = "Receiver(framing, drops, *, expiry_ticks=3, kilobot_type=0x56, extended=False, base=None, "
+              "stigmergy=0): a link's receiving framing in C.",
+    .tp_basicsize = sizeof(vx_receiver_t),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_new = Receiver_new,
+    .tp_dealloc = (destructor)Receiver_dealloc,
+    .tp_traverse = (traverseproc)Receiver_traverse,
+    .tp_clear = (inquiry)Receiver_clear,
+    .tp_methods = Receiver_methods,
+};
+
+/* ---- encoding -------------------------------------------------------------------------- */
+
+size_t vx_tx_bytes(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out) {
+    size_t i, w = 0;
+    uint32_t words[3];
+    uint8_t k;
+    for (i = 0; i < n; i++) {
+        switch (tx->kind) {
+        case VX_COBS8:
+            w += vstig_cobs8_encode(&msgs[i], out + w);
+            break;
+        case VX_EPUCK4:
+            vstig_epuck4_encode(&msgs[i], words);
+            for (k = 0; k < 3; k++) w += vstig_epuck4_word_frame(words[k], out + w);
+            break;
+        default:
+            w += vstig_kilobot_frame(&msgs[i], tx->kilobot_type, out + w);
+            break;
+        }
+    }
+    return w;
+}
+
+size_t vx_tx_frames(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, vstig_can_frame_t *frames) {
+    return vstig_can_encode(&tx->can, msgs, n, frames);
+}
+
+PyObject *vx_frame_unit(const vx_tx_t *tx, const vstig_can_frame_t *frame) {
+    /* can.Message(arbitration_id=, is_extended_id=, data=, is_fd=, bitrate_switch=), as CanFraming builds it */
+    PyObject *args = PyTuple_New(0), *kwargs, *unit = NULL;
+    if (args == NULL) return NULL;
+    kwargs = Py_BuildValue("{s:k,s:O,s:y#,s:O,s:O}", "arbitration_id", (unsigned long)frame->id, "is_extended_id",
+                           frame->extended ? Py_True : Py_False, "data", (const char *)frame->data,
+                           (Py_ssize_t)frame->len, "is_fd", frame->fd ? Py_True : Py_False, "bitrate_switch",
+                           frame->brs ? Py_True : Py_False);
+    if (kwargs != NULL) unit = PyObject_Call(tx->frame_type, args, kwargs);
+    Py_DECREF(args);
+    Py_XDECREF(kwargs);
+    return unit;
+}
+
+static PyObject *Encoder_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
+    static char *kwlist[] = {"framing", "kilobot_type", "extended", "base", "stigmergy", "sender", "fd", "brs",
+                             "frame_type", NULL};
+    PyObject *name, *base = Py_None, *frame_type = Py_None;
+    int kilobot_type = VSTIG_KILOBOT_TYPE, extended = 0, stigmergy = 0, sender = 0, fd = 0, brs = 1, kind;
+    vx_encoder_t *self;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O|$ipOiippO", kwlist, &name, &kilobot_type, &extended, &base,
+                                     &stigmergy, &sender, &fd, &brs, &frame_type))
+        return NULL;
+    if ((kind = framing_kind(name)) < 0) return NULL;
+    if (kind == VX_CAN && !PyCallable_Check(frame_type)) {
+        PyErr_SetString(PyExc_TypeError, "a CAN encoder needs frame_type (can.Message) for the frames it hands out");
+        return NULL;
+    }
+    if (kilobot_type < 0 || kilobot_type >= 0x80) {
+        PyErr_Format(PyExc_ValueError, "Kilobot message type must be a user type in 0..127, got %d", kilobot_type);
+        return NULL;
+    }
+    self = (vx_encoder_t *)type->tp_alloc(type, 0);
+    if (self == NULL) return NULL;
+    self->tx.kind = (uint8_t)kind;
+    self->tx.kilobot_type = (uint8_t)kilobot_type;
+    self->tx.frame_type = Py_NewRef(frame_type);
+    if (kind == VX_CAN && can_scheme(&self->tx.can, extended, base, stigmergy, sender, fd, brs) < 0) {
+        Py_DECREF(self);
+        return NULL;
+    }
+    return (PyObject *)self;
+}
+
+static int Encoder_traverse(vx_encoder_t *self, visitproc visit, void *arg) {
+    Py_VISIT(self->tx.frame_type);
+    return 0;
+}
+
+static int Encoder_clear(vx_encoder_t *self) {
+    Py_CLEAR(self->tx.frame_type);
+    return 0;
+}
+
+static void Encoder_dealloc(vx_encoder_t *self) {
+    PyObject_GC_UnTrack(self);
+    Encoder_clear(self);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+/* Messages from a Python sequence into a C array (PyMem); NULL with an exception. */
+vstig_msg_t *vx_msgs_of(PyObject *messages, size_t *n) {
+    PyObject *seq = PySequence_Fast(messages, "messages must be a sequence of Messages");
+    vstig_msg_t *msgs;
+    Py_ssize_t i;
+    if (seq == NULL) return NULL;
+    *n = (size_t)PySequence_Fast_GET_SIZE(seq);
+    msgs = PyMem_Malloc((*n ? *n : 1u) * sizeof *msgs);
+    if (msgs == NULL) {
+        Py_DECREF(seq);
+        PyErr_NoMemory();
+        return NULL;
+    }
+    for (i = 0; i < (Py_ssize_t)*n; i++) {
+        if (vx_msg_of(PySequence_Fast_GET_ITEM(seq, i), &msgs[i]) < 0) {
+            PyMem_Free(msgs);
+            Py_DECREF(seq);
+            return NULL;
+        }
+    }
+    Py_DECREF(seq);
+    return msgs;
+}
+
+/* encode_batch(messages) -> units: one bytes object for a byte stream (as Link.units_of joins them), or the
+ * CAN frames as can.Message */
+static PyObject *Encoder_encode_batch(vx_encoder_t *self, PyObject *messages) {
+    size_t n, i, count;
+    vstig_msg_t *msgs = vx_msgs_of(messages, &n);
+    PyObject *units = NULL;
+    if (msgs == NULL) return NULL;
+    if (self->tx.kind != VX_CAN) {
+        uint8_t *bytes = PyMem_Malloc(n * VX_SERIAL_MAX_BYTES + 1u);
+        if (bytes == NULL) {
+            PyErr_NoMemory();
+        } else {
+            size_t len = vx_tx_bytes(&self->tx, msgs, n, bytes);
+            units = n == 0 ? PyList_New(0) : Py_BuildValue("[y#]", (const char *)bytes, (Py_ssize_t)len);
+            PyMem_Free(bytes);
+        }
+    } else {
+        vstig_can_frame_t *frames = PyMem_Malloc((n ? n : 1u) * sizeof *frames);
+        if (frames == NULL) {
+            PyErr_NoMemory();
+        } else {
+            count = vx_tx_frames(&self->tx, msgs, n, frames);
+            units = PyList_New((Py_ssize_t)count);
+            for (i = 0; units != NULL && i < count; i++) {
+                PyObject *unit = vx_frame_unit(&self->tx, &frames[i]);
+                if (unit == NULL) Py_CLEAR(units);
+                else PyList_SET_ITEM(units, (Py_ssize_t)i, unit);
+            }
+            PyMem_Free(frames);
+        }
+    }
+    PyMem_Free(msgs);
+    return units;
+}
+
+static PyMethodDef Encoder_methods[] = {
+    {"encode_batch", (PyCFunction)Encoder_encode_batch, METH_O, "The units that carry these messages."},
+    {NULL, NULL, 0, NULL},
+};
+
+PyTypeObject vx_EncoderType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "vstig_hw._vstig.Encoder",
+    .tp_doc = "Encoder(framing, *, kilobot_type=0x56, extended=False, base=None, stigmergy=0, sender=0, fd=False, "
+              "brs=True, frame_type=None): a link's sending framing in C.",
+    .tp_basicsize = sizeof(vx_encoder_t),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_new = Encoder_new,
+    .tp_dealloc = (destructor)Encoder_dealloc,
+    .tp_traverse = (traverseproc)Encoder_traverse,
+    .tp_clear = (inquiry)Encoder_clear,
+    .tp_methods = Encoder_methods,
+};

@@ -1,0 +1,57 @@
+/* A link's framing in C: what libvstig receives and encodes for it (framing.c), for the data path. */
+#ifndef VSTIG_EXT_FRAMING_H
+#define VSTIG_EXT_FRAMING_H
+
+#include "ext.h"
+
+#define VX_COBS8 0u   /* = VSTIG_COBS8 */
+#define VX_EPUCK4 1u  /* = VSTIG_EPUCK4 */
+#define VX_KILOBOT 2u /* = VSTIG_KILOBOT */
+#define VX_CAN 3u
+#define VX_FRAMINGS 4u
+
+/* The wire bytes of one message in each serial framing (cobs8 12, epuck4 3 x 8, kilobot 14). */
+#define VX_SERIAL_MAX_BYTES 24u
+
+typedef struct {
+    uint8_t kind;
+    vstig_serial_rx_t serial;
+    vstig_epuck4_reassembler_t epuck4;
+    vstig_can_t can;
+    PyObject *drops; /* the Python framing's drop Counters: what libvstig counts is added there */
+} vx_rx_t;
+
+typedef struct {
+    uint8_t kind;
+    uint8_t kilobot_type;
+    vstig_can_t can;
+    PyObject *frame_type; /* CAN: can.Message, for the units handed to Python */
+} vx_tx_t;
+
+typedef struct {
+    PyObject_HEAD
+    vx_rx_t rx;
+} vx_receiver_t;
+
+typedef struct {
+    PyObject_HEAD
+    vx_tx_t tx;
+} vx_encoder_t;
+
+/* Messages completed by len bytes of a serial stream, into out (room for max); *used: bytes taken. */
+size_t vx_rx_bytes(vx_rx_t *rx, const uint8_t *data, size_t len, size_t *used, vstig_msg_t *out, size_t max);
+/* The messages of one CAN frame, into out (room for 8). */
+size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8]);
+/* A python-can Message's fields as a libvstig frame; -1 with an exception if it has none of them. */
+int vx_frame_of(PyObject *unit, vstig_can_frame_t *frame);
+/* Adds what libvstig counted to the Python framing's drops; -1 on failure. */
+int vx_rx_harvest(vx_rx_t *rx);
+
+/* The wire bytes of n messages in a serial framing, into out (room for n * VX_SERIAL_MAX_BYTES). */
+size_t vx_tx_bytes(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out);
+/* The CAN frames of n messages into frames (room for n); how many. */
+size_t vx_tx_frames(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, vstig_can_frame_t *frames);
+/* A frame as a can.Message, for Python's writer (new reference). */
+PyObject *vx_frame_unit(const vx_tx_t *tx, const vstig_can_frame_t *frame);
+
+#endif /* VSTIG_EXT_FRAMING_H */

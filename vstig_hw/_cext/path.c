@@ -1,0 +1,805 @@
+/*
+ * Path: a Node's delivery in C (vstig_hw.gateway.node.Node._deliver, _arrive and _spread), one call per read.
+ *
+ * `pump(index, timeout)` reads a link's device itself where it has an fd (a serial port, a SocketCAN socket:
+ * the GIL is released while it waits), and hands what it read on; `deliver(index, t, units)` takes what a
+ * transport's own read returned. Either way, while nothing needs Python per unit (`fast`: no listener wants
+ * each unit or message) and the Node's lock is free, the whole batch is done here: decode (the link's Receiver),
+ * the engine's intake per source, the guard, the part (Seat or Relay), the engine's outbox onto the outlets, and
+ * the outlets' sends (straight to the devices while their writers are idle). Otherwise the batch goes to the
+ * Node's Python delivery, the reference, which does the same with the same objects (decoding with the same
+ * Receiver, so a frame cut across two reads is whole either way).
+ *
+ * The Node's own state the delivery reads and writes is the Python delivery's: its lock, `_reader_thread`,
+ * `_failure` and `_wake` (a listener or rule that raised ends `run` on the loop's thread), `_retry_at`,
+ * `_sleep_until` and `_wake_on_arrival` (when the loop must look). While its readers stop (`stopping`), every
+ * batch takes the Python delivery, which decides what a stop hands on and what it counts.
+ */
+#include "path.h"
+
+#include <errno.h>
+#include <string.h>
+#include <structmember.h>
+#ifndef _WIN32
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+#endif
+
+#define READ_SIZE 65536 /* bytes one serial read takes at most (SerialTransport's _READ_SIZE) */
+#define DRAIN_LIMIT 512 /* CAN frames one read takes after the first (CanTransport's _DRAIN_LIMIT) */
+#define POLL_COUNTS_S 1.0 /* how often a SocketCAN bus's own drop counts are polled (socketcan_drops) */
+
+static PyObject *A_READER, *A_FAILURE, *A_WAKE, *A_RETRY, *A_SLEEP, *A_WAKE_ON_ARRIVAL, *M_SET,
+    *M_ERROR_FRAME, *M_POLL_COUNTS, *CAN_MESSAGE;
+
+static PyObject *TIME_TIME, *TIME_MONOTONIC; /* Python's own clocks: the Node compares what we set with them */
+
+/* time.time() or time.monotonic(), as the Python delivery reads them (-1.0 with an exception on failure). */
+static double clock_of(PyObject *clock) {
+    PyObject *now = PyObject_CallNoArgs(clock);
+    double seconds = now == NULL ? -1.0 : PyFloat_AsDouble(now);
+    Py_XDECREF(now);
+    return seconds;
+}
+
+static double wall_clock(void) { return clock_of(TIME_TIME); }
+
+static double monotonic(void) { return clock_of(TIME_MONOTONIC); }
+
+/* ---- one batch: _arrive ---------------------------------------------------------------- */
+
+static int room_for(vx_path_t *p, size_t n) {
+    vstig_msg_t *grown;
+    if (n <= p->cap) return 0;
+    grown = PyMem_Realloc(p->msgs, n * sizeof *grown);
+    if (grown == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    p->msgs = grown;
+    p->cap = n;
+    return 0;
+}
+
+/* A Python Guard's filter over C messages (its own work: only JumpGuards are C's). */
+static int python_guard(vx_path_t *p, vx_link_t *link, PyObject *sender, double t, vstig_msg_t *msgs, size_t *n) {
+    PyObject *list = PyList_New((Py_ssize_t)*n), *kept;
+    Py_ssize_t i;
+    for (i = 0; list != NULL && i < (Py_ssize_t)*n; i++) {
+        PyObject *m = vx_message(&msgs[i]);
+        if (m == NULL) Py_CLEAR(list);
+        else PyList_SET_ITEM(list, i, m);
+    }
+    if (list == NULL) return -1;
+    kept = PyObject_CallMethod(p->guard, "filter", "OOOdOO", link->name, sender, list, t, link->counters, Py_None);
+    Py_DECREF(list);
+    if (kept == NULL) return -1;
+    if (!PyList_Check(kept) || PyList_GET_SIZE(kept) > (Py_ssize_t)*n) {
+        Py_DECREF(kept);
+        PyErr_SetString(PyExc_TypeError, "a guard's filter returns a list of the messages that pass");
+        return -1;
+    }
+    *n = (size_t)PyList_GET_SIZE(kept);
+    for (i = 0; i < (Py_ssize_t)*n; i++) {
+        if (vx_msg_of(PyList_GET_ITEM(kept, i), &msgs[i]) < 0) {
+            Py_DECREF(kept);
+            return -1;
+        }
+    }
+    Py_DECREF(kept);
+    return 0;
+}
+
+/* What one unit carried, after its decoding: Node._arrive's steps for it (no listeners: `fast`). */
+static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, long sender) {
+    vx_link_t *link = &p->links[index];
+    PyObject *part = p->part;
+    if (n == 0) return 0;
+    if (part != Py_None && PyObject_TypeCheck(part, &vx_SeatType) && ((vx_seat_t *)part)->intake_obj != Py_None &&
+        vx_seat_admit((vx_seat_t *)part, index, Py_None, n, t, &n) < 0) /* the engine's intake, before any other work */
+        return -1;
+    if (n && p->guard != Py_None) {
+        if (PyObject_TypeCheck(p->guard, &vx_JumpGuardType)) {
+            uint32_t now = vx_guard_units(t);
+            size_t i, kept = 0;
+            for (i = 0; i < n; i++) {
+                if (vx_guard_passes((vx_guard_t *)p->guard, &msgs[i], now)) msgs[kept++] = msgs[i];
+            }
+            if (vx_count(link->counters, vx_n.drop_jump, (Py_ssize_t)(n - kept)) < 0) return -1;
+            n = kept;
+        } else {
+            PyObject *who = sender < 0 ? Py_NewRef(Py_None) : PyLong_FromLong(sender);
+            int status = who == NULL ? -1 : python_guard(p, link, who, t, msgs, &n);
+            Py_XDECREF(who);
+            if (status < 0) return -1;
+        }
+    }
+    if (n == 0 || part == Py_None) return 0;
+    if (PyObject_TypeCheck(part, &vx_SeatType)) return vx_seat_take((vx_seat_t *)part, index, msgs, n, Py_None);
+    return vx_relay_take((vx_relay_t *)part, index, msgs, n, Py_None);
+}
+
+/* A serial read's bytes: one unit. */
+static int arrive_bytes(vx_path_t *p, Py_ssize_t index, double t, const uint8_t *data, size_t len, size_t *heard) {
+    vx_rx_t *rx = &p->links[index].receiver->rx;
+    size_t at = 0, n = 0, used;
+    if (room_for(p, len / 4u + 64u) < 0) return -1; /* the shortest frame is 4 bytes: room for all a read holds */
+    while (at < len) {
+        n += vx_rx_bytes(rx, data + at, len - at, &used, p->msgs + n, p->cap - n);
+        at += used;
+    }
+    if (vx_rx_harvest(rx) < 0) return -1;
+    *heard += n;
+    return arrive(p, index, t, p->msgs, n, -1);
+}
+
+/* One CAN frame: one unit; its sender is the node its ID names. */
+static int arrive_frame(vx_path_t *p, Py_ssize_t index, double t, const vstig_can_frame_t *frame, size_t *heard) {
+    vx_rx_t *rx = &p->links[index].receiver->rx;
+    uint16_t sender = 0;
+    size_t n;
+    if (room_for(p, 8) < 0) return -1;
+    n = vstig_can_receive(&rx->can, frame, p->msgs, &sender);
+    if (vx_rx_harvest(rx) < 0) return -1;
+    *heard += n;
+    return arrive(p, index, t, p->msgs, n, n ? (long)sender : -1);
+}
+
+/* ---- _spread --------------------------------------------------------------------------- */
+
+/* The engine's outbox onto the outlets, then every outlet sends what its budget allows; the ones of link
+ * `heard_on` last (its robots heard those frames when we did). Node._retry_at: when a window reopens. */
+static int spread(vx_path_t *p, Py_ssize_t heard_on, double now, int *held_back, double *when_back) {
+    Py_ssize_t i, n = PyList_GET_SIZE(p->outlets), k;
+    int any = 0, status = 0;
+    double retry = 0.0;
+    PyObject *value;
+    if (p->part != Py_None && PyObject_TypeCheck(p->part, &vx_SeatType) && vx_seat_queue_out((vx_seat_t *)p->part) < 0)
+        return -1;
+    for (k = 0; k <= n; k++) {
+        double when;
+        int again;
+        i = k < n ? k : heard_on;
+        if (i == heard_on && k < n) continue;
+        if (i < 0 || i >= n) continue;
+        again = vx_outlet_flush((vx_outlet_t *)PyList_GET_ITEM(p->outlets, i), now, &when);
+        if (again < 0) return -1;
+        if (again && (!any || when < retry)) {
+            retry = when;
+            any = 1;
+        }
+    }
+    *held_back = any;
+    *when_back = retry;
+    value = any ? PyFloat_FromDouble(retry) : Py_NewRef(Py_None);
+    if (value == NULL || PyObject_SetAttr(p->node, A_RETRY, value) < 0) status = -1;
+    Py_XDECREF(value);
+    return status;
+}
+
+/* ---- _deliver ------------------------------------------------------------------------- */
+
+typedef struct {
+    uint8_t kind; /* 0: Python units (a list), 1: bytes, 2: frames */
+    PyObject *units;
+    const uint8_t *data;
+    size_t len;
+    const vstig_can_frame_t *frames;
+    size_t nframes;
+} vx_batch_t;
+
+static int arrive_batch(vx_path_t *p, Py_ssize_t index, double t, const vx_batch_t *batch) {
+    vx_link_t *link = &p->links[index];
+    size_t heard = 0, i;
+    int status = 0;
+    if (batch->kind == 1) {
+        status = arrive_bytes(p, index, t, batch->data, batch->len, &heard);
+    } else if (batch->kind == 2) {
+        for (i = 0; status == 0 && i < batch->nframes; i++) status = arrive_frame(p, index, t, &batch->frames[i], &heard);
+    } else {
+        for (i = 0; status == 0 && i < (size_t)PyList_GET_SIZE(batch->units); i++) {
+            PyObject *unit = PyList_GET_ITEM(batch->units, i);
+            if (link->receiver->rx.kind == VX_CAN) {
+                vstig_can_frame_t frame;
+                status = vx_frame_of(unit, &frame);
+                if (status == 0) status = arrive_frame(p, index, t, &frame, &heard);
+            } else {
+                Py_buffer data;
+                if ((status = PyObject_GetBuffer(unit, &data, PyBUF_SIMPLE)) == 0) {
+                    status = arrive_bytes(p, index, t, data.buf, (size_t)data.len, &heard);
+                    PyBuffer_Release(&data);
+                }
+            }
+        }
+    }
+    if (status == 0) status = vx_count(link->counters, vx_n.in, (Py_ssize_t)heard);
+    return status;
+}
+
+/* A listener or rule raised on a reader thread: `run` raises it on the loop's thread (Node._deliver's rule). */
+static void fail(vx_path_t *p) {
+    PyObject *type, *value, *tb, *failure, *wake, *done;
+    PyErr_Fetch(&type, &value, &tb);
+    PyErr_NormalizeException(&type, &value, &tb);
+    if (tb != NULL && value != NULL) PyException_SetTraceback(value, tb);
+    failure = PyObject_GetAttr(p->node, A_FAILURE);
+    if (failure == Py_None && value != NULL) (void)PyObject_SetAttr(p->node, A_FAILURE, value);
+    Py_XDECREF(failure);
+    wake = PyObject_GetAttr(p->node, A_WAKE);
+    done = wake == NULL ? NULL : PyObject_CallMethodNoArgs(wake, M_SET);
+    Py_XDECREF(wake);
+    Py_XDECREF(done);
+    PyErr_Clear();
+    Py_XDECREF(type);
+    Py_XDECREF(value);
+    Py_XDECREF(tb);
+}
+
+static PyObject *thread_ident(void) { return PyLong_FromUnsignedLong(PyThread_get_thread_ident()); }
+
+/* Whether Python code of the user's may run within a delivery (a Python guard, a conflict rule): it may ask
+ * whether it runs on the Node's thread (Node.on_node_thread), which the reader thread then must be. */
+static int calls_python(const vx_path_t *p) {
+    if (p->guard != Py_None && !PyObject_TypeCheck(p->guard, &vx_JumpGuardType)) return 1;
+    return p->part != Py_None && PyObject_TypeCheck(p->part, &vx_SeatType) &&
+           vx_engine_calls_python(((vx_seat_t *)p->part)->engine);
+}
+
+/* 1: the batch was delivered here; 0: it takes the Python delivery (the lock was busy, a stop is under way, or
+ * something wants it per unit); -1: an error of our own. */
+/* Whether a listener wants each unit or message now (the Node's lists may gain one at any time). */
+static int listened(const vx_path_t *p) {
+    Py_ssize_t i;
+    for (i = 0; i < PyList_GET_SIZE(p->listeners); i++) {
+        PyObject *kind = PyList_GET_ITEM(p->listeners, i);
+        if (PyList_Check(kind) ? PyList_GET_SIZE(kind) != 0 : PyObject_IsTrue(kind) != 0) return 1;
+    }
+    return 0;
+}
+
+/* The Node's `delivered` listeners, told of a batch handled (Node._deliver does so after _spread). */
+static int tell_delivered(const vx_path_t *p, double t) {
+    Py_ssize_t i;
+    PyObject *when;
+    if (PyList_GET_SIZE(p->delivered) == 0) return 0;
+    if ((when = PyFloat_FromDouble(t)) == NULL) return -1;
+    for (i = 0; i < PyList_GET_SIZE(p->delivered); i++) {
+        PyObject *done = PyObject_CallOneArg(PyList_GET_ITEM(p->delivered, i), when);
+        if (done == NULL) {
+            Py_DECREF(when);
+            return -1;
+        }
+        Py_DECREF(done);
+    }
+    Py_DECREF(when);
+    return 0;
+}
+
+static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch_t *batch, const double *now) {
+    PyObject *got, *ident, *wake_on, *sleep;
+    int taking_now, status, held_back = 0, python = calls_python(p);
+    double sleep_until = 0.0, retry = 0.0;
+    if (!p->fast || p->stopping || p->links[index].receiver == NULL || listened(p)) return 0;
+    got = PyObject_CallMethodOneArg(p->lock, vx_n.m_acquire, Py_False);
+    if (got == NULL) return -1;
+    status = PyObject_IsTrue(got);
+    Py_DECREF(got);
+    if (status <= 0) return status;
+    taking_now = !p->stopping; /* a stop under way: the Python delivery knows what to hand on and count */
+    if (taking_now <= 0) {
+        got = PyObject_CallMethodNoArgs(p->lock, vx_n.m_release);
+        Py_XDECREF(got);
+        return taking_now < 0 || got == NULL ? -1 : 0;
+    }
+    /* a Python rule or guard may ask whether it runs on the Node's thread (Node.on_node_thread) */
+    ident = python ? thread_ident() : NULL;
+    if (python && (ident == NULL || PyObject_SetAttr(p->node, A_READER, ident) < 0)) {
+        Py_XDECREF(ident);
+        got = PyObject_CallMethodNoArgs(p->lock, vx_n.m_release);
+        Py_XDECREF(got);
+        return -1;
+    }
+    Py_XDECREF(ident);
+    status = arrive_batch(p, index, t, batch);
+    if (status == 0) {
+        double at = now == NULL ? monotonic() : *now;
+        status = at == -1.0 && PyErr_Occurred() ? -1 : spread(p, index, at, &held_back, &retry);
+    }
+    if (status == 0) status = tell_delivered(p, t);
+    if (status < 0) fail(p);
+    if (python) {
+        ident = PyLong_FromLong(0);
+        if (ident != NULL) (void)PyObject_SetAttr(p->node, A_READER, ident);
+        Py_XDECREF(ident);
+    }
+    got = PyObject_CallMethodNoArgs(p->lock, vx_n.m_release);
+    if (got == NULL) return -1;
+    Py_DECREF(got);
+    if (status < 0) return 1; /* handled: the failure reaches `run` */
+    /* the loop is woken only when it must look: `run` has an `until`, or a window holds messages back sooner than
+     * it would look by itself (read after spread set _retry_at; the loop sets _sleep_until before reading it) */
+    wake_on = PyObject_GetAttr(p->node, A_WAKE_ON_ARRIVAL);
+    status = wake_on == NULL ? -1 : PyObject_IsTrue(wake_on);
+    Py_XDECREF(wake_on);
+    if (status == 0 && held_back) {
+        sleep = PyObject_GetAttr(p->node, A_SLEEP);
+        if (sleep == NULL) status = -1;
+        else {
+            sleep_until = PyFloat_AsDouble(sleep);
+            status = retry < sleep_until;
+        }
+        Py_XDECREF(sleep);
+    }
+    if (status > 0) {
+        PyObject *wake = PyObject_GetAttr(p->node, A_WAKE);
+        got = wake == NULL ? NULL : PyObject_CallMethodNoArgs(wake, M_SET);
+        Py_XDECREF(wake);
+        if (got == NULL) return -1;
+        Py_DECREF(got);
+    }
+    return status < 0 ? -1 : 1;
+}
+
+/* The Python delivery (Node._deliver) for units as Python objects. */
+static int deliver_slow(vx_path_t *p, Py_ssize_t index, double t, PyObject *units) {
+    PyObject *done = PyObject_CallFunction(p->deliver, "ndO", index, t, units);
+    Py_XDECREF(done);
+    return done == NULL ? -1 : 0;
+}
+
+/* ---- reading the devices ----------------------------------------------------------------- */
+
+#ifndef _WIN32
+/* Wait up to `timeout` for fd to be readable, without the GIL; 1 ready, 0 not, -1 (errno) failed; 2: the fd has
+ * an error to report (POLLERR), which the transport's own read must meet: a socket tells an error only once. */
+static int wait_readable(int fd, double timeout) {
+    struct pollfd want;
+    int ready;
+    want.fd = fd;
+    want.events = POLLIN;
+    want.revents = 0;
+    Py_BEGIN_ALLOW_THREADS
+    ready = poll(&want, 1, (int)(timeout * 1000.0 + 0.5));
+    Py_END_ALLOW_THREADS
+    return ready > 0 && (want.revents & (POLLERR | POLLNVAL)) ? 2 : ready;
+}
+
+/* SerialTransport's read, here: its fd's bytes, counted as its read counts them. NULL result: the transport's
+ * own read takes this turn (no fd now, or the device failed: it knows how to tell and reopen). */
+static PyObject *pump_serial(vx_path_t *p, Py_ssize_t index, double timeout) {
+    vx_link_t *link = &p->links[index];
+    PyObject *fd_obj = PyObject_GetAttr(link->transport, vx_n.a_fd);
+    long fd;
+    ssize_t got;
+    int ready;
+    double t;
+    vx_batch_t batch;
+    if (fd_obj == NULL) return NULL;
+    fd = fd_obj == Py_None ? -1 : PyLong_AsLong(fd_obj);
+    Py_DECREF(fd_obj);
+    if (fd < 0) return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
+    if (link->buf == NULL && (link->buf = PyMem_Malloc(READ_SIZE)) == NULL) return PyErr_NoMemory();
+    {
+        struct pollfd want;
+        want.fd = (int)fd;
+        want.events = POLLIN;
+        want.revents = 0;
+        got = -1;
+        Py_BEGIN_ALLOW_THREADS /* the wait and the read, without the GIL once */
+        ready = poll(&want, 1, (int)(timeout * 1000.0 + 0.5));
+        if (ready > 0 && !(want.revents & (POLLERR | POLLNVAL))) got = read((int)fd, link->buf, READ_SIZE);
+        Py_END_ALLOW_THREADS
+        if (ready == 0 || (ready < 0 && errno == EINTR)) return PyLong_FromLong(0);
+        if (ready < 0 || (want.revents & (POLLERR | POLLNVAL))) return Py_NewRef(Py_None);
+    }
+    if (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) return PyLong_FromLong(0);
+    if (got <= 0) return Py_NewRef(Py_None); /* readable yet nothing: the transport's read tells it as lost */
+    if ((t = wall_clock()) == -1.0 && PyErr_Occurred()) return NULL;
+    if (vx_count(link->tcounters, vx_n.rx_bytes, got) < 0 || vx_count(link->tcounters, vx_n.rx, 1) < 0) return NULL;
+    batch.kind = 1;
+    batch.data = link->buf;
+    batch.len = (size_t)got;
+    ready = deliver_fast(p, index, t, &batch, NULL);
+    if (ready < 0) return NULL;
+    if (ready == 0) {
+        PyObject *units = Py_BuildValue("[y#]", (const char *)link->buf, (Py_ssize_t)got);
+        int status = units == NULL ? -1 : deliver_slow(p, index, t, units);
+        Py_XDECREF(units);
+        if (status < 0) return NULL;
+    }
+    return PyLong_FromSsize_t(got);
+}
+
+/* A SocketCAN frame as python-can's capture_message reads it (the flags, the ID's width, an FD frame's size). */
+static void unpack_frame(const uint8_t *raw, size_t size, vstig_can_frame_t *frame, uint8_t *esi) {
+    uint32_t id;
+    memcpy(&id, raw, 4);
+    frame->extended = (uint8_t)((id & 0x80000000ul) != 0);
+    frame->rtr = (uint8_t)((id & 0x40000000ul) != 0);
+    frame->error = (uint8_t)((id & 0x20000000ul) != 0);
+    frame->id = id & (frame->extended ? 0x1FFFFFFFul : 0x7FFul);
+    frame->fd = (uint8_t)(size == 72u);
+    frame->brs = (uint8_t)(frame->fd && (raw[5] & 0x01u));
+    *esi = (uint8_t)(frame->fd && (raw[5] & 0x02u));
+    frame->len = raw[4] > (frame->fd ? 64u : 8u) ? (uint8_t)(frame->fd ? 64u : 8u) : raw[4];
+    memcpy(frame->data, raw + 8, frame->len);
+}
+
+/* A frame read here as the can.Message python-can would have made of it (for the Python delivery and for the
+ * transport's own look at error frames). */
+static PyObject *frame_message(const vx_link_t *link, const vstig_can_frame_t *f, uint8_t esi, double t) {
+    PyObject *args = PyTuple_New(0), *kwargs, *channel, *unit = NULL;
+    if (args == NULL) return NULL;
+    channel = PyObject_GetAttrString(link->transport, "channel");
+    if (channel == NULL) {
+        Py_DECREF(args);
+        return NULL;
+    }
+    kwargs = Py_BuildValue("{s:d,s:O,s:k,s:O,s:O,s:O,s:O,s:O,s:O,s:i,s:y#}", "timestamp", t, "channel", channel,
+                           "arbitration_id", (unsigned long)f->id, "is_extended_id", f->extended ? Py_True : Py_False,
+                           "is_remote_frame", f->rtr ? Py_True : Py_False, "is_error_frame",
+                           f->error ? Py_True : Py_False, "is_fd", f->fd ? Py_True : Py_False, "bitrate_switch",
+                           f->brs ? Py_True : Py_False, "error_state_indicator", esi ? Py_True : Py_False, "dlc",
+                           (int)f->len, "data", (const char *)f->data, (Py_ssize_t)f->len);
+    Py_DECREF(channel);
+    if (kwargs != NULL) unit = PyObject_Call(CAN_MESSAGE, args, kwargs);
+    Py_DECREF(args);
+    Py_XDECREF(kwargs);
+    return unit;
+}
+
+/* The kernel's running count of frames it dropped for this socket (SO_RXQ_OVFL), when a frame carried it. */
+static int kernel_drops(const struct msghdr *header, uint32_t *count) {
+    struct cmsghdr *c;
+    for (c = CMSG_FIRSTHDR(header); c != NULL; c = CMSG_NXTHDR((struct msghdr *)header, c)) {
+        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == 40 /* SO_RXQ_OVFL */) {
+            memcpy(count, CMSG_DATA(c), sizeof *count);
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* CanTransport's read of a SocketCAN bus, here: a frame within `timeout`, then what the socket holds (at most
+ * DRAIN_LIMIT more), counted as its read counts them; error frames go to the transport's own look. */
+static PyObject *pump_socketcan(vx_path_t *p, Py_ssize_t index, double timeout) {
+    vx_link_t *link = &p->links[index];
+    vstig_can_frame_t frames[DRAIN_LIMIT + 1];
+    uint8_t esi[DRAIN_LIMIT + 1];
+    uint8_t raw[72], control[256];
+    struct iovec io;
+    struct msghdr header;
+    size_t n = 0, i;
+    ssize_t got;
+    uint32_t drops = 0;
+    int fd, ready, counted = 0, failed;
+    double t, now;
+    vx_batch_t batch;
+    if (!p->fast) return Py_NewRef(Py_None); /* a listener wants python-can's own messages (their timestamps) */
+    fd = vx_socketcan_fd(link->transport, &link->device, &link->fd, 1);
+    if (fd < -1) return NULL;
+    if (fd < 0) return Py_NewRef(Py_None);
+    if ((now = monotonic()) == -1.0 && PyErr_Occurred()) return NULL;
+    if (now - link->polled >= POLL_COUNTS_S) { /* the bus's own counts, as its recv polls them */
+        PyObject *done = PyObject_CallMethodNoArgs(link->device, M_POLL_COUNTS);
+        if (done == NULL) return NULL;
+        Py_DECREF(done);
+        link->polled = now;
+    }
+    ready = wait_readable(fd, timeout);
+    if (ready == 0 || (ready < 0 && errno == EINTR)) return PyLong_FromLong(0);
+    if (ready != 1) return Py_NewRef(Py_None);
+    Py_BEGIN_ALLOW_THREADS
+    for (n = 0; n <= DRAIN_LIMIT; n++) {
+        io.iov_base = raw;
+        io.iov_len = sizeof raw;
+        memset(&header, 0, sizeof header);
+        header.msg_iov = &io;
+        header.msg_iovlen = 1;
+        header.msg_control = control;
+        header.msg_controllen = sizeof control;
+        got = recvmsg(fd, &header, MSG_DONTWAIT);
+        if (got != 16 && got != 72) break;
+        counted |= kernel_drops(&header, &drops);
+        unpack_frame(raw, (size_t)got, &frames[n], &esi[n]);
+    }
+    failed = got < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR ? errno : 0;
+    Py_END_ALLOW_THREADS
+    if (failed) { /* the socket told its error (an interface gone down) to us alone: the transport must hear it */
+        PyObject *done = PyObject_CallMethod(link->transport, "failed", "s", strerror(failed));
+        if (done == NULL) return NULL;
+        Py_DECREF(done);
+    }
+    if (n == 0) return PyLong_FromLong(0);
+    if ((t = wall_clock()) == -1.0 && PyErr_Occurred()) return NULL;
+    if (vx_count(link->tcounters, vx_n.rx, (Py_ssize_t)n) < 0) return NULL;
+    if (counted) {
+        PyObject *done = PyObject_CallMethod(link->device, "note_kernel_drops", "k", (unsigned long)drops);
+        if (done == NULL) return NULL;
+        Py_DECREF(done);
+    }
+    for (i = 0; i < n; i++) { /* error frames: counted by the transport, which may find the bus off */
+        if (frames[i].error) {
+            PyObject *unit = frame_message(link, &frames[i], esi[i], t), *done;
+            done = unit == NULL ? NULL : PyObject_CallMethodOneArg(link->transport, M_ERROR_FRAME, unit);
+            Py_XDECREF(unit);
+            if (done == NULL) return NULL;
+            Py_DECREF(done);
+        }
+    }
+    batch.kind = 2;
+    batch.frames = frames;
+    batch.nframes = n;
+    ready = deliver_fast(p, index, t, &batch, NULL);
+    if (ready < 0) return NULL;
+    if (ready == 0) {
+        PyObject *units = PyList_New((Py_ssize_t)n);
+        int status;
+        for (i = 0; units != NULL && i < n; i++) {
+            PyObject *unit = frame_message(link, &frames[i], esi[i], t);
+            if (unit == NULL) Py_CLEAR(units);
+            else PyList_SET_ITEM(units, (Py_ssize_t)i, unit);
+        }
+        status = units == NULL ? -1 : deliver_slow(p, index, t, units);
+        Py_XDECREF(units);
+        if (status < 0) return NULL;
+    }
+    return PyLong_FromSize_t(n);
+}
+#endif
+
+/* ---- the Python type ------------------------------------------------------------------------ */
+
+static int intern(void) {
+    static int done;
+    struct {
+        PyObject **slot;
+        const char *name;
+    } names[] = {{&A_READER, "_reader_thread"}, {&A_FAILURE, "_failure"},
+                 {&A_WAKE, "_wake"}, {&A_RETRY, "_retry_at"}, {&A_SLEEP, "_sleep_until"},
+                 {&A_WAKE_ON_ARRIVAL, "_wake_on_arrival"}, {&M_SET, "set"}, {&M_ERROR_FRAME, "_error_frame"},
+                 {&M_POLL_COUNTS, "poll_counts"}};
+    size_t i;
+    PyObject *time_module;
+    if (done) return 0;
+    for (i = 0; i < sizeof names / sizeof names[0]; i++) {
+        if ((*names[i].slot = vx_name(names[i].name)) == NULL) return -1;
+    }
+    time_module = PyImport_ImportModule("time");
+    if (time_module == NULL) return -1;
+    TIME_TIME = PyObject_GetAttrString(time_module, "time");
+    TIME_MONOTONIC = PyObject_GetAttrString(time_module, "monotonic");
+    Py_DECREF(time_module);
+    if (TIME_TIME == NULL || TIME_MONOTONIC == NULL) return -1;
+    done = 1;
+    return 0;
+}
+
+static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
+    static char *kwlist[] = {"node", "lock", "deliver", "links", "receivers", "reads", "part", "guard", "outlets",
+                             "listeners", "delivered", "can_message", NULL};
+    PyObject *node, *lock, *deliver, *links, *receivers, *reads, *part, *guard, *outlets, *listeners = NULL,
+        *delivered = NULL, *can_message = Py_None;
+    vx_path_t *self;
+    Py_ssize_t i;
+    if (intern() < 0 ||
+        !PyArg_ParseTupleAndKeywords(args, kwds, "OOOO!O!O!OOO!|$O!O!O", kwlist, &node, &lock, &deliver,
+                                     &PyList_Type, &links, &PyList_Type, &receivers, &PyList_Type, &reads, &part,
+                                     &guard, &PyList_Type, &outlets, &PyList_Type, &listeners, &PyList_Type,
+                                     &delivered, &can_message))
+        return NULL;
+    if (PyList_GET_SIZE(receivers) != PyList_GET_SIZE(links) || PyList_GET_SIZE(reads) != PyList_GET_SIZE(links)) {
+        PyErr_SetString(PyExc_ValueError, "one receiver and one way of reading per link");
+        return NULL;
+    }
+    if (part != Py_None && !PyObject_TypeCheck(part, &vx_SeatType) && !PyObject_TypeCheck(part, &vx_RelayType)) {
+        PyErr_SetString(PyExc_TypeError, "part must be a Seat, a Relay or None");
+        return NULL;
+    }
+    for (i = 0; i < PyList_GET_SIZE(outlets); i++) {
+        if (!PyObject_TypeCheck(PyList_GET_ITEM(outlets, i), &vx_OutletType)) {
+            PyErr_SetString(PyExc_TypeError, "outlets must be Outlets");
+            return NULL;
+        }
+    }
+    if (can_message != Py_None) Py_XSETREF(CAN_MESSAGE, Py_NewRef(can_message));
+    self = (vx_path_t *)type->tp_alloc(type, 0);
+    if (self == NULL) return NULL;
+    self->node = Py_NewRef(node);
+    self->lock = Py_NewRef(lock);
+    self->deliver = Py_NewRef(deliver);
+    self->part = Py_NewRef(part);
+    self->guard = Py_NewRef(guard);
+    self->outlets = Py_NewRef(outlets);
+    self->fast = 1; /* until the Node says a listener wants each unit or message */
+    self->listeners = listeners == NULL ? PyList_New(0) : Py_NewRef(listeners);
+    self->delivered = delivered == NULL ? PyList_New(0) : Py_NewRef(delivered);
+    if (self->listeners == NULL || self->delivered == NULL) {
+        Py_DECREF(self);
+        return NULL;
+    }
+    self->nlinks = PyList_GET_SIZE(links);
+    self->links = PyMem_Calloc((size_t)(self->nlinks ? self->nlinks : 1), sizeof *self->links);
+    if (self->links == NULL) {
+        Py_DECREF(self);
+        return PyErr_NoMemory();
+    }
+    for (i = 0; i < self->nlinks; i++) {
+        vx_link_t *link = &self->links[i];
+        PyObject *receiver = PyList_GET_ITEM(receivers, i);
+        long reads_how = PyLong_AsLong(PyList_GET_ITEM(reads, i));
+        if (receiver != Py_None && !PyObject_TypeCheck(receiver, &vx_ReceiverType)) {
+            PyErr_SetString(PyExc_TypeError, "receivers must be Receivers or None");
+            Py_DECREF(self);
+            return NULL;
+        }
+        link->receiver = receiver == Py_None ? NULL : (vx_receiver_t *)Py_NewRef(receiver);
+        link->reads = (uint8_t)(link->receiver == NULL ? VX_READ_PYTHON : reads_how);
+        link->link = Py_NewRef(PyList_GET_ITEM(links, i));
+        link->fd = -1;
+        link->name = PyObject_GetAttrString(link->link, "name");
+        link->counters = PyObject_GetAttrString(link->link, "counters");
+        link->transport = PyObject_GetAttrString(link->link, "transport");
+        link->tcounters = link->transport == NULL ? NULL : PyObject_GetAttrString(link->transport, "counters");
+        if (link->name == NULL || link->counters == NULL || link->tcounters == NULL || PyErr_Occurred()) {
+            Py_DECREF(self);
+            return NULL;
+        }
+    }
+    return (PyObject *)self;
+}
+
+static int Path_traverse(vx_path_t *self, visitproc visit, void *arg) {
+    Py_ssize_t i;
+    Py_VISIT(self->node);
+    Py_VISIT(self->lock);
+    Py_VISIT(self->deliver);
+    Py_VISIT(self->part);
+    Py_VISIT(self->guard);
+    Py_VISIT(self->outlets);
+    Py_VISIT(self->listeners);
+    Py_VISIT(self->delivered);
+    for (i = 0; self->links != NULL && i < self->nlinks; i++) {
+        Py_VISIT(self->links[i].receiver);
+        Py_VISIT(self->links[i].link);
+        Py_VISIT(self->links[i].device);
+    }
+    return 0;
+}
+
+static int Path_clear(vx_path_t *self) {
+    Py_ssize_t i;
+    Py_CLEAR(self->node);
+    Py_CLEAR(self->lock);
+    Py_CLEAR(self->deliver);
+    Py_CLEAR(self->part);
+    Py_CLEAR(self->guard);
+    Py_CLEAR(self->outlets);
+    Py_CLEAR(self->listeners);
+    Py_CLEAR(self->delivered);
+    for (i = 0; self->links != NULL && i < self->nlinks; i++) {
+        vx_link_t *link = &self->links[i];
+        Py_CLEAR(link->receiver);
+        Py_CLEAR(link->link);
+        Py_CLEAR(link->name);
+        Py_CLEAR(link->counters);
+        Py_CLEAR(link->transport);
+        Py_CLEAR(link->tcounters);
+        Py_CLEAR(link->device);
+    }
+    return 0;
+}
+
+static void Path_dealloc(vx_path_t *self) {
+    Py_ssize_t i;
+    PyObject_GC_UnTrack(self);
+    Path_clear(self);
+    for (i = 0; self->links != NULL && i < self->nlinks; i++) PyMem_Free(self->links[i].buf);
+    PyMem_Free(self->links);
+    PyMem_Free(self->msgs);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int link_index(vx_path_t *self, Py_ssize_t index) {
+    if (index >= 0 && index < self->nlinks) return 0;
+    PyErr_Format(PyExc_IndexError, "no link %zd", index);
+    return -1;
+}
+
+/* deliver(index, t, units, now=None) -> True when delivered here; False: the caller delivers it (Node._deliver).
+ * `now`: the monotonic time the outlets send at (default: the clock's; the differential test gives its own). */
+static PyObject *Path_deliver(vx_path_t *self, PyObject *args) {
+    Py_ssize_t index;
+    double t, at;
+    PyObject *units, *now = Py_None;
+    vx_batch_t batch;
+    int done;
+    if (!PyArg_ParseTuple(args, "ndO!|O:deliver", &index, &t, &PyList_Type, &units, &now) ||
+        link_index(self, index) < 0)
+        return NULL;
+    if (now != Py_None && (at = PyFloat_AsDouble(now)) == -1.0 && PyErr_Occurred()) return NULL;
+    batch.kind = 0;
+    batch.units = units;
+    done = deliver_fast(self, index, t, &batch, now == Py_None ? NULL : &at);
+    if (done < 0) return NULL;
+    return PyBool_FromLong(done);
+}
+
+static PyObject *Path_pump_at(vx_path_t *self, Py_ssize_t index, double timeout) {
+#ifndef _WIN32
+    switch (self->links[index].reads) {
+    case VX_READ_SERIAL:
+        return pump_serial(self, index, timeout);
+    case VX_READ_SOCKETCAN:
+        return pump_socketcan(self, index, timeout);
+    default:
+        break;
+    }
+#endif
+    return Py_NewRef(Py_None);
+}
+
+/* pump(index, timeout) -> how much was read (bytes or frames, maybe 0), or None: the transport's own read takes
+ * this turn (it has no fd now, the device failed, or a listener wants python-can's messages) */
+static PyObject *Path_pump(vx_path_t *self, PyObject *args) {
+    Py_ssize_t index;
+    double timeout;
+    if (!PyArg_ParseTuple(args, "nd:pump", &index, &timeout) || link_index(self, index) < 0) return NULL;
+    return Path_pump_at(self, index, timeout);
+}
+
+/* serve(index, timeout, turn) -> None: pump link `index` until `stopping` is set; whenever pump hands the turn
+ * back (None), turn() reads through the transport (the reader thread's loop, without a Python frame per read) */
+static PyObject *Path_serve(vx_path_t *self, PyObject *args) {
+    PyObject *turn, *got;
+    Py_ssize_t index;
+    double timeout;
+    if (!PyArg_ParseTuple(args, "ndO:serve", &index, &timeout, &turn) || link_index(self, index) < 0) return NULL;
+    while (!self->stopping) {
+        PyObject *pumped = Path_pump_at(self, index, timeout);
+        if (pumped == NULL) return NULL;
+        got = pumped == Py_None ? PyObject_CallNoArgs(turn) : Py_NewRef(Py_None);
+        Py_DECREF(pumped);
+        if (got == NULL) return NULL;
+        Py_DECREF(got);
+    }
+    Py_RETURN_NONE;
+}
+
+/* pumps(index) -> whether pump reads this link's device itself */
+static PyObject *Path_pumps(vx_path_t *self, PyObject *arg) {
+    Py_ssize_t index = PyLong_AsSsize_t(arg);
+    if ((index == -1 && PyErr_Occurred()) || link_index(self, index) < 0) return NULL;
+    return PyBool_FromLong(self->links[index].reads != VX_READ_PYTHON);
+}
+
+static PyMethodDef Path_methods[] = {
+    {"deliver", (PyCFunction)Path_deliver, METH_VARARGS, "Deliver what link `index` read, here if it can."},
+    {"pump", (PyCFunction)Path_pump, METH_VARARGS, "Read link `index`'s device and deliver what came."},
+    {"pumps", (PyCFunction)Path_pumps, METH_O, "Whether `pump` reads link `index`'s device itself."},
+    {"serve", (PyCFunction)Path_serve, METH_VARARGS, "Pump link `index` until `stopping`; turn() when handed back."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyMemberDef Path_members[] = {
+    {"fast", T_BOOL, offsetof(vx_path_t, fast), 0,
+     "No listener wants each unit or message: whole batches are delivered here (the Node sets it)."},
+    {"stopping", T_BOOL, offsetof(vx_path_t, stopping), 0, "The readers stop: `serve` returns (LinkReaders sets it)."},
+    {NULL, 0, 0, 0, NULL},
+};
+
+PyTypeObject vx_PathType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "vstig_hw._vstig.Path",
+    .tp_doc = "Path(node, lock, deliver, links, receivers, reads, part, guard, outlets, can_message=None): "
+              "a Node's delivery in C.",
+    .tp_basicsize = sizeof(vx_path_t),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_new = Path_new,
+    .tp_dealloc = (destructor)Path_dealloc,
+    .tp_traverse = (traverseproc)Path_traverse,
+    .tp_clear = (inquiry)Path_clear,
+    .tp_methods = Path_methods,
+    .tp_members = Path_members,
+};

@@ -1,0 +1,41 @@
+/* The Path type (path.c): a Node's delivery of what its links read, in C. */
+#ifndef VSTIG_EXT_PATH_H
+#define VSTIG_EXT_PATH_H
+
+#include "parts.h"
+
+#define VX_READ_PYTHON 0u    /* units come from the link's own read (transport.read), as Python objects */
+#define VX_READ_SERIAL 1u    /* the serial port's fd is read here */
+#define VX_READ_SOCKETCAN 2u /* the SocketCAN socket is read here */
+
+typedef struct {
+    uint8_t reads;           /* VX_READ_* */
+    vx_receiver_t *receiver; /* its framing in C, or NULL: this link's units take the Python path */
+    PyObject *link, *name, *counters, *transport, *tcounters;
+    PyObject *device;        /* SocketCAN: the bus `fd` belongs to */
+    int fd;
+    double polled;           /* SocketCAN: when the bus's own drop counts were last polled */
+    uint8_t *buf;            /* serial: a read's bytes (each link's reader thread reads into its own) */
+} vx_link_t;
+
+typedef struct {
+    PyObject_HEAD
+    PyObject *node;     /* the Node whose delivery this is */
+    PyObject *lock;     /* its lock */
+    PyObject *deliver;  /* its Python delivery (Node._deliver): the slow path */
+    PyObject *part;     /* Seat, Relay, or None */
+    PyObject *guard;    /* JumpGuard, a Python Guard, or None */
+    PyObject *outlets;  /* list of Outlet (none: a listener) */
+    Py_ssize_t nlinks;
+    vx_link_t *links;
+    PyObject *listeners; /* the Node's lists of listeners that want each unit or message (a list of lists) */
+    PyObject *delivered; /* the Node's listeners told of every batch handled, with its read time (a list) */
+    char fast;          /* no listener wants each unit or message: the whole batch is C's */
+    char stopping;      /* the readers stop: serve() returns */
+    vstig_msg_t *msgs;  /* the messages of one unit (used under the Node's lock) */
+    size_t cap;
+} vx_path_t;
+
+extern PyTypeObject vx_PathType;
+
+#endif /* VSTIG_EXT_PATH_H */

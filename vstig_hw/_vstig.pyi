@@ -1,0 +1,64 @@
+# Types of the compiled data path (vstig_hw/_cext, built by setup.py). Each type has the interface of the Python
+# class it stands in for, and tests/native holds the two equal; the stub says so by naming that class as its base
+# (the compiled types do not really subclass it: nothing checks them with isinstance).
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from .counters import Counters
+from .engine import Entry, Outcome, Stigmergy
+from .gateway.fairshare import FairFifo, FairQueue
+from .gateway.guard import Guard
+from .gateway.outlet import Outlet as _Outlet
+from .gateway.outlet import SendWindow
+from .gateway.parts import RawRelay
+from .gateway.parts import Seat as _Seat
+from .gateway.writer import LinkWriter
+from .links.link import Link
+from .wire import Message
+
+KEYS: int
+
+def setup(message: type[Message], entry: type[Entry], outcomes: tuple[Outcome, ...],
+          rules: tuple[Any, Any, Any]) -> None: ...
+
+class Engine(Stigmergy): ...
+
+class JumpGuard(Guard):
+    def __init__(self, max_jump: int, learn: float | None = None) -> None: ...
+    def view(self, key: int) -> tuple[int, int, int] | None: ...
+
+class Receiver:
+    def __init__(self, framing: str, drops: Counters, *, expiry_ticks: int = 3, kilobot_type: int = 0x56,
+                 extended: bool = False, base: int | None = None, stigmergy: int = 0) -> None: ...
+    def feed(self, unit: Any) -> list[Message]: ...
+    def tick(self) -> None: ...
+    def reset(self) -> None: ...
+
+class Encoder:
+    def __init__(self, framing: str, *, kilobot_type: int = 0x56, extended: bool = False, base: int | None = None,
+                 stigmergy: int = 0, sender: int = 0, fd: bool = False, brs: bool = True,
+                 frame_type: Any = None) -> None: ...
+    def encode_batch(self, messages: Sequence[Message]) -> list[Any]: ...
+
+class Window(SendWindow): ...
+
+class Outlet(_Outlet):
+    def __init__(self, link: Link[Any], writer: LinkWriter, window: Window, queue: FairQueue | FairFifo, *,
+                 keep_all: bool = False, encoder: Encoder | None = None, port: str = "python") -> None: ...
+
+class Seat(_Seat): ...
+
+class Relay(RawRelay): ...
+
+class Path:
+    fast: bool
+    stopping: bool
+    def __init__(self, node: object, lock: object, deliver: Callable[[int, float, list[Any]], None],
+                 links: list[Link[Any]], receivers: list[Receiver | None], reads: list[int],
+                 part: _Seat | RawRelay | None, guard: Guard | None, outlets: list[_Outlet], *,
+                 listeners: list[Sequence[Any]], delivered: Sequence[Callable[[float], None]],
+                 can_message: object = None) -> None: ...
+    def deliver(self, index: int, t: float, units: list[Any], now: float | None = None) -> bool: ...
+    def pump(self, index: int, timeout: float) -> int | None: ...
+    def pumps(self, index: int) -> bool: ...
+    def serve(self, index: int, timeout: float, turn: Callable[[], None]) -> None: ...

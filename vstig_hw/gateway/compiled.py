@@ -1,0 +1,193 @@
+"""The compiled data path for a Node: its engine, guard, parts, outlets and delivery in C (vstig_hw._vstig).
+
+A Node that relays (ENGINE or RAW) builds its parts here when this install has the
+compiled path and `VSTIG_PURE` does not turn it off (`vstig_hw.native`). Each part
+is the twin of the Python class it stands in for and has its interface, so the
+Node's own Python (listeners, the API, ticks, stops) works on either:
+
+* `Engine` for `Stigmergy`, `Seat` and `Relay` for the parts, `Outlet` (with a
+  `Window`) for the outlets; the fair share's lines stay Python (`fairshare`),
+  touched only while a backlog lasts, and so does each link's `LinkWriter`;
+* `JumpGuard` for a guard of max_jump and learn only (the default); any other
+  guard stays the Python one, which the compiled delivery asks per unit;
+* `Receiver` for each link whose framing is cobs8, epuck4, kilobot or CAN: its
+  decoding lives there for the Node's life, whichever side delivers a batch;
+* `Path`, the delivery (Node._deliver): one call per read. Links on a serial port
+  or a SocketCAN bus are read by it (`pump`) and their writes go straight to the
+  device while its writer is idle.
+
+Everything else (zenoh, XBee, dialects, the overhead controller, blabbermouth...)
+takes the Python path through the same parts. What decides which links the
+compiled path reads and writes is here, in one place: `receiver_for`,
+`encoder_for`, `reads_for`, `port_for`.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+from ..engine import ConflictResolver, Stigmergy
+from ..framing.cobs8 import Cobs8Framing
+from ..framing.epuck4 import Epuck4Framing
+from ..framing.kilobot import KilobotFraming
+from ..links.link import Link
+from ..native import native
+from ..transports.serial import SerialTransport
+from .fairshare import FairFifo, FairQueue
+from .guard import Guard
+from .outlet import RAW_QUEUE_LIMIT, Outlet
+from .parts import ChangeListener, RawRelay, Seat
+from .writer import TX_QUEUE_LIMIT, LinkWriter
+
+if TYPE_CHECKING:
+    from .._vstig import Encoder, Path, Receiver
+
+__all__ = ["Compiled", "compiled_for"]
+
+MAX_EXPIRY_TICKS = 254  # epuck4 partials the compiled receiver can age (libvstig counts ticks in a byte)
+MAX_LEARN = 2_097_151.0  # seconds of `learn` the compiled guard can count (2^31 of its 1/1024 s units)
+
+
+def _is(obj: object, module: str, name: str) -> bool:
+    """Whether `obj` is exactly `module`'s class `name`; False when that module was never imported (then nothing
+    can be one of its objects): a serial gateway does not load python-can for this."""
+    loaded = sys.modules.get(module)
+    return loaded is not None and type(obj) is getattr(loaded, name)
+
+
+def framing_of(link: Link[Any]) -> str | None:
+    """The compiled framing that decodes and encodes exactly as the link's does (cobs8, epuck4, kilobot, can), or
+    None: the link's framing stays Python (zenoh, XBee, dialects, the overhead controller...)."""
+    framing: Any = link.framing
+    kind = type(framing)
+    if kind is Cobs8Framing or kind is KilobotFraming:
+        return str(framing.name)
+    if kind is Epuck4Framing and framing.reassembler.expiry_ticks <= MAX_EXPIRY_TICKS:
+        return "epuck4"
+    if _is(framing, "vstig_hw.framing.can", "CanFraming"):
+        return "can"
+    return None
+
+
+def receiver_for(link: Link[Any]) -> Receiver | None:
+    """The link's framing as a compiled Receiver counting into the framing's own drops, or None (Python's)."""
+    assert native is not None
+    framing: Any = link.framing
+    kind = framing_of(link)
+    receiver: Receiver | None = None
+    if kind == "cobs8":
+        receiver = native.Receiver("cobs8", framing.drops)
+    elif kind == "epuck4":
+        receiver = native.Receiver("epuck4", framing.drops, expiry_ticks=framing.reassembler.expiry_ticks)
+    elif kind == "kilobot":
+        receiver = native.Receiver("kilobot", framing.drops, kilobot_type=framing.msg_type)
+    elif kind == "can":
+        scheme = framing.scheme
+        receiver = native.Receiver("can", framing.drops, extended=scheme.extended, base=scheme.base,
+                                   stigmergy=scheme.stigmergy)
+    return receiver
+
+
+def encoder_for(link: Link[Any]) -> Encoder | None:
+    """The link's framing as a compiled Encoder (the same units its framing makes), or None."""
+    assert native is not None
+    framing: Any = link.framing
+    kind = framing_of(link)
+    encoder: Encoder | None = None
+    if kind in ("cobs8", "epuck4"):
+        encoder = native.Encoder(kind)
+    elif kind == "kilobot":
+        encoder = native.Encoder("kilobot", kilobot_type=framing.msg_type)
+    elif kind == "can":
+        import can
+
+        scheme = framing.scheme
+        encoder = native.Encoder("can", extended=scheme.extended, base=scheme.base, stigmergy=scheme.stigmergy,
+                                 sender=framing.sender, fd=framing.fd, brs=framing.bitrate_switch,
+                                 frame_type=can.Message)
+    return encoder
+
+
+def reads_for(link: Link[Any]) -> int:
+    """How the compiled delivery reads the link: 1 a serial port's fd, 2 a SocketCAN socket, 0 through its
+    transport's own read."""
+    transport = link.transport
+    if type(transport) is SerialTransport:
+        return 1  # while the port has an fd (a device or a pty); pump hands socket:// and outages back
+    if _is(transport, "vstig_hw.transports.can", "CanTransport") and getattr(transport, "interface", "") == "socketcan":
+        return 2
+    return 0
+
+
+def port_for(link: Link[Any]) -> str:
+    """Where the compiled outlet writes while the link's writer is idle: the device itself, or the writer."""
+    return ("python", "serial", "socketcan")[reads_for(link)]
+
+
+def jump_guard(guard: Guard | None) -> Guard | None:
+    """A guard of max_jump and learn alone as a compiled JumpGuard; any other guard (or none) as it is."""
+    if guard is None or native is None:
+        return guard
+    only_jump = (guard.max_jump is not None and guard.rate is None and guard.source_rate is None
+                 and guard.flap is None and not guard.policies
+                 and (guard.learn is None or (math.isfinite(guard.learn) and guard.learn < MAX_LEARN)))
+    if not only_jump:
+        return guard
+    compiled: Guard = native.JumpGuard(guard.max_jump, guard.learn)
+    return compiled
+
+
+class Compiled:
+    """Builds a Node's parts in C (see the module's docstring); one per Node."""
+
+    def __init__(self) -> None:
+        assert native is not None
+        self.native = native
+
+    def outlet(self, link: Link[Any], budget: int | None, period: float, *, keep_all: bool = False,
+               on_room: Callable[[], None] | None = None) -> Outlet:
+        writer = LinkWriter(link, TX_QUEUE_LIMIT, on_room=on_room)
+        queue = FairFifo(RAW_QUEUE_LIMIT) if keep_all else FairQueue()
+        encoder = encoder_for(link)
+        port = port_for(link) if encoder is not None else "python"
+        outlet: Outlet = self.native.Outlet(link, writer, self.native.Window(budget, period), queue,
+                                            keep_all=keep_all, encoder=encoder, port=port)
+        return outlet
+
+    def engine(self, robot_id: int, onconflict: ConflictResolver | None) -> Stigmergy:
+        engine: Stigmergy = self.native.Engine(robot_id, onconflict)
+        return engine
+
+    def seat(self, engine: Stigmergy, links: list[Link[Any]], outlets: list[Outlet], guard: Guard | None,
+             on_change: Sequence[ChangeListener], intake: int | None, period: float) -> Seat:
+        seat: Seat = self.native.Seat(engine, links, outlets, guard, on_change, intake, period)
+        return seat
+
+    def relay(self, outlets: list[Outlet], guard: Guard | None) -> RawRelay:
+        relay: RawRelay = self.native.Relay(outlets, guard)
+        return relay
+
+    def path(self, node: object, lock: object, deliver: Callable[[int, float, list[Any]], None],
+             links: list[Link[Any]], receivers: list[Receiver | None], part: Seat | RawRelay | None,
+             guard: Guard | None, outlets: list[Outlet], listeners: Sequence[Sequence[Any]],
+             delivered: Sequence[Callable[[float], None]]) -> Path:
+        """The delivery; `listeners`: the Node's lists of listeners that want each unit or message (while any has
+        one, batches take the Python delivery); `delivered`: those told of every batch handled (its read time)."""
+        reads = [reads_for(link) if receiver is not None else 0 for link, receiver in zip(links, receivers,
+                                                                                         strict=True)]
+        can = sys.modules.get("can")  # loaded if a link is CAN: the frames the delivery hands Python are its Messages
+        path: Path = self.native.Path(node, lock, deliver, links, receivers, reads, part, guard, outlets,
+                                      listeners=list(listeners), delivered=delivered,
+                                      can_message=None if can is None else can.Message)
+        return path
+
+
+def compiled_for(relays: bool, links: Sequence[Link[Any]]) -> Compiled | None:
+    """The builder for a Node that relays (ENGINE or RAW) over at least one link the compiled path decodes, when
+    this install has it; else None (the Node is pure Python: nothing it reads would be decoded in C)."""
+    if not relays or native is None or not any(framing_of(link) is not None for link in links):
+        return None
+    return Compiled()
