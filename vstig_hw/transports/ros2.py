@@ -38,6 +38,7 @@ from typing import IO, Any, Protocol
 from ..counters import Counters
 from ..engine import Entry
 from ..framing.ros2 import Ros2Sample, wire_sender
+from ..ros2msgs import ros_environment
 from ..wire import Message
 from .base import DeviceTransport, TransportError
 
@@ -193,8 +194,10 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
         config = {"options": dataclasses.asdict(self.options), "links": list(self._links),
                   "robot_id": self.robot_id, "node_name": self.node_name, "served": self._served is not None}
         try:
+            # the wheels' library path, computed: the gateway itself runs without it (ros2msgs.ros_environment)
             process = subprocess.Popen([sys.executable, "-m", "vstig_hw.transports.ros2_node", json.dumps(config)],
-                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                       env={**os.environ, **ros_environment()})
         except OSError as error:
             raise TransportError(f"{self.name}: cannot start its ROS 2 node: {error}") from None
         child = _Child(process)
