@@ -18,9 +18,8 @@ import time
 from pathlib import Path
 
 import pytest
-from peers import VSTIG, PtyPeer, start_vstig, wait_for
+from peers import VSTIG, PtyPeer, catches, start_vstig, wait_for
 from required import missing
-from test_start_up_stops import _catches
 
 from vstig_hw.ros2msgs import BOOTSTRAP_GUARD
 
@@ -62,7 +61,7 @@ def _until_it_catches(radio: PtyPeer, guarded: bool) -> tuple[subprocess.Popen[s
     """A bridge started, and the seconds until it caught SIGTERM."""
     start = time.perf_counter()
     process = start_vstig("bridge", f"serial:{radio.path}", "--robot-id", "1", env=_env(guarded))
-    wait_for(lambda: _catches(process.pid, signal.SIGTERM) or process.poll() is not None, 30,
+    wait_for(lambda: catches(process.pid, signal.SIGTERM) or process.poll() is not None, 30,
              step=lambda: time.sleep(0.001))
     return process, time.perf_counter() - start
 
