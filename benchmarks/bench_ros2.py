@@ -41,7 +41,7 @@ class _Dds:
             raise RuntimeError(f"the ros2 benchmarks need {reason}")
         self.host = dds.Host("bench")
         self.env = {**os.environ, **dds.environment()}
-        os.environ["ROS_DOMAIN_ID"] = self.env["ROS_DOMAIN_ID"]  # for the gateways `_relaying` starts
+        self.gateway_env = dds.vstig_environment()  # the gateways `_relaying` starts: as a user's
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -67,7 +67,7 @@ def _radio_to_ros2(ros: _Dds) -> tuple[float, ...]:
     """(p50, p90, p99) seconds from a PUT written on a pty radio to a ROS 2 subscriber of heard/<that radio>."""
     argv = lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8",  # noqa: E731
                          "ros2:lab", "--robot-id", "200", "--budget", "2000", "--no-refresh"]
-    with _relaying(argv, True, tuple(ros.host.command())) as (_, a, _out):
+    with _relaying(argv, True, ros.gateway_env, tuple(ros.host.command())) as (_, a, _out):
         from vstig_hw.framing.ros2 import ros_name
         from vstig_hw.links import parse
 
@@ -100,12 +100,15 @@ def radio_to_ros2_latency() -> Iterator[Result]:
                      anchor * 1e3)
 
 
-def _relay_cpu(ros: _Dds, with_ros2: bool) -> tuple[float, float, float, int]:
-    """(CPU s per message, switches per message, p50 delay s, delivered) of an engine bridge relaying pty -> pty."""
+def _relay_cpu(ros: _Dds, with_ros2: bool, pure: bool = False) -> tuple[float, float, float, int]:
+    """(CPU s per message, switches per message, p50 delay s, delivered) of an engine bridge relaying pty -> pty
+    (`pure`: the whole Node in Python, VSTIG_PURE=1; with a ros2: link, whose listeners want every message, the
+    Node delivers in Python and its engine and outlets stay compiled)."""
     extra = ["ros2:lab"] if with_ros2 else []
     argv = lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8", f"serial:{b}?framing=cobs8",  # noqa: E731
                          *extra, "--robot-id", "200", "--budget", "2000", "--no-refresh"]
-    with _relaying(argv, True, tuple(ros.host.command())) as (pid, a, out):
+    env = {**ros.gateway_env, "VSTIG_PURE": "1"} if pure else ros.gateway_env
+    with _relaying(argv, True, env, tuple(ros.host.command())) as (pid, a, out):
         watcher = ros.peer("subscribe", "/vstig/lab", "30") if with_ros2 else None
         frames = _frames(COUNT)
         cpu0, sw0 = _usage(pid)
@@ -123,9 +126,12 @@ def _relay_cpu(ros: _Dds, with_ros2: bool) -> tuple[float, float, float, int]:
 def gateway_cost() -> Iterator[Result]:
     with _Dds() as ros:
         without = _relay_cpu(ros, False)
+        pure = _relay_cpu(ros, False, pure=True)
         with_ros2 = _relay_cpu(ros, True)
     yield Result("ros2.gateway_cpu_per_msg", with_ros2[0] * 1e6, "us", "the same bridge without ros2 CPU/msg",
                  without[0] * 1e6)
+    yield Result("ros2.gateway_cpu_per_msg_vs_pure", with_ros2[0] * 1e6, "us",
+                 "the same bridge without ros2, pure path, CPU/msg", pure[0] * 1e6)
     yield Result("ros2.gateway_switches_per_msg", with_ros2[1], "/msg", "the same bridge without ros2",
                  without[1])
     yield Result("ros2.gateway_relay_p50", with_ros2[2] * 1e3, "ms", "the same bridge without ros2 p50",
