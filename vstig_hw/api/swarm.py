@@ -29,6 +29,7 @@ from ..gateway.guard import DEFAULT_MAX_JUMP, Guard
 from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD, Node
 from ..gateway.oneshot import ConfirmedPut, HearsItself, PutResult, not_taken
 from ..gateway.refresh import RoundRobinGet
+from ..gateway.ros2 import serve_ros2
 from ..links.assemble import LinkBuildError, assemble_links
 from ..links.link import Link, LinkSpec
 from ..links.registry import parse
@@ -93,6 +94,7 @@ class Swarm:
         self.onconflictlost(onconflictlost)
         if refresh:
             self._node.on_tick.append(RoundRobinGet())
+        serve_ros2(self._node)  # ros2: links publish what the Node hears and answer put, get and table
         self._hub = ChangeHub(self._attach_hub)
         self._callbacks: list[OnChange] = []
         self._puts: list[tuple[ConfirmedPut, concurrent.futures.Future[PutResult]]] = []  # gateway thread only
