@@ -5,6 +5,10 @@ BIN := $(VENV)/bin
 # `make demo` installs the core alone (the demo needs no extra); `make test` every extra and the test tools.
 CORE_STAMP := $(VENV)/.installed-core
 STAMP := $(VENV)/.installed
+# The ros2 extra's wheels re-execute every Python of the venv to set LD_LIBRARY_PATH unless this is set: vstig and
+# the tests need no restart (a ROS 2 process gets the path from vstig_hw.ros2msgs; DECISIONS.md, "Only a process
+# that uses ROS 2 pays for its wheels").
+export _ROS_WHEELS_BOOTSTRAP_COMPLETE := 1
 
 .PHONY: demo test lint typecheck layers pytest docs bench sysdeps clean fuzz soak supervised chaos
 
@@ -50,14 +54,24 @@ $(NODE_STAMP): tests/live/package.json | sysdeps
 	    || echo "npm install in tests/live failed: the live view's client tests will skip"; \
 	else echo "npm is missing: the live view's client tests will skip"; fi
 
+# The vstig_msgs ROS 2 interfaces, built once per machine into ~/.cache/vstig-hw (~10 s; needs g++, sysdeps).
+ROS2_STAMP := $(VENV)/.ros2-interfaces
+
+$(ROS2_STAMP): $(STAMP) $(wildcard vstig_hw/ros2msgs/*/*.idl) vstig_hw/ros2msgs/build.py | sysdeps
+	$(BIN)/python -m vstig_hw.ros2msgs env >/dev/null && touch $@
+
 # The suites that drive the data path, again on the pure-Python path (VSTIG_PURE=1, child processes included): the
 # run above takes the compiled path, and the Python reference must keep working where it is not built. tests/native
 # holds the two equal; these keep the reference itself whole (about 2 minutes).
 PURE_SUITES := tests/gateway tests/api tests/cli/test_isolation.py tests/cli/test_fair_share.py \
                tests/socketcan/test_in_uml.py
 
-pytest: $(STAMP) sysdeps $(NODE_STAMP)
-	$(BIN)/pytest
+# pytest's own process loads rclpy (its serializer is the CDR tests' reference): it gets the wheels' library path as
+# their bootstrapper computes it, without the restart; the vstig processes of the tests run as a user's (tests/dds.py).
+ROS_LIBRARY_PATH = $$($(BIN)/python -c 'from vstig_hw.ros2msgs import ros_environment as e; print(e()["LD_LIBRARY_PATH"])')
+
+pytest: $(STAMP) sysdeps $(NODE_STAMP) $(ROS2_STAMP)
+	LD_LIBRARY_PATH="$(ROS_LIBRARY_PATH)" $(BIN)/pytest
 	VSTIG_PURE=1 $(BIN)/pytest -q $(PURE_SUITES)
 
 # The docs site, strict: a broken link, anchor or API reference fails. Browse it from site/index.html.

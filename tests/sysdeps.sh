@@ -12,6 +12,9 @@ python3 -c 'import os, sysconfig; raise SystemExit(not os.path.exists(sysconfig.
 command -v avr-gcc >/dev/null || want+=(gcc-avr binutils-avr)  # libvstig for the Kilobot's ATmega328P
 [ -e /usr/lib/avr/include/avr/io.h ] || want+=(avr-libc)
 [ -e /usr/include/simavr/sim_avr.h ] || want+=(libsimavr-dev)  # the simulated AVR robot's board (tests/cli)
+command -v g++ >/dev/null || want+=(g++)  # with gcc and Python's headers: the vstig_msgs ROS 2 interfaces
+python3 -c 'import sysconfig, os, sys; sys.exit(not os.path.exists(sysconfig.get_paths()["include"] + "/Python.h"))' \
+  || want+=(python3-dev)
 command -v linux.uml >/dev/null || [ -x /usr/bin/linux.uml ] || want+=(user-mode-linux)
 command -v modprobe >/dev/null || [ -x /sbin/modprobe ] || want+=(kmod)
 command -v cansend >/dev/null || want+=(can-utils)

@@ -22,6 +22,8 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "mcap": ("mcap", "rosbags"),
     "live": ("foxglove",),
     "metrics": ("prometheus_client",),
+    "ros2": ("rclpy", "rmw_fastrtps_cpp", "diagnostic_msgs", "rosidl_generator_c", "rosidl_generator_py",
+             "rosidl_typesupport_c", "rosidl_typesupport_fastrtps_c", "rosidl_typesupport_introspection_c"),
 }
 
 

@@ -8,6 +8,7 @@ import click
 
 from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency, stop_on_signals
+from vstig_hw.gateway.ros2 import serve_ros2
 from vstig_hw.links import LinkSpec
 
 from ..config import ConfiguredCommand, config_options
@@ -89,6 +90,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
                 onconflict=larger_value_wins if larger else None, guard=firewall)
     if refresh and not raw:
         node.listen(tick=RoundRobinGet())
+    serve_ros2(node)
     live = sys.stderr.isatty()
     favour_latency()
 

@@ -14,6 +14,7 @@ from vstig_hw.engine import larger_value_wins
 from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node, stop_on_signals
 from vstig_hw.gateway.guard import Guard
+from vstig_hw.gateway.ros2 import serve_ros2
 from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
@@ -107,6 +108,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
     firewall = guard.build(built)
     # The engine never transmits: it counts what each message would do to a robot that heard them all.
     node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule)
+    serve_ros2(node)
     view = SwarmView(rule) if rule else SwarmView()
     listeners: list[Callable[[Heard, str | None], None]] = [
         lambda message, reason: view.add(message) if reason is None else view.refuse(message, reason)]

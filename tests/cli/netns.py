@@ -84,3 +84,4 @@ class Lan:
     def close(self) -> None:
         while self._made:
             subprocess.run(["ip", "netns", "del", self._made.pop()], capture_output=True, timeout=20, check=False)
+

@@ -183,6 +183,16 @@ def wait_for(done: Callable[[], bool], deadline: float = 20.0, step: Callable[[]
             time.sleep(0.01)
 
 
+def catches(pid: int, signum: int) -> bool:
+    """Whether the process has a handler for `signum` (bit signum-1 of SigCgt in /proc)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False
+    (mask,) = [line.split()[1] for line in status.splitlines() if line.startswith("SigCgt:")]
+    return bool(int(mask, 16) >> (signum - 1) & 1)
+
+
 def has_open(pid: int, path: str) -> bool:
     """Whether process `pid` has `path` open (a passive listener shows no other sign of being ready)."""
     fds = Path(f"/proc/{pid}/fd")

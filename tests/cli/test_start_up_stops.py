@@ -14,17 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
-from peers import PtyPeer, start_vstig, wait_for
-
-
-def _catches(pid: int, signum: int) -> bool:
-    """Whether the process has a handler for `signum` (bit signum-1 of SigCgt in /proc)."""
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except FileNotFoundError:
-        return False
-    (mask,) = [line.split()[1] for line in status.splitlines() if line.startswith("SigCgt:")]
-    return bool(int(mask, 16) >> (signum - 1) & 1)
+from peers import PtyPeer, catches, start_vstig, wait_for
 
 
 def _loaded(pid: int, fragment: str) -> bool:
@@ -52,7 +42,7 @@ def test_a_stop_as_soon_as_vstig_runs_is_clean(radio: PtyPeer, command: list[str
                                                signum: signal.Signals) -> None:
     process = start_vstig(*(arg.replace("{radio}", f"serial:{radio.path}") for arg in command))
     # vstig takes the three over at once; Python's own SIGINT handler is there from its start, so look for SIGTERM
-    wait_for(lambda: _catches(process.pid, signal.SIGTERM) or process.poll() is not None, 30,
+    wait_for(lambda: catches(process.pid, signal.SIGTERM) or process.poll() is not None, 30,
              step=lambda: time.sleep(0.001))
     early = not _loaded(process.pid, "_cobs")  # before the heavy imports (cobs8 framing: the links' C extension)
     process.send_signal(signum)
@@ -68,7 +58,7 @@ def test_a_sigterm_at_any_moment_of_start_up_is_clean(radio: PtyPeer, command: l
                                                       after: float) -> None:
     process = start_vstig(*(arg.replace("{radio}", f"serial:{radio.path}") for arg in command))
     time.sleep(after)
-    assert _catches(process.pid, signal.SIGTERM), "vstig does not catch SIGTERM after its start"
+    assert catches(process.pid, signal.SIGTERM), "vstig does not catch SIGTERM after its start"
     process.send_signal(signal.SIGTERM)
     _out, err = process.communicate(timeout=10)
     assert process.returncode == status, err

@@ -2,16 +2,19 @@
 
 Python blocks run through sybil, one namespace per page, in a scratch folder. Shell blocks marked
 `<!-- run -->` run under `bash -e` in a scratch folder with this environment's `vstig` first on PATH,
-against python-can's virtual bus, pyserial's loop:// and ptys, and Zenoh on loopback or a unix socket.
+against python-can's virtual bus, pyserial's loop:// and ptys, and Zenoh on loopback or a unix socket;
+a block with a ros2: link runs in a network namespace with only lo, on this run's ROS domain (tests/dds.py).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 from pathlib import Path
 
+import dds
 import pytest
 from docs_blocks import EXECUTED, ROOT, SHELL, Block, all_blocks, markdown_files, shell_script
 from sybil import Example, Sybil
@@ -59,11 +62,23 @@ def _tested_by(block: Block) -> bool:
 def test_shell_example_runs(block: Block, tmp_path: Path) -> None:
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
            "COLUMNS": "120", "NO_COLOR": "1"}
-    try:
-        done = subprocess.run(["bash", "-e", "-c", shell_script(block)], cwd=tmp_path, env=env, text=True,
-                              capture_output=True, timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
-    except subprocess.TimeoutExpired as error:
-        pytest.fail(f"{block.where}: still running after {TIMEOUT_S} s: {error.stderr!r}")
+    command = ["bash", "-e", "-c", shell_script(block)]
+    with contextlib.ExitStack() as cleanup:
+        if "ros2:" in block.body:  # DDS stays on this machine: a namespace with only lo, this run's domain
+            reason = dds.unavailable()
+            if reason:
+                if os.environ.get("VSTIG_REQUIRE_PEERS") == "1":
+                    pytest.fail(f"VSTIG_REQUIRE_PEERS=1 but {reason}")
+                pytest.skip(reason)
+            host = dds.Host("docs")
+            cleanup.callback(host.close)
+            env.update(dds.environment())
+            command = [*host.command(), *command]
+        try:
+            done = subprocess.run(command, cwd=tmp_path, env=env, text=True, capture_output=True,
+                                  timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
+        except subprocess.TimeoutExpired as error:
+            pytest.fail(f"{block.where}: still running after {TIMEOUT_S} s: {error.stderr!r}")
     output = f"{done.stdout[-2000:]}\n{done.stderr[-2000:]}"
     assert done.returncode == 0, f"{block.where} exited {done.returncode}:\n{output}"
     EXECUTED["shell"] += 1

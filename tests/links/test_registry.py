@@ -17,7 +17,7 @@ from vstig_hw.links.registry import SCHEMES
 
 LINKS_DIR = Path(vstig_hw.links.__file__).parent
 MEDIA = sorted({module for module, _ in SCHEMES.values()})
-HEAVY = ("can", "serial", "zenoh")  # python-can, pyserial, eclipse-zenoh
+HEAVY = ("can", "serial", "zenoh", "rclpy", "vstig_msgs")  # python-can, pyserial, eclipse-zenoh, ROS 2
 
 
 def _loaded_after(code: str) -> set[str]:
@@ -28,7 +28,7 @@ def _loaded_after(code: str) -> set[str]:
 
 
 def _unwanted(loaded: set[str], media: tuple[str, ...], libraries: tuple[str, ...]) -> list[str]:
-    transports = tuple(f"vstig_hw.transports.{name}" for name in ("serial", "zenoh", "can", "blabbermouth"))
+    transports = tuple(f"vstig_hw.transports.{name}" for name in ("serial", "zenoh", "can", "blabbermouth", "ros2"))
     return sorted(name for name in loaded
                   if name.split(".")[0] in libraries or name in transports
                   or name in {f"vstig_hw.links.{medium}" for medium in media})
@@ -41,7 +41,8 @@ def test_parsing_a_can_spec_loads_no_other_medium() -> None:
 
 
 @pytest.mark.parametrize("spec", ["serial:/dev/ttyUSB0?framing=epuck4", "kilobot-ohc:/dev/ttyUSB0",
-                                  "zenoh:lab?scout=1", "blabbermouth:k1,k2?size=64&deployment=lab.toml"])
+                                  "zenoh:lab?scout=1", "blabbermouth:k1,k2?size=64&deployment=lab.toml",
+                                  "ros2:lab?domain=3&discovery=subnet"])
 def test_parsing_a_spec_loads_no_library_and_no_transport(spec: str) -> None:
     medium = SCHEMES[spec.partition(":")[0]][0]
     loaded = _loaded_after(f"import vstig_hw.links as links\nlinks.parse({spec!r})")
@@ -75,9 +76,10 @@ def test_every_scheme_names_a_medium_with_a_parser_and_help(scheme: str) -> None
 
 
 def test_help_text_lists_every_kind_once_in_the_order_of_the_registry() -> None:
-    assert list(examples()) == ["can", "serial", "kilobot-ohc", "bittybuzz", "xbee", "rosbuzz", "blabbermouth", "zenoh"]
+    assert list(examples()) == ["can", "serial", "kilobot-ohc", "bittybuzz", "xbee", "rosbuzz", "blabbermouth", "zenoh",
+                                "ros2"]
     assert list(notes()) == list(examples())
-    assert grammar()[0].startswith("can:") and grammar()[-1].startswith("zenoh:")
+    assert grammar()[0].startswith("can:") and grammar()[-1].startswith("ros2:")
 
 
 def test_a_link_spec_type_accepts_parsed_specs_only() -> None:

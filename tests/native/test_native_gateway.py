@@ -235,7 +235,7 @@ def _outlets(compiled: ModuleType, keep_all: bool, budget: int | None) -> tuple[
     c_writer = LinkWriter(links[1], TX_QUEUE_LIMIT)
     queue = FairFifo(RAW_QUEUE_LIMIT) if keep_all else FairQueue()
     c = compiled_module.CompiledOutlet(links[1], c_writer, compiled.Window(budget, 1.0), queue, keep_all=keep_all,
-                                       encoder=compiled.Encoder("cobs8"))  # the Node's: the C Outlet with the pure one's close
+                                       encoder=compiled.Encoder("cobs8"))  # the Node's own
     return python, c
 
 

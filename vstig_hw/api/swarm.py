@@ -26,6 +26,7 @@ from ..gateway.guard import DEFAULT_MAX_JUMP, Guard
 from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD, Listening, Node, SwarmClosed
 from ..gateway.oneshot import HearsItself, PutResult, confirm_write, not_taken
 from ..gateway.refresh import RoundRobinGet
+from ..gateway.ros2 import serve_ros2
 from ..links.assemble import LinkBuildError, assemble_links
 from ..links.link import Link, LinkSpec
 from ..links.registry import parse
@@ -88,6 +89,7 @@ class Swarm:
         self.onconflictlost(onconflictlost)
         if refresh:
             self._node.listen(tick=RoundRobinGet())
+        serve_ros2(self._node)  # ros2: links publish what the Node hears and answer put, get and table
         self._hub = ChangeHub(self._attach_hub)
         self._hub_listening: Listening | None = None
         self._callbacks: list[OnChange] = []

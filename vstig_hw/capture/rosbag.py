@@ -13,13 +13,12 @@ Both libraries come with the `mcap` extra (`pip install 'vstig-hw[mcap]'`).
 from __future__ import annotations
 
 import functools
-import re
-import struct
 from collections.abc import Callable, Iterator
 from typing import IO, Any
 
 from ..counters import Counters
 from ..extras import install_hint
+from ..framing.ros2 import cdr_message, ros_name, sender_of_wire  # MSGDEF in CDR, packed by struct (no rosbags)
 from ..wire import Message, Op
 from .decoded import Decoder
 from .records import MESSAGE_FRAMING, CaptureError, Record, cut_short
@@ -42,23 +41,7 @@ int64 sender
 # Files written before XBee links (whose senders are 64-bit addresses) carry `int32 sender`: still read.
 _MSGDEF_INT32 = MSGDEF.replace("int64 sender", "int32 sender")
 TOPIC_PREFIX = "/vstig/"
-NO_SENDER = -1
 _MAGIC = b"\x89MCAP0\r\n"  # an MCAP file starts and, once closed, ends with it
-_TOPIC_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
-# MSGDEF in CDR, little-endian: the encapsulation header, then each field at its natural alignment
-# (a pad byte after `op`, six before `sender`). Packed by struct: the live view sends one per message
-# heard, and it needs no rosbags; tests/unit hold it equal to rosbags' serialize_cdr.
-_CDR = struct.Struct("<4sBxHHHH6xq")
-_CDR_LE = b"\x00\x01\x00\x00"
-_TWO64 = 1 << 64
-
-
-def cdr_message(message: Message, sender: int | None) -> bytes:
-    """`message` as a CDR-encoded `vstig_msgs/msg/Message` (sender -1 where the medium names none; a 64-bit
-    address from 2**63 up, which no XBee has, as its two's complement)."""
-    wire_sender = NO_SENDER if sender is None else sender - _TWO64 if sender >= 1 << 63 else sender
-    return _CDR.pack(_CDR_LE, message[0] >> 15, message[0] & 0x7FFF, message[1], message[2], message[3],
-                     wire_sender)
 
 
 def _needs_extra(path: str) -> CaptureError:
@@ -89,8 +72,7 @@ def _store_for(schema: Any, store: Any) -> Any:
 
 def topic_for(link: str) -> str:
     """A valid ROS 2 topic for a link name (letters, digits, underscores; no leading digit)."""
-    token = _TOPIC_UNSAFE.sub("_", link) or "link"
-    return TOPIC_PREFIX + ("link_" + token if token[0].isdigit() else token)
+    return TOPIC_PREFIX + ros_name(link)
 
 
 class McapCaptureWriter:
@@ -180,7 +162,7 @@ def _record(store: Any, channel: Any, raw: Any) -> Record:
     m = store.deserialize_cdr(raw.data, TYPE_NAME)
     link = channel.metadata.get("link") or channel.topic.removeprefix(TOPIC_PREFIX)
     message = Message(Op(m.op), m.key, m.value, m.timestamp, m.robot)
-    sender = None if m.sender == NO_SENDER else m.sender + _TWO64 if m.sender < 0 else m.sender
+    sender = sender_of_wire(m.sender)
     return Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, sender))
 
 

@@ -6,12 +6,12 @@ This package is the one place links are assembled:
   (`kind`, `name`, `build(...)`);
 - `grammar`: what every spec shares (`<scheme>:<body>?key=value&...`) and its one-line errors;
 - `registry`: scheme -> owning module; `parse("can:socketcan:vcan0")` imports only that module;
-- one module per medium (`can`, `serial` with `kilobot-ohc:`, `blabbermouth`, `zenoh`), each owning its spec
+- one module per medium (`can`, `serial` with `kilobot-ohc:`, `blabbermouth`, `zenoh`, `ros2`), each owning its spec
   dataclass, parser, defaults, GRAMMAR/EXAMPLES/NOTES for `vstig links`, and its builder. No medium's module
   imports another's.
 
 Framings stay pure: none of them imports a transport or a link. A medium's module imports its library
-(python-can, pyserial, zenoh) and its transport only when a link is built (python-can also when a CAN spec
+(python-can, pyserial, zenoh, rclpy) and its transport only when a link is built (python-can also when a CAN spec
 is checked), so a command imports only the media it opens.
 """
 

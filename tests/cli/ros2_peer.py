@@ -1,0 +1,110 @@
+"""A plain ROS 2 node for the ros2: link tests: rclpy and the vstig_msgs types, none of vstig-hw's code.
+
+Run as `python ros2_peer.py NAMESPACE [WAIT]`; once the gateway's services are found and its changes
+matched (within WAIT seconds, default 20) it prints {"ready": true}, else {"error": ...} and ends. It
+answers commands read from stdin, one a line, with one JSON line each on stdout, and prints every
+change it hears (`{"change": ...}`) as it comes, stamped with the wall-clock time it arrived:
+
+    put KEY VALUE        the put service's answer
+    get KEY              the get service's answer
+    table                the table service's entries
+    write KEY VALUE ROBOT   one sample on the write topic (timestamp 0: the gateway stamps it)
+    listen TOPIC         subscribes to TOPIC under the namespace (vstig_msgs/Message), then {"listening": TOPIC}
+    flood SECONDS [TOPIC]   writes as fast as rclpy publishes (on TOPIC under the namespace: default
+                         write), then {"flooded": N}
+    quit
+
+It subscribes to `changes` as a late joiner would (reliable, transient-local,
+depth 1 a key), so what it prints first is the table the gateway already held.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from vstig_msgs.msg import Change, Message
+from vstig_msgs.srv import Get, Put, Table
+
+CALL_TIMEOUT = 20.0
+
+
+def say(record: dict[str, object]) -> None:
+    sys.stdout.write(json.dumps(record) + "\n")
+    sys.stdout.flush()
+
+
+def entry(e: object) -> list[int]:
+    return [e.key, e.value, e.timestamp, e.robot]  # type: ignore[attr-defined]
+
+
+def main(namespace: str, wait: float) -> None:
+    rclpy.init()
+    node = rclpy.create_node("ros2_peer")
+    table_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+    def changed(change: Change) -> None:
+        say({"change": {"key": change.key, "new": entry(change.new_entry),
+                        "old": entry(change.old_entry) if change.has_old else None,
+                        "link": change.link, "sender": change.sender}, "t": time.time()})
+
+    changes = node.create_subscription(Change, f"{namespace}/changes", changed, table_qos)
+    writes = node.create_publisher(Message, f"{namespace}/write", 100)
+    clients = {name: node.create_client(kind, f"{namespace}/{name}")
+               for name, kind in (("put", Put), ("get", Get), ("table", Table))}
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    threading.Thread(target=executor.spin, daemon=True).start()
+    for client in clients.values():
+        if not client.wait_for_service(timeout_sec=wait):
+            say({"error": f"no service {client.srv_name}"})
+            return
+    end = time.monotonic() + wait
+    while changes.get_publisher_count() == 0 and time.monotonic() < end:  # matched: no change is missed
+        time.sleep(0.01)
+    say({"ready": True})
+    for line in sys.stdin:
+        words = line.split()
+        if not words:
+            continue
+        command, args = words[0], [int(w) if w.lstrip("-").isdigit() else w for w in words[1:]]
+        if command == "quit":
+            break
+        if command == "put":
+            answer = clients["put"].call(Put.Request(key=args[0], value=args[1]), timeout_sec=CALL_TIMEOUT)
+            say({"put": {"taken": answer.taken, "entry": entry(answer.entry), "reason": answer.reason}})
+        elif command == "get":
+            answer = clients["get"].call(Get.Request(key=args[0]), timeout_sec=CALL_TIMEOUT)
+            say({"get": {"found": answer.found, "entry": entry(answer.entry)}})
+        elif command == "table":
+            answer = clients["table"].call(Table.Request(), timeout_sec=CALL_TIMEOUT)
+            say({"table": [entry(e) for e in answer.entries]})
+        elif command == "write":
+            writes.publish(Message(op=Message.PUT, key=args[0], value=args[1], timestamp=0, robot=args[2],
+                                   sender=-1))
+            say({"written": args[:2]})
+        elif command == "listen":
+            node.create_subscription(Message, f"{namespace}/{args[0]}", lambda _: None, 10)
+            say({"listening": args[0]})
+        elif command == "flood":
+            sample, end, sent = Message(op=Message.PUT, key=9, value=1, timestamp=0, robot=999, sender=-1), \
+                time.monotonic() + float(args[0]), 0
+            target = writes if len(args) < 2 else node.create_publisher(Message, f"{namespace}/{args[1]}", 100)
+            while time.monotonic() < end:
+                sample.value = sent & 0xFFFF
+                target.publish(sample)
+                sent += 1
+            say({"flooded": sent})
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], float(sys.argv[2]) if len(sys.argv) > 2 else CALL_TIMEOUT)
