@@ -344,7 +344,7 @@ class XBeeFraming(SerialFraming):
 
     # -- sending -------------------------------------------------------------------
     def encode(self, msg: Message) -> list[bytes]:
-        return [self._transmit(encode(msg))]
+        return self.encode_batch([msg])  # through `_payloads`, which a dialect's framing (XbeeMav) replaces
 
     def encode_batch(self, messages: Sequence[Message]) -> list[bytes]:
         """As few Transmit Requests as hold the messages, in order, each as full as NP allows."""
