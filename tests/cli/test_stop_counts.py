@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
-from flood import FRAME, FloodedPty
+from flooded_pty import FRAME, FloodedPty
 from peers import has_open, start_vstig, stop, wait_for
 
 from vstig_hw.framing import make_serial_framing

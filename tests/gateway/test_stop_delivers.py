@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 import time
 
-from flood import FRAME, FloodedPty
+from flooded_pty import FRAME, FloodedPty
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
