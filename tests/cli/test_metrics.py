@@ -115,7 +115,7 @@ def test_an_attack_on_the_endpoint_costs_only_itself() -> None:
         pytest.skip(f"the test needs 6,000 descriptors; this machine allows {hard}")
     resource.setrlimit(resource.RLIMIT_NOFILE, (max(soft, 6000) if hard == resource.RLIM_INFINITY
                                                 else max(soft, min(hard, 6000)), hard))
-    writer, reader = PtyRobot(5), PtyRobot(6, watch=(9,))
+    writer, reader = PtyRobot(5), PtyRobot(6, watch=(8, 9))
     port = free_port()
     gateway = start_vstig("bridge", writer.spec, reader.spec, "--robot-id", "200", "--metrics", str(port),
                           "--tick", "0.02")
@@ -137,6 +137,9 @@ def test_an_attack_on_the_endpoint_costs_only_itself() -> None:
 
     try:
         wait_for(lambda: _scrape(port) is not None, 30)
+        # The endpoint serves before the links are open (they open in a thread of their own): a write crosses once
+        # both are, and only then does the flood start.
+        wait_for(lambda: reader.value(8) == 1, 30, step=lambda: (writer.put(8, 1), reader.step(), time.sleep(0.05)))
         flood = threading.Thread(target=attack)
         flood.start()
         delays = []
