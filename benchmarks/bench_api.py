@@ -2,7 +2,7 @@
 
 The neighbour is a python-can handle on the same virtual bus as the swarm's link:
 the time measured is from calling put to the neighbour holding the frame. Through
-the API the put crosses to the gateway thread (`Node.call_soon`) and back; through
+the API the put crosses to the gateway thread (`Node.submit`) and back; through
 the Node it is a plain call on the thread that owns it.
 
 Watch throughput is changes per second a consumer thread takes out of a watch:
@@ -155,3 +155,98 @@ def _flooded_swarm(frames: list[can.Message]) -> tuple[float, int]:
             return taken / elapsed, watch.overflow
     finally:
         sender.shutdown()
+
+
+_CONFIRMS = 60
+
+
+class _EchoRobot:
+    """A robot on a virtual bus that re-broadcasts what it stores at once (its own thread, no control step)."""
+
+    def __init__(self, channel: str, robot_id: int = 7) -> None:
+        from vstig_hw import Stigmergy
+
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.engine, self.codec = Stigmergy(robot_id), can_framing_for(robot_id)
+        self._running = True
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while self._running:
+            frame = self.bus.recv(0.05)
+            if frame is None:
+                continue
+            for msg in self.codec.feed(frame):
+                self.engine.receive(msg)
+            for msg in self.engine.drain():
+                self.bus.send(self.codec.encode(msg)[0])
+
+    def close(self) -> None:
+        self._running = False
+        self._thread.join(2)
+        self.bus.shutdown()
+
+
+def _confirm_times(swarm: vstig_hw.Swarm, first_key: int) -> list[float]:
+    samples = []
+    for i in range(_CONFIRMS):
+        start = time.perf_counter()
+        swarm.put(first_key + i, i, confirm=True, timeout=5.0)
+        samples.append(time.perf_counter() - start)
+    return samples
+
+
+@benchmark("api")
+def confirm_latency() -> Iterator[Result]:
+    """A confirmed put -> its verdict: beside a robot on a bus (anchor: the same robot's round trip for a bare
+    PUT), and through a `vstig bridge` over zenoh that holds the write (anchor: the bus robot's confirm)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from .zenoh_peer import free_port
+
+    stamp = time.monotonic_ns()
+    channel = f"bench-confirm-{stamp}"
+    robot = _EchoRobot(channel)
+    tap = can.Bus(interface="virtual", channel=channel)
+    codec = can_framing_for(9)
+    try:
+        bare = []
+        for i in range(_CONFIRMS):  # a bare PUT to the robot and back: the floor of any confirmation here
+            msg = Message(Op.PUT, 20000 + i, i, 1, 9)
+            start = time.perf_counter()
+            tap.send(codec.encode(msg)[0])
+            while True:
+                frame = tap.recv(1.0)
+                assert frame is not None, "the robot did not re-broadcast"
+                if msg in codec.feed(frame):
+                    break
+            bare.append(time.perf_counter() - start)
+        with vstig_hw.join(f"can:virtual:{channel}", robot_id=2) as swarm:
+            _confirm_times(swarm, 1000)  # warm up
+            on_bus = _confirm_times(swarm, 2000)
+    finally:
+        tap.shutdown()
+        robot.close()
+    port = free_port()
+    lab = f"bench-confirm-{stamp % 100000}"
+    vstig = str(Path(sys.executable).with_name("vstig"))
+    bridge = subprocess.Popen([vstig, "bridge", f"zenoh:{lab}?listen=tcp/127.0.0.1:{port}",
+                               f"can:virtual:{lab}", "--robot-id", "200"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        time.sleep(2.0)  # its session listens
+        with vstig_hw.join(f"zenoh:{lab}?connect=tcp/127.0.0.1:{port}", robot_id=9) as program:
+            _confirm_times(program, 3000)
+            through_gateway = _confirm_times(program, 4000)
+    finally:
+        bridge.terminate()
+        bridge.wait(20)
+    yield Result("api.confirm on a bus robot (median)", statistics.median(on_bus) * 1e3, "ms",
+                 "bare PUT -> the robot's re-broadcast (median)", statistics.median(bare) * 1e3)
+    yield Result("api.confirm through a zenoh gateway (median)", statistics.median(through_gateway) * 1e3, "ms",
+                 "api.confirm on a bus robot (median)", statistics.median(on_bus) * 1e3)
+    yield Result("api.confirm through a zenoh gateway (p90)", sorted(through_gateway)[int(0.9 * _CONFIRMS)] * 1e3,
+                 "ms", "one control period", 100.0)

@@ -2,7 +2,7 @@
 beside without.
 
 The live view's bench setup (bench_live): an engine bridge between two python-can virtual buses relays a busy
-swarm's traffic. With metrics on, the Node counts each batch into the relay latency histogram (`on_delivered`)
+swarm's traffic. With metrics on, the Node counts each batch into the relay latency histogram (a `delivered` listener)
 and a scraper in another process reads /metrics every 100 ms (Prometheus' default is every 15 s: a worst case).
 Figures: the gateway process's CPU per message heard (`time.process_time`, the endpoint's thread included).
 """

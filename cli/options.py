@@ -472,10 +472,8 @@ class GuardChoice:
 
 
 def _names_senders(link: Link[Any]) -> bool:
-    """Whether the link can say who sent a unit: its framing reads it (CAN IDs), or the link class does."""
-    from vstig_hw.links import Link
-
-    return getattr(link.framing, "sender_of", None) is not None or type(link).sender_of is not Link.sender_of
+    """Whether the link can say who sent a unit: its framing reads it from the unit (CAN IDs)."""
+    return link.framing.names_senders
 
 
 def guard_options(fn: Callable[..., Any]) -> Callable[..., Any]:

@@ -210,7 +210,7 @@ def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool 
 def describe_links(node: Node) -> None:
     """One line per link whose transport says where it is reachable (a Zenoh link's endpoints)."""
     for link in node.links:
-        about = getattr(link.transport, "about", "")
+        about = link.about
         if about:
             click.echo(f"{link.name}: {about}", err=True)
 
@@ -284,7 +284,7 @@ def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, dur
 
     service = ServiceNotifier.from_environment()
     if service is not None:
-        node.on_tick.append(service.tick)
+        node.listen(tick=service.tick)
         service.ready(_readiness(node))
     try:
         if status is None:
@@ -302,7 +302,7 @@ def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, dur
 
 def _readiness(node: Node) -> str:
     """The STATUS= of READY=1: the links, and those still waiting for their device (a router not up yet)."""
-    waiting = [link.name for link in node.links if not getattr(link.transport, "connected", True)]
+    waiting = [link.name for link in node.links if not link.transport.connected]
     line = f"running on {', '.join(link.name for link in node.links)}"
     return f"{line}; waiting for {', '.join(waiting)}" if waiting else line
 

@@ -6,18 +6,18 @@ from typing import TYPE_CHECKING, Any
 from .wire import DecodeError, Message, Op, decode, encode
 
 if TYPE_CHECKING:
-    from .api import Change, NotTaken, Swarm, SwarmClosed, join
+    from .api import CaptureError, Change, HearsItself, NotTaken, Swarm, SwarmClosed, TransportError, join
     from .engine import Entry, Outcome, Stigmergy
 
 __version__ = "0.1.0"
 
-__all__ = ["Change", "DecodeError", "Entry", "Message", "NotTaken", "Op", "Outcome", "Stigmergy", "Swarm",
-           "SwarmClosed", "__version__", "decode", "encode", "join"]
+__all__ = ["CaptureError", "Change", "DecodeError", "Entry", "HearsItself", "Message", "NotTaken", "Op", "Outcome",
+           "Stigmergy", "Swarm", "SwarmClosed", "TransportError", "__version__", "decode", "encode", "join"]
 
 # The engine and the Python API load when first used, so `import vstig_hw` stays light: a command that
 # only reads captures never loads the engine, and nothing starts threads or imports link modules.
 _ENGINE = ("Entry", "Outcome", "Stigmergy")
-_API = ("Change", "NotTaken", "Swarm", "SwarmClosed", "join")
+_API = ("CaptureError", "Change", "HearsItself", "NotTaken", "Swarm", "SwarmClosed", "TransportError", "join")
 
 
 def __getattr__(name: str) -> Any:

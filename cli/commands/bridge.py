@@ -89,7 +89,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
                 period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
                 onconflict=larger_value_wins if larger else None, guard=firewall)
     if refresh and not raw:
-        node.on_tick.append(RoundRobinGet())
+        node.listen(tick=RoundRobinGet())
     serve_ros2(node)
     live = sys.stderr.isatty()
     favour_latency()

@@ -35,7 +35,7 @@ def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: Va
     started = time.monotonic()  # --wait bounds the whole command: opening the link is part of it
     node = Node(build_links([lossless(link, opening=wait)], robot_id), robot_id)
     name = node.links[0].name
-    if getattr(node.links[0].framing, "transmit_only", False):
+    if node.links[0].transmit_only:
         raise click.BadParameter(f"{name} only transmits: no neighbour can answer", param_hint="'--on'")
     with node:
         entry = get_newest(node, key, max(0.0, wait - (time.monotonic() - started)))

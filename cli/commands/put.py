@@ -41,10 +41,12 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
 
     It asks the swarm for KEY every control step for --learn seconds and writes
     with a timestamp newer than anything heard. A neighbour shows the write was
-    taken by re-broadcasting it or by a GET carrying it. If the swarm answers with
-    a newer or conflicting entry, it writes again (--tries in all); if no
-    neighbour shows the write within --wait, it exits 1 saying what the swarm
-    holds instead. KEY and VALUE take decimal or 0x hex; negative values need no --.
+    taken by re-broadcasting it, by an answer or a GET carrying it, or by writing
+    the key on top of it (the next timestamp). If the swarm answers with a newer
+    or conflicting entry first, it writes again (--tries in all); if no neighbour
+    shows the write within --wait, it exits 1 saying what the swarm holds instead.
+    A radio that echoes what we send cannot confirm anything: exit 1 saying so.
+    KEY and VALUE take decimal or 0x hex; negative values need no --.
 
     Example: vstig put 3 1500 --on can:socketcan:can0 --robot-id 200
     """
@@ -55,7 +57,7 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
     started = time.monotonic()  # --learn and --wait bound the whole command: opening the link is part of them
     node = Node(build_links([lossless(link, opening=learn + wait)], robot_id), robot_id)
     name = node.links[0].name
-    transmit_only = getattr(node.links[0].framing, "transmit_only", False)
+    transmit_only = node.links[0].transmit_only
     if transmit_only and not no_confirm:
         raise click.BadParameter(f"{name} only transmits: no neighbour can answer, so nothing can confirm "
                                  "the write (add --no-confirm to write anyway)", param_hint="'--on'")
@@ -70,3 +72,6 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
         raise click.ClickException(problem)
     click.echo(f"put key={key} {shown(result.written, value_type)} on {name}"
                + (" (not confirmed: --no-confirm)" if no_confirm else ""))
+    if result.shown is not None and result.shown != result.written:  # taken: a robot wrote on top of it
+        click.echo(f"note: robot {result.shown.robot} wrote on top of it: {shown(result.shown, value_type)}",
+                   err=True)

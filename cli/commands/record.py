@@ -132,8 +132,6 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
         for kept in passing.units(record) if keep else (record,):
             captures[0].write(kept)
 
-    node.on_unit.append(write)
-
     # Zenoh links measure their peers' clocks: the capture keeps whose clock it is and the offsets (clock_notes).
     clocks = [clock for link in node.links if (clock := getattr(link.transport, "clock", None)) is not None]
 
@@ -144,18 +142,23 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
                     captures[0].note(offset_note(trip))
             captures[0].flush()
 
-    node.on_tick.append(flush)
+    node.listen(unit=write, tick=flush)
     try:
         with stop_on_signals() as stop, metrics_served(node, metrics), opened(node, stop):
             capture = RotatingCapture(path, medium, max_bytes, Decoder(default_framings(deployment=deployment)),
                                       append=append)
-            with node.lock:  # the readers write under it: the early units go first, in order
+
+            def start_writing() -> None:  # with the Node to itself, no reader writes: the early units go first
                 if clocks:
                     capture.note(clock_note(), every_file=True)
                 captures.append(capture)
                 for unit in early:
                     write(*unit)
                 early.clear()
+
+            started = node.submit(start_writing)
+            node.run(until=started.done)
+            started.result()
             click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
                        err=True)
             if clocks and not capture.takes_notes:

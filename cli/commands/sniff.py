@@ -120,9 +120,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
             for listener in listeners:
                 listener(message, reason)
 
-    node.on_heard.append(heard)
-    if not hide_refused:
-        node.on_refused.append(heard)
+    node.listen(heard=heard, refused=None if hide_refused else heard)
     if jsonl:
         import json
 
@@ -144,7 +142,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
             out.flush()
 
         listeners.append(emit)
-        node.on_tick.append(lambda _node: _warn(firewall))
+        node.listen(tick=lambda _node: _warn(firewall))
         with (stop_on_signals() as stop,
               live_view(node, foxglove, value_type=value_type, larger_value_wins=larger, viewers=foxglove_viewers),
               metrics_served(node, metrics), opened(node, stop)):

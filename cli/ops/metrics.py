@@ -33,7 +33,7 @@ from ..options import LOOPBACK, Address, is_loopback, listen_address
 from .page_server import PageServer
 
 if TYPE_CHECKING:
-    from vstig_hw.gateway import Node
+    from vstig_hw.gateway.node import Listening, Node
 
 __all__ = ["LATENCY_BUCKETS", "MetricsServer", "RelayLatency", "metrics_option", "metrics_served"]
 
@@ -59,7 +59,8 @@ metrics_option = click.option(
 
 
 class RelayLatency:
-    """A histogram of read-to-handed-over times, counted on the Node's threads under its lock (no lock of its own)."""
+    """A histogram of read-to-handed-over times, counted on the Node's threads under its lock (no lock of its own:
+    a scrape reads the fixed list as it is, at worst one batch ahead in a bucket of the sum)."""
 
     def __init__(self, bounds: tuple[float, ...] = LATENCY_BUCKETS) -> None:
         self.bounds = bounds
@@ -93,11 +94,10 @@ class GatewayCollector:
         from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, HistogramMetricFamily
 
         node = self.node
-        with node.lock:  # one consistent view: the readers count under it
-            stats = node.stats()
-            keys = node.engine.size() if node.engine is not None else None
-            up = {link.name: bool(getattr(link.transport, "connected", True)) for link in node.links}
-            buckets, total = self.latency.buckets(), self.latency.total
+        stats = node.stats()  # one consistent view of the counters: the Node takes them under its lock
+        keys = node.engine.size() if node.engine is not None else None
+        up = {link.name: link.transport.connected for link in node.links}
+        buckets, total = self.latency.buckets(), self.latency.total
         clocks = {peer: trip for link in node.links if (clock := getattr(link.transport, "clock", None)) is not None
                   for peer, trip in clock.estimates().items()}
         events = CounterMetricFamily("vstig_link_events", "Every counter of every link: units and messages moved, "
@@ -154,6 +154,7 @@ class MetricsServer:
 
         self.latency = RelayLatency()
         self._node = node
+        self._listening: Listening | None = None
         self.registry = CollectorRegistry(auto_describe=False)
         self.server = PageServer(host, port, b"/metrics", CONTENT_TYPE_LATEST.encode(),
                                  lambda: generate_latest(self.registry))
@@ -162,13 +163,13 @@ class MetricsServer:
         self.host, self.port, self.url = self.server.host, self.server.port, self.server.url
 
     def start(self) -> None:
-        self._node.on_delivered.append(self.latency.observe)
+        self._listening = self._node.listen(delivered=self.latency.observe)
         self.server.start()
 
     def close(self) -> None:
         self.server.close()
-        with contextlib.suppress(ValueError):
-            self._node.on_delivered.remove(self.latency.observe)
+        if self._listening is not None:
+            self._listening.cancel()
 
 
 @contextlib.contextmanager

@@ -177,7 +177,7 @@ from vstig_hw.links import parse
 channel = "fair-{pid}"
 links = [parse(spec).build(robot_id=200) for spec in ({a!r}, {b!r}, "can:virtual:" + channel)]
 node = Node(links, 200, guard=Guard())  # as `vstig bridge` with default options builds it
-node.on_tick.append(RoundRobinGet())
+node.listen(tick=RoundRobinGet())
 favour_latency()
 stop = threading.Event()
 def flood():  # node 66 on the bus, as fast as a full 1 Mbit/s bus carries frames

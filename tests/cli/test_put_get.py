@@ -175,6 +175,7 @@ def test_put_against_a_robot_that_keeps_overwriting_gives_up_after_its_tries() -
         robot.engine.receive(msg)
         entry = robot.engine.entry(23)
         if entry is not None and entry.robot != 9:
+            robot.engine.put(23, 1)  # twice: its write is two past ours, which nothing shows was built on ours
             robot.engine.put(23, 1)
 
     with RadioRobot(9, program=insists_on_its_own_value).holding(23, 1, timestamp=5) as robot:
@@ -184,7 +185,40 @@ def test_put_against_a_robot_that_keeps_overwriting_gives_up_after_its_tries() -
     assert put.returncode == 1 and put.stdout == ""
     (line,) = put.stderr.splitlines()
     assert "the swarm holds value=1 timestamp=" in line and "robot=9" in line and "after 3 writes" in line
-    assert [m.timestamp for m in writes] == [6, 8, 10]  # each write newer than what the robot answered
+    assert [m.timestamp for m in writes] == [6, 9, 12]  # each write newer than what the robot answered
+
+
+def test_put_a_robot_writes_on_top_of_at_once_was_taken_and_says_so() -> None:
+    """Its program stores our write and writes the key again at once (Buzz's out-queue then sends only its
+    own): the write one timestamp past ours was built on ours, so ours was taken."""
+    def writes_on_top(robot: RadioRobot, msg: Message) -> None:
+        robot.engine.receive(msg)
+        entry = robot.engine.entry(23)
+        if entry is not None and entry.robot != 9:
+            robot.engine.put(23, 1)
+
+    with RadioRobot(9, program=writes_on_top).holding(23, 1, timestamp=5) as robot:
+        put = run_vstig("put", "23", "9", "--on", robot.link, "--robot-id", "33", "--learn", "0.3", "--wait", "2")
+        writes = [m for m in robot.heard if m.op is Op.PUT and m.robot == 33]
+    assert put.returncode == 0, put.stderr
+    assert put.stdout.startswith("put key=23 value=9 timestamp=6 robot=33 on ")
+    assert "note: robot 9 wrote on top of it: value=1 timestamp=7 robot=9" in put.stderr
+    assert [m.timestamp for m in writes] == [6]  # written once
+
+
+def test_put_a_neighbour_re_broadcast_is_taken_though_a_robot_writes_on_top_while_it_closes() -> None:
+    """Issue 32's Khepera run: a robot re-broadcasts our write as it stores it, and another robot's program
+    writes the key again (ts + 1) a moment later, while `put` sends what it queued and closes: the write was
+    taken when the re-broadcast came, and that verdict stands."""
+    def stores_then_another_writes_on_top(robot: RadioRobot, msg: Message) -> None:
+        robot.engine.receive(msg)  # stored: its re-broadcast goes out now
+        if msg.op is Op.PUT and msg.robot == 33:
+            threading.Timer(0.02, robot.say.append, (Message(Op.PUT, 23, 1, msg.timestamp + 1, 1),)).start()
+
+    with RadioRobot(4, program=stores_then_another_writes_on_top).holding(23, 5, timestamp=10) as robot:
+        put = run_vstig("put", "23", "9", "--on", robot.link, "--robot-id", "33", "--learn", "0.3", "--wait", "2")
+    assert put.returncode == 0, put.stderr
+    assert put.stdout.startswith("put key=23 value=9 timestamp=11 robot=33 on ")
 
 
 def test_put_that_loses_a_conflict_writes_again_and_then_says_who_won() -> None:

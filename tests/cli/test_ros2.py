@@ -203,13 +203,20 @@ def test_a_confirmed_put_from_ros2_is_held_by_the_pty_robots_and_a_can_robot(lab
 
 
 class Rival(PtyRobot):
-    """A robot that writes key 7 again whenever the entry it holds is not its own: every write to it conflicts."""
+    """A robot whose program overwrites key 7 as soon as it holds an entry not its own, in the same step, twice:
+    only its write, two past ours, goes out (its outbox keeps one per key), which shows nothing of ours (one
+    right on top of ours, or a re-broadcast of ours, would: taken, see `confirm`)."""
 
     def step(self) -> None:
-        super().step()
+        for msg in self._heard():
+            self.engine.receive(msg)
         entry = self.engine.entry(7)
         if entry is not None and entry.robot != self.id:
-            self.put(7, 500)
+            self.engine.put(7, 500)
+            self.engine.put(7, 500)
+        for key in self.watch:
+            self.engine.get(key)
+        self._send(self.engine.drain())
 
 
 def test_a_robots_conflicting_write_is_reported_to_the_ros2_node(lab: Callable[..., Lab]) -> None:

@@ -156,7 +156,7 @@ def test_a_loop_that_stalls_stops_the_pings(tmp_path: Path) -> None:
     robot = PtyRobot(1)
     notifier = ServiceNotifier(address, WATCHDOG_S)
     node = Node([parse(robot.spec).build()], 200, period=0.05)
-    node.on_tick.append(notifier.tick)
+    node.listen(tick=notifier.tick)
     stop_loop = threading.Event()
     with node:
         loop = threading.Thread(target=node.run, kwargs={"stop": stop_loop})
@@ -164,7 +164,7 @@ def test_a_loop_that_stalls_stops_the_pings(tmp_path: Path) -> None:
         try:
             time.sleep(0.8)
             before = len(manager.said("WATCHDOG=1"))
-            with node.lock:  # a stuck participant holds the Node's lock
+            with node._lock:  # a stuck participant (a listener that does not return) holds the Node
                 stalled = time.monotonic()
                 time.sleep(1.2)
             released = time.monotonic()

@@ -163,7 +163,7 @@ def test_an_answer_belongs_to_the_asker_and_leaves_ahead_of_the_flood_whose_entr
         robot_b.send(can_framing_for(5).encode(Message(Op.GET, 1150, 0, 0, 5))[0])  # B asks for key 1150
         while node.engine is not None and node.engine.counts[Outcome.ANSWERED] < 1 and time.monotonic() < deadline:
             node.run(duration=0.05)
-        with node.lock:
+        with node._lock:
             queue = node.outlets[1].queue
             assert len(queue) == 184  # the answer is the flood's pending entry: not queued twice
             next_two = queue.drain(2)

@@ -106,7 +106,7 @@ def test_listeners_see_only_what_passes_and_each_refusal_is_counted_on_its_link(
     guard = Guard(rate=2, links={a: LinkPolicy(deny=IdSet.parse("7", 255), keys=IdSet.parse("0-9", 0x7FFF))})
     heard: list[Heard] = []
     with Node([bus_link(a)], mode=Mode.LISTEN, guard=guard) as node:
-        node.on_heard.append(heard.append)
+        node.listen(heard=heard.append)
         inject(bus, Message(Op.PUT, 1, 1, 1, 5), sender=5)
         inject(bus, Message(Op.PUT, 1, 1, 2, 7), sender=7)  # denied
         inject(bus, Message(Op.PUT, 50, 1, 1, 6), sender=6)  # forbidden key
@@ -125,7 +125,7 @@ def cycling_ids_through(channel: str, guard: Guard) -> int:
     attacker = can.Bus(interface="virtual", channel=channel)
     heard: list[Heard] = []
     node = Node([bus_link(channel)], mode=Mode.LISTEN, guard=guard)
-    node.on_heard.append(heard.append)
+    node.listen(heard=heard.append)
     try:
         with node:
             for i in range(1000):

@@ -1,5 +1,5 @@
-"""The data path without hand-offs: a link's reader thread handles what it read, under `Node.lock`, with no loop
-in between; what it raises still ends `run`; a closer holding the lock loses no frame. Real python-can virtual buses."""
+"""The data path without hand-offs: a link's reader thread handles what it read, holding the node, with no loop
+in between; what it raises still ends `run`; a closer holding the node loses no frame. Real python-can virtual buses."""
 
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def test_a_frame_crosses_on_its_reader_thread_with_no_loop_running(mode: Mode) -
     links = [parse(f"can:virtual:{channel}").build(name, robot_id=100) for name, channel in (("a", a), ("b", b))]
     node = Node(links, 100, mode=mode)
     threads: list[str] = []
-    node.on_heard.append(lambda heard: threads.append(threading.current_thread().name))
+    node.listen(heard=lambda heard: threads.append(threading.current_thread().name))
     put = Message(Op.PUT, 5, 55, 1, 7)
     try:
         with node:  # open, and nobody calls run or poll
@@ -58,7 +58,7 @@ def test_a_listener_raising_on_a_reader_thread_ends_run_at_once_with_its_error()
     def broken(heard: Heard) -> None:
         raise ValueError("the capture disk is full")
 
-    node.on_heard.append(broken)
+    node.listen(heard=broken)
     try:
         with node:
             robot.send(can_framing_for(7).encode(Message(Op.PUT, 1, 1, 1, 7))[0])
@@ -70,25 +70,38 @@ def test_a_listener_raising_on_a_reader_thread_ends_run_at_once_with_its_error()
         robot.shutdown()
 
 
-def test_close_by_a_thread_holding_the_lock_hands_over_what_was_read_and_does_not_wait() -> None:
-    """As the Python API closes: under `Node.lock`. A reader waiting for the lock leaves its batch to the closer."""
-    (a, _b) = _channels()
-    robot = can.Bus(interface="virtual", channel=a)
-    node = Node([parse(f"can:virtual:{a}").build("a", robot_id=100)], 100, mode=Mode.LISTEN)
+def test_close_from_a_listener_hands_over_what_the_other_readers_read_and_does_not_wait() -> None:
+    """A listener closing the node on its reader thread (holding the node): the batch another reader read and
+    waits with for the lock is handed over, not lost, and nobody waits for anybody."""
+    a, b = _channels()
+    robot_a, robot_b = can.Bus(interface="virtual", channel=a), can.Bus(interface="virtual", channel=b)
+    links = [parse(f"can:virtual:{channel}").build(name, robot_id=100) for name, channel in (("a", a), ("b", b))]
+    node = Node(links, 100, mode=Mode.LISTEN)
     heard: list[Message] = []
-    node.on_heard.append(lambda h: heard.append(h.message))
     sent = [Message(Op.PUT, key, key, 1, 7) for key in range(3)]
-    try:
-        node.open()
-        with node.lock:
+    took: list[float] = []
+
+    def listener(h: Heard) -> None:
+        heard.append(h.message)
+        if h.link == "a":  # on a's reader thread, holding the node
             for msg in sent:
-                robot.send(can_framing_for(7).encode(msg)[0])
-            time.sleep(0.3)  # the reader has read them and waits for the lock
-            assert heard == []
+                robot_b.send(can_framing_for(7).encode(msg)[0])
+            time.sleep(0.3)  # b's reader has read them and waits for the node
             started = time.monotonic()
             node.close()
-            took = time.monotonic() - started
+            took.append(time.monotonic() - started)
+
+    node.listen(heard=listener)
+    try:
+        node.open()
+        robot_a.send(can_framing_for(7).encode(Message(Op.PUT, 99, 1, 1, 7))[0])
+        deadline = time.monotonic() + 5
+        while not took and time.monotonic() < deadline:
+            time.sleep(0.01)
     finally:
-        robot.shutdown()
-    assert heard == sent
-    assert took < 1.0
+        node.close()
+        robot_a.shutdown()
+        robot_b.shutdown()
+    assert heard == [Message(Op.PUT, 99, 1, 1, 7), *sent]
+    assert took and took[0] < 1.0
+    assert node.stats()["b"]["in"] == 3 and not node.stats()["b"]["dropped_at_stop"]

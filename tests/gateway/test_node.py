@@ -5,6 +5,7 @@ from __future__ import annotations
 import gc
 import itertools
 import sys
+import threading
 import time
 from collections.abc import Callable
 
@@ -17,6 +18,7 @@ from vstig_hw.engine import Outcome
 from vstig_hw.framing.can import can_framing_for
 from vstig_hw.gateway import Mode, Node, Outlet, SendWindow, favour_latency
 from vstig_hw.links import Heard, Link, parse
+from vstig_hw.transports.base import Transport
 
 _ids = itertools.count()
 
@@ -155,7 +157,7 @@ def test_the_gateways_own_get_of_another_key_in_that_poll_does_not_undo_it(chann
     put = Message(Op.PUT, 4, 77, 1, 7)
     with Node([bus_link(a), bus_link(b)], robot_id=100, period=1e-6) as node:  # every poll ticks
         node.put(9, 1)
-        node.on_tick.append(lambda n: n.get(9) and None)
+        node.listen(tick=lambda n: n.get(9) and None)
         robot.send(can_framing_for(7).encode(put)[0])
         time.sleep(0.2)  # the PUT waits in the arrival queue: the next poll hears it, then ticks
         crossed: list[can.Message] = []
@@ -204,7 +206,7 @@ def test_listen_mode_never_transmits_and_reports_what_it_heard(channels: tuple[s
     observer = can.Bus(interface="virtual", channel=a)
     heard: list[Heard] = []
     node = Node([bus_link(a)], mode=Mode.LISTEN)
-    node.on_heard.append(heard.append)
+    node.listen(heard=heard.append)
     with node:
         for frame in can_framing_for(42).encode(Message(Op.GET, 2, 0, 0, 42)):
             tap.send(frame)
@@ -289,11 +291,11 @@ def test_per_link_queue_keeps_the_newest_message_per_key(channels: tuple[str, st
     observer.shutdown()
 
 
-class BrokenTransport:
+class BrokenTransport(Transport[can.Message]):
     """A transport that breaks its promise never to raise (nothing real fails on cue like this)."""
 
     name = "broken"
-    connected = True
+    connected = True  # type: ignore[assignment]  # a plain attribute for the abstract property
 
     def __init__(self) -> None:
         self.counters = Counters()
@@ -338,3 +340,35 @@ def test_node_rejects_bad_wiring() -> None:
     with pytest.raises(ValueError, match="raw bridge"):
         Node([bus_link("x")], mode=Mode.RAW)
 
+
+
+def test_drain_ends_once_what_was_held_back_left_though_the_swarm_keeps_talking(channels: tuple[str, str]) -> None:
+    """A robot on bus a rewrites three keys every 2 ms; the node passes them to bus b at one message a step:
+    b's queue never empties, yet `drain` returns once the three it held when asked have gone out."""
+    a, b = channels
+    talker = can.Bus(interface="virtual", channel=a)
+    framing = can_framing_for(7)
+    running = True
+
+    def talk() -> None:
+        stamp = 0
+        while running:
+            stamp += 1
+            for key in (1, 2, 3):
+                talker.send(framing.encode(Message(Op.PUT, key, stamp & 0xFFFF, stamp, 7))[0])
+            time.sleep(0.002)
+
+    thread = threading.Thread(target=talk, daemon=True)
+    with Node([bus_link(a), bus_link(b)], robot_id=100, period=0.1, budget=1) as node:
+        thread.start()
+        node.run(until=lambda: node.stats()[b].get("queued", 0) >= 3, duration=5)
+        heard = node.stats()[a]["in"]
+        started = time.monotonic()
+        drained = node.drain(3.0)
+        took = time.monotonic() - started
+        heard_meanwhile = node.stats()[a]["in"] - heard
+        running = False
+        thread.join(2)
+    talker.shutdown()
+    assert drained and took < 1.0, took  # three messages at one a step, not the 3 s timeout
+    assert heard_meanwhile > 0  # the swarm kept talking (and b's queue filling) while it drained

@@ -1,4 +1,4 @@
-"""The Node's ways in for other threads and watchers: `call_soon` wakes a waiting loop, `on_change` tells
+"""The Node's ways in for other threads and watchers: `submit` wakes a waiting loop, a `change` listener hears
 every change of the table with the link and sender it came from; on a real python-can virtual bus."""
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ def test_on_change_tells_heard_and_own_writes_once_each() -> None:
     robot = can.Bus(interface="virtual", channel=channel)
     node = Node([parse(f"can:virtual:{channel}").build("bus", robot_id=50)], 50)
     told: list[Told] = []
-    node.on_change.append(lambda *change: told.append(change))  # type: ignore[arg-type]
+    node.listen(change=lambda *change: told.append(change))  # type: ignore[arg-type]
     codec = can_framing_for(7)
     with node:
         for msg in (Message(Op.PUT, 3, 30, 1, 7), Message(Op.PUT, 3, 30, 1, 7), Message(Op.PUT, 3, 31, 2, 7)):
@@ -38,7 +38,7 @@ def test_on_change_tells_heard_and_own_writes_once_each() -> None:
     ]
 
 
-def test_call_soon_wakes_a_waiting_loop_at_once() -> None:
+def test_submit_wakes_a_waiting_loop_at_once() -> None:
     channel = f"hooks-{time.monotonic_ns()}"
     node = Node([parse(f"can:virtual:{channel}").build("bus", robot_id=50)], 50, period=10.0)  # no tick for 10 s
     ran: list[float] = []
@@ -48,12 +48,13 @@ def test_call_soon_wakes_a_waiting_loop_at_once() -> None:
         loop.start()
         time.sleep(0.1)  # the loop waits for the links now
         asked = time.monotonic()
-        node.call_soon(lambda: ran.append(time.monotonic()))
+        done = node.submit(lambda: ran.append(time.monotonic()) or 7)
         deadline = time.monotonic() + 5
         while not ran and time.monotonic() < deadline:
             time.sleep(0.001)
+        assert done.result(1) == 7
         stop.set()
-        node.call_soon(lambda: None)
+        node.submit(lambda: None)
         loop.join(5)
     assert ran and ran[0] - asked < 0.1  # not at the end of its 0.25 s wait, nor at the next tick
     assert not loop.is_alive()

@@ -16,7 +16,7 @@ def test_each_tick_gets_the_next_key_carrying_the_nodes_view() -> None:
     channel = f"refresh-{os.getpid()}"
     robot = can.Bus(interface="virtual", channel=channel)
     node = Node([parse(f"can:virtual:{channel}").build("bus", robot_id=100)], 100, period=0.02)
-    node.on_tick.append(RoundRobinGet())
+    node.listen(tick=RoundRobinGet())
     engine = node.engine
     assert engine is not None
     for key in (3, 1, 2):

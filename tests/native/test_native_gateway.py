@@ -183,18 +183,18 @@ def _run(node: Node, call: tuple[Any, ...], clock: list[float]) -> None:
     elif name == "heard":
         index, seed, sent, frames = args
         units = _units(random.Random(seed), LINKS[index][1], sent, frames)
-        with node.lock:
+        with node._lock:
             if node._path is not None:
                 assert node._path.deliver(index, t, units, now)
             else:
                 node._arrive(index, t, units)
                 node._spread(now, 1 << index)
     elif name == "tick":
-        with node.lock:
+        with node._lock:
             node._tick(now)
             node._spread(now)
     elif node.mode is Mode.ENGINE:
-        with node.lock:
+        with node._lock:
             getattr(node.seat, name)(*args)
             node._spread(now)
 
@@ -234,8 +234,8 @@ def _outlets(compiled: ModuleType, keep_all: bool, budget: int | None) -> tuple[
     python = Outlet(links[0], budget, 1.0, keep_all=keep_all)
     c_writer = LinkWriter(links[1], TX_QUEUE_LIMIT)
     queue = FairFifo(RAW_QUEUE_LIMIT) if keep_all else FairQueue()
-    c = compiled.Outlet(links[1], c_writer, compiled.Window(budget, 1.0), queue, keep_all=keep_all,
-                        encoder=compiled.Encoder("cobs8"))
+    c = compiled_module.CompiledOutlet(links[1], c_writer, compiled.Window(budget, 1.0), queue, keep_all=keep_all,
+                                       encoder=compiled.Encoder("cobs8"))  # the Node's own
     return python, c
 
 
@@ -280,7 +280,7 @@ def test_outlet_equals_the_python_outlet(compiled: ModuleType, keep_all: bool, b
             assert results[0] == results[1], name
             python, c = ([bytes(u) for u in o.link.transport.taken] for o in outlets)  # type: ignore[attr-defined]
             assert c == python
-            python_state, c_state = ((len(o), len(o.writer), o.link.counters) for o in outlets)
+            python_state, c_state = ((len(o), len(o.writer), o.link.counters, o.handed) for o in outlets)
             assert c_state == python_state
     finally:
         for outlet in outlets:

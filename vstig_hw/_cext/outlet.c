@@ -257,6 +257,7 @@ done:
 static int hand(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n, int idle) {
     int done = 0;
     if (n == 0) return 0;
+    o->handed += n;
 #ifndef _WIN32
     if (o->port.kind != VX_PORT_PYTHON && idle) {
         done = o->port.kind == VX_PORT_SERIAL ? write_serial(o, msgs, n) : write_socketcan(o, msgs, n);
@@ -569,6 +570,8 @@ static PyMemberDef Outlet_members[] = {
     {"writer", T_OBJECT, offsetof(vx_outlet_t, writer), READONLY, NULL},
     {"window", T_OBJECT, offsetof(vx_outlet_t, window), READONLY, NULL},
     {"queue", T_OBJECT, offsetof(vx_outlet_t, queue), READONLY, NULL},
+    {"handed", T_ULONGLONG, offsetof(vx_outlet_t, handed), 0,
+     "Messages handed to the writer or the device so far (what Node.drain waits for)."},
     {NULL, 0, 0, 0, NULL},
 };
 
@@ -585,7 +588,8 @@ PyTypeObject vx_OutletType = {
     .tp_doc = "Outlet(link, writer, window, queue, *, keep_all=False, encoder=None, port='python'): "
               "one link's way out, Outlet in C.",
     .tp_basicsize = sizeof(vx_outlet_t),
-    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    /* a base type: the gateway adds the Python-side calls a stop and a confirmed write make (compiled.py) */
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE | Py_TPFLAGS_HAVE_GC,
     .tp_new = Outlet_new,
     .tp_dealloc = (destructor)Outlet_dealloc,
     .tp_traverse = (traverseproc)Outlet_traverse,

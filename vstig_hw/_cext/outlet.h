@@ -35,6 +35,7 @@ typedef struct {
     long held_link;
     PyObject *held_sub;
     vx_port_t port;
+    unsigned long long handed;  /* messages handed to the writer or the device so far (what Node.drain waits for) */
 } vx_outlet_t;
 
 extern PyTypeObject vx_OutletType;

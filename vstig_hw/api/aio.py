@@ -17,7 +17,7 @@ from ..counters import Counters
 from ..engine import ConflictLost, ConflictResolver, Entry
 from ..gateway.guard import DEFAULT_MAX_JUMP, Guard
 from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD
-from ..values import ValueType, from_raw
+from ..values import ValueType
 from .changes import DEFAULT_BUFFER, AsyncWatch
 from .recording import Recording
 from .swarm import DEFAULT_WAIT, LinkLike, Swarm, SwarmClosed, check_key, checked_keys
@@ -69,8 +69,8 @@ class AsyncSwarm:
         """As `Swarm.put`: the entry written; with `confirm`, the one a neighbour took, else NotTaken."""
         swarm = self.sync
         if not confirm:
-            raw = swarm._raw(key, value)
-            return await self._wait(lambda: swarm._put_now(key, raw))
+            swarm._raw(key, value)  # bad input raises here, not in the gateway
+            return await self._wait(lambda: swarm.put(key, value))
         result = await asyncio.wrap_future(swarm.put_future(key, value, timeout=timeout, tries=tries, learn=learn))
         return swarm.taken(key, result, timeout)
 
@@ -78,8 +78,7 @@ class AsyncSwarm:
         """As `Swarm.get`: our value (None if unknown), and a GET broadcast."""
         swarm = self.sync
         check_key(key)
-        raw = await self._wait(lambda: swarm._node.get(key))
-        return None if raw is None else from_raw(raw, swarm.value_type)
+        return await self._wait(lambda: swarm.get(key))
 
     def entry(self, key: int) -> Entry | None:
         """As `Swarm.entry` (no waiting)."""
@@ -96,7 +95,7 @@ class AsyncSwarm:
     async def items(self) -> list[tuple[int, Entry]]:
         """As `Swarm.items`: a snapshot of every (key, entry)."""
         swarm = self.sync
-        return await self._wait(lambda: list(swarm._engine.entries()))
+        return await self._wait(swarm.items)
 
     async def keys(self) -> list[int]:
         """As `Swarm.keys`."""

@@ -10,6 +10,7 @@ gateway thread as they are read, and flushed every control step.
 from __future__ import annotations
 
 import os
+import threading
 from typing import Any
 
 from ..capture.decoded import Decoder, default_framings
@@ -49,12 +50,11 @@ class Recording:
 
             require("mcap", f"a recording to {path}")
         self.path = path
-        self._node = node
+        self._closing = threading.Lock()
         self._capture = RotatingCapture(path, medium, max_bytes, Decoder(default_framings()))
         self.stopped = False
-        with node.lock:
-            node.on_unit.append(self._write)
-            node.on_tick.append(self._flush)
+        # The node closes it once every unit it read is written (a stop delivers or counts).
+        self._listening = node.listen(unit=self._write, tick=self._flush, closed=self.stop)
 
     @property
     def records(self) -> int:
@@ -68,12 +68,11 @@ class Recording:
 
     def stop(self) -> None:
         """Stop recording and close the file (safe to call twice)."""
-        with self._node.lock:
+        self._listening.cancel()  # once it returns, no unit is being written any more
+        with self._closing:
             if self.stopped:
                 return
             self.stopped = True
-            self._node.on_unit.remove(self._write)
-            self._node.on_tick.remove(self._flush)
             self._capture.close()
 
     def __enter__(self) -> Recording:
@@ -83,8 +82,11 @@ class Recording:
         self.stop()
 
     def _write(self, source: Link[Any], t: float, unit: Any) -> None:
+        if self.stopped:  # stopped from a listener in the middle of a batch
+            return
         framing = CAN_FRAMING if isinstance(source.framing, CanFraming) else source.framing.name
         self._capture.write(Record(t, source.name, framing, unit))
 
     def _flush(self, node: Node) -> None:
-        self._capture.flush()
+        if not self.stopped:
+            self._capture.flush()

@@ -1,33 +1,30 @@
-"""`vstig_hw.join(...)`: a Python program as a swarm member, through the gateway's Node on a thread of its own.
+"""`vstig_hw.join(...)`: a Python program as a swarm member, through the gateway's Node.
 
-The Node's loop runs on one background thread. A call from another thread
-(`put`, `get`, `keys`...) runs on the caller's thread holding `Node.lock`, which
-the loop holds only while it works, never while it waits for the links: no
-thread hand-off, so a put reaches the links as fast as through the Node itself.
-What must wait without blocking (asyncio, a confirmed put) is handed to the loop
-with `Node.call_soon` and awaited as a Future. `entry`, `has` and `size` read the
-table directly: one dict lookup, atomic in CPython.
-
-A confirmed put is `vstig put`'s own logic (`gateway.oneshot.ConfirmedPut`),
-stepped by the gateway thread after every poll instead of by a loop of its own.
+`Swarm` is a thin public face: the Node owns its threads (its loop runs on a thread of
+its own, `Node.start`), its lock and its listeners. A call from another thread
+(`put`, `get`, `items`...) runs on the caller's thread through the Node's own
+thread-safe calls, which take its lock only while they work: no thread hand-off,
+so a put reaches the links as fast as through the Node itself. What must wait
+without blocking (asyncio) is handed to the loop (`Node.submit`) and awaited as a
+Future. `entry`, `has` and `size` read the table directly: one dict lookup, atomic
+in CPython. A confirmed put is `vstig put`'s own driver (`gateway.oneshot.confirm_write`):
+its verdict completes a Future the moment a link's reader hears it.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
-import contextlib
 import logging
 import os
 import threading
-import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, TypeVar
 
 from ..counters import Counters
 from ..engine import ConflictLost, ConflictResolver, Entry, higher_robot_wins
 from ..gateway.guard import DEFAULT_MAX_JUMP, Guard
-from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD, Node
-from ..gateway.oneshot import ConfirmedPut, HearsItself, PutResult, not_taken
+from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD, Listening, Node, SwarmClosed
+from ..gateway.oneshot import HearsItself, PutResult, confirm_write, not_taken
 from ..gateway.refresh import RoundRobinGet
 from ..gateway.ros2 import serve_ros2
 from ..links.assemble import LinkBuildError, assemble_links
@@ -42,22 +39,19 @@ from .tables import MAX_TABLE, specs_for_table, table_of
 __all__ = ["DEFAULT_WAIT", "HearsItself", "NotTaken", "Swarm", "SwarmClosed", "join"]
 
 DEFAULT_WAIT = 2.0  # seconds a confirmed write waits for a neighbour, as `vstig put --wait`
-CLOSE_DRAIN = 5.0  # seconds close() lets queued messages go out at most, as `vstig put` does before it exits
+CLOSE_DRAIN = 5.0  # seconds close() lets what is held back (a budget) go out at most
 
 log = logging.getLogger("vstig_hw.api")
 T = TypeVar("T")
 LinkLike = str | LinkSpec | Link[Any]
 
 
-class SwarmClosed(RuntimeError):
-    """The swarm was closed (or its gateway stopped): no call reaches it any more."""
-
-
 class NotTaken(RuntimeError):
     """A confirmed put no neighbour showed it took; the message names what the swarm holds instead.
 
-    `result` has the details: `written` (our last write), `holds` (our table's entry
-    now), `heard` (the last entry a neighbour's message carried), `tries`.
+    `result` has the details: `verdict` (superseded or unanswered), `written` (our
+    last write), `holds` (our table's entry then), `heard` (the last entry a
+    neighbour's message carried), `tries`.
     """
 
     def __init__(self, message: str, key: int, result: PutResult) -> None:
@@ -82,6 +76,7 @@ class Swarm:
             raise ValueError(f"value_type must be one of {', '.join(VALUE_TYPES)}, got {value_type!r}")
         self.value_type: ValueType = value_type
         self._node = Node(links, robot_id, period=period, budget=budget, guard=guard)
+        self._node.label = f"robot {robot_id}'s swarm on {', '.join(link.name for link in links)}"
         engine = self._node.engine
         assert engine is not None
         self._engine = engine
@@ -93,57 +88,47 @@ class Swarm:
         self.onconflict(onconflict or higher_robot_wins)
         self.onconflictlost(onconflictlost)
         if refresh:
-            self._node.on_tick.append(RoundRobinGet())
+            self._node.listen(tick=RoundRobinGet())
         serve_ros2(self._node)  # ros2: links publish what the Node hears and answer put, get and table
         self._hub = ChangeHub(self._attach_hub)
+        self._hub_listening: Listening | None = None
         self._callbacks: list[OnChange] = []
-        self._puts: list[tuple[ConfirmedPut, concurrent.futures.Future[PutResult]]] = []  # gateway thread only
-        self._waiting: set[concurrent.futures.Future[Any]] = set()
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._closed_because: str | None = "it is not open yet"
+        self._opened = False
         self._specs = None if specs is None else list(specs)  # what `stigmergy(n)` derives its links from
         self._options = options or {}
+        self._root = self  # the swarm whose tables this one is; it keeps them, one handle per table
         self._tables: dict[int, Swarm] = {}
-        self._recordings: list[Recording] = []
 
     # -- lifetime --------------------------------------------------------------
     def open(self) -> Swarm:
         """Open every link and start the gateway thread (`join` does it)."""
-        if self._thread is not None:
+        if self._opened:
             raise SwarmClosed("this swarm was opened once already; join again for a new one")
-        self._node.open()
-        self._closed_because = None
-        self._thread = threading.Thread(target=self._run, name=f"vstig-gateway-{self.robot_id}", daemon=True)
-        self._thread.start()
+        self._opened = True
+        self._node.listen(closed=self._node_closed)
+        self._node.start()
         return self
 
     def close(self) -> None:
-        """Leave the swarm: stop the gateway thread, end every watch, close the links. Safe to call twice."""
-        with self._lock:
-            if self._closed_because is None:
-                self._closed_because = "it was closed"
-        self._stop.set()
-        thread = self._thread
-        if thread is not None and thread.is_alive():
-            self._node.call_soon(_nothing)  # wake the loop now rather than at its next tick
-            if not self._on_gateway_thread():  # on it (a hook closing the swarm), it ends by itself
-                thread.join(CLOSE_DRAIN + 2.0)  # it sends what is queued, then closes the links
-        self._hub.close()
+        """Leave the swarm: what was put but held back by the budget goes out (5 s at most), every watch ends,
+        the links close. Safe to call twice, and from a hook (the gateway thread then closes once it returns)."""
+        if self._opened:
+            self._node.close(drain=CLOSE_DRAIN)
+        else:
+            self._node.close(drain=0.0)
         for callback in self._callbacks:
             callback.cancel()
-        for table in self._tables.values():
+        for table in list(self._tables.values()):
             table.close()
-        self._fail_waiting()
 
     @property
     def closed(self) -> bool:
         """Whether the swarm can no longer be used."""
-        return self._closed_because is not None
+        return not self._opened or self._node.closed
 
     def __repr__(self) -> str:
-        state = "open" if self._closed_because is None else f"closed: {self._closed_because}"
+        state = "open" if not self.closed else "closed"
         return f"<Swarm robot {self.robot_id} on {', '.join(self.links)} ({state})>"
 
     def __enter__(self) -> Swarm:
@@ -158,22 +143,27 @@ class Swarm:
         """Write `value` under `key`; the entry written (raw value, timestamp, our id).
 
         With `confirm`, wait until a neighbour shows it took the write (it
-        re-broadcasts it, or a GET carries it), up to `timeout` seconds per write
-        and `tries` writes when the swarm answers with a newer or conflicting
-        entry; `learn` seconds of asking first make the write newer than what the
-        swarm holds. Raises NotTaken naming what the swarm holds instead,
-        HearsItself when a link brings our own GETs back.
+        re-broadcasts it, a GET or an answer carries it, or it writes on top of it),
+        up to `timeout` seconds per write and `tries` writes when the swarm answers
+        with a newer or conflicting entry; `learn` seconds of asking first make the
+        write newer than what the swarm holds. Raises NotTaken naming what the swarm
+        holds instead, HearsItself when a link brings our own messages back.
         """
         raw = self._raw(key, value)
         if not confirm:
-            return self._call(lambda: self._put_now(key, raw))
-        result = self._put_future(key, raw, timeout=timeout, tries=tries, learn=learn).result()
+            self._check_open()
+            return self._node.put(key, raw)
+        if self._node.on_node_thread():
+            raise RuntimeError("put(confirm=True) waits for the gateway thread, so it cannot run on it (inside "
+                               "onconflict or onconflictlost): use confirm=False there, or on_change")
+        result = self._confirm(key, raw, timeout=timeout, tries=tries, learn=learn).result()
         return self.taken(key, result, timeout)
 
     def get(self, key: int) -> float | None:
         """The paper's read: our value for `key` (None if unknown), and a GET carrying it broadcast."""
         check_key(key)
-        raw = self._call(lambda: self._node.get(key))
+        self._check_open()
+        raw = self._node.get(key)
         return None if raw is None else from_raw(raw, self.value_type)
 
     def entry(self, key: int) -> Entry | None:
@@ -198,8 +188,9 @@ class Swarm:
         return [key for key, _ in self.items()]
 
     def items(self) -> list[tuple[int, Entry]]:
-        """Every (key, entry) of our table (a snapshot, taken on the gateway thread)."""
-        return self._call(lambda: list(self._engine.entries()))
+        """Every (key, entry) of our table (a snapshot)."""
+        self._check_open()
+        return self._node.entries()
 
     def foreach(self, function: Callable[[int, Entry], object]) -> None:
         """Call `function(key, entry)` for every entry, as Buzz's foreach (on a snapshot: it may put)."""
@@ -215,11 +206,14 @@ class Swarm:
 
         It is carried apart where the medium can (29-bit CAN IDs: `extended=1`;
         zenoh: its key space), joined with the same robot id and options, and
-        closed with this swarm; asking again gives the same one. A link that cannot
-        carry it raises ValueError naming the link.
+        closed with the first swarm; asking again, from any of them, gives the same
+        one. A link that cannot carry it raises ValueError naming the link.
         """
         check_field("stigmergy", MAX_TABLE, table)
         self._check_open()
+        root = self._root
+        if root is not self:
+            return root.stigmergy(table)
         if self._specs is None:
             raise ValueError("stigmergy: this swarm was joined with Link objects or a Guard object, which belong to "
                              "one table; join with link specs (and max_jump=) to derive another table's")
@@ -228,16 +222,17 @@ class Swarm:
         with self._lock:
             joined = self._tables.get(table)
             if joined is None or joined.closed:
-                listening = [getattr(link.transport, "listening", ()) for link in self._node.links]
+                listening = [link.listening for link in self._node.links]
                 joined = self._tables[table] = join(*specs_for_table(self._specs, table, listening),
                                                     robot_id=self.robot_id, **self._options)
+                joined._root = self
         return joined
 
     # -- conflicts, under Buzz's names ---------------------------------------------
     def onconflict(self, rule: ConflictResolver) -> ConflictResolver:
         """Set the conflict rule: `rule(key, local, remote)` returns the winning Entry (Buzz's onconflict).
 
-        It runs inside the gateway (a link's reader thread, holding `Node.lock`): keep it
+        It runs inside the gateway (a link's reader thread, holding the gateway's lock): keep it
         quick; it may call `put` (not confirmed). One that raises is logged and counted
         (hook_error), and the higher robot id wins. Usable as a decorator.
         """
@@ -292,17 +287,19 @@ class Swarm:
         The extension picks the format (CAN: .log .asc .blf .csv .pcap .trc; serial
         and zenoh: any name; .mcap for links of several media, with the mcap extra).
         An existing file is never replaced unless `overwrite` (FileExistsError);
-        `max_bytes` rotates to numbered files. Recordings stop when the swarm closes.
+        `max_bytes` rotates to numbered files. Recordings stop when the swarm closes,
+        once every unit its links read is written.
         """
+        if not isinstance(path, str | os.PathLike):
+            raise TypeError(f"record needs a file name, got {path!r}")
         self._check_open()
-        recording = Recording(self._node, path, overwrite=overwrite, max_bytes=max_bytes)
-        self._recordings.append(recording)
-        return recording
+        return Recording(self._node, path, overwrite=overwrite, max_bytes=max_bytes)
 
     # -- what happened -------------------------------------------------------------
     def stats(self) -> dict[str, Counters]:
         """The gateway's counters per link and the engine's outcomes, then the API's own under "api"."""
-        stats = self._call(self._node.stats)
+        self._check_open()
+        stats = self._node.stats()
         api = Counters(self.counters)
         api["watch_overflow"] = self._hub.overflow()
         stats["api"] = api
@@ -314,30 +311,21 @@ class Swarm:
         return [link.name for link in self._node.links]
 
     @property
-    def reachable(self) -> dict[str, str]:
-        """Where links are reachable by others, by link name (a zenoh link: the endpoints it listens on)."""
-        return {link.name: about for link in self._node.links if (about := getattr(link.transport, "about", ""))}
+    def reachable(self) -> dict[str, tuple[str, ...]]:
+        """The endpoints others reach this swarm's links by, per link name: those a link listens on
+        (a zenoh link's, e.g. ("tcp/127.0.0.1:7447",)); links that listen on none are left out."""
+        return {link.name: link.listening for link in self._node.links if link.listening}
 
     # -- for vstig_hw.aio and tools: the same calls as Futures ------------------------
     def submit(self, call: Callable[[], T]) -> concurrent.futures.Future[T]:
-        """Run `call()` on the gateway thread (with the Node to itself); its result as a Future."""
+        """Run `call()` on the gateway thread (with the gateway to itself); its result as a Future."""
         self._check_open()
-        future: concurrent.futures.Future[T] = concurrent.futures.Future()
-        if self._on_gateway_thread():
-            _settle(future, call)
-            return future
-        with self._lock:
-            self._waiting.add(future)
-        future.add_done_callback(self._forget)
-        self._node.call_soon(lambda: _settle(future, call))
-        if self._closed_because is not None:  # closed while we handed it over: nobody will run it
-            self._fail_waiting()
-        return future
+        return self._node.submit(call)
 
     def put_future(self, key: int, value: float | str, *, timeout: float = DEFAULT_WAIT, tries: int = 3,
                    learn: float = 0.0) -> concurrent.futures.Future[PutResult]:
         """A confirmed put as a Future of its PutResult (`taken` turns one into the entry or NotTaken)."""
-        return self._put_future(key, self._raw(key, value), timeout=timeout, tries=tries, learn=learn)
+        return self._confirm(key, self._raw(key, value), timeout=timeout, tries=tries, learn=learn)
 
     def taken(self, key: int, result: PutResult, timeout: float = DEFAULT_WAIT) -> Entry:
         """The entry a neighbour showed it took; NotTaken naming what the swarm holds if none did."""
@@ -347,53 +335,8 @@ class Swarm:
         return result.written
 
     # -- inside ------------------------------------------------------------------------
-    def _run(self) -> None:
-        node = self._node
-        try:
-            node.run(stop=self._stop, until=self._step_puts)
-            # Closing: what was put but held back by a budget still goes out, for a little while.
-            node.run(until=lambda: not any(len(outlet) for outlet in node.outlets), duration=CLOSE_DRAIN)
-        except BaseException as error:  # a link or a hook broke the loop: every caller hears why
-            log.exception("the gateway thread stopped")
-            self._closed_because = f"its gateway stopped: {type(error).__name__}: {error}"
-        finally:
-            self._stop.set()
-            with self._node.lock:  # no caller is inside the Node while it closes, and none gets in after
-                if self._closed_because is None:
-                    self._closed_because = "its gateway stopped"
-                self._node.close()  # hands every unit already read to the recordings
-                for recording in self._recordings:
-                    recording.stop()
-            self._hub.close()
-            self._fail_waiting()
-
-    def _step_puts(self) -> bool:
-        """Between polls, on the gateway thread: step every confirmed put; never stops the loop."""
-        if self._puts:
-            with self._node.lock:
-                self._step_puts_now()
-        return False
-
-    def _step_puts_now(self) -> None:
-        if self._puts:
-            now = time.monotonic()
-            going = []
-            for put, future in self._puts:
-                try:
-                    done = put.step(now)
-                except HearsItself as error:
-                    put.detach()
-                    _complete(future, error=error)
-                    continue
-                if done:
-                    put.detach()
-                    _complete(future, put.result())
-                else:
-                    going.append((put, future))
-            self._puts = going
-
-    def _put_future(self, key: int, raw: int, *, timeout: float, tries: int,
-                    learn: float) -> concurrent.futures.Future[PutResult]:
+    def _confirm(self, key: int, raw: int, *, timeout: float, tries: int,
+                 learn: float) -> concurrent.futures.Future[PutResult]:
         if isinstance(timeout, bool) or not isinstance(timeout, int | float) or not timeout > 0:
             raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
         check_field("tries", 100, tries)
@@ -401,49 +344,19 @@ class Swarm:
             raise ValueError(f"tries must be at least 1, got {tries}")
         if isinstance(learn, bool) or not isinstance(learn, int | float) or learn < 0:
             raise ValueError(f"learn must be a number of seconds >= 0, got {learn!r}")
-        if self._on_gateway_thread():
-            raise RuntimeError("put(confirm=True) waits for the gateway thread, so it cannot run on it (inside "
-                               "onconflict or onconflictlost): use confirm=False there, or on_change")
-        result: concurrent.futures.Future[PutResult] = concurrent.futures.Future()
+        self._check_open()
+        return confirm_write(self._node, key, raw, learn=learn, wait=timeout, tries=tries)
 
-        def start() -> None:
-            put = ConfirmedPut(self._node, key, raw, learn=learn, wait=timeout, tries=tries)
-            if put.start(time.monotonic()):
-                put.detach()
-                _complete(result, put.result())
-            else:
-                self._puts.append((put, result))
-
-        started = self.submit(start)
-        started.add_done_callback(lambda done: _pass_failure(done, result))
-        with self._lock:
-            self._waiting.add(result)
-        result.add_done_callback(self._forget)
-        if self._closed_because is not None:
-            self._fail_waiting()
-        return result
-
-    def _put_now(self, key: int, raw: int) -> Entry:
-        node = self._node
-        node.put(key, raw)
-        for outlet in node.outlets:
-            if len(outlet):  # a budget held some back: the loop, waiting, must see when to send it
-                node.call_soon(_nothing)
-                break
-        entry = self._engine.entry(key)
-        assert entry is not None
-        return entry
-
-    def _call(self, call: Callable[[], T]) -> T:
-        """Run `call` on this thread with the Node to ourselves: its lock is free whenever the loop waits."""
-        with self._node.lock:
-            self._check_open()
-            return call()
+    def _node_closed(self) -> None:
+        """The gateway closed (close(), or its loop failed): every watch ends."""
+        self._hub.close()
 
     def _raw(self, key: int, value: float | str) -> int:
         check_key(key)
         if type(value) is int and 0 <= value <= 0xFFFF and self.value_type == "uint16":  # the common case, at once
             return value
+        if isinstance(value, bool) or not isinstance(value, int | float | str):
+            raise TypeError(f"value must be a number (or a string of one), got {value!r}")
         try:
             return to_raw(value, self.value_type)
         except (ValueError, TypeError) as error:
@@ -453,41 +366,21 @@ class Swarm:
         return f"value={from_raw(entry.value, self.value_type)} timestamp={entry.timestamp} robot={entry.robot}"
 
     def _check_open(self) -> None:
-        if self._closed_because is not None:
-            raise SwarmClosed(f"robot {self.robot_id}'s swarm on {', '.join(self.links)} is closed: "
-                              f"{self._closed_because}")
-
-    def _on_gateway_thread(self) -> bool:
-        """On the gateway thread, or on a link's reader thread in a hook (the Node works on both)."""
-        return threading.current_thread() is self._thread or self._node.on_node_thread()
-
-    def _forget(self, future: concurrent.futures.Future[Any]) -> None:
-        with self._lock:
-            self._waiting.discard(future)
-
-    def _fail_waiting(self) -> None:
-        """Fail every Future nobody will complete now, naming why."""
-        if self._thread is not None and self._thread.is_alive() and self._closed_because is None:
-            return
-        with self._lock:
-            waiting, self._waiting = self._waiting, set()
-        for future in waiting:
-            if not future.done():
-                future.set_exception(SwarmClosed(f"robot {self.robot_id}'s swarm on {', '.join(self.links)} "
-                                                 f"is closed: {self._closed_because}"))
+        if not self._opened:
+            raise SwarmClosed(f"{self._node.label} is closed: it is not open yet")
+        self._node.check_open()
 
     def _subscribe(self, watch: Subscription) -> None:
         self._check_open()
         self._hub.add(watch)
 
     def _attach_hub(self, attach: bool) -> None:
-        """The Node tells changes only while someone watches: without, it keeps its fast path."""
-        with self._node.lock:  # not while the gateway goes through them
-            listeners = self._node.on_change
-            if attach and self._hub.publish not in listeners:
-                listeners.append(self._hub.publish)
-            elif not attach and self._hub.publish in listeners:
-                listeners.remove(self._hub.publish)
+        """The gateway tells changes only while someone watches: without, it keeps its fast path."""
+        if attach and self._hub_listening is None:
+            self._hub_listening = self._node.listen(change=self._hub.publish)
+        elif not attach and self._hub_listening is not None:
+            self._hub_listening.cancel()
+            self._hub_listening = None
 
     def _resolve(self, key: int, local: Entry, remote: Entry) -> Entry:
         """The user's rule, checked here: a rule that raises or returns what the engine cannot store is
@@ -588,31 +481,3 @@ def _check_winner(chosen: object, local: Entry, remote: Entry, robot_id: int) ->
             and robot not in (robot_id, local.robot, remote.robot):
         raise ValueError(f"onconflict returned {chosen!r}: a new value must name this robot ({robot_id}) or "
                          f"the writer of one of the two entries ({local.robot} or {remote.robot})")
-
-
-def _settle(future: concurrent.futures.Future[T], call: Callable[[], T]) -> None:
-    if future.done():  # failed by close() meanwhile: nobody waits for it
-        return
-    try:
-        _complete(future, result=call())
-    except BaseException as error:  # handed to the caller's thread, raised there
-        _complete(future, error=error)
-
-
-def _complete(future: concurrent.futures.Future[Any], result: Any = None, error: BaseException | None = None) -> None:
-    """Set a Future's outcome unless close() already failed it (which must not break the gateway thread)."""
-    with contextlib.suppress(concurrent.futures.InvalidStateError):
-        if error is None:
-            future.set_result(result)
-        else:
-            future.set_exception(error)
-
-
-def _pass_failure(started: concurrent.futures.Future[None], result: concurrent.futures.Future[PutResult]) -> None:
-    error = started.exception()
-    if error is not None:
-        _complete(result, error=error)
-
-
-def _nothing() -> None:
-    pass

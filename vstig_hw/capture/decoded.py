@@ -132,16 +132,15 @@ class Decoder:
 
     def sender_of(self, record: Record) -> int | None:
         """The node that sent a record, where its medium names one (a CAN frame's ID); else None."""
-        sender_of = getattr(self._framing(record), "sender_of", None)
-        return None if sender_of is None else sender_of(record.unit)
+        sender: int | None = self._framing(record).sender_of(record.unit)
+        return sender
 
     def decode(self, record: Record) -> list[Decoded]:
         framing = self._framing(record)
         is_can = record.framing == CAN_FRAMING
         can_id = int(record.unit.arbitration_id) if is_can else None
         messages = framing.feed(record.unit)
-        sender_of = getattr(framing, "sender_of", None) if messages else None
-        sender = None if sender_of is None else sender_of(record.unit)
+        sender = framing.sender_of(record.unit) if messages else None
         return [Decoded(record.t, record.link, can_id, msg, sender) for msg in messages]
 
     def decode_all(self, records: Iterable[Record]) -> Iterator[Decoded]:

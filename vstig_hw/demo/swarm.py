@@ -261,5 +261,5 @@ def _arenas(links: list[Link[Any]], gateways: int, swarm: str) -> Iterator[list[
         return
     first = ZenohSpec(swarm).build("zenoh", robot_id=GATEWAY_ID)
     yield [*links[:2], first]
-    endpoints = first.transport.listening  # type: ignore[attr-defined]  # a ZenohTransport
+    endpoints = first.transport.listening
     yield [links[2], ZenohSpec(swarm, connect=endpoints).build("zenoh", robot_id=GATEWAY_ID + 1)]

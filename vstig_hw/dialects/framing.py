@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from typing import Literal
 
 from ..counters import Counters
+from ..framing.base import Framing, SerialFraming
 from ..framing.cobsframe import DELIMITER, CobsFrameReader, encode_frame
 from ..framing.kilobot_ohc import OHC_FORWARDMSG, OHC_FORWARDMSGSINGLE, TransmitOnlyError, ohc_packet
 from ..framing.xbee import BROADCAST, XBeeFraming
@@ -65,7 +66,7 @@ def _message_t(translator: BittyBuzzTranslator, msg: Message) -> bytes | None:
     return None if out is None else encode_bittybuzz(out) + bytes((BBZ_KILOBOT_TYPE,))
 
 
-class BittyBuzzKilobotFraming:
+class BittyBuzzKilobotFraming(SerialFraming):
     name = "bittybuzz-kilobot"
     default_baud = 115200
     transmit_only = False
@@ -100,7 +101,7 @@ class BittyBuzzKilobotFraming:
         self._reader.reset()
 
 
-class BittyBuzzOhcFraming:
+class BittyBuzzOhcFraming(SerialFraming):
     name = "bittybuzz-ohc"
     default_baud = 38400
     transmit_only = True
@@ -126,8 +127,10 @@ class BittyBuzzOhcFraming:
         """No receive state."""
 
 
-class BuzzKh4Framing:
+class BuzzKh4Framing(Framing[bytes]):
     """Frames of `frame_size` bytes: u16 robot id, [u16 length][Buzz message]..., zero padding; little-endian."""
+
+    names_senders = True  # every frame starts with its robot's id
 
     name = "blabbermouth"
     transmit_only = False

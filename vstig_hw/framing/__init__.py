@@ -7,10 +7,9 @@ Serial framings are built by name (the CLI's and gateway's link specs) through
 from __future__ import annotations
 
 import inspect
-from typing import Any, Protocol
+from typing import Any
 
-from ..counters import Counters
-from ..wire import Message
+from .base import SerialFraming
 from .cobs8 import Cobs8Framing
 from .epuck4 import Epuck4Framing
 from .kilobot import KilobotFraming
@@ -19,20 +18,6 @@ from .xbee import XBeeApi2Framing, XBeeFraming
 
 __all__ = ["SERIAL_FRAMINGS", "SerialFraming", "TransmitOnlyError", "make_serial_framing"]
 
-
-class SerialFraming(Protocol):
-    """A Framing[bytes] for a UART byte stream, with the line defaults a serial link needs."""
-
-    name: str
-    default_baud: int  # the line speed its radios use unless told otherwise
-    transmit_only: bool  # True: `feed` raises TransmitOnlyError (nothing comes back)
-    preamble: bytes  # written before the first frame after every (re)open of the port
-    drops: Counters
-
-    def encode(self, msg: Message) -> list[bytes]: ...
-    def feed(self, unit: bytes) -> list[Message]: ...
-    def tick(self) -> None: ...
-    def reset(self) -> None: ...
 
 
 SERIAL_FRAMINGS: dict[str, type[SerialFraming]] = {

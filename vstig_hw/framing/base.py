@@ -5,31 +5,74 @@ one Message into the units the transport writes (bytes for a UART, frames for
 CAN); `feed` takes whatever unit the transport read and returns the Messages now
 complete. Anything that cannot be a message is dropped and counted in `drops`
 by reason, never raised.
+
+Every framing subclasses `Framing` (python-can's `BusABC` is the model): `encode`
+and `feed` are its own; the optional calls a medium may offer are declared here
+with the default a medium without them gets, so the gateway calls them
+unconditionally and mypy checks a new medium against them:
+
+* `encode_batch`: several messages in as few units as the medium allows (CAN FD,
+  zenoh samples, BuzzKH4 frames); default, one `encode` after another. For one
+  message it must give what `encode` gives (a link sends a lone message with `encode`);
+* `sender_of`: the node that transmitted a unit, where the medium names it (CAN
+  IDs, zenoh keys, BuzzKH4 frame headers; `names_senders` says it does); default None;
+* `source_of`: who really sent a unit, where the medium says more than the sender
+  it claims (a zenoh session; `names_sources` says it does); default None;
+* `transmit_only`: nothing ever comes back (an overhead controller): `feed`
+  raises TransmitOnlyError, and a link built on it never decodes.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Generic, Protocol, TypeVar
+import abc
+from typing import ClassVar, Generic, TypeVar
 
 from ..counters import Counters
 from ..wire import Message
 
+__all__ = ["Framing", "SerialFraming"]
+
 Unit = TypeVar("Unit")
 
 
-class Framing(Protocol, Generic[Unit]):
+class Framing(abc.ABC, Generic[Unit]):
     name: str
     drops: Counters
+    transmit_only: ClassVar[bool] = False  # True: `feed` raises TransmitOnlyError (nothing comes back)
+    names_senders: ClassVar[bool] = False  # True: `sender_of` reads who transmitted a unit from the unit itself
+    names_sources: ClassVar[bool] = False  # True: `source_of` says more than the sender a unit claims
 
-    def encode(self, msg: Message) -> Sequence[Unit]:
+    @abc.abstractmethod
+    def encode(self, msg: Message) -> list[Unit]:
         """The units that carry `msg`, in transmission order."""
-        ...
 
+    @abc.abstractmethod
     def feed(self, unit: Unit) -> list[Message]:
         """Messages completed by this unit (possibly none); bad input is counted in `drops`."""
-        ...
 
-    def tick(self) -> None:
+    def tick(self) -> None:  # an optional call: most framings have nothing to expire
         """One control period passed (expires stale partial state; no-op for most framings)."""
-        ...
+
+    def encode_batch(self, messages: list[Message]) -> list[Unit]:
+        """The units that carry `messages`, as few as the medium allows (default: one `encode` each)."""
+        encode = self.encode
+        return [unit for msg in messages for unit in encode(msg)]
+
+    def sender_of(self, unit: Unit) -> int | None:
+        """The transmitting node's id, where the medium names it (CAN IDs do); None otherwise."""
+        return None
+
+    def source_of(self, unit: Unit) -> str | None:
+        """Who really sent `unit`, where the medium says more than the sender it claims; None otherwise."""
+        return None
+
+
+class SerialFraming(Framing[bytes]):
+    """A framing for a UART byte stream, with the line defaults a serial link needs."""
+
+    default_baud: ClassVar[int]  # the line speed its radios use unless told otherwise
+    preamble: ClassVar[bytes]  # written before the first frame after every (re)open of the port
+
+    @abc.abstractmethod
+    def reset(self) -> None:
+        """Forget any partial frame (the port was reopened: what came before is not continued)."""

@@ -28,6 +28,7 @@ import can
 
 from ..counters import Counters
 from ..wire import GET_BIT, MESSAGE_SIZE, Message, Op, decode_many, encode
+from .base import Framing
 
 __all__ = [
     "BASES_11BIT",
@@ -120,7 +121,7 @@ def _require(ok: bool, complaint: str) -> None:
         raise ValueError(complaint)
 
 
-class CanFraming:
+class CanFraming(Framing[can.Message]):
     """One stigmergy message per classic frame, or FD batches; decodes what any sender put on the bus.
 
     `sender` is this node's id: the ID field it transmits under. Drops (counted
@@ -128,6 +129,8 @@ class CanFraming:
     `remote_frame`, `bad_dlc`, `op_mismatch` (a message whose op bit differs
     from its frame ID's op).
     """
+
+    names_senders = True  # the frame ID carries the sender's id
 
     def __init__(self, scheme: CanIdScheme, sender: int, *, fd: bool = False, bitrate_switch: bool = True) -> None:
         self.scheme = scheme

@@ -8,12 +8,13 @@ from __future__ import annotations
 
 from ..counters import Counters
 from ..wire import MESSAGE_SIZE, Message, decode, encode
+from .base import SerialFraming
 from .cobsframe import DELIMITER, CobsFrameReader, encode_frame
 
 __all__ = ["Cobs8Framing"]
 
 
-class Cobs8Framing:
+class Cobs8Framing(SerialFraming):
     name = "cobs8"
     default_baud = 115200
     transmit_only = False

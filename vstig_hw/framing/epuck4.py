@@ -28,6 +28,7 @@ from __future__ import annotations
 from ..counters import Counters
 from ..crc import crc32
 from ..wire import Message, decode, encode
+from .base import SerialFraming
 from .cobsframe import DELIMITER, CobsFrameReader, encode_frame
 
 __all__ = ["WORDS_PER_MESSAGE", "WORD_SIZE", "Epuck4Framing", "EpuckFragmenter", "EpuckReassembler"]
@@ -150,7 +151,7 @@ class EpuckReassembler:
                     del self._partials[group]
 
 
-class Epuck4Framing:
+class Epuck4Framing(SerialFraming):
     """epuck4 over a UART: each radio word is one serial frame."""
 
     name = "epuck4"

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from ..counters import Counters
 from ..wire import MESSAGE_SIZE, Message, decode, encode
+from .base import SerialFraming
 from .cobsframe import DELIMITER, CobsFrameReader, encode_frame
 
 __all__ = ["KILOBOT_DEFAULT_TYPE", "KILOBOT_PAYLOAD_SIZE", "VSTIG_FORMAT_VERSION", "KilobotFraming",
@@ -38,7 +39,7 @@ def kilobot_payload(msg: Message, msg_type: int = KILOBOT_DEFAULT_TYPE) -> bytes
     return encode(msg) + bytes((VSTIG_FORMAT_VERSION, msg_type))
 
 
-class KilobotFraming:
+class KilobotFraming(SerialFraming):
     name = "kilobot"
     default_baud = 115200
     transmit_only = False

@@ -22,6 +22,7 @@ from typing import Literal
 
 from ..counters import Counters
 from ..wire import Message
+from .base import SerialFraming
 from .kilobot import KILOBOT_DEFAULT_TYPE, check_kilobot_type, kilobot_payload
 
 __all__ = ["OHC_BAUD", "OHC_FORWARDMSG", "OHC_FORWARDMSGSINGLE", "OHC_HEADER", "OHC_PACKET_SIZE",
@@ -45,7 +46,7 @@ def ohc_packet(data_and_type: bytes, packet_type: int) -> bytes:
     return body + bytes((reduce(xor, body),))
 
 
-class KilobotOhcFraming:
+class KilobotOhcFraming(SerialFraming):
     name = "kilobot-ohc"
     default_baud = OHC_BAUD
     transmit_only = True

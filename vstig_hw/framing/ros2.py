@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from ..counters import Counters
 from ..timestamps import TS_NONE
 from ..wire import KEY_MAX, Message, Op
+from .base import Framing
 
 __all__ = ["CDR_SIZE", "NO_SENDER", "Ros2Framing", "Ros2Sample", "cdr_message", "message_of_cdr", "ros_name",
            "sender_of_wire", "wire_sender"]
@@ -80,7 +81,7 @@ class Ros2Sample:
     source: str | None = None
 
 
-class Ros2Framing:
+class Ros2Framing(Framing[Ros2Sample]):
     """What ROS 2 nodes write (CDR Messages) in, the gateway's broadcasts out.
 
     Drops (counted, never raised): `bad_cdr` (a payload that is not a vstig_msgs/Message).
@@ -88,6 +89,7 @@ class Ros2Framing:
     """
 
     name = "ros2"
+    names_sources = True  # each sample says which ROS 2 node published it
 
     def __init__(self, sender: int) -> None:
         self.sender = sender  # the gateway's robot id: the `sender` of what it broadcasts

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 from ..counters import Counters
 from ..wire import MESSAGE_SIZE, Message, decode_many, encode
+from .base import SerialFraming
 
 __all__ = [
     "AT_COMMAND",
@@ -302,7 +303,7 @@ def _unescape_prefix(data: bytes, want: int) -> tuple[bytes, int] | str:
     return bytes(out), i
 
 
-class XBeeFraming:
+class XBeeFraming(SerialFraming):
     """Our messages in XBee API frames (mode 1); `XBeeApi2Framing` for mode 2.
 
     A unit is one frame as on the wire (the XBee transport cuts them). Receive Packets (0x90)
@@ -313,6 +314,7 @@ class XBeeFraming:
 
     name = "xbee"
     escaped = False
+    names_senders = True  # a Receive Packet carries its 64-bit source
     default_baud = 9600  # Digi's factory setting (BD=3)
     transmit_only = False
     preamble = b""  # a 0x7E starts every frame: nothing to cut off
@@ -342,7 +344,7 @@ class XBeeFraming:
 
     # -- sending -------------------------------------------------------------------
     def encode(self, msg: Message) -> list[bytes]:
-        return [self._transmit(encode(msg))]
+        return self.encode_batch([msg])  # through `_payloads`, which a dialect's framing (XbeeMav) replaces
 
     def encode_batch(self, messages: Sequence[Message]) -> list[bytes]:
         """As few Transmit Requests as hold the messages, in order, each as full as NP allows."""

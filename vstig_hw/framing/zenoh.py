@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 from ..counters import Counters
 from ..wire import MESSAGE_SIZE, Message, decode_many, encode
+from .base import Framing
 
 __all__ = ["KEY_ROOT", "MAX_GATEWAY", "MAX_SAMPLE", "MAX_STIGMERGY", "ZenohFraming", "ZenohKeySpace", "ZenohSample",
            "check_swarm"]
@@ -102,13 +103,16 @@ class ZenohKeySpace:
         return gateway if gateway <= MAX_GATEWAY else None
 
 
-class ZenohFraming:
+class ZenohFraming(Framing[ZenohSample]):
     """Batches of 8-byte messages in samples; decodes what any gateway of the swarm publishes.
 
     `sender` is this gateway's id, the last chunk of the key it publishes under.
     Drops (counted, never raised): `foreign_key` (a key outside the space),
     `bad_length` (a payload that is empty or not a multiple of 8 bytes).
     """
+
+    names_senders = True  # the key a sample is published under ends with the gateway's id
+    names_sources = True  # each sample says which session published it
 
     name = "zenoh"
 

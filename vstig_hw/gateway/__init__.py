@@ -1,12 +1,22 @@
-"""The gateway: the PC's seat in the swarm (`Node`), its event loop and its ways out."""
+"""The gateway: the PC's seat in the swarm (`Node`), its event loop and its ways out; what a new part or
+listener builds on is `Node`'s own API (`listen` -> `Listening`, `submit`, `drain`, `close`: see `node`)."""
 
-from .node import DEFAULT_BUDGET, DEFAULT_PERIOD, ENGINE_STATS, Mode, Node, favour_latency
+from .node import (
+    CLOSE_DRAIN,
+    DEFAULT_BUDGET,
+    DEFAULT_PERIOD,
+    ENGINE_STATS,
+    Listening,
+    Mode,
+    Node,
+    SwarmClosed,
+    favour_latency,
+)
 from .outlet import Outlet, SendWindow
 from .refresh import RoundRobinGet
 from .shutdown import stop_on_signals
 
 __all__ = [
-    "DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Mode", "Node", "Outlet", "RoundRobinGet", "SendWindow",
-    "favour_latency",
-    "stop_on_signals",
+    "CLOSE_DRAIN", "DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Listening", "Mode", "Node", "Outlet",
+    "RoundRobinGet", "SendWindow", "SwarmClosed", "favour_latency", "stop_on_signals",
 ]

@@ -44,6 +44,9 @@ from .writer import TX_QUEUE_LIMIT, LinkWriter
 
 if TYPE_CHECKING:
     from .._vstig import Encoder, Path, Receiver
+    from .._vstig import Outlet as _NativeOutlet
+else:
+    _NativeOutlet = object if native is None else native.Outlet
 
 __all__ = ["Compiled", "compiled_for"]
 
@@ -140,6 +143,14 @@ def jump_guard(guard: Guard | None) -> Guard | None:
     return compiled
 
 
+class CompiledOutlet(_NativeOutlet):
+    """The C Outlet with the calls a stop and a confirmed write make, the pure Outlet's own: neither is on the
+    data path, and what they use (`handed`, the window, the writer, the length) is the C Outlet's."""
+
+    send_now = Outlet.send_now
+    close = Outlet.close
+
+
 class Compiled:
     """Builds a Node's parts in C (see the module's docstring); one per Node."""
 
@@ -153,8 +164,8 @@ class Compiled:
         queue = FairFifo(RAW_QUEUE_LIMIT) if keep_all else FairQueue()
         encoder = encoder_for(link)
         port = port_for(link) if encoder is not None else "python"
-        outlet: Outlet = self.native.Outlet(link, writer, self.native.Window(budget, period), queue,
-                                            keep_all=keep_all, encoder=encoder, port=port)
+        outlet: Outlet = CompiledOutlet(link, writer, self.native.Window(budget, period), queue,
+                                        keep_all=keep_all, encoder=encoder, port=port)
         return outlet
 
     def engine(self, robot_id: int, onconflict: ConflictResolver | None) -> Stigmergy:
@@ -172,15 +183,16 @@ class Compiled:
 
     def path(self, node: object, lock: object, deliver: Callable[[int, float, list[Any]], None],
              links: list[Link[Any]], receivers: list[Receiver | None], part: Seat | RawRelay | None,
-             guard: Guard | None, outlets: list[Outlet], listeners: Sequence[Sequence[Any]],
-             delivered: Sequence[Callable[[float], None]]) -> Path:
-        """The delivery; `listeners`: the Node's lists of listeners that want each unit or message (while any has
-        one, batches take the Python delivery); `delivered`: those told of every batch handled (its read time)."""
+             guard: Guard | None, outlets: list[Outlet], listeners: list[Sequence[Any]],
+             delivered: list[Callable[[float], None]]) -> Path:
+        """The delivery; `listeners`: the Node's listeners that want each unit or message, one sequence per kind
+        (while any has one, batches take the Python delivery); `delivered`: those told of every batch handled (its
+        read time). Both lists are the Node's own, kept up to date in place: the delivery looks at them per read."""
         reads = [reads_for(link) if receiver is not None else 0 for link, receiver in zip(links, receivers,
                                                                                          strict=True)]
         can = sys.modules.get("can")  # loaded if a link is CAN: the frames the delivery hands Python are its Messages
         path: Path = self.native.Path(node, lock, deliver, links, receivers, reads, part, guard, outlets,
-                                      listeners=list(listeners), delivered=delivered,
+                                      listeners=listeners, delivered=delivered,
                                       can_message=None if can is None else can.Message)
         return path
 

@@ -1,68 +1,169 @@
-"""One write or one read through a Node, checked against what the swarm says (`vstig put`, `vstig get`).
+"""One write or one read through a Node, checked against what the swarm says (`vstig put`, `vstig get`, the API).
 
-A write is taken only when a neighbour shows it: it re-broadcasts our PUT when it
-stores it, or sends a GET carrying it. Nothing else counts (a robot that finds our
-PUT stale stays silent), so `put_confirmed`:
-
-1. asks every control step while learning, so its write is newer than anything heard;
-2. writes, and keeps asking and listening;
-3. when it hears a newer entry, or loses a conflict, writes again (next timestamp),
-   at most `tries` writes in all;
-4. reports whether a neighbour showed the write, and what the swarm said otherwise.
-
-A link that brings our own empty GET back (a radio that echoes what it is sent, or
-another robot with our id) cannot confirm anything, since a neighbour's copy of our
-PUT looks like our own echo: that raises `HearsItself`, before writing if learning
-found it.
-
-Asking alternates two GETs: one carrying our view (a holder of anything older
-stores ours and re-broadcasts it, a holder of something newer answers with it)
-and an empty one (every holder answers with its entry, which shows our write even
-when the re-broadcast that stored it was lost).
+`confirm_write` drives a `confirm.ConfirmedWrite` (the pure state machine: its
+docstring has the rules) on a Node, for the CLI and the Python API alike: the
+machine hears what the links heard for the key (a `messages` listener, on the
+reader's thread as it arrives), what that did to our table (`change`), and each
+control step (`tick`); what it asks to send goes out through the Node; its
+verdict completes a Future the moment it is reached. The Node's own threads run
+it: nothing else schedules it.
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
-from ..engine import Entry, Stigmergy
-from ..links.link import Heard
-from ..timestamps import TS_NONE
-from ..wire import Op
-from .node import Node
+from ..engine import Entry
+from ..wire import KEY_MAX, Message
+from .confirm import ConfirmedWrite, PutResult, Send, Verdict
+from .node import Listening, Node, SwarmClosed
 
-__all__ = ["ConfirmedPut", "HearsItself", "KeyWatch", "PutResult", "get_newest", "not_taken", "put_confirmed"]
+__all__ = ["HearsItself", "PutResult", "confirm_write", "get_newest", "not_taken", "put_confirmed"]
 
 
 class HearsItself(RuntimeError):
-    """The link brings our own GETs back, so no answer can be told from our echo."""
+    """A link brings our own messages back (it echoes what it is sent), so no neighbour's answer can be told
+    from our echo: a confirmed write cannot be confirmed there."""
 
 
-@dataclass
-class KeyWatch:
-    """What neighbours said about one key: every entry their messages carried, and the last one."""
+def confirm_write(node: Node, key: int, value: int, *, learn: float = 0.0, wait: float = 2.0, tries: int = 3,
+                  confirm: bool = True, spent: float = 0.0) -> concurrent.futures.Future[PutResult]:
+    """Write `value` under `key` through an ENGINE node, checked as `confirm` says; its PutResult as a Future.
 
-    key: int
-    robot_id: int
-    seen: set[Entry] = field(default_factory=set)
-    last: Entry | None = None
-    hears_itself: bool = False  # our own empty GET came back: an echoing radio, or our id taken
+    It starts on the Node's loop (`submit`): that loop must run (`start`, or `run` until the future is done).
+    Each write waits up to `wait` seconds for a neighbour to show it; `learn` seconds of asking come first.
+    `spent`: seconds already used opening the node, taken from `learn`, then from the first write's wait.
+    The future raises HearsItself when a link brings our own probe back, SwarmClosed when the node closes first.
+    """
+    engine = node.engine
+    if engine is None:
+        raise RuntimeError(f"a {node.mode.value} node cannot write")
+    first_wait = max(0.0, wait - max(0.0, spent - learn))
+    machine = ConfirmedWrite(key, engine.robot_id, learn=max(0.0, learn - spent), wait=wait, tries=tries,
+                             confirm=confirm, first_wait=first_wait)
+    driver = _Driver(node, machine, value)
+    started = node.submit(driver.start)
+    started.add_done_callback(driver.failed_to_start)
+    return driver.future
 
-    def __call__(self, heard: Heard) -> None:
-        msg = heard.message
-        if msg.key != self.key or heard.sender == self.robot_id:  # CAN names senders: skip our own frames
+
+class _Driver:
+    """Runs one ConfirmedWrite on a Node: feeds it, sends what it asks, completes `future` with its verdict.
+
+    Everything here runs under the Node's lock: `start` and `tick` on the loop's thread,
+    `heard` and `changed` on a reader's, as the batch is handled (a write again after a
+    superseding entry goes out from there, as a conflict hook's put does).
+    """
+
+    def __init__(self, node: Node, machine: ConfirmedWrite, value: int) -> None:
+        self.node, self.machine, self.value = node, machine, value
+        self.future: concurrent.futures.Future[PutResult] = concurrent.futures.Future()
+        self._listening: Listening | None = None
+
+    def start(self) -> None:
+        self._listening = self.node.listen(messages=self._heard, change=self._changed, tick=self._tick,
+                                           closed=self._closed)
+        self._do(self.machine.start(time.monotonic()))
+
+    def failed_to_start(self, started: concurrent.futures.Future[None]) -> None:
+        error = started.exception()
+        if error is not None:
+            self._finish(error)
+
+    # -- what the Node tells ---------------------------------------------------------
+    def _heard(self, link: str, t: float, sender: int | None, messages: list[Message]) -> None:
+        machine, key = self.machine, self.machine.key
+        for msg in messages:
+            if msg[0] & KEY_MAX == key:  # the head: op bit and key
+                machine.heard(msg, link, sender, time.monotonic())
+        if machine.done:
+            self._settle()
+
+    def _changed(self, key: int, old: Entry | None, new: Entry, link: str | None, sender: int | None) -> None:
+        if key != self.machine.key or link is None:  # our own writes are told too: the machine knows them
             return
-        if msg.timestamp == TS_NONE:  # an empty GET carries no entry; with our id it is our own
-            self.hears_itself |= msg.op is Op.GET and msg.robot == self.robot_id
+        self._do(self.machine.changed(new, time.monotonic()))
+
+    def _tick(self, node: Node) -> None:
+        self._do(self.machine.tick(time.monotonic()))
+
+    def _closed(self) -> None:
+        try:
+            self.node.check_open()
+        except SwarmClosed as closed:
+            self._finish(closed)
+
+    # -- what the machine asks -------------------------------------------------------------
+    def _do(self, sends: list[Send]) -> None:
+        node, machine = self.node, self.machine
+        try:
+            for send in sends:
+                if machine.done:
+                    break
+                if send is Send.PROBE:
+                    node.probe(machine.key)
+                elif send is Send.ASK:
+                    node.get(machine.key)
+                else:
+                    entry = node.put(machine.key, self.value)
+                    self._do(machine.wrote(entry, time.monotonic()))
+        except SwarmClosed as closed:  # the node began closing (what it read is handed over then): no verdict
+            self._finish(closed)
             return
-        self.last = Entry(msg.value, msg.timestamp, msg.robot)
-        self.seen.add(self.last)
+        self._settle()
+
+    def _settle(self) -> None:
+        machine = self.machine
+        if not machine.done or self.future.done():
+            return
+        if machine.verdict is Verdict.HEARS_ITSELF:
+            self._finish(HearsItself(
+                f"{machine.echoed_on} brings our own GETs back (robot id {machine.robot_id}): the radio echoes "
+                "what we send, or another robot uses that id; no neighbour's answer can be told from our echo "
+                "(--no-confirm writes anyway)"))
+        else:
+            self._finish(machine.result())
+
+    def _finish(self, outcome: PutResult | BaseException) -> None:
+        if self._listening is not None:
+            self._listening.cancel()
+        if self.future.done():
+            return
+        if isinstance(outcome, BaseException):
+            self.future.set_exception(outcome)
+        else:
+            self.future.set_result(outcome)
+
+
+def put_confirmed(node: Node, key: int, value: int, *, learn: float, wait: float, tries: int = 3,
+                  confirm: bool = True, spent: float = 0.0) -> PutResult:
+    """`confirm_write` on an open node whose loop nobody else runs: runs it until the verdict, and returns it."""
+    future = confirm_write(node, key, value, learn=learn, wait=wait, tries=tries, confirm=confirm, spent=spent)
+    node.run(until=future.done)
+    return future.result()
+
+
+def not_taken(result: PutResult, key: int, where: str, wait: float, show: Callable[[Entry], str] = str, *,
+              confirm: bool = True) -> str | None:
+    """Why the write was not taken, in one line naming what the swarm holds; None when it was.
+
+    Superseded is always a failure; unanswered only when a confirmation was asked for.
+    """
+    ours = show(result.written)
+    if result.superseded:
+        assert result.holds is not None
+        return (f"key {key}: the swarm holds {show(result.holds)} on {where}, not our write ({ours}), "
+                f"after {result.tries} writes")
+    if confirm and not result.confirmed:
+        said = f"the last entry heard was {show(result.heard)}" if result.heard else "nothing was heard for the key"
+        return f"key {key}: no neighbour on {where} took our write ({ours}) within {wait:g} s; {said}"
+    return None
 
 
 class _Asker:
-    """An on_tick listener: each control step one GET for the key, a view GET and an empty GET in turn."""
+    """A tick listener: each control step one GET for the key, an empty GET and a view GET in turn."""
 
     def __init__(self, key: int) -> None:
         self.key = key
@@ -76,171 +177,13 @@ class _Asker:
             node.get(self.key)
 
 
-@dataclass(frozen=True)
-class PutResult:
-    written: Entry  # our last write
-    confirmed: bool  # a neighbour's message carried it
-    tries: int  # writes made
-    holds: Entry | None  # our engine's entry at the end: not `written` when the swarm superseded it
-    heard: Entry | None  # the last entry a neighbour's message carried (None: nothing heard)
-
-    @property
-    def superseded(self) -> bool:
-        """The swarm holds an entry other than our last write."""
-        return self.holds != self.written
-
-
-class ConfirmedPut:
-    """One confirmed write as steps, driven by whoever runs the node's loop (`put_confirmed`, the Python API).
-
-    Call `start` once, then `step` after every poll until it returns True, then
-    `result`; `detach` (also on failure) removes its listeners. Everything runs on
-    the loop's thread. Without `confirm` (a radio that cannot answer) it writes
-    once and is done, unconfirmed.
-    """
-
-    def __init__(self, node: Node, key: int, value: int, *, learn: float, wait: float, tries: int = 3,
-                 confirm: bool = True, spent: float = 0.0) -> None:
-        engine = node.engine
-        if engine is None:
-            raise RuntimeError(f"a {node.mode.value} node cannot write")
-        self.node, self.engine, self.key, self.value = node, engine, key, value
-        # `spent`: seconds already used opening the node, taken from `learn`, then from the first write's wait
-        self.learn, self.wait, self.tries, self.confirm = max(0.0, learn - spent), wait, tries, confirm
-        self._first_wait = max(0.0, wait - max(0.0, spent - learn))
-        self.watch = KeyWatch(key, engine.robot_id)
-        self.asker = _Asker(key)
-        self.written: Entry | None = None  # None while learning
-        self.made = 0
-        self.deadline = 0.0
-        self.done = False
-
-    def start(self, now: float) -> bool:
-        """Attach the listeners and ask (learning) or write; True when already done (no confirm)."""
-        self.node.on_heard.append(self.watch)
-        self.node.on_tick.append(self.asker)
-        if self.learn:
-            self.asker(self.node)
-            self.deadline = now + self.learn
-            return False
-        self._write(now)
-        return self.done
-
-    def step(self, now: float) -> bool:
-        """After a poll: True once done; HearsItself when the link brings our own GETs back."""
-        if self.done:
-            return True
-        watch = self.watch
-        if self.written is None:
-            if not (self.confirm and watch.hears_itself) and now < self.deadline:
-                return False
-            self._check_not_echoed()
-            self._write(now)
-            return self.done
-        if not _settled(watch, self.written, self.engine) and now < self.deadline:
-            return False
-        self._check_not_echoed()
-        if self.engine.entry(self.key) == self.written or self.made >= self.tries:
-            self.done = True
-        else:
-            watch.seen.clear()
-            self._write(now)
-        return self.done
-
-    def detach(self) -> None:
-        """Remove the listeners (safe to call twice)."""
-        for listeners, listener in ((self.node.on_heard, self.watch), (self.node.on_tick, self.asker)):
-            if listener in listeners:
-                listeners.remove(listener)  # type: ignore[arg-type]
-
-    def result(self) -> PutResult:
-        """What became of the write (after `step` returned True)."""
-        assert self.written is not None
-        holds = self.engine.entry(self.key)
-        confirmed = self.confirm and self.written in self.watch.seen and holds == self.written
-        return PutResult(self.written, confirmed, self.made, holds, self.watch.last)
-
-    def _write(self, now: float) -> None:
-        self.written, self.made = _write(self.node, self.key, self.value), self.made + 1
-        self.deadline = now + (self._first_wait if self.made == 1 else self.wait)
-        self.done = not self.confirm
-
-    def _check_not_echoed(self) -> None:
-        _check_not_echoed(self.node, self.watch, self.confirm)
-
-
-def put_confirmed(node: Node, key: int, value: int, *, learn: float, wait: float, tries: int = 3,
-                  confirm: bool = True, spent: float = 0.0) -> PutResult:
-    """Write `value` under `key` through an open ENGINE node whose loop nobody else runs, as described above.
-
-    Each write waits up to `wait` seconds for a neighbour to show it. Without
-    `confirm` (a radio that cannot answer) it writes once and returns unconfirmed.
-    `spent`: seconds already used opening the node, taken from `learn`, then from the first write's wait.
-    """
-    put = ConfirmedPut(node, key, value, learn=learn, wait=wait, tries=tries, confirm=confirm, spent=spent)
-    try:
-        if not put.start(time.monotonic()):
-            node.run(until=lambda: put.step(time.monotonic()))
-        _drain(node)
-    finally:
-        put.detach()
-    return put.result()
-
-
-def not_taken(result: PutResult, key: int, where: str, wait: float, show: Callable[[Entry], str] = str, *,
-              confirm: bool = True) -> str | None:
-    """Why the write was not taken, in one line naming what the swarm holds; None when it was.
-
-    Superseded is always a failure; unconfirmed only when a confirmation was asked for.
-    """
-    ours = show(result.written)
-    if result.superseded:
-        assert result.holds is not None
-        return (f"key {key}: the swarm holds {show(result.holds)} on {where}, not our write ({ours}), "
-                f"after {result.tries} writes")
-    if confirm and not result.confirmed:
-        said = f"the last entry heard was {show(result.heard)}" if result.heard else "nothing was heard for the key"
-        return f"key {key}: no neighbour on {where} took our write ({ours}) within {wait:g} s; {said}"
-    return None
-
-
 def get_newest(node: Node, key: int, wait: float) -> Entry | None:
     """Ask every control step for `wait` seconds; the newest entry heard (conflicts resolved), or None."""
     engine = node.engine
     if engine is None:
         raise RuntimeError(f"a {node.mode.value} node cannot ask")
     asker = _Asker(key)
-    node.on_tick.append(asker)
-    try:
+    with node.listen(tick=asker):
         asker(node)
         node.run(duration=wait)
-    finally:
-        node.on_tick.remove(asker)
     return engine.entry(key)
-
-
-def _check_not_echoed(node: Node, watch: KeyWatch, confirm: bool) -> None:
-    if confirm and watch.hears_itself:
-        names = ", ".join(link.name for link in node.links)
-        raise HearsItself(f"{names} brings our own GETs back (robot id {watch.robot_id}): the radio echoes what "
-                          "we send, or another robot uses that id; no answer can be told from our echo "
-                          "(--no-confirm writes anyway)")
-
-
-def _settled(watch: KeyWatch, written: Entry, engine: Stigmergy) -> bool:
-    """A neighbour showed our write, the swarm superseded it, or the link brings our own GETs back."""
-    return written in watch.seen or engine.entry(watch.key) != written or watch.hears_itself
-
-
-def _write(node: Node, key: int, value: int) -> Entry:
-    node.put(key, value)  # timestamp: one past the newest we hold, so newer than anything heard
-    assert node.engine is not None
-    entry = node.engine.entry(key)
-    assert entry is not None
-    return entry
-
-
-def _drain(node: Node) -> None:
-    """Send what is queued before the links close."""
-    node.run(until=lambda: all(not len(outlet) for outlet in node.outlets), duration=5.0)
-    time.sleep(0.05)  # let the device's own buffer drain before the port closes

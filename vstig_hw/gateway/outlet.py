@@ -34,7 +34,7 @@ from ..counters import Counters
 from ..links.link import Link
 from ..wire import Message
 from .fairshare import LOCAL, FairFifo, FairQueue
-from .writer import TX_QUEUE_LIMIT, LinkWriter
+from .writer import CLOSE_WAIT, TX_QUEUE_LIMIT, LinkWriter
 
 __all__ = ["Outlet", "SendWindow"]
 
@@ -128,6 +128,7 @@ class Outlet:
         self._held_link = LOCAL  # and their source
         self._held_sub: Hashable = None
         self._held_ours = False  # `_held` is a list of our own (a raw batch's units joined), not the caller's
+        self.handed = 0  # messages handed to the writer so far (what `Node.drain` waits for)
 
     @property
     def counters(self) -> Counters:
@@ -198,11 +199,29 @@ class Outlet:
         return None
 
     def _submit(self, batch: list[Message]) -> None:
+        self.handed += len(batch)
         try:
             self.writer.submit(self.link.units_of(batch), len(batch))  # one unit for the batch on a byte stream
         except Exception:  # a transport that broke its promise not to raise: count, keep the loop alive
             self.counters["drop_write_error"] += len(batch)
 
-    def close(self) -> None:
-        """Let the device take what is queued (briefly), then stop the writer."""
-        self.writer.close()
+    def send_now(self, msg: Message, now: float) -> None:
+        """Send `msg` ahead of everything queued here, whatever the window (which it still counts against).
+
+        For what must leave before anything queued after it (a confirmed write's probe, see `confirm`):
+        queued, a PUT for the same key would replace it.
+        """
+        self.window.record(now, 1)
+        self.handed += 1
+        try:
+            self.writer.submit(self.link.units_of([msg]), 1)
+        except Exception:  # as in `flush`
+            self.counters["drop_write_error"] += 1
+
+    def close(self, wait: float = CLOSE_WAIT) -> None:
+        """Give the device up to `wait` seconds to take what the writer holds, then stop it. What the window
+        still held back, and what the device did not take, is counted as `unsent_at_close`."""
+        held = len(self)  # left where it is: nothing flushes a closed outlet
+        if held:
+            self.counters["unsent_at_close"] += held
+        self.writer.close(wait)

@@ -16,12 +16,12 @@ the link tells its peers apart (a Zenoh session), which of them (`sub`). What a
 part queues on the outlets carries that source, so each outlet shares itself
 fairly among them (`fairshare`); the Seat's own messages are `LOCAL`.
 
-A part runs under `Node.lock`, on whichever thread handed it the batch.
+A part runs under the Node's lock, on whichever thread handed it the batch.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
 from ..engine import Entry, Outcome, Stigmergy
@@ -69,7 +69,7 @@ class Seat:
 
     A PUT it stores is not echoed onto the link it came from when that link is one
     broadcast domain (`Link.one_domain`): every robot there heard the original.
-    `on_change` (the Node's list, shared) hears of every entry that changed.
+    `on_change` (the Node's listeners, set by the Node) hears of every entry that changed.
 
     What the engine queues goes out under the source that caused it: what it stored
     from a link, its answers to that link's GETs and the conflicts that link caused
@@ -86,14 +86,14 @@ class Seat:
     """
 
     def __init__(self, engine: Stigmergy, links: list[Link[Any]], outlets: list[Outlet], guard: Guard | None,
-                 on_change: list[ChangeListener], intake: int | None = None, period: float = 0.1) -> None:
+                 on_change: Sequence[ChangeListener] = (), intake: int | None = None, period: float = 0.1) -> None:
         if intake is not None and intake < 1:
             raise ValueError(f"the engine's intake per source and tick must be at least 1 message, got {intake}")
         self.engine = engine
         self.links = links
         self.outlets = outlets  # outlets[i] belongs to links[i]; none: the seat only judges
         self.guard = guard
-        self.on_change = on_change
+        self.on_change = on_change  # the Node's, replaced as listeners come and go
         self.intake = intake
         self._rate = 0.0 if intake is None else intake / period  # messages a second a source may give
         self._burst = 0.0 if intake is None else float(intake * INTAKE_BURST_TICKS)

@@ -60,9 +60,7 @@ class LinkReaders:
         if self.path is not None:
             self.path.stopping = False
         for index, link in enumerate(self.links):
-            deliver_to = getattr(link.transport, "deliver_to", None)
-            if deliver_to is not None:
-                deliver_to(functools.partial(self._pushed, index))
+            link.deliver_to(functools.partial(self._pushed, index))  # a device that calls back hands over at once
             pumped = self.path is not None and self.path.pumps(index)
             thread = threading.Thread(target=self._pump if pumped else self._read, args=(index, link),
                                       name=f"read-{link.name}", daemon=True)
@@ -70,7 +68,7 @@ class LinkReaders:
             self._threads.append(thread)
 
     def _read(self, index: int, link: Link[Any]) -> None:
-        read = link.transport.read
+        read = link.read
         deliver = self.deliver
         while not self._stop.is_set():
             try:
@@ -109,9 +107,9 @@ class LinkReaders:
         if self.path is not None:
             self.path.stopping = True
         for link in self.links:
-            deliver_to = getattr(link.transport, "deliver_to", None)
-            if deliver_to is not None:
-                deliver_to(None)
+            link.deliver_to(None)
+        me = threading.current_thread()
         for thread in self._threads:
-            thread.join(timeout=2.0)
+            if thread is not me:  # a listener on a reader thread may close the node
+                thread.join(timeout=2.0)
         self._threads.clear()

@@ -7,14 +7,14 @@ owns what they carry, in the Node's terms:
   topic (`messages` listener: one call per unit, no `Heard` built);
 * every change of the table goes to `changes` (`change` listener);
 * the counters go to /diagnostics, once a second (`tick` listener);
-* `put` is a confirmed write (`oneshot.ConfirmedPut`, as `vstig put` makes it): the
+* `put` is a confirmed write (`oneshot.confirm_write`, as `vstig put` makes it): the
   service answers the entry a neighbour took, or why not and what the swarm holds;
   `get` reads the table (sending nothing), `table` all of it;
 * a PUT a ROS 2 node writes with timestamp 0 gets the timestamp after our entry.
 
 The services run on the transport's request threads and reach the Node as any
-other thread does; a confirmed write is started on the loop's thread and stepped
-at every tick. Whoever builds a Node with ros2: links composes this part in with
+other thread does; a confirmed write is driven by the Node's own threads, and the
+service waits for its Future. Whoever builds a Node with ros2: links composes this part in with
 `serve_ros2(node)` before opening it (`vstig bridge`, `vstig sniff`, `vstig_hw.join`), as the
 live view and recordings are composed; everything the part does to the Node is in this module.
 """
@@ -22,8 +22,6 @@ live view and recordings are composed; everything the part does to the Node is i
 from __future__ import annotations
 
 import concurrent.futures
-import time
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from ..engine import Entry
@@ -32,7 +30,8 @@ from ..links.link import Link
 from ..timestamps import next_timestamp
 from ..transports.ros2 import PutAnswer, Ros2Transport  # no rclpy at import: it loads when the node opens
 from ..wire import KEY_MAX, Message
-from .oneshot import ConfirmedPut, HearsItself, PutResult, not_taken
+from .node import SwarmClosed
+from .oneshot import HearsItself, confirm_write, not_taken
 
 if TYPE_CHECKING:
     from .node import Node
@@ -59,15 +58,12 @@ class Ros2Part:
     def __init__(self, node: Node, link: Link[Any], transport: Ros2Transport) -> None:
         self.node = node
         self.transport = transport
-        self._puts: list[tuple[ConfirmedPut, concurrent.futures.Future[PutResult]]] = []  # the loop's thread only
         self._where = ", ".join(other.name for other in node.links)
         transport.serve(self if node.engine is not None else None, [other.name for other in node.links])
-        node.on_messages.append(self._heard)
-        node.on_tick.append(self._tick)
-        if node.engine is not None:
-            if isinstance(link.framing, Ros2Framing):
-                link.framing.stamp = self._stamp
-            node.on_change.append(self._changed)
+        if node.engine is not None and isinstance(link.framing, Ros2Framing):
+            link.framing.stamp = self._stamp
+        self.listening = node.listen(messages=self._heard, tick=self._tick,
+                                     change=self._changed if node.engine is not None else None)
 
     # -- what the Node tells (under its lock, on whichever thread did the work) ----------
     def _heard(self, link: str, t: float, sender: int | None, messages: list[Message]) -> None:
@@ -75,6 +71,9 @@ class Ros2Part:
 
     def _changed(self, key: int, old: Entry | None, new: Entry, link: str | None, sender: int | None) -> None:
         self.transport.publish_change(key, old, new, link, sender)
+
+    def _tick(self, node: Node) -> None:
+        self.transport.publish_stats(node.stats())  # for /diagnostics (the transport sends one a second)
 
     def _stamp(self, key: int) -> int:
         engine = self.node.engine
@@ -88,11 +87,10 @@ class Ros2Part:
             return PutAnswer(False, None, key, f"key must be 0..{KEY_MAX}, got {key}")
         if node.engine is None or node.mode.value != "engine":
             return PutAnswer(False, None, key, f"a {node.mode.value} gateway does not write: give it --robot-id")
-        done: concurrent.futures.Future[PutResult] = concurrent.futures.Future()
-        node.call_soon(lambda: self._start(key, value, done))
         try:
-            result = done.result(timeout=PUT_WAIT * PUT_TRIES + _GRACE)
-        except HearsItself as error:
+            result = confirm_write(node, key, value, learn=0.0, wait=PUT_WAIT, tries=PUT_TRIES).result(
+                timeout=PUT_WAIT * PUT_TRIES + _GRACE)
+        except (HearsItself, SwarmClosed) as error:
             return PutAnswer(False, None, key, str(error))
         except concurrent.futures.TimeoutError:
             return PutAnswer(False, None, key, "the gateway's loop did not take the write in time")
@@ -106,34 +104,4 @@ class Ros2Part:
         return engine.entry(key) if engine is not None and key <= KEY_MAX else None  # one dict lookup: atomic
 
     def table(self) -> list[tuple[int, Entry]]:
-        engine = self.node.engine
-        if engine is None:
-            return []
-        with self.node.lock:  # the table must not change while it is copied
-            return list(engine.entries())
-
-    # -- confirmed writes, on the loop's thread ------------------------------------------
-    def _start(self, key: int, value: int, done: concurrent.futures.Future[PutResult]) -> None:
-        put = ConfirmedPut(self.node, key, value, learn=0.0, wait=PUT_WAIT, tries=PUT_TRIES)
-        self._step(put, done, put.start)
-
-    def _tick(self, node: Node) -> None:
-        self.transport.publish_stats(node.stats())  # for /diagnostics (the transport sends one a second)
-        puts, self._puts = self._puts, []
-        for put, done in puts:
-            self._step(put, done, put.step)
-
-    def _step(self, put: ConfirmedPut, done: concurrent.futures.Future[PutResult],
-              step: Callable[[float], bool]) -> None:
-        """Start or step one put; settle its Future when it is done or failed (nothing may end the loop)."""
-        try:
-            finished = step(time.monotonic())
-        except Exception as error:  # HearsItself, or a link that broke: the service answers why
-            put.detach()
-            done.set_exception(error)
-            return
-        if finished:
-            put.detach()
-            done.set_result(put.result())
-        else:
-            self._puts.append((put, done))
+        return self.node.entries() if self.node.engine is not None else []  # a snapshot, taken under the lock

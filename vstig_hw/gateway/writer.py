@@ -5,8 +5,9 @@ reading: each would hold a blocking write, and with it the loop every other link
 depends on. So each link gets its own bounded queue and writer thread:
 
 * While the device takes what we send, the loop writes it at once itself
-  (`write_nowait`, where the transport has one: a serial port's fd, a Zenoh
-  publisher that drops under congestion), with no hand-off to another thread.
+  (`write_nowait`: a serial port's fd, a Zenoh publisher that drops under
+  congestion), with no hand-off to another thread. A transport that cannot write
+  without waiting takes nothing that way (its default), so all goes to the queue.
 * What the device does not take at once waits in this link's queue, and this
   link's thread alone waits for the device (its transport's blocking `write`).
 * The outlet hands over no more while `room` is spent: the writer holds at most
@@ -57,8 +58,8 @@ class LinkWriter:
         self._full = False  # `room` was spent: tell `on_room` when it opens again
         self._full_since: float | None = None  # when room was first found spent in this episode
         self._told = False  # the episode was logged (a long stall, or drops): its end is logged too
-        self._write = link.transport.write
-        self._write_nowait = getattr(link.transport, "write_nowait", None)
+        self._write = link.write
+        self._write_nowait = link.write_nowait
         self._queue: deque[tuple[Any, int]] = deque()  # (unit, messages it carries)
         self._queued = 0  # messages in _queue
         self._rest: tuple[Any, int] | None = None  # the tail of a unit the loop began
@@ -107,8 +108,8 @@ class LinkWriter:
         base, extra = divmod(messages, len(units))  # a frame packing several messages carries each: unit i
         with self._lock:                             # carries base + (i < extra)
             done = 0
-            write_nowait = self._write_nowait
-            if write_nowait is not None and not (self._busy or self._queue or self._rest is not None):
+            if not (self._busy or self._queue or self._rest is not None):
+                write_nowait = self._write_nowait
                 sent = 0
                 for unit in units:
                     count = base + (done < extra)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar, runtime_checkable
 
@@ -25,10 +26,19 @@ class Heard:
 
 
 class Link(Generic[Unit]):
-    """`one_domain`: every node on the medium hears every frame any of them sends (a CAN bus, a
+    """One transport plus one framing: what the gateway and replay read, decode and write through.
+
+    The gateway never reaches past a Link into its framing or transport: it reads
+    (`read`, or the device's callback via `deliver_to`), decodes (`decode`), names
+    senders (`sender_of`, `source_of`) and writes (`units_of`, `write_nowait`,
+    `write`) through these, which are the framing's and transport's own methods
+    bound once here, so they cost no call of their own on the hot path.
+
+    `one_domain`: every node on the medium hears every frame any of them sends (a CAN bus, a
     blabbermouth relay), so an engine gateway does not echo an entry back onto the link it came
     from (docs/explanation/design.md, "Echo suppression"). False, the safe default, where a robot may be out of
-    another's range (radios): there the re-broadcast carries the entry a hop further."""
+    another's range (radios): there the re-broadcast carries the entry a hop further.
+    """
 
     def __init__(self, name: str, transport: Transport[Unit], framing: Framing[Unit], *,
                  one_domain: bool = False) -> None:
@@ -37,15 +47,40 @@ class Link(Generic[Unit]):
         self.framing = framing
         self.one_domain = one_domain
         self.counters = Counters()
-        # What the framing offers beyond Framing, looked up once: a missing attribute costs an exception per look.
-        self._encode_batch = getattr(framing, "encode_batch", None)
-        self._sender_of = getattr(framing, "sender_of", None)
-        self.source_of = getattr(framing, "source_of", None)  # who really sent a unit, where more than the link
+        self.opened = False  # open() was called and close() was not: a Link may come already open
+        # The device and the framing, as the gateway and replay use them (bound once: see the class docstring).
+        self.read: Callable[[float], list[Unit]] = transport.read  # units within a timeout (maybe none)
+        self.write: Callable[[Unit], None] = transport.write  # one unit; may wait on the device
+        self.write_nowait: Callable[[Unit], Unit | None] = transport.write_nowait  # never waits: what was not taken
+        self.deliver_to = transport.deliver_to  # the device's own thread hands over what it heard (or not)
+        # The messages a unit completes: the framing's `feed`; a transmit-only framing's units are counted.
+        self.decode: Callable[[Unit], list[Message]] = self._undecodable if framing.transmit_only else framing.feed
+        self.sender_of: Callable[[Unit], int | None] = framing.sender_of  # where the medium names senders
+        self.source_of: Callable[[Unit], str | None] = framing.source_of  # who really sent it, where that is more
+
+    @property
+    def transmit_only(self) -> bool:
+        """Nothing comes back on this link (an overhead controller): no neighbour can answer here."""
+        return self.framing.transmit_only
+
+    @property
+    def listening(self) -> tuple[str, ...]:
+        """The endpoints others reach this link by (a zenoh link's listeners); none for most media."""
+        return self.transport.listening
+
+    @property
+    def about(self) -> str:
+        """Where the link listens and connects, in one line ("": nothing to say)."""
+        return self.transport.about
 
     def open(self) -> None:
-        self.transport.open()
+        """Open the device; a link already open stays as it is (a Link object may be handed over open)."""
+        if not self.opened:
+            self.transport.open()
+            self.opened = True
 
     def close(self) -> None:
+        self.opened = False
         self.transport.close()
 
     def send(self, msg: Message) -> None:
@@ -68,30 +103,22 @@ class Link(Generic[Unit]):
 
     def units_of(self, messages: list[Message]) -> list[Unit]:
         """The units that carry `messages`, as few as the medium allows (see `send_many`)."""
-        encode_batch = self._encode_batch
-        if encode_batch is not None:
-            units: list[Unit] = encode_batch(messages)
-        else:
-            encode = self.framing.encode
-            units = [unit for msg in messages for unit in encode(msg)]
+        framing = self.framing
+        # One message (a quiet link's usual batch): its own units, without a batching call around them.
+        units = framing.encode(messages[0]) if len(messages) == 1 else framing.encode_batch(messages)
         if len(units) > 1 and isinstance(units[0], bytes):
             units = [b"".join(units)]  # type: ignore[list-item,arg-type]  # Unit is bytes here
         return units
 
     def receive(self, timeout: float) -> list[Heard]:
-        """Messages completed within `timeout` seconds."""
+        """Messages completed within `timeout` seconds, read and decoded as the gateway does."""
         heard: list[Heard] = []
-        for unit in self.transport.read(timeout):
+        for unit in self.read(timeout):
             now = time.time()
             sender = self.sender_of(unit)
-            heard.extend(Heard(msg, self.name, now, sender) for msg in self.framing.feed(unit))
+            heard.extend(Heard(msg, self.name, now, sender) for msg in self.decode(unit))
         self.counters["in"] += len(heard)
         return heard
-
-    def sender_of(self, unit: Any) -> int | None:
-        """The transmitting node, where the medium names it (CAN IDs do); None otherwise."""
-        sender = self._sender_of
-        return sender(unit) if sender else None
 
     def tick(self) -> None:
         self.framing.tick()
@@ -102,6 +129,11 @@ class Link(Generic[Unit]):
         merged.update({f"drop_{reason}": n for reason, n in self.framing.drops.items()})
         merged.update(self.transport.counters)
         return merged
+
+    def _undecodable(self, unit: Unit) -> list[Message]:
+        """A transmit-only link's units (bytes from a stock overhead controller): counted, never decoded."""
+        self.counters["drop_undecodable"] += 1
+        return []
 
 
 @runtime_checkable

@@ -2,7 +2,7 @@
 
 `sniff/bridge --foxglove` serve Foxglove (docs/how-to/live-view.md). The server (`server`: the
 SDK, CDR, the table, each write's spread, JSON) runs in a process of its own, so its Python work never
-takes the GIL from the gateway's loop. The loop pays one call per unit heard (`Node.on_messages`) and
+takes the GIL from the gateway's loop. The loop pays one call per unit heard (a `messages` listener) and
 a bounded `deque` append (full: counted `drop_behind`, never a wait); a thread ships what piled up to
 the server through a pipe every PUMP seconds (a slow server blocks that thread only, and the inbox
 then fills and drops). Counters reach the server at most `rate` times a second.
@@ -23,7 +23,7 @@ import time
 from typing import IO, Any
 
 from ..counters import Counters
-from ..gateway.node import Node
+from ..gateway.node import Listening, Node
 from ..links.link import Heard
 from ..values import ValueType
 from ..wire import Message
@@ -66,6 +66,7 @@ class LiveView:
         self._thread: threading.Thread | None = None
         self._server: subprocess.Popen[bytes] | None = None
         self._pipe: IO[bytes] | None = None
+        self._listening: Listening | None = None
 
     # -- lifetime -------------------------------------------------------------
     def open(self) -> None:
@@ -85,9 +86,7 @@ class LiveView:
         self.port = int(line.split()[1])
         self._started_cpu = float(line.split()[2])
         self._server, self._pipe = server, server.stdin
-        self.node.on_messages.append(self._heard)
-        self.node.on_refused.append(self._refused)
-        self.node.on_tick.append(self._tick)
+        self._listening = self.node.listen(messages=self._heard, refused=self._refused, tick=self._tick)
         self._thread = threading.Thread(target=self._run, name="vstig-live-view", daemon=True)
         self._thread.start()
 
@@ -95,13 +94,8 @@ class LiveView:
         """Stop serving: the server gets `wait` seconds to take what is left and say its counters, then it is
         ended. A server flooded by viewers (thousands of connections) may not read us for long: a stop of the
         gateway never waits for it beyond that."""
-        node = self.node
-        if self._heard in node.on_messages:
-            node.on_messages.remove(self._heard)
-        if self._refused in node.on_refused:
-            node.on_refused.remove(self._refused)
-        if self._tick in node.on_tick:
-            node.on_tick.remove(self._tick)
+        if self._listening is not None:
+            self._listening.cancel()
         deadline = time.monotonic() + wait
         self._stop.set()  # the pump ships what is left and closes the server's input (see `_run`)
         thread, self._thread = self._thread, None

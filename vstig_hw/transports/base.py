@@ -13,10 +13,12 @@ transport implements only its device calls, `_open_device`, `_read_device`,
 
 from __future__ import annotations
 
+import abc
 import logging
 import threading
 import time
-from typing import ClassVar, Generic, Protocol, TypeVar
+from collections.abc import Callable
+from typing import ClassVar, Generic, TypeVar
 
 from ..counters import Counters
 
@@ -49,26 +51,57 @@ class DeviceUnreachable(TransportError):
     """The device cannot be opened yet but may come (a router not up): `open` returns and `read` retries it."""
 
 
-class Transport(Protocol, Generic[Unit]):
+class Transport(abc.ABC, Generic[Unit]):
+    """One device: what every transport does, and the optional calls with the default a device without them gets.
+
+    The gateway calls the optional ones unconditionally (python-can's `BusABC`
+    declares `fileno` so), and mypy checks a new device against them:
+
+    * `write_nowait`: write without waiting, where the device can say it is full
+      (a non-blocking fd, `send(timeout=0)`); default: it takes nothing at once, so
+      the link's writer thread writes the unit with the blocking `write`;
+    * `deliver_to`: hand what is heard to a callback on the device's own thread
+      (Zenoh's subscriber); default: nothing calls back, the reader thread reads;
+    * `listening`: the endpoints others reach it by (a Zenoh link's listeners);
+      default: none; `about`: one line on where it listens and connects, for a start line.
+    """
+
     name: str  # how the user named the device, for messages and counters
     counters: Counters  # rx/tx units, reconnects, bus errors...
+    listening: tuple[str, ...] = ()  # the endpoints it listens on, where others reach it
 
+    @abc.abstractmethod
     def open(self) -> None:
         """Open the device; raise TransportError with a one-line reason if it cannot be."""
-        ...
 
-    def close(self) -> None: ...
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release the device (it may be gone already: this does not raise)."""
 
+    @abc.abstractmethod
     def read(self, timeout: float) -> list[Unit]:
         """Units received within `timeout` seconds (maybe none). Reconnects quietly when the device is gone."""
-        ...
 
+    @abc.abstractmethod
     def write(self, unit: Unit) -> None:
         """Send one unit; while the device is gone the unit is dropped and counted, not raised."""
-        ...
 
     @property
-    def connected(self) -> bool: ...
+    @abc.abstractmethod
+    def connected(self) -> bool:
+        """Whether the device is there now."""
+
+    def write_nowait(self, unit: Unit) -> Unit | None:
+        """Write what the device takes now, never waiting: None when it took all, else what it did not take."""
+        return unit
+
+    def deliver_to(self, deliver: Callable[[list[Unit]], None] | None) -> None:
+        """Hand what the device hears to `deliver` on its own thread instead of `read` (None: back to `read`)."""
+
+    @property
+    def about(self) -> str:
+        """Where it listens and connects, in one line for a start line ("": nothing to say)."""
+        return ""
 
 
 class Backoff:
@@ -90,7 +123,7 @@ class Backoff:
         self.next_at = now + self.delay
 
 
-class DeviceTransport(Generic[Unit, Device]):
+class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
     """A Transport over one device that may vanish: the outage, backoff and counters, once.
 
     An outage starts when a device call fails (the transport calls `_lose`, or its

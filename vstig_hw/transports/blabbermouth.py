@@ -26,7 +26,7 @@ import threading
 import time
 
 from ..counters import Counters
-from .base import Backoff, TransportError, one_line
+from .base import Backoff, Transport, TransportError, one_line
 
 __all__ = ["BlabbermouthTransport"]
 
@@ -103,7 +103,7 @@ class _Robot:
             sock.close()
 
 
-class BlabbermouthTransport:
+class BlabbermouthTransport(Transport[bytes]):
     """Transport[bytes]: one unit is one fixed-size frame from any robot."""
 
     def __init__(self, robots: list[tuple[str, int]], frame_size: int, *, name: str | None = None,
