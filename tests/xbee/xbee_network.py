@@ -237,6 +237,7 @@ class XBeeNetwork:
         self._order = itertools.count()
         self._wake_r, self._wake_w = os.pipe()
         self._stop = threading.Event()
+        self.turns = 0  # the network thread's loops: a test that timed out shows whether the firmware ran at all
         self._thread = threading.Thread(target=self._run, name="xbee-network", daemon=True)
         self._thread.start()
 
@@ -271,6 +272,7 @@ class XBeeNetwork:
 
     def _run(self) -> None:
         while not self._stop.is_set():
+            self.turns += 1
             with self.lock:
                 timeout = 0.05 if not self._due else max(0.0, min(0.05, self._due[0][0] - time.monotonic()))
                 readers = {m.master: m for m in self.modules if not m.deaf}
@@ -278,6 +280,7 @@ class XBeeNetwork:
             try:
                 readable, writable, _ = select.select([self._wake_r, *readers], list(writers), [], timeout)
             except (OSError, ValueError):  # a pty closed under us: look again
+                self.counters["select_errors"] += 1
                 time.sleep(0.01)
                 continue
             with self.lock:
@@ -311,8 +314,18 @@ class XBeeNetwork:
     def __enter__(self) -> XBeeNetwork:
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, kind: object, *exc: object) -> None:
+        if kind is not None:  # a failing test shows what the network did (pytest prints it with the failure)
+            print(self.state())
         self.close()
+
+    def state(self) -> str:
+        """The network thread's liveness and each module's traffic, for a test that failed to read."""
+        with self.lock:
+            modules = "; ".join(f"{m.address:016X} api={m.api} deaf={m.deaf} from_host={len(m.from_host)} "
+                                f"to_host={len(m.to_host)} at={m.at_log[:8]} {dict(m.counters)}" for m in self.modules)
+            return (f"xbee network: thread alive={self._thread.is_alive()} turns={self.turns} due={len(self._due)} "
+                    f"{dict(self.counters)}; {modules}")
 
 
 class Host:
