@@ -147,11 +147,20 @@ class Gateway:
         self.process = None
         return took, status, any(line.startswith("engine: ") for line in self.log) and manager.said("STOPPING=1")
 
-    def check(self) -> None:
+    def check(self, now: float) -> None:
+        """A gateway that ended by itself is a failure of the run, said at once; then it is started again
+        (systemd's Restart=on-failure), so the run goes on and its table still comes out."""
         process = self.process
         if process is not None and process.poll() is not None:
-            self.deaths.append(f"gateway {self.index} died ({process.returncode}): {''.join(self.log)[-1500:]}")
+            manager = self.lives[-1].manager
+            manager.join()
+            death = (f"gateway {self.index} died at {now:.0f} s (status {process.returncode}, watchdog fired "
+                     f"{manager.fired.is_set()}, longest ping gap {manager.longest_gap:.2f} s): "
+                     f"{''.join(self.log)[-1500:]}")
+            print(f"  {death}", flush=True)
+            self.deaths.append(death)
             self.process = None
+            self.start(now)
 
     def sample(self, now: float) -> None:
         if self.process is not None and self.lives:
@@ -302,7 +311,7 @@ class Chaos:
             if now >= next_sample:
                 next_sample = now + 2.0
                 for gateway in self.gateways:
-                    gateway.check()
+                    gateway.check(self.now())
                     gateway.sample(now)
             if now >= next_fault and now < last_fault_at:
                 self._one_fault(len(self.faults))
@@ -311,7 +320,7 @@ class Chaos:
         self.tell("stop-writing")
         time.sleep(args.drain)
         for gateway in self.gateways:
-            gateway.check()
+            gateway.check(self.now())
             gateway.sample(self.now())
         swarm = self.tell("report")
         for gateway in self.gateways:
@@ -335,7 +344,7 @@ class Chaos:
         until = time.monotonic() + (0.0 if kind in ("sigterm", "kill") else self.args.active)
         while time.monotonic() < until:
             for gateway in self.gateways:
-                gateway.check()
+                gateway.check(self.now())
             time.sleep(0.05)
         heal()
         fault.healed = True
