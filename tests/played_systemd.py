@@ -8,6 +8,7 @@ process is being stopped on purpose (`stopping()`, as systemd stops judging duri
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import signal
 import socket
@@ -27,6 +28,7 @@ class PlayedSystemd:
         self._socket = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         self._socket.bind(str(socket_path))
         self._socket.settimeout(0.5)
+        self._listener: threading.Thread | None = None
 
     def env(self) -> dict[str, str]:
         """What the manager puts into the service's environment."""
@@ -34,7 +36,13 @@ class PlayedSystemd:
 
     def watch(self, process: subprocess.Popen[str]) -> None:
         """Listen to `process` until it ends, on a thread of its own."""
-        threading.Thread(target=self._listen, args=(process,), daemon=True).start()
+        self._listener = threading.Thread(target=self._listen, args=(process,), daemon=True)
+        self._listener.start()
+
+    def join(self, timeout: float = 2.0) -> None:
+        """Once the process has ended: wait until everything it said has been read (STOPPING=1 included)."""
+        if self._listener is not None:
+            self._listener.join(timeout)
 
     def _listen(self, process: subprocess.Popen[str]) -> None:
         last = time.monotonic()
@@ -53,6 +61,10 @@ class PlayedSystemd:
                       and not self.fired.is_set()):
                     self.fired.set()  # WatchdogSec: the service is ended with SIGABRT
                     process.send_signal(signal.SIGABRT)
+            self._socket.setblocking(False)  # what it said just before it ended is still queued: read it too
+            with contextlib.suppress(BlockingIOError):
+                while True:
+                    self.heard.append((time.monotonic(), self._socket.recv(4096).decode()))
         finally:
             self._socket.close()
 

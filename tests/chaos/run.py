@@ -26,9 +26,11 @@ timestamp of that moment within the time left before the next fault. Resident me
 of each gateway is sampled every 2 s; each stop is timed. Each gateway runs under a
 played systemd (tests/played_systemd.py, as `make supervised`): a notify socket,
 READY=1 awaited, WatchdogSec --watchdog (a gateway whose pings stop that long is ended
-with SIGABRT, which fails the run), the longest gap between pings reported. One table at the end; the
-run fails on any lost pair, a stop over 2 s or that did not end cleanly, a heal that
-did not converge, a gateway that died by itself, or more than --max-growth MB grown.
+with SIGABRT, which fails the run), the longest gap between pings reported, STOPPING=1
+owed at every stop. One table at the end; the run fails on any lost pair, a stop over
+2 s or that did not end cleanly (status 0, counters printed, STOPPING=1 said), a heal
+that did not converge, a gateway that died by itself, or more than --max-growth MB
+grown by one life of a gateway (counted from --warmup s after its start).
 """
 
 from __future__ import annotations
@@ -127,10 +129,11 @@ class Gateway:
         self.lives.append(Life(now, manager))
 
     def stop(self, signum: int = signal.SIGTERM) -> tuple[float, int, bool]:
-        """Signal it and wait: (seconds it took, exit status, whether it printed its counters)."""
+        """Signal it and wait: (seconds it took, exit status, whether it printed its counters and said STOPPING=1)."""
         process = self.process
         assert process is not None
-        self.lives[-1].manager.stopping()
+        manager = self.lives[-1].manager
+        manager.stopping()
         started = time.monotonic()
         process.send_signal(signum)
         try:
@@ -140,14 +143,24 @@ class Gateway:
             status = process.wait()
         took = time.monotonic() - started
         time.sleep(0.1)  # the pump reads the last lines
+        manager.join()
         self.process = None
-        return took, status, any(line.startswith("engine: ") for line in self.log)
+        return took, status, any(line.startswith("engine: ") for line in self.log) and manager.said("STOPPING=1")
 
-    def check(self) -> None:
+    def check(self, now: float) -> None:
+        """A gateway that ended by itself is a failure of the run, said at once; then it is started again
+        (systemd's Restart=on-failure), so the run goes on and its table still comes out."""
         process = self.process
         if process is not None and process.poll() is not None:
-            self.deaths.append(f"gateway {self.index} died ({process.returncode}): {''.join(self.log)[-1500:]}")
+            manager = self.lives[-1].manager
+            manager.join()
+            death = (f"gateway {self.index} died at {now:.0f} s (status {process.returncode}, watchdog fired "
+                     f"{manager.fired.is_set()}, longest ping gap {manager.longest_gap:.2f} s): "
+                     f"{''.join(self.log)[-1500:]}")
+            print(f"  {death}", flush=True)
+            self.deaths.append(death)
             self.process = None
+            self.start(now)
 
     def sample(self, now: float) -> None:
         if self.process is not None and self.lives:
@@ -195,7 +208,8 @@ class Chaos:
             self.gateways.append(Gateway(g, [VSTIG, "bridge", *specs, zenoh, "--robot-id", str(200 + g)], folder,
                                          args.watchdog))
         self.faults: list[Fault] = []
-        self.stops: list[tuple[str, float, int, bool]] = []  # (which, seconds, status, counters printed)
+        # (which, seconds, status, counters printed and STOPPING=1 said)
+        self.stops: list[tuple[str, float, int, bool]] = []
 
     def now(self) -> float:
         return time.monotonic() - self.t0
@@ -297,7 +311,7 @@ class Chaos:
             if now >= next_sample:
                 next_sample = now + 2.0
                 for gateway in self.gateways:
-                    gateway.check()
+                    gateway.check(self.now())
                     gateway.sample(now)
             if now >= next_fault and now < last_fault_at:
                 self._one_fault(len(self.faults))
@@ -306,7 +320,7 @@ class Chaos:
         self.tell("stop-writing")
         time.sleep(args.drain)
         for gateway in self.gateways:
-            gateway.check()
+            gateway.check(self.now())
             gateway.sample(self.now())
         swarm = self.tell("report")
         for gateway in self.gateways:
@@ -330,7 +344,7 @@ class Chaos:
         until = time.monotonic() + (0.0 if kind in ("sigterm", "kill") else self.args.active)
         while time.monotonic() < until:
             for gateway in self.gateways:
-                gateway.check()
+                gateway.check(self.now())
             time.sleep(0.05)
         heal()
         fault.healed = True
@@ -365,11 +379,12 @@ class Chaos:
         if swarm["lost"]:
             problems.append(f"{swarm['lost']} pairs lost on healthy paths")
         worst = max((took for _, took, _, _ in self.stops), default=0.0)
-        print(f"  stops {len(self.stops)}: max {worst:.2f} s, "
-              f"all clean: {all(status == 0 and counters for _, _, status, counters in self.stops)}")
-        for which, took, status, counters in self.stops:
-            if took > STOP_S or status != 0 or not counters:
-                problems.append(f"{which}: stop took {took:.2f} s, status {status}, counters printed: {counters}")
+        print(f"  stops {len(self.stops)}: max {worst:.2f} s, all clean (status 0, counters, STOPPING=1): "
+              f"{all(status == 0 and clean for _, _, status, clean in self.stops)}")
+        for which, took, status, clean in self.stops:
+            if took > STOP_S or status != 0 or not clean:
+                problems.append(f"{which}: stop took {took:.2f} s, status {status}, "
+                                f"counters printed and STOPPING=1 said: {clean}")
         growth = 0.0
         for gateway in self.gateways:
             for life in gateway.lives:

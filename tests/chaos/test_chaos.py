@@ -4,7 +4,8 @@ The run is tests/chaos/run.py with a fault every 11 s: three real gateway proces
 federated over Zenoh, five pty radios and an slcan adapter on a pty, 800 PUTs a second.
 It must lose no (write, robot) pair on a healthy path, stop every gateway cleanly within
 2 s, converge after every heal, and keep every gateway's resident memory within 30 MB, each
-gateway under a played systemd (notify socket, WatchdogSec 5) whose watchdog never fires.
+gateway under a played systemd (notify socket, WatchdogSec 5) whose watchdog never fires,
+and each stop says STOPPING=1 on the notify socket.
 """
 
 from __future__ import annotations

@@ -81,6 +81,7 @@ def main() -> int:
         gateway.kill()
         _, err = gateway.communicate()
     took = time.monotonic() - asked
+    manager.join()
     pings, gap = manager.pings, manager.longest_gap
     lost = {k: (v, b.value(k)) for k, v in last.items() if b.value(k) != v}
     drops = re.findall(r"\b((?:drop_\w+|tx_overflow|tx_dropped|lost)=\d+)", err)
