@@ -76,6 +76,8 @@ class MemoryTransport(Transport[Any]):
     def full(self, full: bool) -> None:
         with self._room:
             self._full = full
+            if not full:  # a writer waiting in `write` is held no longer: settling waits for it to finish
+                self.blocked = False
             self._room.notify_all()
 
     def open(self) -> None:
