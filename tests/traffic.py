@@ -121,3 +121,34 @@ def can_frames(draw: st.DrawFn) -> can.Message:
     return can.Message(arbitration_id=can_id, is_extended_id=extended, is_fd=fd, bitrate_switch=fd,
                        is_remote_frame=draw(st.integers(0, 9)) == 0 and not fd,
                        is_error_frame=draw(st.integers(0, 19)) == 0, data=bytes(data))
+
+
+def xbee_stream(rng: random.Random, escaped: bool, frames: int = 12) -> bytes:
+    """What a module hands its host, hostile: Receive Packets from a few modules (one to many messages, the
+    bytes a mode-2 module escapes among them), the module's own reports, frame types a link does not use,
+    RF data that are not whole messages, lengths of 0 and above the bound, then `noisy`'s corruption and cuts,
+    escapes gone wrong and stray 0x7E/0x7D/0x11/0x13 bytes."""
+    from vstig_hw.framing.xbee import api_frame, receive_packet
+
+    special = (0x7E, 0x7D, 0x11, 0x13)
+    units = []
+    for _ in range(frames):
+        roll = rng.random()
+        if roll < 0.6:
+            rf = b"".join(bytes(rng.choice((rng.choice(special), rng.randrange(256))) for _ in range(8))
+                          for _ in range(rng.choice((1, 1, 2, 8, 62))))
+            data = receive_packet(rng.choice((0x0013A20040A1B2C3, 0x0013A2004000007E, 0x7D11)), rf)
+        elif roll < 0.7:
+            data = bytes((rng.choice((0x8B, 0x8A, 0x88)),)) + rng.randbytes(rng.randrange(1, 8))  # reports
+        elif roll < 0.8:
+            data = bytes((rng.choice((0x95, 0x10, 0x90)),)) + rng.randbytes(rng.randrange(0, 30))
+        else:
+            units.append(b"\x7e" + rng.choice((b"\x00\x00", b"\x02\x01", b"\x7d\x31")) + rng.randbytes(4))
+            continue
+        units.append(api_frame(data, escaped))
+    stream = bytearray(noisy(rng, units))
+    for _ in range(rng.randrange(4)):  # a stray special byte, or a broken escape
+        stray = rng.choice((b"\x7e", b"\x7d", b"\x11", b"\x13", b"\x7d\x00", b"\x7d\x5e"))
+        at = rng.randrange(len(stream) + 1)
+        stream[at:at] = stray
+    return bytes(stream)

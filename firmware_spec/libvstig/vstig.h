@@ -5,6 +5,7 @@
  *   vstig_wire      the 8-byte message, timestamps (RFC 1982), CRCs, drop counters
  *   vstig_serial    the serial frame and the cobs8, epuck4, kilobot, kilobot-ohc framings
  *   vstig_can       the CAN ID scheme, classic frames and CAN FD batches
+ *   vstig_xbee      Digi XBee API frames (modes 1 and 2): Receive Packets in, Transmit Requests out
  *   vstig_outqueue  the outgoing queue: one message per key, newest wins, PUTs first
  *   vstig_engine    put, get, receive, the conflict rule as a callback, drain
  *   vstig_guard     a gateway's jump bound
@@ -18,6 +19,7 @@
 #include "vstig_wire.h"
 #include "vstig_serial.h"
 #include "vstig_can.h"
+#include "vstig_xbee.h"
 #include "vstig_outqueue.h"
 #include "vstig_engine.h"
 #include "vstig_guard.h"

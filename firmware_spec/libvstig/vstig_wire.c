@@ -74,6 +74,7 @@ uint32_t vstig_crc32(const uint8_t *data, size_t len) {
 static const char *const drop_names[VSTIG_DROP_REASONS] = {
     "cobs", "crc", "bad_length", "overlong", "bad_index", "collision", "check", "stale", "duplicate",
     "foreign_type", "bad_version", "error_frame", "unknown_id", "remote_frame", "bad_dlc", "op_mismatch",
+    "noise", "escape", "frame_length", "truncated", "checksum", "unknown_type",
 };
 
 const char *vstig_drop_name(vstig_drop_t reason) {

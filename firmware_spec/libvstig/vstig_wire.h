@@ -71,6 +71,12 @@ typedef enum {
     VSTIG_DROP_REMOTE_FRAME, /* CAN: RTR on a scheme ID */
     VSTIG_DROP_BAD_DLC,      /* CAN: a data length that is not a whole allowed number of messages */
     VSTIG_DROP_OP_MISMATCH,  /* CAN: a message whose op differs from the ID's (per message) */
+    VSTIG_DROP_NOISE,        /* XBee: bytes outside any frame (a run counts once) */
+    VSTIG_DROP_ESCAPE,       /* XBee mode 2: a bad escape, or a byte left raw that must be escaped */
+    VSTIG_DROP_FRAME_LENGTH, /* XBee: a length of 0 or above VSTIG_XBEE_MAX_FRAME_DATA */
+    VSTIG_DROP_TRUNCATED,    /* XBee: a frame cut short (the next 0x7E in mode 2, or the line went quiet) */
+    VSTIG_DROP_CHECKSUM,     /* XBee: the checksum does not match */
+    VSTIG_DROP_UNKNOWN_TYPE, /* XBee: a frame type a link does not use */
     VSTIG_DROP_REASONS
 } vstig_drop_t;
 

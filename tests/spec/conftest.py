@@ -61,7 +61,8 @@ def driver(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFact
 def results(messages: list[str], drops: dict[str, int]) -> str:
     """A receive result in the driver's `msgs=... drops=...` form (drops in the header's reason order)."""
     order = ["cobs", "crc", "bad_length", "overlong", "bad_index", "collision", "check", "stale", "duplicate",
-             "foreign_type", "bad_version", "error_frame", "unknown_id", "remote_frame", "bad_dlc", "op_mismatch"]
+             "foreign_type", "bad_version", "error_frame", "unknown_id", "remote_frame", "bad_dlc", "op_mismatch",
+             "noise", "escape", "frame_length", "truncated", "checksum", "unknown_type"]
     shown = [f"{name}:{drops[name]}" for name in order if drops.get(name)]
     assert set(drops) <= set(order), f"a vector names an unknown drop reason: {set(drops) - set(order)}"
     return f"msgs={','.join(messages) or '-'} drops={','.join(shown) or '-'}"

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import random
 
-from adapters import epuck_reassembler, epuck_words, nonzero, serial_framing
+from adapters import epuck_reassembler, epuck_words, nonzero, serial_framing, xbee_receiver
 from conftest import Driver, results
+from traffic import xbee_stream
 
 from vstig_hw import Message, Op, decode, encode
 
@@ -125,3 +126,37 @@ def test_epuck4_reassembly_same_outcome(driver: Driver) -> None:
         commands.append("epuck4_rx 2 " + " ".join("t" if e is None else f"w:{e.hex()}" for e in events))
         expected.append(results(delivered, nonzero(reassembler.drops)))
     assert driver.run(commands) == expected
+
+
+def _python_xbee(api: int, chunks: list[bytes]) -> str:
+    """The XBee transport's cutting and the framing's reading of a stream (as test_xbee_streams), as the driver
+    prints it."""
+    transport, framing = xbee_receiver(api)
+    units = [unit for chunk in chunks for unit in transport.cut(chunk)] + transport.quiet()
+    frames = []
+    for unit in units:
+        messages = framing.feed(unit)
+        if messages:
+            sender = framing.sender_of(unit)
+            carried = ",".join(encode(m).hex() for m in messages)
+            frames.append(f"{'-' if sender is None else f'{sender:016x}'}={carried}")
+    drops = {name.removeprefix("drop_"): n for name, n in nonzero(transport.counters).items()
+             if name.startswith("drop_")}
+    drops.update(nonzero(framing.drops))
+    return f"{';'.join(frames) or '-'} {results([], drops)}"
+
+
+def test_xbee_streams_same_outcome(driver: Driver) -> None:
+    """Hostile XBee streams in both API modes, cut into random chunks: the same frames, senders and drops."""
+    rng = random.Random(7)
+    commands, wants = [], []
+    for case in range(400):
+        api = 1 + case % 2
+        stream = xbee_stream(rng, api == 2)
+        cuts = sorted(rng.sample(range(1, len(stream)), min(len(stream) - 1, rng.randrange(0, 12))))
+        chunks = [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)]
+        commands.append(f"xbee_rx {api} {' '.join(chunk.hex() for chunk in chunks)}")
+        wants.append(_python_xbee(api, chunks))
+    got = driver.run(commands)
+    wrong = [(c, w, g) for c, w, g in zip(commands, wants, got, strict=True) if w != g]
+    assert not wrong, f"{len(wrong)} differ; first: {wrong[0]}"

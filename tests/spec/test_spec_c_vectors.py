@@ -174,3 +174,46 @@ def test_c_sources_fit_small_targets() -> None:
         for banned in ("malloc", "free(", "double", "float", "uint64_t", "int64_t", "long long", "stdio", "printf",
                        "time("):
             assert banned not in code, f"{path.name} uses {banned}"
+
+
+def _xbee_frames(frames: list[dict[str, object]]) -> str:
+    return ";".join(f"{frame['sender']}={','.join(frame['messages'])}" for frame in frames) or "-"  # type: ignore[arg-type]
+
+
+def test_xbee_streams(driver: Driver) -> None:
+    """Every stream of xbee.json, whole and byte by byte (the line goes quiet at its end), in its API mode."""
+    cases = []
+    for v in load("xbee.json")["streams"]:
+        want = f"{_xbee_frames(v['frames'])} {results([], v['drops'])}"
+        stream = v["stream"]
+        for chunks in ([stream], [stream[i:i + 2] for i in range(0, len(stream), 2)]):
+            cases.append((f"api{v['api']}: {v['name']}", f"xbee_rx {v['api']} {' '.join(chunks)}", want))
+    for v in load("xbee.json")["checksums"]:  # Digi's examples are whole frames: an AT command, a Transmit Request
+        data = v["frame_data"]                 # (8 bytes of RF data: one message, sent by us), a frame type 0x23
+        want = f"-={data[28:]} {results([], {})}" if data[:2] == "10" else f"- {results([], {'unknown_type': 1})}"
+        cases += [(v["source"], f"xbee_rx {api} {v[f'api{api}']}", want) for api in (1, 2) if f"api{api}" in v]
+    _check(driver, cases)
+
+
+def test_xbee_transmit_requests(driver: Driver) -> None:
+    """xbee.json's Transmit Requests (frame id 1, broadcast) in both modes, and NP -> messages per frame."""
+    vectors = load("xbee.json")
+    cases = [(case["name"], f"xbee_tx {api} 64 0 {','.join(case['messages'])}", case[f"api{api}"])
+             for api in (1, 2) for case in vectors["transmit"]]
+    _check(driver, cases)
+    for case in vectors["messages_per_frame"]:  # one message more than a frame holds: two frames, the first full
+        sent = ",".join(f"{key:016x}" for key in range(case["messages"] + 1))
+        frames = driver.one(f"xbee_tx 1 {case['np']} 0 {sent}")
+        first = int(frames[2:6], 16) - 14  # the first frame's RF data, from its length
+        assert first == case["messages"] * 8 and frames.count("7e") >= 2, case
+
+
+def test_xbee_frame_ids_follow_the_ticks(driver: Driver) -> None:
+    """The first frame of a control period asks for a report (frame ids 1, 2, ... 255, 1), the others carry 0."""
+    batches = " ".join(["0001002a00030005"] * 3)
+    ids = [frame[8:10] for frame in driver.one(f"xbee_tx 1 64 1 {batches}").split()]
+    assert ids == ["01", "02", "03"]
+    ids = [frame[8:10] for frame in driver.one(f"xbee_tx 1 64 0 {batches}").split()]
+    assert ids == ["01", "00", "00"]
+    wrapped = driver.one(f"xbee_tx 2 64 1 {' '.join(['0001002a00030005'] * 256)}").split()
+    assert [frame[8:10] for frame in wrapped[253:]] == ["fe", "ff", "01"]

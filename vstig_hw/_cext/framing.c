@@ -1,6 +1,7 @@
 /*
  * Receiver and Encoder: a link's framing in C, libvstig's receivers and encoders with the Python
- * framings' interface (feed, tick, reset; encode_batch), for cobs8, epuck4, kilobot and CAN.
+ * framings' interface (feed, tick, reset; encode_batch), for cobs8, epuck4, kilobot, CAN and XBee (API frames
+ * in mode 1 or 2, whole frames a unit as the XBee transport cuts them).
  *
  * A Receiver counts its drops in the Python framing's own `drops` Counters (given when built), so
  * a link's stats read the same whichever side decoded.
@@ -8,8 +9,9 @@
 #include "framing.h"
 
 #include <string.h>
+#include <structmember.h>
 
-static const char *const FRAMINGS[VX_FRAMINGS] = {"cobs8", "epuck4", "kilobot", "can"};
+static const char *const FRAMINGS[VX_FRAMINGS] = {"cobs8", "epuck4", "kilobot", "can", "xbee"};
 
 static int framing_kind(PyObject *name) {
     int kind;
@@ -17,7 +19,7 @@ static int framing_kind(PyObject *name) {
     for (kind = 0; text != NULL && kind < (int)VX_FRAMINGS; kind++) {
         if (strcmp(text, FRAMINGS[kind]) == 0) return kind;
     }
-    if (!PyErr_Occurred()) PyErr_Format(PyExc_ValueError, "no compiled framing %R (cobs8, epuck4, kilobot, can)", name);
+    if (!PyErr_Occurred()) PyErr_Format(PyExc_ValueError, "no compiled framing %R (cobs8, epuck4, kilobot, can, xbee)", name);
     return -1;
 }
 
@@ -44,6 +46,32 @@ size_t vx_rx_bytes(vx_rx_t *rx, const uint8_t *data, size_t len, size_t *used, v
     return vstig_serial_receive(&rx->serial, data, len, used, out, max);
 }
 
+/* One whole frame the XBee receiver cut: its messages at out[n..], the sender noted. */
+static size_t xbee_frame(vx_rx_t *rx, vstig_msg_t *out) {
+    uint8_t source[8], has_source, n = 0, i;
+    if (vstig_xbee_messages(vstig_xbee_frame_data(&rx->xbee), vstig_xbee_frame_len(&rx->xbee), out, &n, source,
+                            &has_source, &rx->xbee.drops) == VSTIG_XBEE_REPORT)
+        vstig_drops_count(&rx->xbee.drops, VSTIG_DROP_UNKNOWN_TYPE); /* the transport keeps the module's reports */
+    if (n && has_source && !rx->has_sender) {
+        rx->has_sender = 1;
+        rx->sender = 0;
+        for (i = 0; i < 8u; i++) rx->sender = rx->sender << 8 | source[i];
+    }
+    return n;
+}
+
+size_t vx_rx_xbee(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *out) {
+    /* XBeeFraming.feed: a unit is whole, so what it did not complete never will (fed, then flushed) */
+    size_t i, n = 0;
+    rx->has_sender = 0;
+    for (i = 0; i <= len; i++) {
+        if (i < len ? !vstig_xbee_feed(&rx->xbee, data[i]) : !vstig_xbee_flush(&rx->xbee)) continue;
+        do n += xbee_frame(rx, out + n);
+        while (vstig_xbee_next(&rx->xbee));
+    }
+    return n;
+}
+
 size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8]) {
     uint16_t sender;
     return vstig_can_receive(&rx->can, frame, out, &sender);
@@ -51,6 +79,7 @@ size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[
 
 int vx_rx_harvest(vx_rx_t *rx) {
     if (rx->kind == VX_CAN) return vx_harvest_drops(&rx->can.drops, rx->drops);
+    if (rx->kind == VX_XBEE) return vx_harvest_drops(&rx->xbee.drops, rx->drops);
     if (vx_harvest_drops(&rx->serial.deframer.drops, rx->drops) < 0) return -1;
     return rx->kind == VX_EPUCK4 ? vx_harvest_drops(&rx->epuck4.drops, rx->drops) : 0;
 }
@@ -89,13 +118,17 @@ done:
 
 static PyObject *Receiver_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     static char *kwlist[] = {"framing", "drops", "expiry_ticks", "kilobot_type", "extended", "base", "stigmergy",
-                             NULL};
-    PyObject *name, *drops, *base = Py_None;
-    int expiry_ticks = 3, kilobot_type = VSTIG_KILOBOT_TYPE, extended = 0, stigmergy = 0, kind;
+                             "escaped", "on_tick", NULL};
+    PyObject *name, *drops, *base = Py_None, *on_tick = Py_None;
+    int expiry_ticks = 3, kilobot_type = VSTIG_KILOBOT_TYPE, extended = 0, stigmergy = 0, escaped = 0, kind;
     vx_receiver_t *self;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO!|$iipOi", kwlist, &name, &PyDict_Type, &drops, &expiry_ticks,
-                                     &kilobot_type, &extended, &base, &stigmergy))
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO!|$iipOipO", kwlist, &name, &PyDict_Type, &drops, &expiry_ticks,
+                                     &kilobot_type, &extended, &base, &stigmergy, &escaped, &on_tick))
         return NULL;
+    if (on_tick != Py_None && !PyCallable_Check(on_tick)) {
+        PyErr_SetString(PyExc_TypeError, "on_tick must be callable or None");
+        return NULL;
+    }
     if ((kind = framing_kind(name)) < 0) return NULL;
     if (expiry_ticks < 1 || expiry_ticks > 254) {
         PyErr_Format(PyExc_ValueError, "the compiled epuck4 receiver expires after 1..254 ticks, got %d", expiry_ticks);
@@ -105,8 +138,12 @@ static PyObject *Receiver_new(PyTypeObject *type, PyObject *args, PyObject *kwds
     if (self == NULL) return NULL;
     self->rx.kind = (uint8_t)kind;
     self->rx.drops = Py_NewRef(drops);
+    self->rx.on_tick = Py_NewRef(on_tick);
     vstig_epuck4_init(&self->rx.epuck4, (uint8_t)expiry_ticks);
-    if (kind == VX_CAN) {
+    vstig_xbee_rx_init(&self->rx.xbee, (uint8_t)escaped);
+    if (kind == VX_XBEE) {
+        /* nothing more: the XBee receiver needs only its API mode */
+    } else if (kind == VX_CAN) {
         if (can_scheme(&self->rx.can, extended, base, stigmergy, 0, 0, 0) < 0) goto fail;
     } else if (kilobot_type < 0 || kilobot_type >= 0x80 ||
                vstig_serial_rx_init(&self->rx.serial, (uint8_t)kind, (uint8_t)kilobot_type, &self->rx.epuck4) != 0) {
@@ -121,11 +158,13 @@ fail:
 
 static int Receiver_traverse(vx_receiver_t *self, visitproc visit, void *arg) {
     Py_VISIT(self->rx.drops);
+    Py_VISIT(self->rx.on_tick);
     return 0;
 }
 
 static int Receiver_clear(vx_receiver_t *self) {
     Py_CLEAR(self->rx.drops);
+    Py_CLEAR(self->rx.on_tick);
     return 0;
 }
 
@@ -155,6 +194,28 @@ static PyObject *Receiver_feed(vx_receiver_t *self, PyObject *unit) {
             }
             Py_DECREF(m);
         }
+    } else if (self->rx.kind == VX_XBEE) {
+        Py_buffer data;
+        vstig_msg_t *got;
+        if (PyObject_GetBuffer(unit, &data, PyBUF_SIMPLE) < 0) goto fail;
+        got = PyMem_Malloc(((size_t)data.len / VSTIG_MESSAGE_SIZE + 1u) * sizeof *got);
+        if (got == NULL) {
+            PyBuffer_Release(&data);
+            PyErr_NoMemory();
+            goto fail;
+        }
+        n = vx_rx_xbee(&self->rx, (const uint8_t *)data.buf, (size_t)data.len, got);
+        PyBuffer_Release(&data);
+        for (i = 0; i < n; i++) {
+            PyObject *m = vx_message(&got[i]);
+            if (m == NULL || PyList_Append(list, m) < 0) {
+                Py_XDECREF(m);
+                PyMem_Free(got);
+                goto fail;
+            }
+            Py_DECREF(m);
+        }
+        PyMem_Free(got);
     } else {
         Py_buffer data;
         size_t at = 0, used;
@@ -187,6 +248,11 @@ static PyObject *Receiver_tick(vx_receiver_t *self, PyObject *unused) {
         vstig_epuck4_tick(&self->rx.epuck4);
         if (vx_rx_harvest(&self->rx) < 0) return NULL;
     }
+    if (self->rx.on_tick != Py_None) {
+        PyObject *done = PyObject_CallNoArgs(self->rx.on_tick);
+        if (done == NULL) return NULL;
+        Py_DECREF(done);
+    }
     Py_RETURN_NONE;
 }
 
@@ -195,6 +261,7 @@ static PyObject *Receiver_reset(vx_receiver_t *self, PyObject *unused) {
     (void)unused;
     self->rx.serial.deframer.len = 0;
     self->rx.serial.deframer.discarding = 0;
+    vstig_xbee_rx_reset(&self->rx.xbee);
     Py_RETURN_NONE;
 }
 
@@ -209,7 +276,7 @@ PyTypeObject vx_ReceiverType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "vstig_hw._vstig.Receiver",
     .tp_doc = "Receiver(framing, drops, *, expiry_ticks=3, kilobot_type=0x56, extended=False, base=None, "
-              "stigmergy=0): a link's receiving framing in C.",
+              "stigmergy=0, escaped=False, on_tick=None): a link's receiving framing in C.",
     .tp_basicsize = sizeof(vx_receiver_t),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
     .tp_new = Receiver_new,
@@ -221,10 +288,15 @@ PyTypeObject vx_ReceiverType = {
 
 /* ---- encoding -------------------------------------------------------------------------- */
 
-size_t vx_tx_bytes(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out) {
+size_t vx_tx_room(const vx_tx_t *tx, size_t n) {
+    return tx->kind == VX_XBEE ? VSTIG_XBEE_TX_BYTES(n) : n * VX_SERIAL_MAX_BYTES;
+}
+
+size_t vx_tx_bytes(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out) {
     size_t i, w = 0;
     uint32_t words[3];
     uint8_t k;
+    if (tx->kind == VX_XBEE) return vstig_xbee_encode(&tx->xbee, msgs, n, out);
     for (i = 0; i < n; i++) {
         switch (tx->kind) {
         case VX_COBS8:
@@ -262,12 +334,15 @@ PyObject *vx_frame_unit(const vx_tx_t *tx, const vstig_can_frame_t *frame) {
 
 static PyObject *Encoder_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     static char *kwlist[] = {"framing", "kilobot_type", "extended", "base", "stigmergy", "sender", "fd", "brs",
-                             "frame_type", NULL};
+                             "frame_type", "escaped", "dest", NULL};
     PyObject *name, *base = Py_None, *frame_type = Py_None;
-    int kilobot_type = VSTIG_KILOBOT_TYPE, extended = 0, stigmergy = 0, sender = 0, fd = 0, brs = 1, kind;
+    int kilobot_type = VSTIG_KILOBOT_TYPE, extended = 0, stigmergy = 0, sender = 0, fd = 0, brs = 1, escaped = 0, kind;
+    unsigned long long dest = 0xFFFFull;
+    uint8_t dest_bytes[8];
+    int i;
     vx_encoder_t *self;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O|$ipOiippO", kwlist, &name, &kilobot_type, &extended, &base,
-                                     &stigmergy, &sender, &fd, &brs, &frame_type))
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O|$ipOiippOpK", kwlist, &name, &kilobot_type, &extended, &base,
+                                     &stigmergy, &sender, &fd, &brs, &frame_type, &escaped, &dest))
         return NULL;
     if ((kind = framing_kind(name)) < 0) return NULL;
     if (kind == VX_CAN && !PyCallable_Check(frame_type)) {
@@ -283,6 +358,8 @@ static PyObject *Encoder_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
     self->tx.kind = (uint8_t)kind;
     self->tx.kilobot_type = (uint8_t)kilobot_type;
     self->tx.frame_type = Py_NewRef(frame_type);
+    for (i = 0; i < 8; i++) dest_bytes[i] = (uint8_t)(dest >> (56 - 8 * i));
+    vstig_xbee_tx_init(&self->tx.xbee, (uint8_t)escaped, dest_bytes);
     if (kind == VX_CAN && can_scheme(&self->tx.can, extended, base, stigmergy, sender, fd, brs) < 0) {
         Py_DECREF(self);
         return NULL;
@@ -338,7 +415,7 @@ static PyObject *Encoder_encode_batch(vx_encoder_t *self, PyObject *messages) {
     PyObject *units = NULL;
     if (msgs == NULL) return NULL;
     if (self->tx.kind != VX_CAN) {
-        uint8_t *bytes = PyMem_Malloc(n * VX_SERIAL_MAX_BYTES + 1u);
+        uint8_t *bytes = PyMem_Malloc(vx_tx_room(&self->tx, n) + 1u);
         if (bytes == NULL) {
             PyErr_NoMemory();
         } else {
@@ -370,11 +447,43 @@ static PyMethodDef Encoder_methods[] = {
     {NULL, NULL, 0, NULL},
 };
 
+/* XBee: what the link's XBeeFraming reads and sets as its own (frame ids, reports, NP), so both send alike. */
+static PyMemberDef Encoder_members[] = {
+    {"frame_id", T_UBYTE, offsetof(vx_encoder_t, tx.xbee.frame_id), 0, "XBee: the last frame id given (1..255)."},
+    {"report", T_UBYTE, offsetof(vx_encoder_t, tx.xbee.report), 0,
+     "XBee: the next frame asks for a Transmit Status (1)."},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PyObject *Encoder_get_per_frame(vx_encoder_t *self, void *closure) {
+    (void)closure;
+    return PyLong_FromLong(self->tx.xbee.per_frame);
+}
+
+static int Encoder_set_per_frame(vx_encoder_t *self, PyObject *value, void *closure) {
+    long per_frame = value == NULL ? -1 : PyLong_AsLong(value);
+    (void)closure;
+    if (per_frame == -1 && PyErr_Occurred()) return -1;
+    if (per_frame < 1 || per_frame > (long)VSTIG_XBEE_MAX_MESSAGES) {
+        PyErr_Format(PyExc_ValueError, "an XBee frame carries 1..%d messages, got %R", (int)VSTIG_XBEE_MAX_MESSAGES,
+                     value == NULL ? Py_None : value);
+        return -1;
+    }
+    self->tx.xbee.per_frame = (uint8_t)per_frame;
+    return 0;
+}
+
+static PyGetSetDef Encoder_getset[] = {
+    {"per_frame", (getter)Encoder_get_per_frame, (setter)Encoder_set_per_frame,
+     "XBee: messages a frame carries (the module's NP / 8).", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
 PyTypeObject vx_EncoderType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "vstig_hw._vstig.Encoder",
     .tp_doc = "Encoder(framing, *, kilobot_type=0x56, extended=False, base=None, stigmergy=0, sender=0, fd=False, "
-              "brs=True, frame_type=None): a link's sending framing in C.",
+              "brs=True, frame_type=None, escaped=False, dest=0xFFFF): a link's sending framing in C.",
     .tp_basicsize = sizeof(vx_encoder_t),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
     .tp_new = Encoder_new,
@@ -382,4 +491,6 @@ PyTypeObject vx_EncoderType = {
     .tp_traverse = (traverseproc)Encoder_traverse,
     .tp_clear = (inquiry)Encoder_clear,
     .tp_methods = Encoder_methods,
+    .tp_members = Encoder_members,
+    .tp_getset = Encoder_getset,
 };

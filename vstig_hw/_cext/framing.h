@@ -8,7 +8,8 @@
 #define VX_EPUCK4 1u  /* = VSTIG_EPUCK4 */
 #define VX_KILOBOT 2u /* = VSTIG_KILOBOT */
 #define VX_CAN 3u
-#define VX_FRAMINGS 4u
+#define VX_XBEE 4u
+#define VX_FRAMINGS 5u
 
 /* The wire bytes of one message in each serial framing (cobs8 12, epuck4 3 x 8, kilobot 14). */
 #define VX_SERIAL_MAX_BYTES 24u
@@ -18,13 +19,18 @@ typedef struct {
     vstig_serial_rx_t serial;
     vstig_epuck4_reassembler_t epuck4;
     vstig_can_t can;
+    vstig_xbee_rx_t xbee;
+    uint8_t has_sender;         /* XBee: the last unit's messages came in a Receive Packet, from `sender` */
+    unsigned long long sender;  /* its 64-bit source */
     PyObject *drops; /* the Python framing's drop Counters: what libvstig counts is added there */
+    PyObject *on_tick; /* called at each tick, or None (XBee: the framing's tick, for what it sends) */
 } vx_rx_t;
 
 typedef struct {
     uint8_t kind;
     uint8_t kilobot_type;
     vstig_can_t can;
+    vstig_xbee_tx_t xbee; /* its frame ids and NP: the link's XBeeFraming sends with the same (`share`) */
     PyObject *frame_type; /* CAN: can.Message, for the units handed to Python */
 } vx_tx_t;
 
@@ -40,6 +46,9 @@ typedef struct {
 
 /* Messages completed by len bytes of a serial stream, into out (room for max); *used: bytes taken. */
 size_t vx_rx_bytes(vx_rx_t *rx, const uint8_t *data, size_t len, size_t *used, vstig_msg_t *out, size_t max);
+/* XBee: the messages of one unit (whole frames, as the transport cuts them), into out (room for len / 8 + 1);
+ * rx->has_sender and rx->sender: the source of the first Receive Packet that carried any. */
+size_t vx_rx_xbee(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *out);
 /* The messages of one CAN frame, into out (room for 8). */
 size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8]);
 /* A python-can Message's fields as a libvstig frame; -1 with an exception if it has none of them. */
@@ -47,8 +56,10 @@ int vx_frame_of(PyObject *unit, vstig_can_frame_t *frame);
 /* Adds what libvstig counted to the Python framing's drops; -1 on failure. */
 int vx_rx_harvest(vx_rx_t *rx);
 
-/* The wire bytes of n messages in a serial framing, into out (room for n * VX_SERIAL_MAX_BYTES). */
-size_t vx_tx_bytes(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out);
+/* Bytes the wire form of n messages may take at most. */
+size_t vx_tx_room(const vx_tx_t *tx, size_t n);
+/* The wire bytes of n messages in a serial framing, into out (room for vx_tx_room(tx, n)). */
+size_t vx_tx_bytes(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out);
 /* The CAN frames of n messages into frames (room for n); how many. */
 size_t vx_tx_frames(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, vstig_can_frame_t *frames);
 /* A frame as a can.Message, for Python's writer (new reference). */

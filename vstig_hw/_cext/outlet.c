@@ -98,15 +98,15 @@ static int serial_fd(vx_port_t *p) {
 /* The batch's wire bytes straight to the serial fd; 1 done (or handed to the writer), 0 not tried, -1 error. */
 static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     vx_port_t *p = &o->port;
-    const vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
+    vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
     PyObject *fresh, *rest;
     uint8_t stack[64 * VX_SERIAL_MAX_BYTES + 16], *buf = stack;
-    size_t len, at = 0;
+    size_t len, at = 0, room = vx_tx_room(tx, n) + 16;
     ssize_t written;
     int fd = serial_fd(p), status = 1;
     if (fd < -1) return -1;
     if (fd < 0) return 0; /* the transport reopens it: its write_nowait knows how */
-    if (n * VX_SERIAL_MAX_BYTES + 16 > sizeof stack && (buf = PyMem_Malloc(n * VX_SERIAL_MAX_BYTES + 16)) == NULL) {
+    if (room > sizeof stack && (buf = PyMem_Malloc(room)) == NULL) {
         PyErr_NoMemory();
         return -1;
     }

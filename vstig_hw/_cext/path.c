@@ -91,8 +91,10 @@ static int python_guard(vx_path_t *p, vx_link_t *link, PyObject *sender, double 
     return 0;
 }
 
-/* What one unit carried, after its decoding: Node._arrive's steps for it (no listeners: `fast`). */
-static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, long sender) {
+/* What one unit carried, after its decoding: Node._arrive's steps for it (no listeners: `fast`). `sender`: who the
+ * medium says sent it (a CAN node, an XBee module's 64-bit address), when `named`. */
+static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, int named,
+                  unsigned long long sender) {
     vx_link_t *link = &p->links[index];
     PyObject *part = p->part;
     if (n == 0) return 0;
@@ -109,7 +111,7 @@ static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, s
             if (vx_count(link->counters, vx_n.drop_jump, (Py_ssize_t)(n - kept)) < 0) return -1;
             n = kept;
         } else {
-            PyObject *who = sender < 0 ? Py_NewRef(Py_None) : PyLong_FromLong(sender);
+            PyObject *who = named ? PyLong_FromUnsignedLongLong(sender) : Py_NewRef(Py_None);
             int status = who == NULL ? -1 : python_guard(p, link, who, t, msgs, &n);
             Py_XDECREF(who);
             if (status < 0) return -1;
@@ -120,18 +122,24 @@ static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, s
     return vx_relay_take((vx_relay_t *)part, index, msgs, n, Py_None);
 }
 
-/* A serial read's bytes: one unit. */
+/* A serial read's bytes: one unit (an XBee transport's: whole frames, which name their sender). */
 static int arrive_bytes(vx_path_t *p, Py_ssize_t index, double t, const uint8_t *data, size_t len, size_t *heard) {
     vx_rx_t *rx = &p->links[index].receiver->rx;
     size_t at = 0, n = 0, used;
     if (room_for(p, len / 4u + 64u) < 0) return -1; /* the shortest frame is 4 bytes: room for all a read holds */
+    if (rx->kind == VX_XBEE) {
+        n = vx_rx_xbee(rx, data, len, p->msgs);
+        if (vx_rx_harvest(rx) < 0) return -1;
+        *heard += n;
+        return arrive(p, index, t, p->msgs, n, rx->has_sender, rx->sender);
+    }
     while (at < len) {
         n += vx_rx_bytes(rx, data + at, len - at, &used, p->msgs + n, p->cap - n);
         at += used;
     }
     if (vx_rx_harvest(rx) < 0) return -1;
     *heard += n;
-    return arrive(p, index, t, p->msgs, n, -1);
+    return arrive(p, index, t, p->msgs, n, 0, 0);
 }
 
 /* One CAN frame: one unit; its sender is the node its ID names. */
@@ -143,7 +151,7 @@ static int arrive_frame(vx_path_t *p, Py_ssize_t index, double t, const vstig_ca
     n = vstig_can_receive(&rx->can, frame, p->msgs, &sender);
     if (vx_rx_harvest(rx) < 0) return -1;
     *heard += n;
-    return arrive(p, index, t, p->msgs, n, n ? (long)sender : -1);
+    return arrive(p, index, t, p->msgs, n, n != 0, sender);
 }
 
 /* ---- _spread --------------------------------------------------------------------------- */

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from ..counters import Counters
 from ..wire import MESSAGE_SIZE, Message, decode_many, encode
@@ -50,12 +51,14 @@ __all__ = [
     "BROADCAST",
     "DEFAULT_MAX_PAYLOAD",
     "MAX_FRAME_DATA",
+    "MAX_PER_FRAME",
     "MODEM_STATUS",
     "RECEIVE_PACKET",
     "START",
     "TRANSMIT_REQUEST",
     "TX_STATUS",
     "ModuleInfo",
+    "Sending",
     "XBeeApi2Framing",
     "XBeeFraming",
     "XBeeStreamReader",
@@ -92,6 +95,8 @@ MAX_FRAME_DATA = 512
 DEFAULT_MAX_PAYLOAD = 64
 _RX_HEADER = 12  # 0x90, source64, source16, options
 _TX_HEADER = 14  # 0x10, frame id, dest64, dest16, radius, options
+# Messages a frame carries at most, whatever NP a module claims: its frame data stay within MAX_FRAME_DATA.
+MAX_PER_FRAME = (MAX_FRAME_DATA - _TX_HEADER) // MESSAGE_SIZE
 
 
 def checksum(frame_data: bytes | bytearray) -> int:
@@ -156,6 +161,19 @@ class ModuleInfo:
     address: int | None = None
     max_payload: int | None = None
     api_mode: int | None = None
+
+
+class Sending:
+    """What a link's frames carry from one to the next: the last frame id given (1..255), whether the next frame asks
+    for a report, messages a frame. The compiled data path's Encoder has the same fields; a link whose outlet sends
+    through one shares them with it (`XBeeFraming.share_sending`), so frame ids go on whichever side sends."""
+
+    __slots__ = ("frame_id", "per_frame", "report")
+
+    def __init__(self) -> None:
+        self.frame_id = 0
+        self.report = True
+        self.per_frame = DEFAULT_MAX_PAYLOAD // MESSAGE_SIZE
 
 
 def _stuffed(wire: bytes) -> bool:
@@ -328,19 +346,33 @@ class XBeeFraming(SerialFraming):
         self.drops = Counters()
         self.dest = dest
         self.max_payload = self.default_max_payload
-        self.per_frame = self.max_payload // MESSAGE_SIZE
-        self._frame_id = 0
-        self._report = True  # the next frame asks the module for a Transmit Status (see `_transmit`)
+        self.sending: Sending | Any = Sending()  # or the compiled Encoder's fields (`share_sending`)
+        self.sending.per_frame = self._per_frame(self.max_payload)
         self._head = bytes((TRANSMIT_REQUEST, 0)) + dest.to_bytes(8, "big") + UNKNOWN_16.to_bytes(2, "big") + \
             b"\x00\x00"  # a Transmit Request's fields, frame id 0 (byte 1)
         self._reader = XBeeStreamReader(self.escaped, self.drops)
         self._last: tuple[bytes | None, int | None] = (None, None)
 
+    @property
+    def per_frame(self) -> int:
+        return int(self.sending.per_frame)
+
+    @staticmethod
+    def _per_frame(max_payload: int) -> int:
+        return max(1, min(max_payload // MESSAGE_SIZE, MAX_PER_FRAME))
+
     def use_module(self, module: ModuleInfo) -> None:
-        """What the module said at open: as many messages per frame as its NP holds (at least one)."""
+        """What the module said at open: as many messages per frame as its NP holds (at least one, at most
+        MAX_PER_FRAME)."""
         if module.max_payload is not None:
             self.max_payload = module.max_payload
-            self.per_frame = max(1, module.max_payload // MESSAGE_SIZE)
+            self.sending.per_frame = self._per_frame(module.max_payload)
+
+    def share_sending(self, twin: Any) -> None:
+        """Send with `twin`'s frame ids, reports and NP from now on (the compiled Encoder of this link's outlet:
+        what either sends goes on the other's count). It takes ours as they are."""
+        twin.frame_id, twin.report, twin.per_frame = self.sending.frame_id, self.sending.report, self.per_frame
+        self.sending = twin
 
     # -- sending -------------------------------------------------------------------
     def encode(self, msg: Message) -> list[bytes]:
@@ -362,10 +394,11 @@ class XBeeFraming(SerialFraming):
         reports its delivery (0x8B); the others have 0. A report per frame would cost the host's UART 11 bytes
         and the gateway a read for each: a sample shows the same channel, NP and network faults."""
         head = self._head
-        if self._report:
-            self._report = False
-            self._frame_id = self._frame_id % 255 + 1
-            head = head[:1] + bytes((self._frame_id,)) + head[2:]
+        sending = self.sending
+        if sending.report:
+            sending.report = False
+            sending.frame_id = sending.frame_id % 255 + 1
+            head = head[:1] + bytes((sending.frame_id,)) + head[2:]
         data = head + rf_data
         body = len(data).to_bytes(2, "big") + data + bytes((0xFF - (sum(data) & 0xFF),))
         return b"\x7e" + (escape(body) if self.escaped else body)
@@ -424,7 +457,7 @@ class XBeeFraming(SerialFraming):
 
     def tick(self) -> None:
         """A control period passed: the next frame asks for a report. (Units are whole frames: nothing ages.)"""
-        self._report = True
+        self.sending.report = True
 
     def reset(self) -> None:
         """No partial state between units."""

@@ -10,14 +10,17 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   touched only while a backlog lasts, and so does each link's `LinkWriter`;
 * `JumpGuard` for a guard of max_jump and learn only (the default); any other
   guard stays the Python one, which the compiled delivery asks per unit;
-* `Receiver` for each link whose framing is cobs8, epuck4, kilobot or CAN: its
-  decoding lives there for the Node's life, whichever side delivers a batch;
+* `Receiver` for each link whose framing is cobs8, epuck4, kilobot, CAN or XBee
+  (API mode 1 or 2, our 8-byte messages): its decoding lives there for the Node's
+  life, whichever side delivers a batch;
 * `Path`, the delivery (Node._deliver): one call per read. Links on a serial port
   or a SocketCAN bus are read by it (`pump`) and their writes go straight to the
-  device while its writer is idle.
+  device while its writer is idle. An XBee link's writes do too, but its reads are
+  its transport's (it cuts frames and keeps the module's own reports), handed to
+  the delivery a batch of whole frames at a time.
 
-Everything else (zenoh, XBee, dialects, the overhead controller, blabbermouth...)
-takes the Python path through the same parts. What decides which links the
+Everything else (zenoh, dialects, XbeeMav's packets, the overhead controller,
+blabbermouth...) takes the Python path through the same parts. What decides which links the
 compiled path reads and writes is here, in one place: `receiver_for`,
 `encoder_for`, `reads_for`, `port_for`.
 """
@@ -33,9 +36,11 @@ from ..engine import ConflictResolver, Stigmergy
 from ..framing.cobs8 import Cobs8Framing
 from ..framing.epuck4 import Epuck4Framing
 from ..framing.kilobot import KilobotFraming
+from ..framing.xbee import XBeeApi2Framing, XBeeFraming
 from ..links.link import Link
 from ..native import native
 from ..transports.serial import SerialTransport
+from ..transports.xbee import XBeeTransport
 from .fairshare import FairFifo, FairQueue
 from .guard import Guard
 from .outlet import RAW_QUEUE_LIMIT, Outlet
@@ -62,12 +67,14 @@ def _is(obj: object, module: str, name: str) -> bool:
 
 
 def framing_of(link: Link[Any]) -> str | None:
-    """The compiled framing that decodes and encodes exactly as the link's does (cobs8, epuck4, kilobot, can), or
-    None: the link's framing stays Python (zenoh, XBee, dialects, the overhead controller...)."""
+    """The compiled framing that decodes and encodes exactly as the link's does (cobs8, epuck4, kilobot, can, xbee),
+    or None: the link's framing stays Python (zenoh, dialects, XbeeMav's packets, the overhead controller...)."""
     framing: Any = link.framing
     kind = type(framing)
     if kind is Cobs8Framing or kind is KilobotFraming:
         return str(framing.name)
+    if kind is XBeeFraming or kind is XBeeApi2Framing:
+        return "xbee"
     if kind is Epuck4Framing and framing.reassembler.expiry_ticks <= MAX_EXPIRY_TICKS:
         return "epuck4"
     if _is(framing, "vstig_hw.framing.can", "CanFraming"):
@@ -91,11 +98,14 @@ def receiver_for(link: Link[Any]) -> Receiver | None:
         scheme = framing.scheme
         receiver = native.Receiver("can", framing.drops, extended=scheme.extended, base=scheme.base,
                                    stigmergy=scheme.stigmergy)
+    elif kind == "xbee":  # its ticks are the framing's too: they set which frame asks the module for a report
+        receiver = native.Receiver("xbee", framing.drops, escaped=framing.escaped, on_tick=framing.tick)
     return receiver
 
 
 def encoder_for(link: Link[Any]) -> Encoder | None:
-    """The link's framing as a compiled Encoder (the same units its framing makes), or None."""
+    """The link's framing as a compiled Encoder (the same units its framing makes), or None. An XBee framing sends
+    with the Encoder's frame ids and NP from then on, so that either side's frames go on the same count."""
     assert native is not None
     framing: Any = link.framing
     kind = framing_of(link)
@@ -111,6 +121,9 @@ def encoder_for(link: Link[Any]) -> Encoder | None:
         encoder = native.Encoder("can", extended=scheme.extended, base=scheme.base, stigmergy=scheme.stigmergy,
                                  sender=framing.sender, fd=framing.fd, brs=framing.bitrate_switch,
                                  frame_type=can.Message)
+    elif kind == "xbee":
+        encoder = native.Encoder("xbee", escaped=framing.escaped, dest=framing.dest)
+        framing.share_sending(encoder)
     return encoder
 
 
@@ -127,6 +140,8 @@ def reads_for(link: Link[Any]) -> int:
 
 def port_for(link: Link[Any]) -> str:
     """Where the compiled outlet writes while the link's writer is idle: the device itself, or the writer."""
+    if type(link.transport) is XBeeTransport:
+        return "serial"  # its writes are a serial port's: the frames as the Encoder makes them
     return ("python", "serial", "socketcan")[reads_for(link)]
 
 

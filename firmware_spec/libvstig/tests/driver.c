@@ -20,6 +20,10 @@
  *   can_tx EXT BASE STIG SENDER FD MSGS       -> ID#DATA or ID##1DATA per frame | refused
  *   engine_case SELF RESOLVER LOCAL BEFORE MSG -> OUTCOME entry=V,T,R|- queued=HEX,..|- lost=V,T,R|-
  *   traffic SEED ROUNDS               -> ok | fail WHAT  (random traffic through every part, invariants)
+ *   xbee_rx API CHUNK..               -> SENDER=MSGS;.. drops=..  (each chunk fed byte by byte, then the line
+ *                                        goes quiet; one SENDER=MSG,MSG per frame with messages, - if none)
+ *   xbee_tx API NP TICKS MSGS..       -> frame hex per batch  (each MSGS one batch, comma-separated; TICKS:
+ *                                        1 ticks before every batch, 0 never)
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -318,6 +322,67 @@ static void traffic(char **arg) {
 
 /* ---- the codec and serial framings ---------------------------------------- */
 
+/* The frames a receiver completed: SENDER=MSG,MSG per frame that carried messages. */
+static unsigned xbee_frames;
+
+static void xbee_frame(vstig_xbee_rx_t *rx, vstig_drops_t *drops) {
+    vstig_msg_t got[VSTIG_XBEE_MAX_MESSAGES];
+    uint8_t source[8], has_source, n;
+    if (vstig_xbee_messages(vstig_xbee_frame_data(rx), vstig_xbee_frame_len(rx), got, &n, source, &has_source,
+                            drops) != VSTIG_XBEE_MESSAGES)
+        return;
+    fputs(xbee_frames++ ? ";" : "", stdout);
+    if (has_source) print_hex(source, 8);
+    else fputs("-", stdout);
+    fputs("=", stdout);
+    print_msgs(got, n);
+}
+
+static void xbee_rx(char **arg, int argc) {
+    static vstig_xbee_rx_t rx;
+    static uint8_t bytes[MAX_BYTES];
+    vstig_drops_t drops;
+    size_t n, k;
+    int i;
+    vstig_xbee_rx_init(&rx, (uint8_t)(num(arg[0]) == 2));
+    vstig_drops_clear(&drops);
+    xbee_frames = 0;
+    for (i = 1; i < argc; i++) {
+        n = parse_hex(arg[i], bytes);
+        for (k = 0; k < n; k++) {
+            if (!vstig_xbee_feed(&rx, bytes[k])) continue;
+            do xbee_frame(&rx, &drops);
+            while (vstig_xbee_next(&rx));
+        }
+    }
+    if (vstig_xbee_flush(&rx)) {
+        do xbee_frame(&rx, &drops);
+        while (vstig_xbee_next(&rx));
+    }
+    if (!xbee_frames) fputs("-", stdout);
+    for (i = 0; i < VSTIG_DROP_REASONS; i++) vstig_drops_add(&drops, (vstig_drop_t)i, rx.drops.count[i]);
+    res.n = 0;
+    fputs(" ", stdout);
+    print_results(&drops);
+}
+
+static void xbee_tx(char **arg, int argc) {
+    static vstig_msg_t msgs[256];
+    static uint8_t out[VSTIG_XBEE_TX_BYTES(256)];
+    vstig_xbee_tx_t tx;
+    int i;
+    vstig_xbee_tx_init(&tx, (uint8_t)(num(arg[0]) == 2), NULL);
+    vstig_xbee_max_payload(&tx, (uint16_t)num(arg[1]));
+    for (i = 3; i < argc; i++) {
+        size_t n = 0;
+        char *m = strtok(arg[i], ",");
+        for (; m != NULL && n < 256; m = strtok(NULL, ",")) msgs[n++] = msg_of(m);
+        if (num(arg[2])) vstig_xbee_tick(&tx);
+        if (i > 3) fputs(" ", stdout);
+        print_hex(out, vstig_xbee_encode(&tx, msgs, n, out));
+    }
+}
+
 static void run(char *line) {
     static uint8_t buf[MAX_BYTES];
     static uint8_t out[MAX_BYTES];
@@ -444,6 +509,10 @@ static void run(char *line) {
         engine_case(arg);
     } else if (strcmp(cmd, "traffic") == 0) {
         traffic(arg);
+    } else if (strcmp(cmd, "xbee_rx") == 0) {
+        xbee_rx(arg, (int)argc);
+    } else if (strcmp(cmd, "xbee_tx") == 0) {
+        xbee_tx(arg, (int)argc);
     } else {
         printf("error unknown command %s", cmd);
     }
