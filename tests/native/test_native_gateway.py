@@ -24,10 +24,11 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 from traffic import EXAMPLES, can_frames, messages, noisy
 
-from vstig_hw import Message, Op, Stigmergy
+from vstig_hw import Message, Op, Stigmergy, encode
 from vstig_hw.counters import Counters
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.framing.xbee import api_frame, receive_packet
 from vstig_hw.gateway import compiled as compiled_module
 from vstig_hw.gateway import node as node_module
 from vstig_hw.gateway.fairshare import FairFifo, FairQueue
@@ -120,7 +121,7 @@ def _settled(node: Node) -> None:
 
 
 # (link name, framing, one broadcast domain)
-LINKS = [("radio", "cobs8", False), ("bus", "can", True), ("words", "epuck4", False)]
+LINKS = [("radio", "cobs8", False), ("bus", "can", True), ("words", "epuck4", False), ("modules", "xbee", False)]
 
 
 def _links() -> list[Link[Any]]:
@@ -144,7 +145,13 @@ def _units(rng: random.Random, framing: str, sent: list[Message], frames: list[c
     if framing == "can":
         encoder = CanFraming(CanIdScheme(), sender=rng.choice([3, 4]))
         return [frame for m in sent for frame in encoder.encode(m)] + frames
-    stream = noisy(rng, [unit for m in sent for unit in make_serial_framing(framing).encode(m)])
+    if framing == "xbee":  # Receive Packets from two modules (the sender a Python guard is told), mostly one a unit
+        units = [api_frame(receive_packet(rng.choice([0x0013A20040A1B2C3, 0x7E]), encode(m))) for m in sent]
+        if rng.random() < 0.8:
+            return units
+    else:
+        units = [unit for m in sent for unit in make_serial_framing(framing).encode(m)]
+    stream = noisy(rng, units)
     cuts = sorted(rng.sample(range(1, len(stream)), min(3, len(stream) - 1))) if len(stream) > 1 else []
     return [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)]
 
@@ -164,10 +171,10 @@ def _state(node: Node) -> dict[str, Any]:
 
 
 calls = st.one_of(
-    st.tuples(st.just("heard"), st.integers(0, 2), st.integers(0, 2**32), st.lists(messages, max_size=6),
+    st.tuples(st.just("heard"), st.integers(0, len(LINKS) - 1), st.integers(0, 2**32), st.lists(messages, max_size=6),
               st.lists(can_frames(), max_size=2)),
     st.tuples(st.just("time"), st.integers(0, 300)),
-    st.tuples(st.just("full"), st.integers(0, 2), st.booleans()),
+    st.tuples(st.just("full"), st.integers(0, len(LINKS) - 1), st.booleans()),
     st.tuples(st.just("put"), st.integers(0, 3), st.integers(0, 9)),
     st.tuples(st.just("get"), st.integers(0, 3)),
     st.tuples(st.just("ask"), st.integers(0, 3)),

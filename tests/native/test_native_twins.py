@@ -34,6 +34,7 @@ from traffic import (
     messages,
     noisy,
     robots,
+    xbee_stream,
 )
 
 from vstig_hw import Entry, Message, Op, Stigmergy
@@ -213,3 +214,81 @@ def test_can_encoder_equals_the_framing(compiled: ModuleType, scheme: tuple[bool
         return [(f.arbitration_id, f.is_extended_id, f.is_fd, f.bitrate_switch, bytes(f.data)) for f in frames]
 
     assert fields(c.encode_batch(sent)) == fields(python.encode_batch(sent))
+
+
+def _xbee_pair(compiled: ModuleType, api: int) -> tuple[Any, Any, Counters]:
+    """(the Python framing, its compiled Receiver counting into its own Counters, those Counters)."""
+    python = make_serial_framing("xbee-api2" if api == 2 else "xbee")
+    drops = Counters()
+    return python, compiled.Receiver("xbee", drops, escaped=api == 2), drops
+
+
+def _xbee_units(rng: random.Random, stream: bytes, api: int) -> list[bytes]:
+    """Units as the transport cuts them (whole frames, reports kept back), and as a hand-made capture may hold them
+    (any bytes: the framing reads every unit whole)."""
+    from vstig_hw.transports.xbee import XBeeTransport
+
+    transport = XBeeTransport("unopened", api=api)  # never opened: its cutting alone
+    cut = transport.cut(stream) + transport.quiet()
+    at, chunks = 0, []
+    while at < len(stream):
+        step = rng.randrange(1, 80)
+        chunks.append(stream[at:at + step])
+        at += step
+    return cut + chunks
+
+
+@EXAMPLES
+@given(api=st.sampled_from([1, 2]), seed=st.integers(0, 2**32))
+def test_xbee_receiver_equals_the_framing(compiled: ModuleType, api: int, seed: int) -> None:
+    """Hostile streams (tests/traffic.py), in whole frames and in random pieces: the same messages, the same sender
+    (the 64-bit source the guard and sniff see) and the same drops."""
+    rng = random.Random(seed)
+    python, c, drops = _xbee_pair(compiled, api)
+    for unit in _xbee_units(rng, xbee_stream(rng, api == 2), api):
+        heard = python.feed(unit)
+        assert (c.feed(unit), c.sender if heard else None) == (heard, python.sender_of(unit) if heard else None)
+        if rng.random() < 0.1:
+            c.reset()
+            python.reset()
+    assert drops == python.drops
+
+
+@pytest.mark.parametrize("api", [1, 2])
+def test_xbee_receiver_split_at_every_byte_equals_the_framing(compiled: ModuleType, api: int) -> None:
+    """A hostile stream cut in two at every byte: each half a unit, as the framing reads it."""
+    rng = random.Random(api)
+    for _ in range(4):
+        stream = xbee_stream(rng, api == 2, frames=6)
+        for cut in range(len(stream) + 1):
+            python, c, drops = _xbee_pair(compiled, api)
+            for unit in (stream[:cut], stream[cut:]):
+                assert c.feed(unit) == python.feed(unit)
+            assert drops == python.drops, cut
+
+
+@EXAMPLES
+@given(api=st.sampled_from([1, 2]), dest=st.sampled_from([0xFFFF, 0x0013A20040A1B2C3, 0x7D7E1113]),
+       np=st.sampled_from([None, 5, 64, 73, 256, 1000]),
+       batches=st.lists(st.tuples(st.booleans(), st.lists(messages, max_size=70)), max_size=8))
+def test_xbee_encoder_equals_the_framing(compiled: ModuleType, api: int, dest: int, np: int | None,
+                                         batches: list[tuple[bool, list[Message]]]) -> None:
+    """The same Transmit Requests (frame ids after ticks, NP, escapes, the destination), and once the framing
+    shares the Encoder's fields, frames from either side go on one count of frame ids."""
+    from vstig_hw.framing.xbee import ModuleInfo, XBeeApi2Framing, XBeeFraming
+
+    kind = XBeeApi2Framing if api == 2 else XBeeFraming
+    python, sharing = kind(dest), kind(dest)
+    c = compiled.Encoder("xbee", escaped=api == 2, dest=dest)
+    for framing in (python, sharing):
+        framing.use_module(ModuleInfo(max_payload=np))
+    sharing.share_sending(c)
+    for i, (tick, sent) in enumerate(batches):
+        if tick:
+            python.tick()
+            sharing.tick()
+        want = b"".join(python.encode_batch(sent))
+        got = b"".join(sharing.encode_batch(sent)) if i % 2 else b"".join(c.encode_batch(sent))
+        assert got == want
+    assert (c.frame_id, bool(c.report), c.per_frame) == (python.sending.frame_id, python.sending.report,
+                                                         python.per_frame)

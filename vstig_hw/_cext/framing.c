@@ -265,6 +265,19 @@ static PyObject *Receiver_reset(vx_receiver_t *self, PyObject *unused) {
     Py_RETURN_NONE;
 }
 
+/* XBee: the 64-bit source of the last unit's messages (what Node._arrive's sender_of says), or None. */
+static PyObject *Receiver_get_sender(vx_receiver_t *self, void *closure) {
+    (void)closure;
+    if (!self->rx.has_sender) Py_RETURN_NONE;
+    return PyLong_FromUnsignedLongLong(self->rx.sender);
+}
+
+static PyGetSetDef Receiver_getset[] = {
+    {"sender", (getter)Receiver_get_sender, NULL, "XBee: the sender of the last unit fed (its 64-bit source), or None.",
+     NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
 static PyMethodDef Receiver_methods[] = {
     {"feed", (PyCFunction)Receiver_feed, METH_O, "The messages this unit completes; drops counted in `drops`."},
     {"tick", (PyCFunction)Receiver_tick, METH_NOARGS, "One control period passed (expires epuck4 fragments)."},
@@ -284,6 +297,7 @@ PyTypeObject vx_ReceiverType = {
     .tp_traverse = (traverseproc)Receiver_traverse,
     .tp_clear = (inquiry)Receiver_clear,
     .tp_methods = Receiver_methods,
+    .tp_getset = Receiver_getset,
 };
 
 /* ---- encoding -------------------------------------------------------------------------- */
