@@ -72,6 +72,8 @@ uint8_t vstig_xbee_next(vstig_xbee_rx_t *rx);
 uint8_t vstig_xbee_flush(vstig_xbee_rx_t *rx);
 /* Forget everything held (a reopened port); the drops stay. */
 void vstig_xbee_rx_reset(vstig_xbee_rx_t *rx);
+/* Something came since the last frame: part of one, or bytes skipped (a run the line going quiet ends). */
+#define vstig_xbee_holding(rx) ((rx)->head != (rx)->avail || (rx)->counted)
 #define vstig_xbee_frame_data(rx) ((const uint8_t *)(rx)->data + 2)
 #define vstig_xbee_frame_len(rx) ((uint16_t)((rx)->got - 3u))
 #define vstig_xbee_wire(rx) ((const uint8_t *)(rx)->raw + (rx)->wire_at)

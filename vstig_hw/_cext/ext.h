@@ -27,7 +27,8 @@ typedef struct {
     PyTypeObject *entry;   /* vstig_hw.engine.Entry: (value, timestamp, robot) */
     PyObject *outcomes;    /* tuple of vstig_hw.engine.Outcome, by value */
     PyObject *rules;       /* tuple: higher_robot_wins, larger_value_wins, sum_merge (their C twins run) */
-    PyObject *drop_names;  /* tuple of str: "drop_" + SPEC's name, by vstig_drop_t */
+    PyObject *drop_names;  /* tuple of str: SPEC's name, by vstig_drop_t (a framing's drops) */
+    PyObject *device_drop_names; /* the same with "drop_" before it (a transport's counters: XBee's cutting) */
     PyObject *names;       /* dict of interned counter names (str -> str) */
 } vx_python_t;
 
@@ -60,8 +61,10 @@ int vx_msg_of(PyObject *obj, vstig_msg_t *msg);
  * ValueError "<name> must be an integer in 0..<limit>, got <repr>". */
 long vx_field(const char *name, long limit, PyObject *value);
 
-/* Adds what `drops` counted to counters["drop_<reason>"] and clears it; -1 on failure. */
+/* Adds what `drops` counted to a framing's counters[reason] and clears it; -1 on failure. */
 int vx_harvest_drops(vstig_drops_t *drops, PyObject *counters);
+/* The same into a transport's counters["drop_<reason>"]. */
+int vx_harvest_device_drops(vstig_drops_t *drops, PyObject *counters);
 
 extern PyTypeObject vx_EngineType;
 extern PyTypeObject vx_JumpGuardType;

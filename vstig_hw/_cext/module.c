@@ -122,7 +122,7 @@ long vx_field(const char *name, long limit, PyObject *value) {
     return n;
 }
 
-int vx_harvest_drops(vstig_drops_t *drops, PyObject *counters) {
+static int harvest(vstig_drops_t *drops, PyObject *counters, PyObject *names) {
     static const vstig_drops_t none;
     int reason;
     if (memcmp(drops, &none, sizeof none) == 0) return 0; /* the common case: a read with nothing dropped */
@@ -130,9 +130,15 @@ int vx_harvest_drops(vstig_drops_t *drops, PyObject *counters) {
         uint16_t n = drops->count[reason];
         if (n == 0) continue;
         drops->count[reason] = 0;
-        if (vx_count(counters, PyTuple_GET_ITEM(vx_py.drop_names, reason), n) < 0) return -1;
+        if (vx_count(counters, PyTuple_GET_ITEM(names, reason), n) < 0) return -1;
     }
     return 0;
+}
+
+int vx_harvest_drops(vstig_drops_t *drops, PyObject *counters) { return harvest(drops, counters, vx_py.drop_names); }
+
+int vx_harvest_device_drops(vstig_drops_t *drops, PyObject *counters) {
+    return harvest(drops, counters, vx_py.device_drop_names);
 }
 
 static PyObject *setup(PyObject *module, PyObject *args, PyObject *kwds) {
@@ -188,11 +194,16 @@ PyMODINIT_FUNC PyInit__vstig(void) {
     if (module == NULL) return NULL;
     vx_py.names = PyDict_New();
     vx_py.drop_names = PyTuple_New(VSTIG_DROP_REASONS);
-    if (vx_py.names == NULL || vx_py.drop_names == NULL) goto fail;
+    vx_py.device_drop_names = PyTuple_New(VSTIG_DROP_REASONS);
+    if (vx_py.names == NULL || vx_py.drop_names == NULL || vx_py.device_drop_names == NULL) goto fail;
     for (reason = 0; reason < VSTIG_DROP_REASONS; reason++) { /* the framings' drops: SPEC's names */
-        PyObject *name = vx_name(vstig_drop_name((vstig_drop_t)reason));
+        char prefixed[64];
+        PyObject *name = vx_name(vstig_drop_name((vstig_drop_t)reason)), *device_name;
         if (name == NULL) goto fail;
         PyTuple_SET_ITEM(vx_py.drop_names, reason, Py_NewRef(name));
+        PyOS_snprintf(prefixed, sizeof prefixed, "drop_%s", vstig_drop_name((vstig_drop_t)reason));
+        if ((device_name = vx_name(prefixed)) == NULL) goto fail;
+        PyTuple_SET_ITEM(vx_py.device_drop_names, reason, Py_NewRef(device_name));
     }
     if (intern_names() < 0) goto fail;
     if (add_type(module, &vx_EngineType, "Engine") < 0 || add_type(module, &vx_JumpGuardType, "JumpGuard") < 0 ||

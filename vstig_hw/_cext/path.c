@@ -18,6 +18,7 @@
 #include "path.h"
 
 #include <errno.h>
+#include <time.h>
 #include <string.h>
 #include <structmember.h>
 #ifndef _WIN32
@@ -189,9 +190,10 @@ static int spread(vx_path_t *p, Py_ssize_t heard_on, double now, int *held_back,
 /* ---- _deliver ------------------------------------------------------------------------- */
 
 typedef struct {
-    uint8_t kind; /* 0: Python units (a list), 1: bytes, 2: frames */
+    uint8_t kind; /* 0: Python units (a list), 1: bytes, 2: frames, 3: XBee frames (data, each unit_len[i] bytes) */
     PyObject *units;
     const uint8_t *data;
+    const uint16_t *unit_len;
     size_t len;
     const vstig_can_frame_t *frames;
     size_t nframes;
@@ -203,6 +205,10 @@ static int arrive_batch(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
     int status = 0;
     if (batch->kind == 1) {
         status = arrive_bytes(p, index, t, batch->data, batch->len, &heard);
+    } else if (batch->kind == 3) {
+        size_t at = 0;
+        for (i = 0; status == 0 && i < batch->len; at += batch->unit_len[i++])
+            status = arrive_bytes(p, index, t, batch->data + at, batch->unit_len[i], &heard);
     } else if (batch->kind == 2) {
         for (i = 0; status == 0 && i < batch->nframes; i++) status = arrive_frame(p, index, t, &batch->frames[i], &heard);
     } else {
@@ -373,6 +379,30 @@ static int wait_readable(int fd, double timeout) {
     return ready > 0 && (want.revents & (POLLERR | POLLNVAL)) ? 2 : ready;
 }
 
+/* Up to READ_SIZE bytes of a serial fd into link->buf, once it has some within `timeout` (the wait and the read
+ * without the GIL): 1 with *got bytes, 0 nothing yet, -1 the transport's own read must take the turn (the device
+ * failed or was lost: it knows how to tell and reopen; an exception set only when out of memory). */
+static int read_serial(vx_link_t *link, int fd, double timeout, ssize_t *got) {
+    struct pollfd want;
+    int ready;
+    if (link->buf == NULL && (link->buf = PyMem_Malloc(READ_SIZE)) == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    want.fd = fd;
+    want.events = POLLIN;
+    want.revents = 0;
+    *got = -1;
+    Py_BEGIN_ALLOW_THREADS
+    ready = poll(&want, 1, (int)(timeout * 1000.0 + 0.5));
+    if (ready > 0 && !(want.revents & (POLLERR | POLLNVAL))) *got = read(fd, link->buf, READ_SIZE);
+    Py_END_ALLOW_THREADS
+    if (ready == 0 || (ready < 0 && errno == EINTR)) return 0;
+    if (ready < 0 || (want.revents & (POLLERR | POLLNVAL))) return -1;
+    if (*got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) return 0;
+    return *got <= 0 ? -1 : 1; /* readable yet nothing: the transport's read tells it as lost */
+}
+
 /* SerialTransport's read, here: its fd's bytes, counted as its read counts them. NULL result: the transport's
  * own read takes this turn (no fd now, or the device failed: it knows how to tell and reopen). */
 static PyObject *pump_serial(vx_path_t *p, Py_ssize_t index, double timeout) {
@@ -387,22 +417,8 @@ static PyObject *pump_serial(vx_path_t *p, Py_ssize_t index, double timeout) {
     fd = fd_obj == Py_None ? -1 : PyLong_AsLong(fd_obj);
     Py_DECREF(fd_obj);
     if (fd < 0) return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
-    if (link->buf == NULL && (link->buf = PyMem_Malloc(READ_SIZE)) == NULL) return PyErr_NoMemory();
-    {
-        struct pollfd want;
-        want.fd = (int)fd;
-        want.events = POLLIN;
-        want.revents = 0;
-        got = -1;
-        Py_BEGIN_ALLOW_THREADS /* the wait and the read, without the GIL once */
-        ready = poll(&want, 1, (int)(timeout * 1000.0 + 0.5));
-        if (ready > 0 && !(want.revents & (POLLERR | POLLNVAL))) got = read((int)fd, link->buf, READ_SIZE);
-        Py_END_ALLOW_THREADS
-        if (ready == 0 || (ready < 0 && errno == EINTR)) return PyLong_FromLong(0);
-        if (ready < 0 || (want.revents & (POLLERR | POLLNVAL))) return Py_NewRef(Py_None);
-    }
-    if (got < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR)) return PyLong_FromLong(0);
-    if (got <= 0) return Py_NewRef(Py_None); /* readable yet nothing: the transport's read tells it as lost */
+    if ((ready = read_serial(link, (int)fd, timeout, &got)) < 0) return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
+    if (ready == 0) return PyLong_FromLong(0);
     if ((t = wall_clock()) == -1.0 && PyErr_Occurred()) return NULL;
     if (vx_count(link->tcounters, vx_n.rx_bytes, got) < 0 || vx_count(link->tcounters, vx_n.rx, 1) < 0) return NULL;
     batch.kind = 1;
@@ -415,6 +431,114 @@ static PyObject *pump_serial(vx_path_t *p, Py_ssize_t index, double timeout) {
         int status = units == NULL ? -1 : deliver_slow(p, index, t, units);
         Py_XDECREF(units);
         if (status < 0) return NULL;
+    }
+    return PyLong_FromSsize_t(got);
+}
+
+/* CLOCK_MONOTONIC in seconds: when an XBee module's byte came (compared only with itself). */
+static double seconds_now(void) {
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    return (double)now.tv_sec + (double)now.tv_nsec * 1e-9;
+}
+
+/* The frame the link's cutting just completed: the module's own report goes to the transport (`note_report`
+ * counts it), any other is the next unit of link->units. 0, or -1 with an exception. */
+static int xbee_unit(vx_link_t *link, size_t *n, size_t *at) {
+    const vstig_xbee_rx_t *rx = link->stream;
+    const uint8_t *data = vstig_xbee_frame_data(rx);
+    if (data[0] == VSTIG_XBEE_TX_STATUS || data[0] == VSTIG_XBEE_MODEM_STATUS || data[0] == VSTIG_XBEE_AT_RESPONSE) {
+        PyObject *done = PyObject_CallMethod(link->transport, "note_report", "y#", (const char *)data,
+                                             (Py_ssize_t)vstig_xbee_frame_len(rx));
+        Py_XDECREF(done);
+        return done == NULL ? -1 : 0;
+    }
+    memcpy(link->units + *at, vstig_xbee_wire(rx), rx->wire_len);
+    link->unit_len[(*n)++] = rx->wire_len;
+    *at += rx->wire_len;
+    return 0;
+}
+
+/* The units (frames) that len bytes complete, or that the line going quiet (`quiet`) gives; -1 with an exception. */
+static Py_ssize_t xbee_cut(vx_link_t *link, const uint8_t *data, size_t len, int quiet) {
+    vstig_xbee_rx_t *rx = link->stream;
+    size_t i, n = 0, at = 0;
+    for (i = 0; i <= len; i++) {
+        if (i < len ? !vstig_xbee_feed(rx, data[i]) : !(quiet && vstig_xbee_flush(rx))) continue;
+        do {
+            if (xbee_unit(link, &n, &at) < 0) return -1;
+        } while (vstig_xbee_next(rx));
+    }
+    return (Py_ssize_t)n;
+}
+
+#define XBEE_UNITS_ROOM (READ_SIZE + VSTIG_XBEE_WIRE_MAX) /* a read's bytes and the frame they finish */
+
+/* XBeeTransport's read, here (its _read_device and cut): the module's bytes cut into frames by libvstig as its
+ * reader cuts them (drops under its drop_<reason>), the module's reports counted by the transport, every other frame
+ * a unit, counted as its read counts them; a frame still arriving `quiet` s after the last byte is cut short. NULL
+ * result: the transport's own read takes this turn (no fd, the device failed, or a port just opened whose answers at
+ * open left frames, or part of one, with the transport: it hands them on, then the reads are ours). */
+static PyObject *pump_xbee(vx_path_t *p, Py_ssize_t index, double timeout) {
+    vx_link_t *link = &p->links[index];
+    PyObject *fd_obj;
+    Py_ssize_t n, i, at;
+    long fd;
+    ssize_t got = 0;
+    int ready;
+    double t, now;
+    vx_batch_t batch;
+    if (link->stream == NULL) {
+        link->stream = PyMem_Malloc(sizeof *link->stream);
+        link->units = PyMem_Malloc(XBEE_UNITS_ROOM);
+        link->unit_len = PyMem_Malloc((XBEE_UNITS_ROOM / 5u + 1u) * sizeof *link->unit_len); /* 5: the least frame */
+        if (link->stream == NULL || link->units == NULL || link->unit_len == NULL) return PyErr_NoMemory();
+        vstig_xbee_rx_init(link->stream, link->escaped);
+    }
+    if ((fd_obj = PyObject_GetAttr(link->transport, vx_n.a_fd)) == NULL) return NULL;
+    fd = fd_obj == Py_None ? -1 : PyLong_AsLong(fd_obj);
+    Py_DECREF(fd_obj);
+    if (fd < 0) return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
+    if (fd != link->fd) { /* a port opened since: the reads are ours once the transport holds nothing */
+        PyObject *holds = PyObject_CallMethod(link->transport, "holds", NULL);
+        int held = holds == NULL ? -1 : PyObject_IsTrue(holds);
+        Py_XDECREF(holds);
+        if (held != 0) return held < 0 ? NULL : Py_NewRef(Py_None);
+        vstig_xbee_rx_reset(link->stream);
+        link->fd = (int)fd;
+    }
+    if ((ready = read_serial(link, (int)fd, timeout, &got)) < 0) {
+        link->fd = -1; /* the transport's read takes over: what it reads is its own until it holds nothing */
+        return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
+    }
+    now = seconds_now();
+    if (ready == 0) {
+        if (!vstig_xbee_holding(link->stream) || now - link->last_byte <= link->quiet) return PyLong_FromLong(0);
+        n = xbee_cut(link, NULL, 0, 1);
+    } else {
+        link->last_byte = now;
+        if (vx_count(link->tcounters, vx_n.rx_bytes, got) < 0) return NULL;
+        n = xbee_cut(link, link->buf, (size_t)got, 0);
+    }
+    if (n < 0 || vx_harvest_device_drops(&link->stream->drops, link->tcounters) < 0) return NULL;
+    if (n == 0) return PyLong_FromSsize_t(got);
+    if (vx_count(link->tcounters, vx_n.rx, n) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred())) return NULL;
+    batch.kind = 3;
+    batch.data = link->units;
+    batch.unit_len = link->unit_len;
+    batch.len = (size_t)n;
+    ready = deliver_fast(p, index, t, &batch, NULL);
+    if (ready < 0) return NULL;
+    if (ready == 0) {
+        PyObject *units = PyList_New(n);
+        for (i = 0, at = 0; units != NULL && i < n; at += link->unit_len[i++]) {
+            PyObject *unit = PyBytes_FromStringAndSize((const char *)link->units + at, link->unit_len[i]);
+            if (unit == NULL) Py_CLEAR(units);
+            else PyList_SET_ITEM(units, i, unit);
+        }
+        ready = units == NULL ? -1 : deliver_slow(p, index, t, units);
+        Py_XDECREF(units);
+        if (ready < 0) return NULL;
     }
     return PyLong_FromSsize_t(got);
 }
@@ -584,6 +708,19 @@ static int intern(void) {
     return 0;
 }
 
+/* An XBee transport's API mode and quiet time (`api`, `quiet_after`); 0, or -1 with an exception. */
+static int xbee_settings(vx_link_t *link) {
+    PyObject *api = PyObject_GetAttrString(link->transport, "api"),
+             *quiet = api == NULL ? NULL : PyObject_GetAttrString(link->transport, "quiet_after");
+    long mode = api == NULL ? -1 : PyLong_AsLong(api);
+    link->quiet = quiet == NULL ? -1.0 : PyFloat_AsDouble(quiet);
+    Py_XDECREF(api);
+    Py_XDECREF(quiet);
+    if (PyErr_Occurred()) return -1;
+    link->escaped = (uint8_t)(mode == 2);
+    return 0;
+}
+
 static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     static char *kwlist[] = {"node", "lock", "deliver", "links", "receivers", "reads", "part", "guard", "outlets",
                              "listeners", "delivered", "can_message", NULL};
@@ -654,6 +791,10 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
             Py_DECREF(self);
             return NULL;
         }
+        if (link->reads == VX_READ_XBEE && xbee_settings(link) < 0) {
+            Py_DECREF(self);
+            return NULL;
+        }
     }
     return (PyObject *)self;
 }
@@ -703,7 +844,12 @@ static void Path_dealloc(vx_path_t *self) {
     Py_ssize_t i;
     PyObject_GC_UnTrack(self);
     Path_clear(self);
-    for (i = 0; self->links != NULL && i < self->nlinks; i++) PyMem_Free(self->links[i].buf);
+    for (i = 0; self->links != NULL && i < self->nlinks; i++) {
+        PyMem_Free(self->links[i].buf);
+        PyMem_Free(self->links[i].stream);
+        PyMem_Free(self->links[i].units);
+        PyMem_Free(self->links[i].unit_len);
+    }
     PyMem_Free(self->links);
     PyMem_Free(self->msgs);
     Py_TYPE(self)->tp_free((PyObject *)self);
@@ -741,6 +887,8 @@ static PyObject *Path_pump_at(vx_path_t *self, Py_ssize_t index, double timeout)
         return pump_serial(self, index, timeout);
     case VX_READ_SOCKETCAN:
         return pump_socketcan(self, index, timeout);
+    case VX_READ_XBEE:
+        return pump_xbee(self, index, timeout);
     default:
         break;
     }

@@ -7,6 +7,7 @@
 #define VX_READ_PYTHON 0u    /* units come from the link's own read (transport.read), as Python objects */
 #define VX_READ_SERIAL 1u    /* the serial port's fd is read here */
 #define VX_READ_SOCKETCAN 2u /* the SocketCAN socket is read here */
+#define VX_READ_XBEE 3u      /* an XBee module's serial fd is read and cut into frames here */
 
 typedef struct {
     uint8_t reads;           /* VX_READ_* */
@@ -16,6 +17,11 @@ typedef struct {
     int fd;
     double polled;           /* SocketCAN: when the bus's own drop counts were last polled */
     uint8_t *buf;            /* serial: a read's bytes (each link's reader thread reads into its own) */
+    vstig_xbee_rx_t *stream; /* XBee: the transport's cutting of its module's bytes into frames */
+    uint8_t *units;          /* XBee: the frames one read completed, as on the wire, back to back */
+    uint16_t *unit_len;      /* and their sizes */
+    double last_byte, quiet; /* XBee: when a byte last came; a frame still arriving after `quiet` s never will */
+    uint8_t escaped;         /* XBee: API mode 2 */
 } vx_link_t;
 
 typedef struct {

@@ -201,8 +201,9 @@ class XBeeStreamReader:
 
     @property
     def holding(self) -> bool:
-        """Bytes are waiting: part of a frame, or noise."""
-        return bool(self._buf)
+        """Something came since the last frame: part of one, or bytes skipped (a run of noise, a bad frame's remains,
+        which the line going quiet ends: `flush`)."""
+        return bool(self._buf) or self._counted
 
     def feed(self, chunk: bytes | bytearray | memoryview) -> list[tuple[bytes, bytes]]:
         self._buf += chunk

@@ -15,9 +15,9 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   life, whichever side delivers a batch;
 * `Path`, the delivery (Node._deliver): one call per read. Links on a serial port
   or a SocketCAN bus are read by it (`pump`) and their writes go straight to the
-  device while its writer is idle. An XBee link's writes do too, but its reads are
-  its transport's (it cuts frames and keeps the module's own reports), handed to
-  the delivery a batch of whole frames at a time.
+  device while its writer is idle. An XBee link is read as its transport reads it:
+  its module's bytes cut into frames (libvstig's), the module's own reports handed
+  to the transport, one unit a frame.
 
 Everything else (zenoh, dialects, XbeeMav's packets, the overhead controller,
 blabbermouth...) takes the Python path through the same parts. What decides which links the
@@ -128,11 +128,13 @@ def encoder_for(link: Link[Any]) -> Encoder | None:
 
 
 def reads_for(link: Link[Any]) -> int:
-    """How the compiled delivery reads the link: 1 a serial port's fd, 2 a SocketCAN socket, 0 through its
-    transport's own read."""
+    """How the compiled delivery reads the link: 1 a serial port's fd, 2 a SocketCAN socket, 3 an XBee module's
+    serial fd (cut into frames as its transport cuts them), 0 through its transport's own read."""
     transport = link.transport
     if type(transport) is SerialTransport:
         return 1  # while the port has an fd (a device or a pty); pump hands socket:// and outages back
+    if type(transport) is XBeeTransport:
+        return 3  # likewise, and while the transport holds nothing it read at open
     if _is(transport, "vstig_hw.transports.can", "CanTransport") and getattr(transport, "interface", "") == "socketcan":
         return 2
     return 0
@@ -140,9 +142,7 @@ def reads_for(link: Link[Any]) -> int:
 
 def port_for(link: Link[Any]) -> str:
     """Where the compiled outlet writes while the link's writer is idle: the device itself, or the writer."""
-    if type(link.transport) is XBeeTransport:
-        return "serial"  # its writes are a serial port's: the frames as the Encoder makes them
-    return ("python", "serial", "socketcan")[reads_for(link)]
+    return ("python", "serial", "socketcan", "serial")[reads_for(link)]  # an XBee module's writes: a serial port's
 
 
 def jump_guard(guard: Guard | None) -> Guard | None:

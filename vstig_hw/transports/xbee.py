@@ -71,6 +71,7 @@ class XBeeTransport(SerialTransport):
     """Transport[bytes] whose units are whole XBee API frames (see the module docstring)."""
 
     reopen_on_write = False  # opening asks the module and waits for its answers: the reader thread does it
+    quiet_after = QUIET  # (the compiled data path, which may read the module's bytes itself, cuts short as we do)
 
     def __init__(self, port: str, baudrate: int = 9600, *, api: int = 1, at_timeout: float = AT_TIMEOUT,
                  on_module: Callable[[ModuleInfo], None] | None = None, **options: Any) -> None:
@@ -112,7 +113,7 @@ class XBeeTransport(SerialTransport):
         if chunks:
             self._last_byte = time.monotonic()
             return self.cut(chunks[0])
-        if self._reader.holding and time.monotonic() - self._last_byte > QUIET:
+        if self._reader.holding and time.monotonic() - self._last_byte > self.quiet_after:
             return self.quiet()
         return []
 
@@ -164,21 +165,26 @@ class XBeeTransport(SerialTransport):
         address = None if high is None or low is None else high << 32 | low
         return ModuleInfo(address=address, max_payload=_number(answers.get("NP")), api_mode=mode)
 
+    def holds(self) -> bool:
+        """What this transport's reads took is not all handed on: frames that came with the answers at open, or
+        part of a frame (the compiled data path, which may read the module's bytes itself, waits for none)."""
+        return bool(self._held) or self._reader.holding
+
+    def note_report(self, data: bytes) -> bool:
+        """Count the module's own report whose frame data are `data` (Transmit Status per delivery status, Modem
+        Status per event; an AT answer after open: nothing asked it); False for any other frame (a unit)."""
+        kind = data[0]
+        if kind == TX_STATUS:
+            if len(data) >= 6:
+                self.counters[delivery_counter(data[5])] += 1
+        elif kind == MODEM_STATUS:
+            if len(data) >= 2:
+                self.counters[modem_counter(data[1])] += 1
+        return kind in _REPORTS
+
     def _units(self, frames: list[tuple[bytes, bytes]]) -> list[bytes]:
         """The frames the framing gets; the module's own reports counted here."""
-        units = []
-        counters = self.counters
-        for wire, data in frames:
-            kind = data[0]
-            if kind == TX_STATUS:
-                if len(data) >= 6:
-                    counters[delivery_counter(data[5])] += 1
-            elif kind == MODEM_STATUS:
-                if len(data) >= 2:
-                    counters[modem_counter(data[1])] += 1
-            elif kind != AT_RESPONSE:  # an AT answer after open: nothing asked it
-                units.append(wire)
-        return units
+        return [wire for wire, data in frames if not self.note_report(data)]
 
 
 def _number(value: bytes | None) -> int | None:
