@@ -174,12 +174,10 @@ class XBeeTransport(SerialTransport):
         """Count the module's own report whose frame data are `data` (Transmit Status per delivery status, Modem
         Status per event; an AT answer after open: nothing asked it); False for any other frame (a unit)."""
         kind = data[0]
-        if kind == TX_STATUS:
-            if len(data) >= 6:
-                self.counters[delivery_counter(data[5])] += 1
-        elif kind == MODEM_STATUS:
-            if len(data) >= 2:
-                self.counters[modem_counter(data[1])] += 1
+        if kind == TX_STATUS and len(data) >= 6:
+            self.counters[delivery_counter(data[5])] += 1
+        elif kind == MODEM_STATUS and len(data) >= 2:
+            self.counters[modem_counter(data[1])] += 1
         return kind in _REPORTS
 
     def _units(self, frames: list[tuple[bytes, bytes]]) -> list[bytes]:
