@@ -123,11 +123,12 @@ def can_frames(draw: st.DrawFn) -> can.Message:
                        is_error_frame=draw(st.integers(0, 19)) == 0, data=bytes(data))
 
 
-def xbee_stream(rng: random.Random, escaped: bool, frames: int = 12) -> bytes:
+def xbee_stream(rng: random.Random, escaped: bool, frames: int = 12,
+                types: tuple[int, ...] = (0x95, 0x10, 0x90)) -> bytes:
     """What a module hands its host, hostile: Receive Packets from a few modules (one to many messages, the
     bytes a mode-2 module escapes among them), the module's own reports, frame types a link does not use,
-    RF data that are not whole messages, lengths of 0 and above the bound, then `noisy`'s corruption and cuts,
-    escapes gone wrong and stray 0x7E/0x7D/0x11/0x13 bytes."""
+    RF data that are not whole messages (frame `types`), lengths of 0 and above the bound, then `noisy`'s
+    corruption and cuts, escapes gone wrong and stray 0x7E/0x7D/0x11/0x13 bytes."""
     from vstig_hw.framing.xbee import api_frame, receive_packet
 
     special = (0x7E, 0x7D, 0x11, 0x13)
@@ -141,7 +142,7 @@ def xbee_stream(rng: random.Random, escaped: bool, frames: int = 12) -> bytes:
         elif roll < 0.7:
             data = bytes((rng.choice((0x8B, 0x8A, 0x88)),)) + rng.randbytes(rng.randrange(1, 8))  # reports
         elif roll < 0.8:
-            data = bytes((rng.choice((0x95, 0x10, 0x90)),)) + rng.randbytes(rng.randrange(0, 30))
+            data = bytes((rng.choice(types),)) + rng.randbytes(rng.randrange(0, 30))
         else:
             units.append(b"\x7e" + rng.choice((b"\x00\x00", b"\x02\x01", b"\x7d\x31")) + rng.randbytes(4))
             continue

@@ -11,7 +11,7 @@ static uint8_t special(uint8_t byte) { return (uint8_t)(byte == 0x7Eu || byte ==
 void vstig_xbee_rx_reset(vstig_xbee_rx_t *rx) {
     rx->head = rx->pos = rx->avail = 0;
     rx->got = 0;
-    rx->in_frame = rx->escaping = rx->raw_special = 0;
+    rx->in_frame = rx->escaping = 0;
     rx->counted = 0;
     rx->final = 0;
 }
@@ -45,10 +45,6 @@ static uint8_t take(vstig_xbee_rx_t *rx, uint8_t byte) {
         return 0;
     }
     if (rx->got < length + 3u) return 0;
-    if (rx->raw_special) { /* a byte the module escapes came raw: not a mode-2 frame */
-        refuse(rx, VSTIG_DROP_ESCAPE);
-        return 0;
-    }
     for (i = 2; i < rx->got; i++) sum = (uint8_t)(sum + rx->data[i]);
     if (sum != 0xFFu) {
         refuse(rx, VSTIG_DROP_CHECKSUM);
@@ -82,7 +78,7 @@ static uint8_t scan(vstig_xbee_rx_t *rx) {
                 rx->head = (uint16_t)(rx->pos - 1u);
                 rx->in_frame = 1;
                 rx->got = 0;
-                rx->escaping = rx->raw_special = 0;
+                rx->escaping = 0;
             } else {
                 if (!rx->counted) vstig_drops_count(&rx->drops, VSTIG_DROP_NOISE); /* one drop per run */
                 rx->counted = 1;
@@ -94,17 +90,20 @@ static uint8_t scan(vstig_xbee_rx_t *rx) {
             if (take(rx, byte)) return 1;
             continue;
         }
-        if (byte == VSTIG_XBEE_START) { /* mode 2: a 0x7E always starts a frame (searched again from its 0x7E) */
-            refuse(rx, VSTIG_DROP_TRUNCATED);
-        } else if (rx->escaping) {
+        /* Mode 2: a 0x7E always starts a frame (searched again from it); SPEC.md 6.6's order puts a bad escape
+         * (0x7D before a byte it never escapes, 0x7E included; a 0x11 or 0x13 left raw) before `truncated`. */
+        if (rx->escaping) {
             rx->escaping = 0;
             if (!special((uint8_t)(byte ^ FLIP))) refuse(rx, VSTIG_DROP_ESCAPE);
             else if (take(rx, (uint8_t)(byte ^ FLIP))) return 1;
+        } else if (byte == VSTIG_XBEE_START) {
+            refuse(rx, VSTIG_DROP_TRUNCATED);
         } else if (byte == ESCAPE) {
             rx->escaping = 1;
-        } else {
-            if (byte == 0x11u || byte == 0x13u) rx->raw_special = 1;
-            if (take(rx, byte)) return 1;
+        } else if (byte == 0x11u || byte == 0x13u) {
+            refuse(rx, VSTIG_DROP_ESCAPE);
+        } else if (take(rx, byte)) {
+            return 1;
         }
     }
 }

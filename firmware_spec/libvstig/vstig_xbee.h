@@ -10,7 +10,7 @@
  *
  * The receiver is fed one byte at a time and resynchronises at the next 0x7E after anything
  * that is not a frame, counting one drop per bad unit: noise (a run of bytes outside any frame,
- * once), escape (mode 2: 0x7D before a byte it never escapes, or 0x7E/0x7D/0x11/0x13 left raw),
+ * once), escape (mode 2: 0x7D before a byte it never escapes, a 0x7E included, or 0x11/0x13 left raw),
  * frame_length (0 or above VSTIG_XBEE_MAX_FRAME_DATA), truncated (mode 2: the next 0x7E came
  * first; either mode: vstig_xbee_flush, the line went quiet) and checksum. In mode 1 a 0x7E
  * may be data, so the bytes of a bad frame are searched again for one: a fed byte can complete
@@ -55,7 +55,6 @@ typedef struct {
     uint8_t escaped;  /* API mode 2 */
     uint8_t in_frame; /* a 0x7E was seen at raw[head] */
     uint8_t escaping; /* mode 2: the last byte was 0x7D */
-    uint8_t raw_special; /* mode 2: a byte the module escapes came raw */
     uint8_t counted;  /* the bytes being skipped are already counted (noise, or a bad frame's remains) */
     uint8_t final;    /* vstig_xbee_flush: what is still arriving never will */
     vstig_drops_t drops;

@@ -860,6 +860,8 @@ def xbee_vectors() -> dict[str, object]:
                          [(XBEE_SOURCE, [a, escapes])], {}),
             _xbee_stream("the stream ends inside a frame (the line went quiet)", mode, good + good2[:9],
                          [(XBEE_SOURCE, [a, escapes])], {"truncated": 1}),
+            _xbee_stream("bytes after a bad frame are its remains, not noise", mode, bad_sum + b"junk" + good,
+                         [(XBEE_SOURCE, [a, escapes])], {"checksum": 1}),
         ]
     good2 = xbee_frame(rx, True)
     streams += [
@@ -869,6 +871,10 @@ def xbee_vectors() -> dict[str, object]:
                      [(XBEE_SOURCE, [a, escapes])], {"escape": 1}),
         _xbee_stream("mode 2: 0x11 left unescaped", 2, bytes.fromhex("7e0002231174") + good2,
                      [(XBEE_SOURCE, [a, escapes])], {"escape": 1}),
+        _xbee_stream("mode 2: 0x7D before the next 0x7E is a bad escape, not a cut", 2,
+                     bytes.fromhex("7e00057d") + good2, [(XBEE_SOURCE, [a, escapes])], {"escape": 1}),
+        _xbee_stream("mode 2: 0x13 left raw in a frame cut short is a bad escape", 2,
+                     bytes.fromhex("7e000590130102") + good2, [(XBEE_SOURCE, [a, escapes])], {"escape": 1}),
         _xbee_stream("mode 1: 0x7E, 0x7D, 0x11, 0x13 inside a frame are data", 1, xbee_frame(rx, False),
                      [(XBEE_SOURCE, [a, escapes])], {}),
         _xbee_stream("mode 1: a corrupted length claims 300 bytes; the frames inside them are still read", 1,
@@ -884,8 +890,8 @@ def xbee_vectors() -> dict[str, object]:
                        "as 0x7D, byte ^ 0x20. `checksums`: Digi's worked examples. `transmit`: what a sender "
                        "writes to its module for these messages (a Transmit Request 0x10, frame id 1, broadcast), "
                        "in both modes. `messages_per_frame`: NP (the module's maximum RF payload) -> messages a "
-                       "frame carries. `streams`: what a module hands its host -> each Receive Packet's sender "
-                       "(64-bit source) and messages, in order, and drops by reason.",
+                       "frame carries (at most 62). `streams`: what a module hands its host -> each Receive "
+                       "Packet's sender (64-bit source) and messages, in order, and drops by reason.",
         "checksums": [
             {"source": "Digi: AT Command NJ", "frame_data": "08014e4a", "api1": "7e000408014e4a5e"},
             {"source": "Digi: Transmit Request 'TxData0A'", "frame_data": "10010013a200400a0127fffe0000"
@@ -895,7 +901,9 @@ def xbee_vectors() -> dict[str, object]:
         ],
         "max_frame_data": XBEE_MAX_FRAME_DATA,
         "transmit": transmit,
-        "messages_per_frame": [{"np": np, "messages": max(1, np // 8)} for np in (5, 8, 64, 73, 84, 100, 256)],
+        # at most 62: a frame's data stay within max_frame_data (14 bytes of header, then the messages)
+        "messages_per_frame": [{"np": np, "messages": max(1, min(np // 8, (XBEE_MAX_FRAME_DATA - 14) // 8))}
+                               for np in (5, 8, 64, 73, 84, 100, 256, 1000)],
         "streams": streams,
     }
 

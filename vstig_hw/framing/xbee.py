@@ -21,7 +21,7 @@ guard, sniff and captures see, then RF data of whole 8-byte messages.
 
 - `noise`: bytes outside any frame (a run of them counts once);
 - `escape`: mode 2 only, a 0x7D followed by a byte that is not an escaped 0x7E, 0x7D,
-  0x11 or 0x13;
+  0x11 or 0x13 (a 0x7E too), or a 0x11 or 0x13 left raw, met before the frame's end;
 - `frame_length`: a length of 0 or above `MAX_FRAME_DATA` (no module sends one: a corrupted
   header);
 - `truncated`: a frame cut short: another frame began (mode 2), or the line went quiet,
@@ -37,6 +37,7 @@ for its header). Everything here is pure: no device, no clock.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -274,44 +275,56 @@ class XBeeStreamReader:
 
     def _escaped_frame_at(self, buf: bytearray, start: int) -> tuple[int, bytes] | str | None:
         # Mode 2: the frame runs at most to the next 0x7E; unescape as far as its length says, no further
-        # (what follows a whole frame is the next unit's business, noise or not).
+        # (what follows a whole frame is the next unit's business, noise or not). SPEC.md 6.6's order: a bad
+        # escape met before the frame's end is `escape`, even if the frame is cut short or its length impossible.
         stop = buf.find(START, start + 1)
+        cut = stop >= 0
         raw = bytes(buf[start + 1:] if stop < 0 else buf[start + 1:stop])
-        head = _unescape_prefix(raw, 2)
+        head = _unescape_prefix(raw, 2, cut)
         if isinstance(head, str):
             return head
         if len(head[0]) < 2:
-            return None if stop < 0 else "truncated"
+            return "truncated" if cut else None
         length = head[0][0] << 8 | head[0][1]
         if not 0 < length <= MAX_FRAME_DATA:
             return "frame_length"
-        found = _unescape_prefix(raw, length + 3)
+        found = _unescape_prefix(raw, length + 3, cut)
         if isinstance(found, str):
             return found
         frame, used = found
         if len(frame) < length + 3:
-            return None if stop < 0 else "truncated"
-        if raw[:used] != escape(frame):  # a byte left raw that a module escapes: not a mode-2 frame
-            return "escape"
+            return "truncated" if cut else None
         if sum(frame[2:]) & 0xFF != 0xFF:
             return "checksum"
         return start + 1 + used, frame[2:-1]
 
 
-def _unescape_prefix(data: bytes, want: int) -> tuple[bytes, int] | str:
+_STUFFING = re.compile(b"[\x7d\x11\x13]")  # an escape, or a byte a mode-2 module never sends raw
+
+
+def _unescape_prefix(data: bytes, want: int, cut: bool) -> tuple[bytes, int] | str:
     """The first `want` bytes of `data` unescaped (fewer if it ends first) and the raw bytes they took; "escape"
-    for a 0x7D before a byte it never escapes (a 0x7D at the very end waits for its byte)."""
+    for a 0x7D before a byte it never escapes, or a 0x11 or 0x13 left raw. A 0x7D at the very end waits for its
+    byte, unless `cut` (a 0x7E follows: 0x7D 0x7E is a bad escape too)."""
     out = bytearray()
     i, end = 0, len(data)
     while len(out) < want and i < end:
-        j = data.find(b"\x7d", i)
-        if j < 0 or j - i >= want - len(out):
+        found = _STUFFING.search(data, i)
+        j = end if found is None else found.start()
+        if j - i >= want - len(out):
             take = min(want - len(out), end - i)
             out += data[i:i + take]
             i += take
             break
         out += data[i:j]
+        if j == end:
+            i = j
+            break
+        if data[j] != ESCAPE:
+            return "escape"
         if j + 1 >= end:
+            if cut:
+                return "escape"
             i = j
             break
         byte = data[j + 1] ^ _FLIP
