@@ -248,3 +248,15 @@ def test_dest_must_be_a_64_bit_address() -> None:
     for bad in (-1, 1 << 64, True, "FFFF"):
         with pytest.raises(ValueError, match="64-bit address"):
             XBeeFraming(bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("escaped", [False, True])
+def test_a_quiet_line_ends_a_run_of_noise_however_long(escaped: bool) -> None:
+    """The transport flushes its reader when the line goes quiet while it holds anything, a run of skipped bytes
+    included: noise after the pause is a new run (the compiled path's cutting does the same)."""
+    reader = XBeeStreamReader(escaped, Counters())
+    for length in (7, 2 * MAX_FRAME_DATA):  # a run its buffer keeps, and one it has let go of
+        reader.feed(b"\x00" * length)
+        assert reader.holding
+        assert reader.flush() == [] and not reader.holding
+    assert reader.drops == Counters({"noise": 2})
