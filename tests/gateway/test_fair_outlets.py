@@ -40,37 +40,49 @@ def heard_keys(observer: can.BusABC) -> list[int]:
 
 
 def test_a_backlog_leaves_evenly_spaced_and_a_quiet_spell_allows_a_burst_again() -> None:
-    window = SendWindow(10, 1.0)  # 10 a second: one every 0.1 s while a backlog lasts
-    assert window.allowance(0.0) == 10
-    window.record(0.0, 10, backlog=True)  # the burst after a quiet spell, and more waiting
-    assert window.allowance(0.5) == 0 and window.next_free() == 1.0  # the window is full until 1.0
-    assert window.allowance(1.0) == PACE_BURST  # the window reopens: a few at once, not all ten
+    window = SendWindow(10, 1.0)  # 10 a second; a backlog leaves one place free (the reserve): one every 1/9 s
+    assert window.reserve == 1 and window.free(0.0) == 10 and window.allowance(0.0) == 9
+    window.record(0.0, 9, backlog=True)  # the burst after a quiet spell, and more waiting
+    assert window.allowance(0.5) == 0 and window.next_free() == 1.0  # full for the backlog until 1.0
+    assert window.free(0.5) == 1 and window.next_free(sparse=True) is None  # a sparse source's place, at once
+    window.record(0.5, 1, backlog=True, sparse=True)
+    assert window.free(0.6) == 0 and window.next_free(sparse=True) == 1.0  # the budget is never exceeded
+    assert window.allowance(1.0) == PACE_BURST  # the window reopens: a few at once, not all nine
     window.record(1.0, PACE_BURST, backlog=True)
-    assert window.allowance(1.05) == 0 and window.next_free() == pytest.approx(1.1)
-    assert window.allowance(1.1) == 1  # then one every 0.1 s
-    window.record(1.1, 1, backlog=False)  # nothing waits any more
-    assert window.allowance(2.5) == 10
+    assert window.allowance(1.05) == 0 and window.next_free() == pytest.approx(1 + 1 / 9)
+    assert window.allowance(1.12) == 1  # then one every 1/9 s
+    window.record(1.12, 1, backlog=False)  # nothing waits any more
+    assert window.allowance(2.5) == 9 and window.free(2.5) == 10
 
 
-def test_a_quiet_sources_message_leaves_next_while_a_flood_waits(bus: str) -> None:
+def test_a_window_keeps_a_sixteenth_of_its_budget_for_sparse_sources() -> None:
+    assert [SendWindow(budget, 1.0).reserve for budget in (None, 1, 3, 4, 31, 32, 64, 1000)] == [0, 0, 0, 1, 1, 2, 4,
+                                                                                                   62]
+
+
+def test_a_quiet_sources_message_leaves_at_once_while_a_flood_waits(bus: str) -> None:
+    """The flood has the window but its reserve: the quiet source's message leaves the moment it comes (at 0.5),
+    not when the window reopens (at 1.0), and the flood gets the rest."""
     observer = can.Bus(interface="virtual", channel=bus)
     link = parse(f"can:virtual:{bus}").build("out", robot_id=100)
     link.open()
     outlet = Outlet(link, budget=10, period=1.0)
     try:
         outlet.push(flood(100), FLOODER)
-        outlet.flush(0.0)  # the first ten of the flood: a burst, the window was quiet
+        assert outlet.flush(0.0) == 1.0  # the first nine of the flood: a burst, the window was quiet
         outlet.push([Message(Op.PUT, 1, 1, 1, 5)], QUIET)
-        assert outlet.flush(0.5) == 1.0  # the window is full until 1.0
+        assert outlet.flush(0.5) == 1.0  # the quiet one's, at once; the flood waits for the window
+        outlet.push([Message(Op.PUT, 2, 1, 1, 5)], QUIET)
+        assert outlet.flush(0.6) == 1.0  # served within the round: no longer sparse, it waits for its turn
         outlet.flush(1.0)
         outlet.close()
         keys = heard_keys(observer)
     finally:
         link.close()
         observer.shutdown()
-    assert keys[:10] == list(range(1000, 1010))
-    assert keys[10:12] == [1010, 1] and len(keys) == 10 + PACE_BURST  # one of the flood's, then the quiet one's
-    assert len(outlet) == 100 - 10 - PACE_BURST + 1
+    assert keys[:10] == [*range(1000, 1009), 1]
+    assert keys[10:] == [1009, 2, 1010, 1011]  # the flood's turn, then the quiet source's
+    assert len(outlet) == 100 - 9 - (PACE_BURST - 1)
 
 
 def test_a_slow_device_holds_a_few_messages_and_the_share_decides_what_it_gets_next() -> None:
@@ -166,9 +178,10 @@ def test_an_answer_belongs_to_the_asker_and_leaves_ahead_of_the_flood_whose_entr
         with node._lock:
             queue = node.outlets[1].queue
             assert len(queue) == 184  # the answer is the flood's pending entry: not queued twice
-            next_two = queue.drain(2)
             rest = queue.drain()
+        heard = heard_keys(robot_b)
     flooder.shutdown()
     robot_b.shutdown()
-    assert [msg.key for msg in next_two] == [1016, 1150]  # the flood's turn, then B's: not 134 of the flood first
-    assert 1150 not in [msg.key for msg in rest] and len(rest) == 182
+    # B's line was empty: the answer left at once, from the window's reserve, not behind 185 of the flood
+    assert heard == [*range(1000, 1015), 1150]
+    assert 1150 not in [msg.key for msg in rest] and len(rest) == 184  # and it left once

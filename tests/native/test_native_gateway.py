@@ -42,19 +42,22 @@ from vstig_hw.transports.base import Transport
 
 
 @EXAMPLES
-@given(budget=st.none() | st.integers(1, 12), period=st.sampled_from([0.1, 1.0, 0.3]),
-       calls=st.lists(st.tuples(st.integers(0, 40), st.integers(0, 9), st.booleans()), max_size=60))
+@given(budget=st.none() | st.integers(1, 40), period=st.sampled_from([0.1, 1.0, 0.3]),
+       calls=st.lists(st.tuples(st.integers(0, 40), st.integers(0, 9), st.booleans(), st.booleans()), max_size=60))
 def test_window_equals_send_window(compiled: ModuleType, budget: int | None, period: float,
-                                   calls: list[tuple[int, int, bool]]) -> None:
+                                   calls: list[tuple[int, int, bool, bool]]) -> None:
+    """Backlogs paced and sparse sources' messages from the reserve: the same answers."""
     python, c = SendWindow(budget, period), compiled.Window(budget, period)
     now = 0.0
-    for step, count, backlog in calls:
+    for step, count, backlog, sparse in calls:
         now += step / 100  # whole hundredths and their sums: the same floats on both sides
         assert c.allowance(now) == python.allowance(now)
-        python.record(now, count, backlog)
-        c.record(now, count, backlog)
+        assert c.free(now) == python.free(now)
+        python.record(now, count, backlog, sparse)
+        c.record(now, count, backlog, sparse)
         assert c.next_free() == python.next_free()
-    assert (c.budget, c.period) == (python.budget, python.period)
+        assert c.next_free(sparse=True) == python.next_free(sparse=True)
+    assert (c.budget, c.period, c.reserve) == (python.budget, python.period, python.reserve)
 
 
 class MemoryTransport(Transport[Any]):

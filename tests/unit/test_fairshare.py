@@ -40,14 +40,108 @@ def test_a_message_waits_for_one_message_of_a_flooder_not_for_its_backlog() -> N
     assert len(queue) == 4999
 
 
-def test_sources_take_turns_one_message_each_and_a_new_one_joins_the_end_of_the_round() -> None:
+def test_sources_take_turns_one_message_each_and_a_sparse_one_goes_first() -> None:
     queue = FairQueue()
     queue.push([put(10), put(11), put(12)], A)
     queue.push([put(20), put(21)], B)
     assert keys(queue.drain(2)) == [10, 20]
-    queue.push([put(30)], LOCAL)  # joins after A and B, whose turns come round again first
-    assert keys(queue.drain()) == [11, 21, 30, 12]
+    queue.push([put(30)], LOCAL)  # its line was empty: ahead of A and B, once, then in its turn
+    assert keys(queue.drain()) == [30, 11, 21, 12]
     assert not queue and queue.sources == 0
+
+
+# -- sparse links (RFC 8290's new flows) --------------------------------------------------
+def test_a_sparse_links_message_leaves_before_a_backlog() -> None:
+    queue = FairQueue()
+    queue.push(flood(5000), H)
+    assert keys(queue.drain(3)) == [1000, 1001, 1002]
+    queue.push([put(1)], A)
+    assert len(queue.sparse) == 1
+    assert keys(queue.drain(2)) == [1, 1003]  # A's first: not after the flood's turn
+
+
+def test_a_link_served_within_the_round_is_sparse_again_only_once_its_turn_came_round() -> None:
+    queue = FairQueue()
+    queue.push(flood(100), H)
+    queue.push(flood(100, 2000), B)
+    queue.push([put(1)], A)
+    assert keys(queue.drain(3)) == [1000, 2000, 1]  # all three sparse, in the order they came
+    queue.push([put(2)], A)  # served within the round: it waits for its turn
+    assert not queue.sparse and keys(queue.drain(3)) == [1001, 2001, 2]
+    assert keys(queue.drain(1)) == [1002]
+    queue.push([put(3)], A)  # its turn (its emptied place) has not come round yet
+    assert not queue.sparse and keys(queue.drain(2)) == [2002, 3]
+    assert keys(queue.drain(3)) == [1003, 2003, 1004]  # A's emptied place came round and passed
+    queue.push([put(4)], A)
+    assert len(queue.sparse) == 1 and keys(queue.drain(1)) == [4]
+
+
+def test_a_source_refilling_its_line_each_time_it_empties_gets_one_message_a_round() -> None:
+    """Becoming sparse at every chance gains nothing: against one backlog, half the messages, as in the round."""
+    queue = FairQueue()
+    queue.push(flood(1000), H)
+    out: list[int] = []
+    for i in range(200):
+        if not queue._lines.get((A, None)):
+            queue.push([put(i + 1)], A)
+        out += keys(queue.drain(1))
+    assert sum(key < 1000 for key in out) <= 101
+
+
+def test_many_sub_sources_of_one_link_each_sending_one_message_share_that_links_turn() -> None:
+    """A flooder opening a fresh session (a sub-source) for every message is not sparse for it: sub-sources split
+    their link's turn, and only a link is sparse."""
+    queue = FairQueue()
+    queue.push([put(i + 1) for i in range(900)], A)
+    out: list[int] = []
+    for session in range(300):
+        queue.push([put(1000 + session, robot=66)], H, f"session-{session}")
+        queue.push([put(2000 + session, robot=66)], H, f"session-{session}-b")
+        out += keys(queue.drain(2))
+    a = [key < 1000 for key in out]
+    assert all(a[1::2]) or all(a[0::2])  # every other message is A's, however many sessions H opens
+    assert not queue.sparse
+
+
+@st.composite
+def link_steps(draw: st.DrawFn) -> list[tuple[int, int, int] | int]:
+    """Steps: (link, sub, how many distinct keys) pushed, or a drain budget."""
+    step = st.one_of(st.tuples(st.integers(-1, 3), st.integers(0, 3), st.integers(1, 4)), st.integers(1, 5))
+    return draw(st.lists(step, max_size=80))
+
+
+@settings(max_examples=300, deadline=None)
+@given(link_steps())
+def test_a_waiting_link_waits_for_at_most_one_message_of_every_other_link(steps: list[tuple[int, int, int] | int]
+                                                                           ) -> None:
+    """Sparse links first does not weaken the round: between two messages of a link that had messages waiting
+    all along, every other link sends at most one; and a sparse link waits only for the sparse links ahead."""
+    queue = FairQueue()
+    waiting = dict.fromkeys(range(-1, 4), 0)
+    since: dict[int, dict[int, int]] = {}  # link waiting all along -> messages of each other link since its last
+    fresh = 0
+    for step in steps:
+        if isinstance(step, int):
+            sparse = list(queue.sparse)
+            out = queue.drain(step)
+            assert [msg.key // 1000 - 2 for msg in out[:len(sparse)]] == sparse[:len(out)]
+            for msg in out:
+                link = msg.key // 1000 - 2
+                waiting[link] -= 1
+                since[link] = {}
+                for other, counts in since.items():
+                    if other != link:
+                        counts[link] = counts.get(link, 0) + 1
+                        assert counts[link] <= 1, (other, link, out)
+                if not waiting[link]:
+                    del since[link]
+        else:
+            link, sub, count = step
+            queue.push([put((link + 2) * 1000 + fresh + i) for i in range(count)], link, sub)  # keys never repeat
+            fresh += count
+            waiting[link] += count
+            since.setdefault(link, {})
+
 
 
 def test_a_links_peers_share_that_links_turn() -> None:
@@ -181,6 +275,14 @@ def test_a_raw_queue_serves_sources_in_turn_and_keeps_every_message_in_order() -
     fifo.push(flood(3), H)
     assert keys(fifo.drain()) == [1, 1000, 1, 1001, 1002]
     assert not fifo
+
+
+def test_a_raw_queue_serves_a_sparse_link_first_too() -> None:
+    fifo = FairFifo(limit=100)
+    fifo.push(flood(50), H)
+    assert keys(fifo.drain(2)) == [1000, 1001]
+    fifo.push([put(1), put(1, ts=2)], A)
+    assert keys(fifo.drain(4)) == [1, 1002, 1, 1003]  # its first message ahead of the backlog, then in turn
 
 
 def test_a_full_raw_queue_drops_the_flooders_oldest_not_another_sources() -> None:

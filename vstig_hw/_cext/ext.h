@@ -38,7 +38,7 @@ extern vx_python_t vx_py;
 typedef struct {
     PyObject *in, *out, *tx, *tx_bytes, *rx, *rx_bytes, *superseded, *drop_overflow, *not_echoed, *drop_write_error,
         *drop_intake, *unsent_at_close, *drop_jump, *dropped_at_stop;
-    PyObject *a_fd, *a_fresh, *a_preamble, *a_device, *a_outage, *a_idle, *a_turns, *a_socket;
+    PyObject *a_fd, *a_fresh, *a_preamble, *a_device, *a_outage, *a_idle, *a_active, *a_sparse, *a_socket;
     PyObject *m_submit, *m_room, *m_push, *m_drain, *m_close, *m_units_of, *m_fileno, *m_acquire, *m_release;
 } vx_names_t;
 

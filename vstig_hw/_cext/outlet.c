@@ -272,11 +272,21 @@ static int hand(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n, int idle) {
 /* ---- the share and the window: Outlet's push and flush ------------------------------------- */
 
 static int note_backlog(vx_outlet_t *o) {
-    PyObject *turns = PyObject_GetAttr(o->queue, vx_n.a_turns);
-    if (turns == NULL) return -1;
-    o->backlog = PyObject_IsTrue(turns);
-    Py_DECREF(turns);
+    PyObject *active = PyObject_GetAttr(o->queue, vx_n.a_active);
+    if (active == NULL) return -1;
+    o->backlog = PyObject_IsTrue(active);
+    Py_DECREF(active);
     return o->backlog < 0 ? -1 : 0;
+}
+
+/* len(queue.sparse): the sparse sources waiting, each first in the lines with one message; -1 with an exception */
+static Py_ssize_t sparse_waiting(vx_outlet_t *o) {
+    PyObject *sparse = PyObject_GetAttr(o->queue, vx_n.a_sparse);
+    Py_ssize_t count;
+    if (sparse == NULL) return -1;
+    count = PyObject_Length(sparse);
+    Py_DECREF(sparse);
+    return count;
 }
 
 /* Outlet._enqueue: into the source's line; what the lines do not take is counted. */
@@ -395,11 +405,11 @@ int vx_outlet_flush(vx_outlet_t *o, double now, double *retry) {
     if (o->held_len) { /* nothing else waits: all of it now, as it came, if the window and the writer take it all */
         long r = room(o, &idle);
         if (r < 0) return -1;
-        if ((long)o->held_len <= r && (window->budget == 0 || (long)o->held_len <= vx_window_allowance(window, now))) {
+        if ((long)o->held_len <= r && (window->budget == 0 || (long)o->held_len <= vx_window_free(window, now))) {
             size_t n = o->held_len;
             o->held_len = 0;
             Py_CLEAR(o->held_sub);
-            vx_window_record(window, now, (long)n, 0);
+            vx_window_record(window, now, (long)n, 0, 0);
             return hand(o, o->held, n, idle);
         }
         if (enqueue_held(o) < 0) return -1;
@@ -408,19 +418,27 @@ int vx_outlet_flush(vx_outlet_t *o, double now, double *retry) {
         vstig_msg_t *batch;
         size_t n;
         int status;
+        Py_ssize_t sparse = 0;
         long allowed = room(o, &idle);
         if (allowed < 0) return -1;
         if (allowed == 0) return 0; /* the writer calls on_room when it has room again */
         if (window->budget != 0) {
-            long free_ = vx_window_allowance(window, now);
+            long free_;
+            if ((sparse = sparse_waiting(o)) < 0) return -1;
+            if (sparse) { /* sparse sources' messages, first in the lines: at once, the budget allowing */
+                if (sparse < allowed) allowed = (long)sparse;
+                free_ = vx_window_free(window, now);
+            } else {
+                free_ = vx_window_allowance(window, now);
+            }
             if (free_ < allowed) allowed = free_;
-            if (allowed <= 0) return vx_window_next_free(window, retry);
+            if (allowed <= 0) return vx_window_next_free(window, sparse != 0, retry);
         }
         if (drain_lines(o, allowed, &batch, &n) < 0 || note_backlog(o) < 0) {
             PyMem_Free(batch);
             return -1;
         }
-        vx_window_record(window, now, (long)n, o->backlog);
+        vx_window_record(window, now, (long)n, o->backlog, sparse != 0);
         status = hand(o, batch, n, idle);
         PyMem_Free(batch);
         if (status < 0) return -1;

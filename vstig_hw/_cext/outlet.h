@@ -29,7 +29,7 @@ typedef struct {
     PyObject *not_queued;       /* the counter of a message the lines did not take */
     int keep_all;
     long hold;                  /* messages the writer may hold for a slow device (LinkWriter.hold) */
-    int backlog;                /* the lines have messages: what `queue.turns` said after the last call on it */
+    int backlog;                /* the lines have messages: what `queue.active` said after the last call on it */
     vstig_msg_t *held;          /* one push's messages, pushed while nothing waited: sent as they came */
     size_t held_len, held_cap;
     long held_link;

@@ -6,7 +6,8 @@
 
 #include <structmember.h>
 
-#define PACE_BURST 4.0 /* SendWindow's PACE_BURST */
+#define PACE_BURST 4.0   /* SendWindow's PACE_BURST */
+#define RESERVE_SHARE 16 /* SendWindow's RESERVE_SHARE */
 
 static double oldest(const vx_window_t *w) { return w->sent[w->head]; }
 
@@ -22,24 +23,31 @@ static void append(vx_window_t *w, double when) {
     w->len++;
 }
 
+long vx_window_free(vx_window_t *w, double now) {
+    if (w->budget == 0) return 1L << 30;
+    while (w->len && oldest(w) <= now - w->period) pop_oldest(w);
+    return w->budget - w->len;
+}
+
 long vx_window_allowance(vx_window_t *w, double now) {
     long free_, paced;
     if (w->budget == 0) return 1L << 30;
-    while (w->len && oldest(w) <= now - w->period) pop_oldest(w);
-    free_ = w->budget - w->len;
+    free_ = vx_window_free(w, now) - w->reserve;
     if (!w->paced) return free_;
     paced = (long)((now - w->paced_to) / w->spacing); /* int() truncates toward zero */
     if (paced > (long)PACE_BURST) paced = (long)PACE_BURST;
     return free_ < paced ? free_ : paced;
 }
 
-void vx_window_record(vx_window_t *w, double now, long count, int backlog) {
+void vx_window_record(vx_window_t *w, double now, long count, int backlog, int sparse) {
     long i, n;
     if (w->budget == 0) return;
     n = count < w->budget ? count : w->budget;
     for (i = 0; i < n; i++) append(w, now);
     if (!backlog) {
         w->paced = 0;
+    } else if (sparse) { /* from the reserve: the backlog's pace stays where it was */
+        return;
     } else if (!w->paced) { /* a backlog starts: what just left was the burst */
         w->paced = 1;
         w->paced_to = now;
@@ -49,12 +57,18 @@ void vx_window_record(vx_window_t *w, double now, long count, int backlog) {
     }
 }
 
-int vx_window_next_free(const vx_window_t *w, double *when) {
+int vx_window_next_free(const vx_window_t *w, int sparse, double *when) {
+    long over;
     int opens;
     double at = 0.0, paced;
     if (w->budget == 0) return 0;
-    opens = w->len >= w->budget;
-    if (opens) at = oldest(w) + w->period;
+    if (sparse) {
+        *when = oldest(w) + w->period;
+        return w->len >= w->budget;
+    }
+    over = w->len - (w->budget - w->reserve); /* the backlog has a place once over + 1 have expired */
+    opens = over >= 0;
+    if (opens) at = w->sent[(w->head + over) % w->cap] + w->period;
     if (!w->paced) {
         *when = at;
         return opens;
@@ -83,7 +97,8 @@ static PyObject *Window_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
     if (self == NULL) return NULL;
     self->budget = budget;
     self->period = period;
-    self->spacing = budget ? period / (double)budget : 0.0;
+    self->reserve = budget < 4 ? 0 : budget / RESERVE_SHARE > 1 ? budget / RESERVE_SHARE : 1;
+    self->spacing = budget ? period / (double)(budget - self->reserve) : 0.0;
     self->cap = budget ? budget : 1;
     self->sent = PyMem_Malloc((size_t)self->cap * sizeof *self->sent);
     self->budget_obj = Py_NewRef(budget_obj);
@@ -102,6 +117,12 @@ static void Window_dealloc(vx_window_t *self) {
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
+static PyObject *Window_free(vx_window_t *self, PyObject *now) {
+    double t = PyFloat_AsDouble(now);
+    if (t == -1.0 && PyErr_Occurred()) return NULL;
+    return PyLong_FromLong(vx_window_free(self, t));
+}
+
 static PyObject *Window_allowance(vx_window_t *self, PyObject *now) {
     double t = PyFloat_AsDouble(now);
     if (t == -1.0 && PyErr_Occurred()) return NULL;
@@ -109,27 +130,36 @@ static PyObject *Window_allowance(vx_window_t *self, PyObject *now) {
 }
 
 static PyObject *Window_record(vx_window_t *self, PyObject *args, PyObject *kwds) {
-    static char *kwlist[] = {"now", "count", "backlog", NULL};
+    static char *kwlist[] = {"now", "count", "backlog", "sparse", NULL};
     double now;
     long count;
-    int backlog = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "dl|p", kwlist, &now, &count, &backlog)) return NULL;
-    vx_window_record(self, now, count, backlog);
+    int backlog = 0, sparse = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "dl|pp", kwlist, &now, &count, &backlog, &sparse)) return NULL;
+    vx_window_record(self, now, count, backlog, sparse);
     Py_RETURN_NONE;
 }
 
-static PyObject *Window_next_free(vx_window_t *self, PyObject *unused) {
+static PyObject *Window_next_free(vx_window_t *self, PyObject *args, PyObject *kwds) {
+    static char *kwlist[] = {"sparse", NULL};
     double when;
-    (void)unused;
-    if (!vx_window_next_free(self, &when)) Py_RETURN_NONE;
+    int sparse = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "|p", kwlist, &sparse)) return NULL;
+    if (!vx_window_next_free(self, sparse, &when)) Py_RETURN_NONE;
     return PyFloat_FromDouble(when);
 }
 
+static PyObject *Window_get_reserve(vx_window_t *self, void *closure) {
+    (void)closure;
+    return PyLong_FromLong(self->reserve);
+}
+
 static PyMethodDef Window_methods[] = {
-    {"allowance", (PyCFunction)Window_allowance, METH_O, "How many may leave at `now`."},
+    {"free", (PyCFunction)Window_free, METH_O, "How many may leave at `now` by the budget alone."},
+    {"allowance", (PyCFunction)Window_allowance, METH_O, "How many of a backlog may leave at `now`."},
     {"record", (PyCFunction)(void (*)(void))Window_record, METH_VARARGS | METH_KEYWORDS,
-     "`count` messages left at `now`; `backlog`: others still wait."},
-    {"next_free", (PyCFunction)Window_next_free, METH_NOARGS, "When the window next lets a message go, if not now."},
+     "`count` messages left at `now`; `backlog`: others still wait; `sparse`: they were sparse sources'."},
+    {"next_free", (PyCFunction)(void (*)(void))Window_next_free, METH_VARARGS | METH_KEYWORDS,
+     "When the window next lets a message of the backlog (`sparse`: a sparse source's) go, if not now."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -137,6 +167,11 @@ static PyMemberDef Window_members[] = {
     {"budget", T_OBJECT, offsetof(vx_window_t, budget_obj), READONLY, NULL},
     {"period", T_OBJECT, offsetof(vx_window_t, period_obj), READONLY, NULL},
     {NULL, 0, 0, 0, NULL},
+};
+
+static PyGetSetDef Window_getset[] = {
+    {"reserve", (getter)Window_get_reserve, NULL, "Places of the window a backlog leaves to sparse sources.", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
 };
 
 PyTypeObject vx_WindowType = {
@@ -149,4 +184,5 @@ PyTypeObject vx_WindowType = {
     .tp_dealloc = (destructor)Window_dealloc,
     .tp_methods = Window_methods,
     .tp_members = Window_members,
+    .tp_getset = Window_getset,
 };

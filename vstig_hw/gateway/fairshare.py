@@ -20,9 +20,21 @@ gateway itself knows:
 **The share** is two-level round robin, one message per turn (every message is
 8 bytes, so this is deficit round robin with a quantum of one message): the links
 (and LOCAL) take turns, and within a link its sub-sources take turns. A source
-with nothing waiting has no turn; a new one joins the end of the round. So a
-message waits for at most one message of every other active link (and of every
-other active sub-source of its own link), however much any of them has queued.
+with nothing waiting has no turn. So a message waits for at most one message of
+every other active link (and of every other active sub-source of its own link),
+however much any of them has queued.
+
+**Sparse links go first** (RFC 8290's new flows, section 4.1, with a quantum of
+one message): a link whose lines were all empty, and which was not served within
+the last round, is *sparse*: its first message leaves before any backlogged
+link's, then the link takes its turns among them. A link served whose lines then
+emptied keeps its place in the round, empty, until its turn comes again: only then
+may it be sparse again. So a source that sends one message each time its line
+empties gets one message per round, as in the plain round robin, never more; and
+what the outlet lets sparse messages use at once (a reserve of its window,
+outlet.py) is bounded by the number of links. Only links are sparse, not
+sub-sources: those cost a peer little to make (a Zenoh session), so a flood of
+fresh sessions, each sending one message, stays within its link's share.
 
 **Each line keeps the out-queue's rules** (vstig_hw/outqueue.py, SPEC section 5)
 in `FairQueue`: PUTs before GETs, oldest first, a replaced message keeps its
@@ -45,7 +57,8 @@ a key. `FairFifo` is the raw bridge's form: each line a FIFO of every message.
 from __future__ import annotations
 
 from collections import OrderedDict, deque
-from collections.abc import Hashable
+from collections.abc import Hashable, Iterator
+from itertools import chain
 from typing import Generic, TypeVar
 
 from ..outqueue import OutQueue, replaces, same_entry
@@ -94,9 +107,13 @@ class _Turns(Generic[Line]):
     _kind: type[Line]
 
     def __init__(self) -> None:
-        # link -> its ring of lines with messages waiting (sub -> line), the first of each next in turn; a link
-        # is here while its ring is not empty (so nothing waits when it is empty). The rings are kept once made.
+        # link -> its ring of lines with messages waiting (sub -> line), the first of each next in turn. A link with
+        # messages is in `sparse` (its lines were empty and it was not served within the last round: it goes
+        # first, one message) or in `turns` (the round); a link served whose ring emptied stays in `turns`, its
+        # ring empty, until its turn comes round. The rings are kept once made.
+        self.sparse: OrderedDict[int, OrderedDict[Hashable, Line]] = OrderedDict()
         self.turns: OrderedDict[int, OrderedDict[Hashable, Line]] = OrderedDict()
+        self.active = 0  # links with messages waiting (0: nothing waits)
         self._rings: dict[int, OrderedDict[Hashable, Line]] = {}
         self._lines: dict[tuple[int, Hashable], Line] = {}  # (link, sub) -> its line, made or kept
         self._subs: dict[int, int] = {}  # link -> how many sub-source lines (sub not None) it has
@@ -104,7 +121,10 @@ class _Turns(Generic[Line]):
     @property
     def sources(self) -> int:
         """How many sources (link, sub) have messages waiting."""
-        return sum(len(subs) for subs in self.turns.values())
+        return sum(len(subs) for subs in self._waiting_rings())
+
+    def _waiting_rings(self) -> Iterator[OrderedDict[Hashable, Line]]:
+        return chain(self.sparse.values(), self.turns.values())
 
     def _line(self, link: int, sub: Hashable) -> Line:
         """The line of source (link, sub): made if it has none (`_settle` it once queued to)."""
@@ -119,7 +139,7 @@ class _Turns(Generic[Line]):
         return line
 
     def _settle(self, line: Line) -> None:
-        """After messages were queued to or taken from `line`: it joins the turns (last) or leaves them."""
+        """After messages were queued to or taken from `line`: it joins the turns or leaves them."""
         if line:
             if not line.waiting:
                 line.waiting = True
@@ -129,19 +149,25 @@ class _Turns(Generic[Line]):
                     ring = self._rings[link] = OrderedDict()
                 ring[line.sub] = line
                 if len(ring) == 1:
-                    self.turns[link] = ring
+                    self.active += 1
+                    if link not in self.turns:  # not served within the last round: sparse
+                        self.sparse[link] = ring
         elif line.waiting:
             self._leave(line)
         elif line.sub is not None:  # made for nothing: a sub-source's line lives only while it has messages
             self._drop(line)
 
     def _leave(self, line: Line) -> None:
-        """Take an emptied line out of the turns."""
+        """Take an emptied line out of its ring (its link keeps its place in the round, if it has one)."""
         line.waiting = False
-        ring = self._rings[line.link]
+        link = line.link
+        ring = self._rings[link]
         del ring[line.sub]
         if not ring:
-            del self.turns[line.link]
+            self.sparse.pop(link, None)
+            self.active -= 1
+            if not self.active:  # nothing waits: every link's turn has passed
+                self.turns.clear()
         if line.sub is not None:
             self._drop(line)
 
@@ -150,26 +176,52 @@ class _Turns(Generic[Line]):
         self._subs[line.link] -= 1
 
     def _served(self, line: Line) -> None:
-        """After `line` sent one message: it goes last among its link's lines, its link last among the links."""
-        if not line:
+        """After `line` sent one message: it goes last among its link's lines, its link last in the round (empty
+        or not: a link served is not sparse again before its turn comes round)."""
+        link = line.link
+        ring = self._rings[link]
+        if line:
+            ring.move_to_end(line.sub)
+        else:
             self._leave(line)
-            return
-        link, turns = line.link, self.turns
-        turns[link].move_to_end(line.sub)
+            if not self.active:
+                return
+        self.sparse.pop(link, None)
+        turns = self.turns
+        turns[link] = ring
         turns.move_to_end(link)
+
+    def _served_alone(self, line: Line) -> None:
+        """After `line`, the only one with messages waiting, sent some: every other link's turn has passed."""
+        if not line:
+            self._leave(line)  # nothing waits now
+            return
+        link = line.link
+        self.sparse.pop(link, None)
+        self.turns.clear()
+        self.turns[link] = self._rings[link]
+
+    def _next_ring(self) -> OrderedDict[Hashable, Line]:
+        """The ring of the link whose turn it is (there is one: the caller checked that `active`)."""
+        if self.sparse:
+            return next(iter(self.sparse.values()))
+        turns = self.turns
+        while True:
+            ring = next(iter(turns.values()))
+            if ring:
+                return ring
+            turns.popitem(last=False)  # served within the last round, emptied since: its turn passes
 
     def _next(self) -> Line:
         """The line whose turn it is (there is one: the caller checked)."""
-        subs = next(iter(self.turns.values()))
-        return next(iter(subs.values()))
+        return next(iter(self._next_ring().values()))
 
     def _only(self) -> Line | None:
         """The one line with messages waiting, if there is exactly one (the common case: no contention)."""
-        turns = self.turns
-        if len(turns) == 1:
-            subs = next(iter(turns.values()))
-            if len(subs) == 1:
-                return next(iter(subs.values()))
+        if self.active == 1:
+            ring = self._next_ring()
+            if len(ring) == 1:
+                return next(iter(ring.values()))
         return None
 
 
@@ -238,7 +290,7 @@ class FairQueue(_Turns[_Line]):
                     del holders[msg[0] & KEY_MAX]
             else:
                 self._holders.clear()
-                self._leave(only)
+            self._served_alone(only)
             return out
         out = []
         holders = self._holders
@@ -297,7 +349,7 @@ class FairFifo(_Turns[_Fifo]):
     def _drop_one(self) -> None:
         """Drop the oldest message of the longest line of the link with the most waiting (the first in turn of
         equals). Counting them costs a pass over the waiting lines, made only when the queue is full."""
-        ring = max(self.turns.values(), key=lambda lines: sum(map(len, lines.values())))
+        ring = max(self._waiting_rings(), key=lambda lines: sum(map(len, lines.values())))
         line = max(ring.values(), key=len)
         line.popleft()
         self._count -= 1
@@ -311,7 +363,7 @@ class FairFifo(_Turns[_Fifo]):
             out = list(only)
             only.clear()
             self._count = 0
-            self._leave(only)
+            self._served_alone(only)
             return out
         out = []
         limit = self._count if budget is None else min(budget, self._count)

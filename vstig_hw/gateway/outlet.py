@@ -15,7 +15,8 @@ the same bandwidth the tick-aligned drain would allow.
 
 The queue shares the link among the sources of what it carries (`fairshare`): one
 line per source, served in turn, so a source that floods waits for its own messages
-and every other source's go first.
+and every other source's go first. A backlog leaves a reserve of the window unused,
+so a sparse source's message (its line was empty) leaves at once, not at the pace.
 
 What leaves the window goes to the link's `LinkWriter`: written at once while the
 device takes it, else queued for that link's own thread, so a device that stops
@@ -41,18 +42,22 @@ __all__ = ["Outlet", "SendWindow"]
 RAW_QUEUE_LIMIT = 10_000  # raw mode keeps every frame; beyond this a flooder's oldest are dropped and counted
 
 
-PACE_BURST = 4  # messages a backlogged outlet sends at once after a late wake-up (else one per period/budget)
+PACE_BURST = 4  # messages a backlogged outlet sends at once after a late wake-up (else one per period/paced share)
+RESERVE_SHARE = 16  # a backlog leaves 1/16 of the budget (at least 1 from a budget of 4) to sparse sources
 
 
 class SendWindow:
-    """At most `budget` sends in any `period` seconds (None: unlimited), evenly spaced while a backlog lasts.
+    """At most `budget` sends in any `period` seconds (None: unlimited), evenly spaced while a backlog lasts, with
+    a reserve kept for sparse sources.
 
-    After a quiet spell a burst leaves at once, up to the budget. While messages
-    wait beyond what the window allows (`record(..., backlog=True)`), they leave
-    one every period/budget (up to PACE_BURST at once after a late wake-up), not in
-    a burst each time the window reopens: so a message that joins a backlog, from
-    a source whose turn comes next (`fairshare`), waits about period/budget, not up
-    to a whole period.
+    After a quiet spell a burst leaves at once, up to the budget (`free`). A backlog
+    (`allowance`) never uses the last `reserve` places of the window, and while it
+    lasts (`record(..., backlog=True)`) its messages leave one every period/(budget -
+    reserve) (up to PACE_BURST at once after a late wake-up), not in a burst each
+    time the window reopens. A sparse source's message (`fairshare`: its line was
+    empty) may use the whole window (`free`) and does not move the backlog's pace
+    (`record(..., sparse=True)`): so it leaves at once while another source floods,
+    the budget is never exceeded, and the flood gets the rest.
     """
 
     def __init__(self, budget: int | None, period: float) -> None:
@@ -62,23 +67,33 @@ class SendWindow:
             raise ValueError(f"the tick period must be positive, got {period}")
         self.budget = budget
         self.period = period
+        self.reserve = max(1, budget // RESERVE_SHARE) if budget is not None and budget >= 4 else 0
         self._sent: deque[float] = deque(maxlen=budget or 1)
-        self._spacing = period / budget if budget else 0.0
+        self._spacing = period / (budget - self.reserve) if budget else 0.0
         self._paced_to: float | None = None  # while backlogged: the time up to which the pace was spent
 
-    def allowance(self, now: float) -> int:
+    def free(self, now: float) -> int:
+        """How many may leave at `now` by the budget alone (a sparse source's message, or a burst after a quiet
+        spell)."""
         if self.budget is None:
             return 1 << 30
         sent = self._sent
         while sent and sent[0] <= now - self.period:
             sent.popleft()
-        free = self.budget - len(sent)
+        return self.budget - len(sent)
+
+    def allowance(self, now: float) -> int:
+        """How many of a backlog may leave at `now`: the budget less the reserve, at the pace."""
+        if self.budget is None:
+            return 1 << 30
+        free = self.free(now) - self.reserve
         if self._paced_to is None:
             return free
         return min(free, PACE_BURST, int((now - self._paced_to) / self._spacing))
 
-    def record(self, now: float, count: int, backlog: bool = False) -> None:
-        """`count` messages left at `now`; `backlog`: others still wait (the sends are spaced from now on)."""
+    def record(self, now: float, count: int, backlog: bool = False, sparse: bool = False) -> None:
+        """`count` messages left at `now`; `backlog`: others still wait (the sends are spaced from now on);
+        `sparse`: they were sparse sources' (the backlog's pace stays where it was)."""
         if self.budget is None:
             return
         if count == 1:
@@ -87,16 +102,23 @@ class SendWindow:
             self._sent.extend([now] * min(count, self.budget))
         if not backlog:
             self._paced_to = None
+        elif sparse:  # from the reserve: the backlog's pace stays where it was
+            return
         elif self._paced_to is None:  # a backlog starts: what just left was the burst
             self._paced_to = now
         else:
             self._paced_to = max(self._paced_to, now - PACE_BURST * self._spacing) + count * self._spacing
 
-    def next_free(self) -> float | None:
-        """When the window next lets a message go, if it does not now (None: it does, or there is no budget)."""
+    def next_free(self, sparse: bool = False) -> float | None:
+        """When the window next lets a message of the backlog go (`sparse`: a sparse source's), if it does not
+        now (None: it does, or there is no budget)."""
         if self.budget is None:
             return None
-        opens = self._sent[0] + self.period if len(self._sent) >= self.budget else None
+        sent = self._sent
+        if sparse:
+            return sent[0] + self.period if len(sent) >= self.budget else None
+        over = len(sent) - (self.budget - self.reserve)  # the backlog has a place once over + 1 have expired
+        opens = sent[over] + self.period if over >= 0 else None
         if self._paced_to is None:
             return opens
         paced = self._paced_to + self._spacing
@@ -145,7 +167,7 @@ class Outlet:
             return
         held = self._held
         if not held:
-            if not self.queue.turns:  # nothing waits
+            if not self.queue.active:  # nothing waits
                 self._held, self._held_link, self._held_sub, self._held_ours = messages, link, sub, False
                 return
         elif self.keep_all and link == self._held_link and sub == self._held_sub:  # a raw batch's next unit
@@ -178,23 +200,25 @@ class Outlet:
         held = self._held
         if held:  # nothing else waits: all of it now, as it came, if the window and the writer take it all
             room = writer.room()
-            if len(held) <= room and (window.budget is None or len(held) <= window.allowance(now)):
+            if len(held) <= room and (window.budget is None or len(held) <= window.free(now)):
                 self._held = []
                 window.record(now, len(held))
                 self._submit(held)
                 return None
             self._enqueue_held()
         queue = self.queue
-        while queue.turns:
+        while queue.active:
             allowed = writer.room()
             if allowed <= 0:
                 return None
+            sparse = 0
             if window.budget is not None:
-                allowed = min(allowed, window.allowance(now))
+                sparse = len(queue.sparse)  # sparse sources' messages, first in the lines: at once, the budget allowing
+                allowed = min(allowed, sparse, window.free(now)) if sparse else min(allowed, window.allowance(now))
                 if allowed <= 0:
-                    return window.next_free()
+                    return window.next_free(bool(sparse))
             batch = queue.drain(allowed)
-            window.record(now, len(batch), bool(queue.turns))
+            window.record(now, len(batch), bool(queue.active), bool(sparse))
             self._submit(batch)
         return None
 
