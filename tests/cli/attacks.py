@@ -72,11 +72,13 @@ def wait_until_relaying(a: Radio, b: Radio, deadline: float = 30.0) -> None:
         time.sleep(0.1)
 
 
-def honest_delays(a: Radio, b: Radio, count: int = 60, rate: float = 20.0, grace: float = 3.0) -> list[float | None]:
-    """A writes `count` new keys at `rate` a second; the delay of each to B (None: not there `grace` s after)."""
+def honest_delays(a: Radio, b: Radio, count: int = 60, rate: float = 20.0, grace: float = 3.0,
+                  first: int = 0) -> list[float | None]:
+    """A writes `count` new keys at `rate` a second (from the `first`-th of HONEST_KEYS: a second run in one bridge
+    takes others); the delay of each to B (None: not there `grace` s after)."""
     sent = {}
     start = time.perf_counter() + 0.01
-    for i, key in enumerate(HONEST_KEYS[:count], start=0):
+    for i, key in enumerate(HONEST_KEYS[first:first + count], start=0):
         pause = start + i / rate - time.perf_counter()
         if pause > 0:
             time.sleep(pause)

@@ -17,12 +17,21 @@ from peers import wait_for
 from vstig_hw.links.zenoh import _free_loopback_port
 
 
-def _assert_a_reaches_b_in_time(delays: list[float | None], stderr: str) -> None:
+def _quiet_delays(a: Radio, b: Radio) -> list[float | None]:
+    """A -> B through the same bridge before the flood (keys of their own: the flooded run's are new)."""
+    return honest_delays(a, b, count=40, first=900)
+
+
+def _assert_a_reaches_b_in_time(delays: list[float | None], quiet: list[float | None], stderr: str) -> None:
+    """Every write there, and at the median as soon as without the flood: A's line is empty when it writes, so its
+    message goes first and finds the budget's reserve free (before, ~3 ms against 0.5 ms: it waited for the flood's
+    turn and the next paced place in a full window)."""
     missing = sum(d is None for d in delays)
     assert not missing, f"{missing} of robot A's {len(delays)} writes never reached robot B; bridge: {stderr[-800:]}"
-    assert quantile(delays, 0.5) < 0.1 and quantile(delays, 0.9) < 0.5, (
-        f"A -> B p50 {quantile(delays, 0.5) * 1e3:.0f} ms, p90 {quantile(delays, 0.9) * 1e3:.0f} ms; "
-        f"bridge: {stderr[-800:]}")
+    p50, quiet_p50 = quantile(delays, 0.5), quantile(quiet, 0.5)
+    assert p50 <= max(2 * quiet_p50, quiet_p50 + 0.001) and quantile(delays, 0.9) < 0.5, (
+        f"A -> B p50 {p50 * 1e3:.2f} ms (without the flood {quiet_p50 * 1e3:.2f} ms), "
+        f"p90 {quantile(delays, 0.9) * 1e3:.0f} ms; bridge: {stderr[-800:]}")
 
 
 def test_a_radio_flooding_distinct_keys_within_its_baud_leaves_a_to_b_near_normal() -> None:
@@ -30,11 +39,12 @@ def test_a_radio_flooding_distinct_keys_within_its_baud_leaves_a_to_b_near_norma
     try:
         with Bridge(a.spec, b.spec, hostile.spec) as bridge:
             wait_until_relaying(a, b)
+            quiet = _quiet_delays(a, b)
             with RadioFlood(hostile) as flood:
                 time.sleep(1.0)  # the flood fills every outlet first
                 delays = honest_delays(a, b)
             assert flood.sent > 3000 and b.heard > 1000  # it flooded, and the bridge relayed the flood too
-        _assert_a_reaches_b_in_time(delays, bridge.stderr)
+        _assert_a_reaches_b_in_time(delays, quiet, bridge.stderr)
     finally:
         for radio in (a, b, hostile):
             radio.close()
@@ -46,10 +56,11 @@ def test_a_local_zenoh_flood_of_distinct_keys_leaves_a_to_b_near_normal() -> Non
     try:
         with Bridge(a.spec, b.spec, f"zenoh:lab?listen={endpoint}") as bridge:
             wait_until_relaying(a, b)
+            quiet = _quiet_delays(a, b)
             with zenoh_flood(endpoint):
                 wait_for(lambda: b.heard > 500, 10.0)  # the flood reaches B's outlet
                 delays = honest_delays(a, b)
-        _assert_a_reaches_b_in_time(delays, bridge.stderr)
+        _assert_a_reaches_b_in_time(delays, quiet, bridge.stderr)
         assert "drop_intake=" in bridge.stderr  # the engine took no more than its intake from the flood
     finally:
         for radio in (a, b):
