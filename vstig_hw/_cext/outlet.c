@@ -24,15 +24,18 @@
 
 /* ---- reaching the device --------------------------------------------------------------- */
 
-/* The writer holds nothing and writes nothing now (LinkWriter.idle): a batch may go straight to the device. */
-static int writer_idle(vx_outlet_t *o) {
-    PyObject *idle = PyObject_GetAttr(o->writer, vx_n.a_idle);
+/* bool(obj.name): 1 or 0, or -1 with an exception */
+static int attribute_true(PyObject *obj, PyObject *name) {
+    PyObject *value = PyObject_GetAttr(obj, name);
     int result;
-    if (idle == NULL) return -1;
-    result = PyObject_IsTrue(idle);
-    Py_DECREF(idle);
+    if (value == NULL) return -1;
+    result = PyObject_IsTrue(value);
+    Py_DECREF(value);
     return result;
 }
+
+/* The writer holds nothing and writes nothing now (LinkWriter.idle): a batch may go straight to the device. */
+static int writer_idle(vx_outlet_t *o) { return attribute_true(o->writer, vx_n.a_idle); }
 
 /* writer.submit(units, messages) with the exception Outlet._hand counts as drop_write_error. */
 static int writer_submit(vx_outlet_t *o, PyObject *units, Py_ssize_t messages) {
@@ -272,10 +275,7 @@ static int hand(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n, int idle) {
 /* ---- the share and the window: Outlet's push and flush ------------------------------------- */
 
 static int note_backlog(vx_outlet_t *o) {
-    PyObject *active = PyObject_GetAttr(o->queue, vx_n.a_active);
-    if (active == NULL) return -1;
-    o->backlog = PyObject_IsTrue(active);
-    Py_DECREF(active);
+    o->backlog = attribute_true(o->queue, vx_n.a_active);
     return o->backlog < 0 ? -1 : 0;
 }
 
