@@ -127,15 +127,21 @@ import zenoh
 sys.path.insert(0, {attacks!r})
 from attacks import flood_message
 from vstig_hw import encode
-config = zenoh.Config()  # a stock session, as any local user can open one
-config.insert_json5("connect/endpoints", json.dumps([{endpoint!r}]))
-config.insert_json5("scouting/multicast/enabled", "false")
-session = zenoh.open(config)
-publisher = session.declare_publisher("vstig/lab/0/66")
-while not session.info.peers_zid():
-    time.sleep(0.01)
+sessions, publishers = [], []  # the sessions are kept: one dropped is closed
+for _ in range({sessions}):
+    config = zenoh.Config()  # a stock session, as any local user can open one
+    config.insert_json5("connect/endpoints", json.dumps([{endpoint!r}]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    if {sessions} > 1:  # each sample stamped with its own session's id: a source of its own at the bridge
+        config.insert_json5("timestamping/enabled", "true")
+    session = zenoh.open(config)
+    sessions.append(session)
+    publishers.append(session.declare_publisher("vstig/lab/0/66"))
+    while not session.info.peers_zid():
+        time.sleep(0.01)
 time.sleep(0.5)  # the bridge's subscription reaches this session just after it connects
 print("ready", flush=True)
+per_sample = 64 if {sessions} == 1 else 1  # many sessions: one message each, in turn
 
 def stamp():  # the stock API stamps any id: a session that never was, per sample
     return zenoh.Timestamp(datetime.datetime.now(datetime.UTC), zenoh.TimestampId(os.urandom(16)))
@@ -144,19 +150,22 @@ start, sent = time.perf_counter(), 0
 while True:
     due = int((time.perf_counter() - start) * {rate})
     while sent < due:
-        payload = b"".join(encode(flood_message(i)) for i in range(sent, sent + 64))
+        payload = b"".join(encode(flood_message(i)) for i in range(sent, sent + per_sample))
+        publisher = publishers[sent // per_sample % len(publishers)]
         publisher.put(payload, timestamp=stamp()) if {forge} else publisher.put(payload)
-        sent += 64
+        sent += per_sample
     time.sleep(0.002)
 """
 
 
 @contextlib.contextmanager
-def zenoh_flood(endpoint: str, rate: int = ZENOH_FLOOD_RATE, forge: bool = False) -> Iterator[subprocess.Popen[str]]:
-    """A local process on the bridge's zenoh link publishing distinct keys at `rate` messages a second; `forge`:
-    each sample stamped with a new session id."""
+def zenoh_flood(endpoint: str, rate: int = ZENOH_FLOOD_RATE, forge: bool = False, sessions: int = 1
+                ) -> Iterator[subprocess.Popen[str]]:
+    """A local process on the bridge's zenoh link publishing distinct keys at `rate` messages a second, in samples
+    of 64; `forge`: each sample stamped with a new session id; `sessions` > 1: that many sessions connected to the
+    bridge, each sample one message from the next session in turn."""
     here = os.path.dirname(os.path.abspath(__file__))
-    script = _ZENOH_FLOODER.format(attacks=here, endpoint=endpoint, rate=rate, forge=forge)
+    script = _ZENOH_FLOODER.format(attacks=here, endpoint=endpoint, rate=rate, forge=forge, sessions=sessions)
     process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                text=True)
     try:

@@ -67,6 +67,29 @@ def test_a_local_zenoh_flood_of_distinct_keys_leaves_a_to_b_near_normal() -> Non
             radio.close()
 
 
+def test_a_zenoh_peer_sending_one_message_from_each_of_many_sessions_gains_no_priority_over_a_quiet_robot() -> None:
+    """The abuse of "quiet sources first": 16 sessions connected to the bridge, each a source of its own, each
+    sending one message in turn, as if each were quiet. Sessions split their link's turn and are never sparse
+    themselves, so the link stays one backlogged source: A's writes still go first, and the flood still gets the
+    rest of B's budget."""
+    endpoint = f"tcp/127.0.0.1:{_free_loopback_port()}"
+    a, b = Radio(), Radio()
+    try:
+        with Bridge(a.spec, b.spec, f"zenoh:lab?listen={endpoint}") as bridge:
+            wait_until_relaying(a, b)
+            quiet = _quiet_delays(a, b)
+            with zenoh_flood(endpoint, rate=2_000, sessions=16):  # three times what B's outlet sends
+                wait_for(lambda: b.heard > 300, 10.0)
+                heard = b.heard
+                delays = honest_delays(a, b)
+                flood_heard = b.heard - heard - len(delays)
+        _assert_a_reaches_b_in_time(delays, quiet, bridge.stderr)
+        assert flood_heard > 1000, flood_heard  # 3 s of B's 640 a second, less the reserve A used
+    finally:
+        for radio in (a, b):
+            radio.close()
+
+
 def test_a_zenoh_peer_stamping_a_new_session_on_every_sample_gets_at_most_its_source_rate() -> None:
     """The stock API stamps any id per sample; before, each was a new source with a bucket of its own (79x the
     rate got through). A stamp that names no session connected to the bridge is no source of its own."""
