@@ -42,7 +42,7 @@ __all__ = ["Outlet", "SendWindow"]
 RAW_QUEUE_LIMIT = 10_000  # raw mode keeps every frame; beyond this a flooder's oldest are dropped and counted
 
 
-PACE_BURST = 4  # messages a backlogged outlet sends at once after a late wake-up (else one per period/paced share)
+PACE_BURST = 4  # messages a backlog sends at once after a late wake-up (else one per period/(budget - reserve))
 RESERVE_SHARE = 16  # a backlog leaves 1/16 of the budget (at least 1 from a budget of 4) to sparse sources
 
 
