@@ -70,7 +70,8 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
 
     Every link's --budget is shared fairly among the sources of what it carries (each link, each
     zenoh session connected to ours, the bridge itself), so a flooding radio or zenoh peer delays
-    only its own messages; the engine takes at most 16 ticks of budget per source and tick,
+    only its own messages; a quiet link's message goes first, from a sixteenth of the budget a
+    backlog leaves free; the engine takes at most 16 ticks of budget per source and tick,
     on average, with bursts of ten times that (drop_intake).
 
     \b
