@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import time
+from typing import Any
 
 from attacks import Bridge, Radio, RadioFlood, honest_delays, quantile, wait_until_relaying, zenoh_flood
 from peers import wait_for
@@ -50,21 +51,31 @@ def test_a_radio_flooding_distinct_keys_within_its_baud_leaves_a_to_b_near_norma
             radio.close()
 
 
-def test_a_local_zenoh_flood_of_distinct_keys_leaves_a_to_b_near_normal() -> None:
+def _across_a_zenoh_flood(heard_first: int, **flood: Any) -> tuple[list[float | None], list[float | None], str, int]:
+    """A -> B through a bridge whose zenoh link a local process floods (`zenoh_flood`'s options), once B heard
+    `heard_first` messages; beside the same bridge's run before the flood. The delays under the flood and without
+    it, the bridge's stderr, and how many of the flood's messages B heard meanwhile."""
     endpoint = f"tcp/127.0.0.1:{_free_loopback_port()}"
     a, b = Radio(), Radio()
     try:
         with Bridge(a.spec, b.spec, f"zenoh:lab?listen={endpoint}") as bridge:
             wait_until_relaying(a, b)
             quiet = _quiet_delays(a, b)
-            with zenoh_flood(endpoint):
-                wait_for(lambda: b.heard > 500, 10.0)  # the flood reaches B's outlet
+            with zenoh_flood(endpoint, **flood):
+                wait_for(lambda: b.heard > heard_first, 10.0)  # the flood reaches B's outlet
+                heard = b.heard
                 delays = honest_delays(a, b)
-        _assert_a_reaches_b_in_time(delays, quiet, bridge.stderr)
-        assert "drop_intake=" in bridge.stderr  # the engine took no more than its intake from the flood
+                flood_heard = b.heard - heard - len(delays)
+        return delays, quiet, bridge.stderr, flood_heard
     finally:
         for radio in (a, b):
             radio.close()
+
+
+def test_a_local_zenoh_flood_of_distinct_keys_leaves_a_to_b_near_normal() -> None:
+    delays, quiet, stderr, _ = _across_a_zenoh_flood(500)
+    _assert_a_reaches_b_in_time(delays, quiet, stderr)
+    assert "drop_intake=" in stderr  # the engine took no more than its intake from the flood
 
 
 def test_a_zenoh_peer_sending_one_message_from_each_of_many_sessions_gains_no_priority_over_a_quiet_robot() -> None:
@@ -72,22 +83,9 @@ def test_a_zenoh_peer_sending_one_message_from_each_of_many_sessions_gains_no_pr
     sending one message in turn, as if each were quiet. Sessions split their link's turn and are never sparse
     themselves, so the link stays one backlogged source: A's writes still go first, and the flood still gets the
     rest of B's budget."""
-    endpoint = f"tcp/127.0.0.1:{_free_loopback_port()}"
-    a, b = Radio(), Radio()
-    try:
-        with Bridge(a.spec, b.spec, f"zenoh:lab?listen={endpoint}") as bridge:
-            wait_until_relaying(a, b)
-            quiet = _quiet_delays(a, b)
-            with zenoh_flood(endpoint, rate=1_000, sessions=16):  # more than B's outlet sends (640 a second)
-                wait_for(lambda: b.heard > 300, 10.0)
-                heard = b.heard
-                delays = honest_delays(a, b)
-                flood_heard = b.heard - heard - len(delays)
-        _assert_a_reaches_b_in_time(delays, quiet, bridge.stderr)
-        assert flood_heard > 1000, flood_heard  # 3 s of B's 640 a second, less the reserve A used
-    finally:
-        for radio in (a, b):
-            radio.close()
+    delays, quiet, stderr, flood_heard = _across_a_zenoh_flood(300, rate=1_000, sessions=16)  # > B's 640 a second
+    _assert_a_reaches_b_in_time(delays, quiet, stderr)
+    assert flood_heard > 1000, flood_heard  # 3 s of B's 640 a second, less the reserve A used
 
 
 def test_a_zenoh_peer_stamping_a_new_session_on_every_sample_gets_at_most_its_source_rate() -> None:
