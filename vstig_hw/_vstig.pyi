@@ -61,7 +61,8 @@ class Path:
     def __init__(self, node: object, lock: object, deliver: Callable[[int, float, list[Any]], None],
                  links: list[Link[Any]], receivers: list[Receiver | None], reads: list[int],
                  part: _Seat | RawRelay | None, guard: Guard | None, outlets: list[_Outlet], *,
-                 listeners: list[Sequence[Any]], delivered: Sequence[Callable[[float], None]],
+                 listeners: list[Sequence[Any]], told: list[tuple[Callable[..., None], ...]], heard: type,
+                 delivered: Sequence[Callable[[float], None]],
                  can_message: object = None) -> None: ...
     def deliver(self, index: int, t: float, units: list[Any], now: float | None = None) -> bool: ...
     def pump(self, index: int, timeout: float) -> int | None: ...

@@ -24,7 +24,7 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 from traffic import EXAMPLES, can_frames, messages, noisy
 
-from vstig_hw import Message, Op, Stigmergy, encode
+from vstig_hw import Entry, Message, Op, Stigmergy, encode
 from vstig_hw.counters import Counters
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
@@ -33,11 +33,11 @@ from vstig_hw.gateway import compiled as compiled_module
 from vstig_hw.gateway import node as node_module
 from vstig_hw.gateway.fairshare import FairFifo, FairQueue
 from vstig_hw.gateway.guard import Guard
-from vstig_hw.gateway.node import Mode, Node
+from vstig_hw.gateway.node import Listening, Mode, Node
 from vstig_hw.gateway.outlet import RAW_QUEUE_LIMIT, Outlet, SendWindow
 from vstig_hw.gateway.parts import Seat
 from vstig_hw.gateway.writer import TX_QUEUE_LIMIT, LinkWriter
-from vstig_hw.links.link import Link
+from vstig_hw.links.link import Heard, Link
 from vstig_hw.transports.base import Transport
 
 
@@ -124,7 +124,9 @@ def _settled(node: Node) -> None:
 
 
 # (link name, framing, one broadcast domain)
-LINKS = [("radio", "cobs8", False), ("bus", "can", True), ("words", "epuck4", False), ("modules", "xbee", False)]
+LINKS = [("radio", "cobs8", False), ("bus", "can", True), ("words", "epuck4", False), ("modules", "xbee", False),
+         ("kilo", "kilobot", False)]
+LINK = st.integers(0, len(LINKS) - 1)
 
 
 def _links() -> list[Link[Any]]:
@@ -174,15 +176,20 @@ def _state(node: Node) -> dict[str, Any]:
 
 
 calls = st.one_of(
-    st.tuples(st.just("heard"), st.integers(0, len(LINKS) - 1), st.integers(0, 2**32), st.lists(messages, max_size=6),
+    st.tuples(st.just("heard"), LINK, st.integers(0, 2**32), st.lists(messages, max_size=6),
               st.lists(can_frames(), max_size=2)),
     st.tuples(st.just("time"), st.integers(0, 300)),
-    st.tuples(st.just("full"), st.integers(0, len(LINKS) - 1), st.booleans()),
+    st.tuples(st.just("full"), LINK, st.booleans()),
     st.tuples(st.just("put"), st.integers(0, 3), st.integers(0, 9)),
     st.tuples(st.just("get"), st.integers(0, 3)),
     st.tuples(st.just("ask"), st.integers(0, 3)),
     st.tuples(st.just("tick")),
 )
+
+
+def _flood(count: int) -> list[Message]:
+    """More PUTs at once than a source's intake takes with a budget of 1 (its burst: 160)."""
+    return [Message(Op.PUT, i % 40, i, 1 + i, 2) for i in range(count)]
 
 
 def _run(node: Node, call: tuple[Any, ...], clock: list[float]) -> None:
@@ -192,13 +199,12 @@ def _run(node: Node, call: tuple[Any, ...], clock: list[float]) -> None:
         clock[0] += args[0] / 100
     elif name == "full":
         node.links[args[0]].transport.full = args[1]  # type: ignore[attr-defined]
-    elif name == "heard":
-        index, seed, sent, frames = args
+    elif name in ("heard", "flood"):
+        index, seed, sent, frames = args if name == "heard" else (*args[:2], _flood(args[2]), [])
         units = _units(random.Random(seed), LINKS[index][1], sent, frames)
         with node._lock:
-            if node._path is not None:
-                assert node._path.deliver(index, t, units, now)
-            else:
+            if node._path is None or not node._path.deliver(index, t, units, now):
+                assert node._path is None or node._on_heard, "only a `heard` listener takes the Python delivery"
                 node._arrive(index, t, units)
                 node._spread(now, 1 << index)
     elif name == "tick":
@@ -364,3 +370,131 @@ def test_seat_equals_the_python_seat(compiled: ModuleType, intake: int | None, p
         for _, outlets, _ in sides:
             for outlet in outlets:
                 outlet.close()
+
+
+# -- listeners: the compiled delivery tells `messages` and `change` listeners itself --------------------------------
+
+def _listen(node: Node, log: list[tuple[Any, ...]], kind: str, number: int) -> Listening:
+    """A listener of `kind` writing every call into `log`, tagged with `number` (its place among the listeners)."""
+    def messages(link: str, t: float, sender: int | None, batch: list[Message]) -> None:
+        log.append(("messages", number, link, t, sender, [(type(m), *m) for m in batch]))
+        if kind == "once":  # cancels itself: the rest of this batch still reaches it, as the others
+            listening.cancel()
+
+    def change(key: int, old: Any, new: Any, link: str | None, sender: int | None) -> None:
+        log.append(("change", number, key, old, new, link, sender))
+
+    def refused(heard: Heard, reason: str) -> None:
+        log.append(("refused", number, type(heard), type(heard.message), *heard.message, heard.link, heard.t,
+                    heard.sender, reason))
+
+    def heard(heard: Heard) -> None:  # wants every `Heard`: the Python delivery's alone
+        log.append(("heard", number, heard))
+
+    listening: Listening = node.listen(
+        messages=messages if kind in ("messages", "once", "both", "live") else None,
+        change=change if kind in ("change", "both") else None, refused=refused if kind in ("refused", "live") else None,
+        heard=heard if kind == "heard" else None)
+    return listening
+
+
+listener_calls = st.one_of(
+    calls,
+    st.tuples(st.just("flood"), LINK, st.integers(0, 2**32), st.integers(150, 400)),
+    st.tuples(st.just("listen"), st.sampled_from(["messages", "change", "both", "once", "refused", "live", "heard"])),
+    st.tuples(st.just("cancel"), st.integers(0, 5)),
+)
+
+
+@EXAMPLES
+@example(mode=Mode.ENGINE, budget=1, guard="jump", script=[
+    ("listen", "both"), ("listen", "live"),
+    ("heard", 1, 7, [Message(Op.PUT, 1, 5, 1, 3), Message(Op.PUT, 1, 50, 2, 3)], []),
+    ("flood", 0, 3, 300), ("listen", "once"), ("flood", 1, 4, 200), ("cancel", 0), ("listen", "change"),
+    ("heard", 3, 5, [Message(Op.PUT, 2, 5, 1, 3)], [])])
+@given(mode=st.sampled_from([Mode.ENGINE, Mode.RAW]), budget=st.none() | st.just(1) | st.integers(1, 6),
+       guard=st.sampled_from(["none", "jump", "python"]), script=st.lists(listener_calls, max_size=40))
+def test_the_compiled_delivery_tells_listeners_as_the_python_node(
+        compiled: ModuleType, mode: Mode, budget: int | None, guard: str, script: list[tuple[Any, ...]]) -> None:
+    """`messages`, `refused` and `change` listeners added and cancelled as traffic flows (floods past the engine's
+    intake, a guard refusing some, a listener that cancels itself, a `heard` listener that sends the batches to the
+    Python delivery while it listens): the same calls, in the same order, with the same senders, `Message`s and
+    `Heard`s."""
+    def guard_of() -> Guard | None:
+        if guard == "none":
+            return None
+        return Guard(max_jump=3) if guard == "jump" else Guard(max_jump=3, rate=5.0)  # rate: stays Python
+
+    nodes = [_node(False, mode, budget, guard_of()), _node(True, mode, budget, guard_of())]
+    clocks: list[list[float]] = [[0.0], [0.0]]
+    logs: list[list[tuple[Any, ...]]] = [[], []]
+    listenings: list[list[Listening]] = [[], []]
+    for step, call in enumerate(script):
+        for node, clock, log, mine in zip(nodes, clocks, logs, listenings, strict=True):
+            if call[0] == "listen":
+                mine.append(_listen(node, log, call[1], step))
+            elif call[0] == "cancel":
+                if mine:
+                    mine.pop(call[1] % len(mine)).cancel()
+            else:
+                _run(node, call, clock)
+            _settled(node)
+        assert logs[1] == logs[0], call
+        pure, compiled_state = (_state(node) for node in nodes)
+        assert compiled_state == pure, call
+    for node in nodes:
+        for link, outlet in zip(node.links, node.outlets, strict=True):
+            link.transport.close()
+            outlet.writer.close(1.0)
+
+
+def test_the_compiled_delivery_tells_each_link_s_sender(compiled: ModuleType) -> None:
+    """The sender a `messages` listener is told: a CAN frame's node (from its ID), an XBee module's 64-bit source,
+    none on the other serial links; both deliveries, through `Node._deliver` as a reader thread calls it."""
+    told: list[list[tuple[str, int | None]]] = [[], []]
+    for node, log in zip([_node(False, Mode.ENGINE, None, None), _node(True, Mode.ENGINE, None, None)], told,
+                         strict=True):
+        node.listen(messages=lambda link, t, sender, batch, log=log: log.append((link, sender)))  # type: ignore[misc]
+        for index, (_name, framing, _) in enumerate(LINKS):
+            units = _units(random.Random(3), framing, [Message(Op.PUT, 1, index, 1 + index, 2)], [])
+            (node._deliver if node._path is None else node._deliver_compiled)(index, 1_700_000_000.0, units)
+        assert node._failure is None
+    assert told[1] == told[0]
+    senders = dict(told[0])
+    assert senders["radio"] is senders["words"] is senders["kilo"] is None
+    assert senders["bus"] in (3, 4) and senders["modules"] in (0x0013A20040A1B2C3, 0x7E)
+
+
+@pytest.mark.parametrize("kind", ["messages", "change", "refused"])
+def test_a_listener_that_raises_ends_run_on_either_delivery(compiled: ModuleType, kind: str) -> None:
+    """A listener raising on its second call: the batch stops where Python's stops (what was taken stays taken,
+    what was refused stays counted, nothing is sent for it, its messages are not counted in), and the loop's next
+    poll raises the same error."""
+    refusing = kind == "refused"  # key 1 jumps from timestamp 1 to 100 and 200: refused twice
+    sent = [Message(Op.PUT, 1, 7, ts, 2) for ts in (1, 100, 200, 2)] if refusing else \
+        [Message(Op.PUT, key, 7, 1, 2) for key in (1, 2, 3)]
+    outcomes = []
+    for node in (_node(False, Mode.ENGINE, None, Guard(max_jump=3) if refusing else None),
+                 _node(True, Mode.ENGINE, None, Guard(max_jump=3) if refusing else None)):
+        calls: list[Any] = []
+
+        def listener(*args: Any, calls: list[Any] = calls) -> None:
+            calls.append(args)
+            if len(calls) == 2:
+                raise RuntimeError(f"listener broke at {args[0]!r}")
+
+        node.listen(**{kind: listener})
+        units = [unit for m in sent for unit in make_serial_framing("cobs8").encode(m)]
+        (node._deliver if node._path is None else node._deliver_compiled)(0, 1_700_000_000.0, units)
+        _settled(node)
+        with pytest.raises(RuntimeError) as raised:
+            node.poll(0)
+        outcomes.append((str(raised.value), calls, _state(node)))
+        node.poll(0)  # raised once: the loop goes on
+        for link, outlet in zip(node.links, node.outlets, strict=True):
+            link.transport.close()
+            outlet.writer.close(1.0)
+    assert outcomes[1] == outcomes[0]
+    assert len(outcomes[0][1]) == 2 and outcomes[0][2]["table"] == [(1, Entry(7, 1, 2))] + \
+        ([(2, Entry(7, 1, 2))] if kind == "change" else [])
+    assert outcomes[0][2]["stats"]["radio"]["drop_jump"] == (2 if refusing else 0)

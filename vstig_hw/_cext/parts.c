@@ -265,10 +265,12 @@ static int receive_telling(vx_seat_t *s, Py_ssize_t index, const vstig_msg_t *ms
     return status;
 }
 
-static int listening(vx_seat_t *s) { return PyObject_IsTrue(s->on_change); }
+int vx_seat_listening(vx_seat_t *s) { return PyObject_IsTrue(s->on_change); }
 
-int vx_seat_take(vx_seat_t *s, Py_ssize_t index, const vstig_msg_t *msgs, size_t n, PyObject *sub) {
-    if (caused_by(s, (long)index, sub) < 0) return -1;
+int vx_seat_take(vx_seat_t *s, Py_ssize_t index, const vstig_msg_t *msgs, size_t n, PyObject *sender, PyObject *sub) {
+    int listen;
+    if (caused_by(s, (long)index, sub) < 0 || (listen = vx_seat_listening(s)) < 0) return -1;
+    if (listen) return receive_telling(s, index, msgs, n, sender);
     return receive(s, index, msgs, n, one_domain(s, index));
 }
 
@@ -539,7 +541,7 @@ static PyObject *Seat_put(vx_seat_t *self, PyObject *args) {
     vstig_entry_t old;
     int listen, had;
     if (!PyArg_ParseTuple(args, "OO:put", &key_obj, &value_obj) || caused_by(self, VX_LOCAL, Py_None) < 0) return NULL;
-    if ((listen = listening(self)) < 0 || (key = vx_field("key", VSTIG_KEY_MAX, key_obj)) < 0) return NULL;
+    if ((listen = vx_seat_listening(self)) < 0 || (key = vx_field("key", VSTIG_KEY_MAX, key_obj)) < 0) return NULL;
     had = vstig_engine_entry(&self->engine->engine, (uint16_t)key, &old);
     {
         PyObject *done = PyObject_CallMethod((PyObject *)self->engine, "put", "OO", key_obj, value_obj);
@@ -590,15 +592,11 @@ static PyObject *Seat_take(vx_seat_t *self, PyObject *args, PyObject *kwds) {
     Py_ssize_t index;
     size_t n;
     vstig_msg_t *msgs;
-    int status, listen;
+    int status;
     if (!PyArg_ParseTupleAndKeywords(args, kwds, "nOO|O", kwlist, &index, &messages, &sender, &sub)) return NULL;
     if (index < 0 || index >= self->nlinks) return PyErr_Format(PyExc_IndexError, "no link %zd", index);
     if ((msgs = vx_msgs_of(messages, &n)) == NULL) return NULL;
-    status = caused_by(self, (long)index, sub);
-    if (status == 0 && (listen = listening(self)) != 0)
-        status = listen < 0 ? -1 : receive_telling(self, index, msgs, n, sender);
-    else if (status == 0)
-        status = receive(self, index, msgs, n, one_domain(self, index));
+    status = vx_seat_take(self, index, msgs, n, sender, sub);
     PyMem_Free(msgs);
     if (status < 0) return NULL;
     Py_RETURN_NONE;

@@ -40,8 +40,11 @@ extern PyTypeObject vx_RelayType;
 
 /* Seat.admit over C messages: how many of the first n the engine takes (the rest are counted drop_intake). */
 int vx_seat_admit(vx_seat_t *s, Py_ssize_t index, PyObject *sub, size_t n, double t, size_t *admitted);
-/* Seat.take and Relay.take over C messages (without change listeners: the caller checks); 0 or -1. */
-int vx_seat_take(vx_seat_t *s, Py_ssize_t index, const vstig_msg_t *msgs, size_t n, PyObject *sub);
+/* Seat.take and Relay.take over C messages; 0 or -1. A Seat tells its change listeners (`on_change`) of every
+ * entry that changed, with `sender` (what the unit's link says sent it, or None). */
+int vx_seat_take(vx_seat_t *s, Py_ssize_t index, const vstig_msg_t *msgs, size_t n, PyObject *sender, PyObject *sub);
+/* Whether the Seat's change listeners want to hear (1), not (0), or -1 on error. */
+int vx_seat_listening(vx_seat_t *s);
 int vx_seat_queue_out(vx_seat_t *s);
 int vx_relay_take(vx_relay_t *r, Py_ssize_t index, const vstig_msg_t *msgs, size_t n, PyObject *sub);
 

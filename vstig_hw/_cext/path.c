@@ -3,10 +3,11 @@
  *
  * `pump(index, timeout)` reads a link's device itself where it has an fd (a serial port, a SocketCAN socket:
  * the GIL is released while it waits), and hands what it read on; `deliver(index, t, units)` takes what a
- * transport's own read returned. Either way, while nothing needs Python per unit (`fast`: no listener wants
- * each unit or message) and the Node's lock is free, the whole batch is done here: decode (the link's Receiver),
- * the engine's intake per source, the guard, the part (Seat or Relay), the engine's outbox onto the outlets, and
- * the outlets' sends (straight to the devices while their writers are idle). Otherwise the batch goes to the
+ * transport's own read returned. Either way, while no listener wants each unit or every `Heard` (`unit`,
+ * `heard`) and the Node's lock is free, the whole batch is done here: decode (the link's Receiver), the engine's
+ * intake per source, the guard (telling the `refused` listeners), the `messages` listeners, the part (Seat or
+ * Relay; a Seat tells the `change` listeners), the engine's outbox onto the outlets, and the outlets' sends
+ * (straight to the devices while their writers are idle). Otherwise the batch goes to the
  * Node's Python delivery, the reference, which does the same with the same objects (decoding with the same
  * Receiver, so a frame cut across two reads is whole either way).
  *
@@ -32,7 +33,7 @@
 #define POLL_COUNTS_S 1.0 /* how often a SocketCAN bus's own drop counts are polled (socketcan_drops) */
 
 static PyObject *A_READER, *A_FAILURE, *A_WAKE, *A_RETRY, *A_SLEEP, *A_WAKE_ON_ARRIVAL, *M_SET,
-    *M_ERROR_FRAME, *M_POLL_COUNTS, *CAN_MESSAGE;
+    *M_ERROR_FRAME, *M_POLL_COUNTS, *M_CHECK, *CAN_MESSAGE;
 
 static PyObject *TIME_TIME, *TIME_MONOTONIC; /* Python's own clocks: the Node compares what we set with them */
 
@@ -92,17 +93,83 @@ static int python_guard(vx_path_t *p, vx_link_t *link, PyObject *sender, double 
     return 0;
 }
 
-/* What one unit carried, after its decoding: Node._arrive's steps for it (no listeners: `fast`). `sender`: who the
- * medium says sent it (a CAN node, an XBee module's 64-bit address), when `named`. */
-static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, int named,
-                  unsigned long long sender) {
+/* The listeners a batch's delivery tells here (tuples: the Node replaces them, never changes them). */
+typedef struct {
+    PyObject *messages; /* `messages`: what each unit carried past the guard */
+    PyObject *refused;  /* `refused`: each message the guard refused, with its drop counter's name */
+} vx_told_t;
+
+/* The Node's `messages` listeners, told what one unit carried past the guard, in their order (Node._arrive). */
+static int tell_messages(const vx_link_t *link, double t, PyObject *sender, const vstig_msg_t *msgs, size_t n,
+                         PyObject *listeners) {
+    PyObject *list = PyList_New((Py_ssize_t)n), *when = PyFloat_FromDouble(t);
+    Py_ssize_t i;
+    int status = list == NULL || when == NULL ? -1 : 0;
+    for (i = 0; status == 0 && i < (Py_ssize_t)n; i++) {
+        PyObject *m = vx_message(&msgs[i]);
+        if (m == NULL) status = -1;
+        else PyList_SET_ITEM(list, i, m);
+    }
+    for (i = 0; status == 0 && i < PyTuple_GET_SIZE(listeners); i++) {
+        PyObject *done = PyObject_CallFunctionObjArgs(PyTuple_GET_ITEM(listeners, i), link->name, when, sender, list,
+                                                      NULL);
+        if (done == NULL) status = -1;
+        Py_XDECREF(done);
+    }
+    Py_XDECREF(list);
+    Py_XDECREF(when);
+    return status;
+}
+
+/* Node._judge_and_tell (no `heard` listeners: they take the Python delivery): the guard asked message by message,
+ * each refused one counted, then told to the `refused` listeners as a Heard; the ones that pass kept in place. */
+static int judge_telling(vx_path_t *p, const vx_link_t *link, double t, PyObject *sender, vstig_msg_t *msgs,
+                         size_t *n, PyObject *refused) {
+    int jump = PyObject_TypeCheck(p->guard, &vx_JumpGuardType), status = 0;
+    uint32_t now = vx_guard_units(t);
+    PyObject *when = PyFloat_FromDouble(t);
+    size_t i, kept = 0;
+    Py_ssize_t k;
+    if (when == NULL) return -1;
+    for (i = 0; status == 0 && i < *n; i++) {
+        PyObject *m = vx_message(&msgs[i]), *reason = NULL, *heard;
+        if (m != NULL && jump) {
+            reason = Py_NewRef(vx_guard_passes((vx_guard_t *)p->guard, &msgs[i], now) ? Py_None : vx_n.drop_jump);
+        } else if (m != NULL) {
+            reason = PyObject_CallMethodObjArgs(p->guard, M_CHECK, link->name, sender, m, when, Py_None, NULL);
+        }
+        if (reason == NULL || (reason != Py_None && !PyUnicode_Check(reason))) {
+            if (reason != NULL) PyErr_Format(PyExc_TypeError, "a guard's check returns None or a counter's name, "
+                                             "got %R", reason);
+            status = -1;
+        } else if (reason == Py_None) {
+            msgs[kept++] = msgs[i];
+        } else if ((status = vx_count(link->counters, reason, 1)) == 0) {
+            heard = PyObject_CallFunctionObjArgs(p->heard, m, link->name, when, sender, NULL);
+            status = heard == NULL ? -1 : 0;
+            for (k = 0; status == 0 && k < PyTuple_GET_SIZE(refused); k++) {
+                PyObject *done = PyObject_CallFunctionObjArgs(PyTuple_GET_ITEM(refused, k), heard, reason, NULL);
+                if (done == NULL) status = -1;
+                Py_XDECREF(done);
+            }
+            Py_XDECREF(heard);
+        }
+        Py_XDECREF(reason);
+        Py_XDECREF(m);
+    }
+    Py_DECREF(when);
+    *n = kept;
+    return status;
+}
+
+/* Past the engine's intake: the guard, the `messages` listeners, the part. `sender`: as Python's (None: unsaid). */
+static int judge_and_take(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, PyObject *sender,
+                          const vx_told_t *told) {
     vx_link_t *link = &p->links[index];
     PyObject *part = p->part;
-    if (n == 0) return 0;
-    if (part != Py_None && PyObject_TypeCheck(part, &vx_SeatType) && ((vx_seat_t *)part)->intake_obj != Py_None &&
-        vx_seat_admit((vx_seat_t *)part, index, Py_None, n, t, &n) < 0) /* the engine's intake, before any other work */
-        return -1;
-    if (n && p->guard != Py_None) {
+    if (p->guard != Py_None && PyTuple_GET_SIZE(told->refused)) {
+        if (judge_telling(p, link, t, sender, msgs, &n, told->refused) < 0) return -1;
+    } else if (p->guard != Py_None) {
         if (PyObject_TypeCheck(p->guard, &vx_JumpGuardType)) {
             uint32_t now = vx_guard_units(t);
             size_t i, kept = 0;
@@ -111,20 +178,42 @@ static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, s
             }
             if (vx_count(link->counters, vx_n.drop_jump, (Py_ssize_t)(n - kept)) < 0) return -1;
             n = kept;
-        } else {
-            PyObject *who = named ? PyLong_FromUnsignedLongLong(sender) : Py_NewRef(Py_None);
-            int status = who == NULL ? -1 : python_guard(p, link, who, t, msgs, &n);
-            Py_XDECREF(who);
-            if (status < 0) return -1;
+        } else if (python_guard(p, link, sender, t, msgs, &n) < 0) {
+            return -1;
         }
     }
-    if (n == 0 || part == Py_None) return 0;
-    if (PyObject_TypeCheck(part, &vx_SeatType)) return vx_seat_take((vx_seat_t *)part, index, msgs, n, Py_None);
+    if (n == 0) return 0;
+    if (PyTuple_GET_SIZE(told->messages) && tell_messages(link, t, sender, msgs, n, told->messages) < 0) return -1;
+    if (part == Py_None) return 0;
+    if (PyObject_TypeCheck(part, &vx_SeatType)) return vx_seat_take((vx_seat_t *)part, index, msgs, n, sender, Py_None);
     return vx_relay_take((vx_relay_t *)part, index, msgs, n, Py_None);
 }
 
+/* What one unit carried, after its decoding: Node._arrive's steps for it. `sender`: who the medium says sent it (a
+ * CAN node, an XBee module's 64-bit address), when `named`; `told`: this batch's listeners told here. */
+static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, int named,
+                  unsigned long long sender, const vx_told_t *told) {
+    PyObject *part = p->part, *who;
+    int seat = part != Py_None && PyObject_TypeCheck(part, &vx_SeatType), telling = 0, status;
+    if (n == 0) return 0;
+    if (seat && ((vx_seat_t *)part)->intake_obj != Py_None &&
+        vx_seat_admit((vx_seat_t *)part, index, Py_None, n, t, &n) < 0) /* the engine's intake, before any other work */
+        return -1;
+    if (n == 0) return 0;
+    /* the sender as a Python object only where Python code is told it (a Python guard, a listener) */
+    if (seat && (telling = vx_seat_listening((vx_seat_t *)part)) < 0) return -1;
+    if (!named || !(telling || PyTuple_GET_SIZE(told->messages) || PyTuple_GET_SIZE(told->refused) ||
+                        (p->guard != Py_None && !PyObject_TypeCheck(p->guard, &vx_JumpGuardType))))
+        return judge_and_take(p, index, t, msgs, n, Py_None, told);
+    if ((who = PyLong_FromUnsignedLongLong(sender)) == NULL) return -1;
+    status = judge_and_take(p, index, t, msgs, n, who, told);
+    Py_DECREF(who);
+    return status;
+}
+
 /* A serial read's bytes: one unit (an XBee transport's: whole frames, which name their sender). */
-static int arrive_bytes(vx_path_t *p, Py_ssize_t index, double t, const uint8_t *data, size_t len, size_t *heard) {
+static int arrive_bytes(vx_path_t *p, Py_ssize_t index, double t, const uint8_t *data, size_t len, size_t *heard,
+                        const vx_told_t *told) {
     vx_rx_t *rx = &p->links[index].receiver->rx;
     size_t at = 0, n = 0, used;
     if (room_for(p, len / 4u + 64u) < 0) return -1; /* the shortest frame is 4 bytes: room for all a read holds */
@@ -132,7 +221,7 @@ static int arrive_bytes(vx_path_t *p, Py_ssize_t index, double t, const uint8_t 
         n = vx_rx_xbee(rx, data, len, p->msgs);
         if (vx_rx_harvest(rx) < 0) return -1;
         *heard += n;
-        return arrive(p, index, t, p->msgs, n, rx->has_sender, rx->sender);
+        return arrive(p, index, t, p->msgs, n, rx->has_sender, rx->sender, told);
     }
     while (at < len) {
         n += vx_rx_bytes(rx, data + at, len - at, &used, p->msgs + n, p->cap - n);
@@ -140,11 +229,12 @@ static int arrive_bytes(vx_path_t *p, Py_ssize_t index, double t, const uint8_t 
     }
     if (vx_rx_harvest(rx) < 0) return -1;
     *heard += n;
-    return arrive(p, index, t, p->msgs, n, 0, 0);
+    return arrive(p, index, t, p->msgs, n, 0, 0, told);
 }
 
 /* One CAN frame: one unit; its sender is the node its ID names. */
-static int arrive_frame(vx_path_t *p, Py_ssize_t index, double t, const vstig_can_frame_t *frame, size_t *heard) {
+static int arrive_frame(vx_path_t *p, Py_ssize_t index, double t, const vstig_can_frame_t *frame, size_t *heard,
+                        const vx_told_t *told) {
     vx_rx_t *rx = &p->links[index].receiver->rx;
     uint16_t sender = 0;
     size_t n;
@@ -152,7 +242,7 @@ static int arrive_frame(vx_path_t *p, Py_ssize_t index, double t, const vstig_ca
     n = vstig_can_receive(&rx->can, frame, p->msgs, &sender);
     if (vx_rx_harvest(rx) < 0) return -1;
     *heard += n;
-    return arrive(p, index, t, p->msgs, n, n != 0, sender);
+    return arrive(p, index, t, p->msgs, n, n != 0, sender, told);
 }
 
 /* ---- _spread --------------------------------------------------------------------------- */
@@ -199,29 +289,30 @@ typedef struct {
     size_t nframes;
 } vx_batch_t;
 
-static int arrive_batch(vx_path_t *p, Py_ssize_t index, double t, const vx_batch_t *batch) {
+static int arrive_batch(vx_path_t *p, Py_ssize_t index, double t, const vx_batch_t *batch,
+                        const vx_told_t *told) {
     vx_link_t *link = &p->links[index];
     size_t heard = 0, i;
     int status = 0;
     if (batch->kind == 1) {
-        status = arrive_bytes(p, index, t, batch->data, batch->len, &heard);
+        status = arrive_bytes(p, index, t, batch->data, batch->len, &heard, told);
     } else if (batch->kind == 3) {
         size_t at = 0;
         for (i = 0; status == 0 && i < batch->len; at += batch->unit_len[i++])
-            status = arrive_bytes(p, index, t, batch->data + at, batch->unit_len[i], &heard);
+            status = arrive_bytes(p, index, t, batch->data + at, batch->unit_len[i], &heard, told);
     } else if (batch->kind == 2) {
-        for (i = 0; status == 0 && i < batch->nframes; i++) status = arrive_frame(p, index, t, &batch->frames[i], &heard);
+        for (i = 0; status == 0 && i < batch->nframes; i++) status = arrive_frame(p, index, t, &batch->frames[i], &heard, told);
     } else {
         for (i = 0; status == 0 && i < (size_t)PyList_GET_SIZE(batch->units); i++) {
             PyObject *unit = PyList_GET_ITEM(batch->units, i);
             if (link->receiver->rx.kind == VX_CAN) {
                 vstig_can_frame_t frame;
                 status = vx_frame_of(unit, &frame);
-                if (status == 0) status = arrive_frame(p, index, t, &frame, &heard);
+                if (status == 0) status = arrive_frame(p, index, t, &frame, &heard, told);
             } else {
                 Py_buffer data;
                 if ((status = PyObject_GetBuffer(unit, &data, PyBUF_SIMPLE)) == 0) {
-                    status = arrive_bytes(p, index, t, data.buf, (size_t)data.len, &heard);
+                    status = arrive_bytes(p, index, t, data.buf, (size_t)data.len, &heard, told);
                     PyBuffer_Release(&data);
                 }
             }
@@ -252,17 +343,30 @@ static void fail(vx_path_t *p) {
 
 static PyObject *thread_ident(void) { return PyLong_FromUnsignedLong(PyThread_get_thread_ident()); }
 
-/* Whether Python code of the user's may run within a delivery (a Python guard, a conflict rule): it may ask
- * whether it runs on the Node's thread (Node.on_node_thread), which the reader thread then must be. */
-static int calls_python(const vx_path_t *p) {
+/* Whether Python code of the user's may run within a delivery (a Python guard, a conflict rule, a listener): it
+ * may ask whether it runs on the Node's thread (Node.on_node_thread), which the reader thread then must be. 1, 0,
+ * or -1 on error. */
+static int calls_python(const vx_path_t *p, const vx_told_t *told) {
+    int seat = p->part != Py_None && PyObject_TypeCheck(p->part, &vx_SeatType);
+    if (PyTuple_GET_SIZE(told->messages) || PyTuple_GET_SIZE(told->refused)) return 1;
     if (p->guard != Py_None && !PyObject_TypeCheck(p->guard, &vx_JumpGuardType)) return 1;
-    return p->part != Py_None && PyObject_TypeCheck(p->part, &vx_SeatType) &&
-           vx_engine_calls_python(((vx_seat_t *)p->part)->engine);
+    if (seat && vx_engine_calls_python(((vx_seat_t *)p->part)->engine)) return 1;
+    return seat ? vx_seat_listening((vx_seat_t *)p->part) : 0;
 }
 
-/* 1: the batch was delivered here; 0: it takes the Python delivery (the lock was busy, a stop is under way, or
- * something wants it per unit); -1: an error of our own. */
-/* Whether a listener wants each unit or message now (the Node's lists may gain one at any time). */
+/* This batch's listeners told here: the tuples the Node's list holds now ([messages, refused]); 0 or -1. */
+static int told_now(const vx_path_t *p, vx_told_t *told) {
+    Py_ssize_t n = PyList_GET_SIZE(p->told);
+    told->messages = n > 0 ? PySequence_Tuple(PyList_GET_ITEM(p->told, 0)) : PyTuple_New(0);
+    told->refused = n > 1 ? PySequence_Tuple(PyList_GET_ITEM(p->told, 1)) : PyTuple_New(0);
+    if (told->messages != NULL && told->refused != NULL) return 0;
+    Py_CLEAR(told->messages);
+    Py_CLEAR(told->refused);
+    return -1;
+}
+
+/* Whether a listener wants what the Python delivery alone gives (each unit, every `Heard`) now: the Node's lists
+ * may gain one at any time. */
 static int listened(const vx_path_t *p) {
     Py_ssize_t i;
     for (i = 0; i < PyList_GET_SIZE(p->listeners); i++) {
@@ -290,9 +394,12 @@ static int tell_delivered(const vx_path_t *p, double t) {
     return 0;
 }
 
+/* 1: the batch was delivered here; 0: it takes the Python delivery (the lock was busy, a stop is under way, or
+ * a listener wants it per unit); -1: an error of our own. */
 static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch_t *batch, const double *now) {
     PyObject *got, *ident, *wake_on, *sleep;
-    int taking_now, status, held_back = 0, python = calls_python(p);
+    vx_told_t told;
+    int taking_now, status, held_back = 0, python;
     double sleep_until = 0.0, retry = 0.0;
     if (!p->fast || p->stopping || p->links[index].receiver == NULL || listened(p)) return 0;
     got = PyObject_CallMethodOneArg(p->lock, vx_n.m_acquire, Py_False);
@@ -306,16 +413,21 @@ static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
         Py_XDECREF(got);
         return taking_now < 0 || got == NULL ? -1 : 0;
     }
-    /* a Python rule or guard may ask whether it runs on the Node's thread (Node.on_node_thread) */
-    ident = python ? thread_ident() : NULL;
-    if (python && (ident == NULL || PyObject_SetAttr(p->node, A_READER, ident) < 0)) {
+    /* this batch's listeners told here; Python code of the user's may ask whether it runs on the Node's thread */
+    python = told_now(p, &told) < 0 ? -1 : calls_python(p, &told);
+    ident = python > 0 ? thread_ident() : NULL;
+    if (python < 0 || (python && (ident == NULL || PyObject_SetAttr(p->node, A_READER, ident) < 0))) {
         Py_XDECREF(ident);
+        Py_XDECREF(told.messages);
+        Py_XDECREF(told.refused);
         got = PyObject_CallMethodNoArgs(p->lock, vx_n.m_release);
         Py_XDECREF(got);
         return -1;
     }
     Py_XDECREF(ident);
-    status = arrive_batch(p, index, t, batch);
+    status = arrive_batch(p, index, t, batch, &told);
+    Py_DECREF(told.messages);
+    Py_DECREF(told.refused);
     if (status == 0) {
         double at = now == NULL ? monotonic() : *now;
         status = at == -1.0 && PyErr_Occurred() ? -1 : spread(p, index, at, &held_back, &retry);
@@ -691,7 +803,7 @@ static int intern(void) {
     } names[] = {{&A_READER, "_reader_thread"}, {&A_FAILURE, "_failure"},
                  {&A_WAKE, "_wake"}, {&A_RETRY, "_retry_at"}, {&A_SLEEP, "_sleep_until"},
                  {&A_WAKE_ON_ARRIVAL, "_wake_on_arrival"}, {&M_SET, "set"}, {&M_ERROR_FRAME, "_error_frame"},
-                 {&M_POLL_COUNTS, "poll_counts"}};
+                 {&M_POLL_COUNTS, "poll_counts"}, {&M_CHECK, "check"}};
     size_t i;
     PyObject *time_module;
     if (done) return 0;
@@ -723,16 +835,16 @@ static int xbee_settings(vx_link_t *link) {
 
 static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     static char *kwlist[] = {"node", "lock", "deliver", "links", "receivers", "reads", "part", "guard", "outlets",
-                             "listeners", "delivered", "can_message", NULL};
+                             "listeners", "told", "heard", "delivered", "can_message", NULL};
     PyObject *node, *lock, *deliver, *links, *receivers, *reads, *part, *guard, *outlets, *listeners = NULL,
-        *delivered = NULL, *can_message = Py_None;
+        *told = NULL, *heard = Py_None, *delivered = NULL, *can_message = Py_None;
     vx_path_t *self;
     Py_ssize_t i;
     if (intern() < 0 ||
-        !PyArg_ParseTupleAndKeywords(args, kwds, "OOOO!O!O!OOO!|$O!O!O", kwlist, &node, &lock, &deliver,
+        !PyArg_ParseTupleAndKeywords(args, kwds, "OOOO!O!O!OOO!|$O!O!OO!O", kwlist, &node, &lock, &deliver,
                                      &PyList_Type, &links, &PyList_Type, &receivers, &PyList_Type, &reads, &part,
                                      &guard, &PyList_Type, &outlets, &PyList_Type, &listeners, &PyList_Type,
-                                     &delivered, &can_message))
+                                     &told, &heard, &PyList_Type, &delivered, &can_message))
         return NULL;
     if (PyList_GET_SIZE(receivers) != PyList_GET_SIZE(links) || PyList_GET_SIZE(reads) != PyList_GET_SIZE(links)) {
         PyErr_SetString(PyExc_ValueError, "one receiver and one way of reading per link");
@@ -757,10 +869,12 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     self->part = Py_NewRef(part);
     self->guard = Py_NewRef(guard);
     self->outlets = Py_NewRef(outlets);
-    self->fast = 1; /* until the Node says a listener wants each unit or message */
+    self->fast = 1; /* until the Node says a listener wants each unit or every `Heard` */
     self->listeners = listeners == NULL ? PyList_New(0) : Py_NewRef(listeners);
+    self->told = told == NULL ? PyList_New(0) : Py_NewRef(told);
+    self->heard = Py_NewRef(heard);
     self->delivered = delivered == NULL ? PyList_New(0) : Py_NewRef(delivered);
-    if (self->listeners == NULL || self->delivered == NULL) {
+    if (self->listeners == NULL || self->told == NULL || self->delivered == NULL) {
         Py_DECREF(self);
         return NULL;
     }
@@ -808,6 +922,8 @@ static int Path_traverse(vx_path_t *self, visitproc visit, void *arg) {
     Py_VISIT(self->guard);
     Py_VISIT(self->outlets);
     Py_VISIT(self->listeners);
+    Py_VISIT(self->told);
+    Py_VISIT(self->heard);
     Py_VISIT(self->delivered);
     for (i = 0; self->links != NULL && i < self->nlinks; i++) {
         Py_VISIT(self->links[i].receiver);
@@ -826,6 +942,8 @@ static int Path_clear(vx_path_t *self) {
     Py_CLEAR(self->guard);
     Py_CLEAR(self->outlets);
     Py_CLEAR(self->listeners);
+    Py_CLEAR(self->told);
+    Py_CLEAR(self->heard);
     Py_CLEAR(self->delivered);
     for (i = 0; self->links != NULL && i < self->nlinks; i++) {
         vx_link_t *link = &self->links[i];
@@ -940,7 +1058,7 @@ static PyMethodDef Path_methods[] = {
 
 static PyMemberDef Path_members[] = {
     {"fast", T_BOOL, offsetof(vx_path_t, fast), 0,
-     "No listener wants each unit or message: whole batches are delivered here (the Node sets it)."},
+     "No listener wants each unit or every `Heard`: whole batches may be delivered here (the Node sets it)."},
     {"stopping", T_BOOL, offsetof(vx_path_t, stopping), 0, "The readers stop: `serve` returns (LinkReaders sets it)."},
     {NULL, 0, 0, 0, NULL},
 };
@@ -948,7 +1066,8 @@ static PyMemberDef Path_members[] = {
 PyTypeObject vx_PathType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "vstig_hw._vstig.Path",
-    .tp_doc = "Path(node, lock, deliver, links, receivers, reads, part, guard, outlets, can_message=None): "
+    .tp_doc = "Path(node, lock, deliver, links, receivers, reads, part, guard, outlets, *, listeners, told, heard, "
+              "delivered, can_message=None): "
               "a Node's delivery in C.",
     .tp_basicsize = sizeof(vx_path_t),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,

@@ -34,9 +34,11 @@ typedef struct {
     PyObject *outlets;  /* list of Outlet (none: a listener) */
     Py_ssize_t nlinks;
     vx_link_t *links;
-    PyObject *listeners; /* the Node's lists of listeners that want each unit or message (a list of lists) */
+    PyObject *listeners; /* the Node's listeners that take its Python delivery, one sequence per kind (a list) */
+    PyObject *told;      /* [`messages` listeners, `refused` listeners] (tuples): the delivery here tells them */
+    PyObject *heard;     /* the type a refused message is told as (vstig_hw.links.link.Heard) */
     PyObject *delivered; /* the Node's listeners told of every batch handled, with its read time (a list) */
-    char fast;          /* no listener wants each unit or message: the whole batch is C's */
+    char fast;          /* no listener wants each unit or every `Heard`: the whole batch may be C's */
     char stopping;      /* the readers stop: serve() returns */
     vstig_msg_t *msgs;  /* the messages of one unit (used under the Node's lock) */
     size_t cap;

@@ -223,13 +223,15 @@ class Node:
         self._tickers: list[Callable[[], None]] = [
             link.tick if receiver is None else receiver.tick for link, receiver in zip(self.links, receivers,
                                                                                       strict=True)]
-        # The compiled delivery (`compiled`) takes a batch whole while no listener wants each unit or message:
-        # it looks at these two lists, which `_rebuild_listeners` keeps equal to the listeners' tuples.
+        # The compiled delivery (`compiled`) takes a batch whole while no listener wants each unit or every
+        # `Heard`, and tells the `messages`, `refused`, `change` and `delivered` listeners itself: it looks at
+        # these lists, which `_rebuild_listeners` keeps equal to the listeners' tuples.
         self._path_wants: list[Sequence[Any]] = []
+        self._path_told: list[tuple[Callable[..., None], ...]] = [(), ()]  # messages, refused
         self._path_delivered: list[DeliveredListener] = []
         self._path = None if compiled is None else compiled.path(
             self, self._lock, self._deliver, self.links, receivers, self.part, self.guard, self.outlets,
-            self._path_wants, self._path_delivered)
+            self._path_wants, self._path_told, self._path_delivered)
         self._readers = LinkReaders(self.links, self._deliver if self._path is None else self._deliver_compiled,
                                     self._path)
         self._sleep_until = 0.0  # when the waiting loop looks again by itself (0: it is not waiting)
@@ -660,7 +662,8 @@ class Node:
         self._on_closed = tuple(x.closed for x in every if x.closed is not None)
         if self.seat is not None:
             self.seat.on_change = self._on_change
-        self._path_wants[:] = [self._on_unit, self._on_heard, self._on_refused, self._on_messages, self._on_change]
+        self._path_wants[:] = [self._on_unit, self._on_heard]
+        self._path_told[:] = [self._on_messages, self._on_refused]
         self._path_delivered[:] = self._on_delivered
 
     def on_node_thread(self) -> bool:
