@@ -217,17 +217,24 @@ def _run(node: Node, call: tuple[Any, ...], clock: list[float]) -> None:
             node._spread(now)
 
 
+def _guard(kind: str) -> Guard | None:
+    if kind == "none":
+        return None
+    return Guard(max_jump=3) if kind == "jump" else Guard(max_jump=3, rate=5.0)  # rate: stays Python
+
+
+def _close(node: Node) -> None:
+    for link, outlet in zip(node.links, node.outlets, strict=True):
+        link.transport.close()
+        outlet.writer.close(1.0)
+
+
 @EXAMPLES
 @given(mode=st.sampled_from([Mode.ENGINE, Mode.RAW]), budget=st.none() | st.integers(1, 6),
        guard=st.sampled_from(["none", "jump", "python"]), script=st.lists(calls, max_size=40))
 def test_the_compiled_delivery_equals_the_python_node(compiled: ModuleType, mode: Mode, budget: int | None,
                                                       guard: str, script: list[tuple[Any, ...]]) -> None:
-    def guard_of() -> Guard | None:
-        if guard == "none":
-            return None
-        return Guard(max_jump=3) if guard == "jump" else Guard(max_jump=3, rate=5.0)  # rate: stays Python
-
-    nodes = [_node(False, mode, budget, guard_of()), _node(True, mode, budget, guard_of())]
+    nodes = [_node(False, mode, budget, _guard(guard)), _node(True, mode, budget, _guard(guard))]
     clocks = [[0.0], [0.0]]
     for call in script:
         for node, clock in zip(nodes, clocks, strict=True):
@@ -236,9 +243,7 @@ def test_the_compiled_delivery_equals_the_python_node(compiled: ModuleType, mode
         pure, compiled_state = (_state(node) for node in nodes)
         assert compiled_state == pure, call
     for node in nodes:
-        for link, outlet in zip(node.links, node.outlets, strict=True):
-            link.transport.close()
-            outlet.writer.close(1.0)
+        _close(node)
 
 
 def test_a_pure_node_is_built_when_vstig_pure_says_so(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -420,12 +425,7 @@ def test_the_compiled_delivery_tells_listeners_as_the_python_node(
     intake, a guard refusing some, a listener that cancels itself, a `heard` listener that sends the batches to the
     Python delivery while it listens): the same calls, in the same order, with the same senders, `Message`s and
     `Heard`s."""
-    def guard_of() -> Guard | None:
-        if guard == "none":
-            return None
-        return Guard(max_jump=3) if guard == "jump" else Guard(max_jump=3, rate=5.0)  # rate: stays Python
-
-    nodes = [_node(False, mode, budget, guard_of()), _node(True, mode, budget, guard_of())]
+    nodes = [_node(False, mode, budget, _guard(guard)), _node(True, mode, budget, _guard(guard))]
     clocks: list[list[float]] = [[0.0], [0.0]]
     logs: list[list[tuple[Any, ...]]] = [[], []]
     listenings: list[list[Listening]] = [[], []]
@@ -443,9 +443,7 @@ def test_the_compiled_delivery_tells_listeners_as_the_python_node(
         pure, compiled_state = (_state(node) for node in nodes)
         assert compiled_state == pure, call
     for node in nodes:
-        for link, outlet in zip(node.links, node.outlets, strict=True):
-            link.transport.close()
-            outlet.writer.close(1.0)
+        _close(node)
 
 
 def test_the_compiled_delivery_tells_each_link_s_sender(compiled: ModuleType) -> None:
@@ -494,9 +492,7 @@ def test_a_listener_that_raises_ends_run_on_either_delivery(compiled: ModuleType
             node.poll(0)
         outcomes.append((str(raised.value), calls, _state(node)))
         node.poll(0)  # raised once: the loop goes on
-        for link, outlet in zip(node.links, node.outlets, strict=True):
-            link.transport.close()
-            outlet.writer.close(1.0)
+        _close(node)
     assert outcomes[1] == outcomes[0]
     assert len(outcomes[0][1]) == 2 and outcomes[0][2]["table"] == [(1, Entry(7, 1, 2))] + \
         ([(2, Entry(7, 1, 2))] if kind == "change" else [])
