@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 from adapters import epuck_reassembler, nonzero, serial_framing, xbee_receiver
-from conftest import load
+from conftest import SPEC, load
+from traffic import xbee_stream
 
 from vstig_hw import DecodeError, Message, Op, Outcome, Stigmergy, decode, encode
 from vstig_hw.engine import ConflictResolver, Entry, higher_robot_wins, sum_merge
@@ -199,8 +200,6 @@ def test_xbee_reading_follows_the_spec_procedure_on_hostile_streams() -> None:
     import random
     import sys
 
-    from conftest import SPEC
-    from traffic import xbee_stream
 
     sys.path.insert(0, str(SPEC / "tools"))
     try:
