@@ -190,7 +190,18 @@ def run(args: list[str] | None = None) -> int:
 
 def main() -> None:
     guard_streams()
-    sys.exit(run())
+    status = run()
+    if "zenoh" in sys.modules:
+        # Zenoh's own threads may still be inside a callback into Python (a sample or a transport event in flight)
+        # while the interpreter finalizes: such a thread is then unwound through Rust and the process aborts
+        # ("FATAL: exception not rethrown"). Every link is closed and every stream flushed by now: end here.
+        import logging
+
+        logging.shutdown()
+        with contextlib.suppress(click.ClickException, click.exceptions.Exit, OSError, ValueError):
+            flush_streams()  # run() reported any failure of theirs already
+        os._exit(status)
+    sys.exit(status)
 
 
 if __name__ == "__main__":
