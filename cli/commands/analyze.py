@@ -19,6 +19,7 @@ from vstig_hw.capture.records import CaptureError
 from vstig_hw.counters import Counters
 from vstig_hw.extras import require
 from vstig_hw.values import ValueType, from_raw
+from vstig_hw.wording import shown_sender
 
 from ..options import (
     Finite,
@@ -240,16 +241,11 @@ def _print_text(report: Report, value_type: ValueType) -> None:
         for name in heard_links:
             h = w.heard.get(name)
             heard += f"{'-':>24}" if h is None else f"{f'{h.first - start:.3f}..{h.last - start:.3f}':>24}"
-        behind = " ".join(map(_sender, w.behind[:10])) + (" ..." if len(w.behind) > 10 else "")
+        behind = " ".join(map(shown_sender, w.behind[:10])) + (" ..." if len(w.behind) > 10 else "")
         click.echo((f"{_seconds(w.converged_after):>11} {w.key:>5} {from_raw(w.value, value_type)!s:>8} "
                     f"{w.timestamp:>5} {w.robot:>5} {w.t - start:>10.3f} {caught:>9}  {heard}{behind}").rstrip())
     click.echo()
     _print_traffic(report)
-
-
-def _sender(sender: int) -> str:
-    """A sender as people write it: a node id in decimal, an XBee module's 64-bit address in hex."""
-    return str(sender) if sender <= 0xFFFF else f"{sender:016X}"
 
 
 def _print_traffic(report: Report) -> None:
@@ -264,6 +260,6 @@ def _print_traffic(report: Report) -> None:
     for name, traffic in report.links.items():
         click.echo(row(f"link {name}", traffic))
     for sender, traffic in report.senders.items():
-        click.echo(row(f"sender {_sender(sender)}", traffic))
+        click.echo(row(f"sender {shown_sender(sender)}", traffic))
     click.echo(f"PUTs: {report.first_copies} first copies, {report.rebroadcasts} re-broadcasts; "
                f"conflicts: {report.conflicts} writes share a key and timestamp with another robot's write")

@@ -16,8 +16,8 @@ from typing import Any
 
 LOG = ("(1700000000.250000) can0 601#0003006400010001\n"
        "(1700000000.260000) can0 701#8003000000010002\n")
-TEXT = ("(1700000000.250000) can0 id=601 PUT key=3 value=100 ts=1 robot=1\n"
-        "(1700000000.260000) can0 id=701 GET key=3 value=0 ts=1 robot=2\n")
+TEXT = ("(1700000000.250000) can0 id=601 PUT key=3 value=100 ts=1 robot=1 sender=1\n"
+        "(1700000000.260000) can0 id=701 GET key=3 value=0 ts=1 robot=2 sender=1\n")
 NEVER = ("vstig_hw.transports", "vstig_hw.links", "vstig_hw.gateway", "vstig_hw.engine", "vstig_hw.dialects",
          "numpy")
 

@@ -62,7 +62,7 @@ def test_skip_bad_counts_and_continues(tmp_path: Path) -> None:
     bad.write_text("(1.000000) can0 600#0001000200030004\nnot a frame\n(2.000000) can0 600#0001000200030005\n")
     result = CliRunner().invoke(cli, ["decode", str(bad), "--skip-bad", "--format", "csv"])
     assert result.exit_code == 0
-    assert result.stdout.splitlines()[0] == "t,link,can_id,op,key,value,timestamp,robot"
+    assert result.stdout.splitlines()[0] == "t,link,can_id,op,key,value,timestamp,robot,sender"
     assert len(result.stdout.splitlines()) == 3 and "1 bad lines skipped" in result.stderr
 
 
@@ -95,7 +95,7 @@ def test_csv_of_several_files_has_one_header_and_a_file_column(tmp_path: Path) -
     result = CliRunner().invoke(cli, ["decode", str(a), str(b), "--format", "csv", "--skip-bad"])
     assert result.exit_code == 0, result.output
     lines = result.stdout.splitlines()
-    assert lines[0] == "file,t,link,can_id,op,key,value,timestamp,robot" and len(lines) == 3
+    assert lines[0] == "file,t,link,can_id,op,key,value,timestamp,robot,sender" and len(lines) == 3
     assert lines[1].startswith(f'"{a}",1.000000,') and lines[2].startswith(f'"{b}",2.000000,')
 
 

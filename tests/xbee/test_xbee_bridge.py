@@ -212,7 +212,7 @@ def test_a_capture_holds_each_frame_as_the_module_sent_it_and_decodes_with_its_s
     analyzed = run_vstig("analyze", str(path))
     assert analyzed.returncode == 0, analyzed.stderr
     assert [line.split()[1] for line in analyzed.stdout.splitlines() if line.startswith("sender ")] == [
-        f"{m.address:016X}" for m in modules]  # by their 64-bit addresses
+        f"0x{m.address:016X}" for m in modules]  # by their 64-bit addresses, as --sender takes them
     mcap = path.with_suffix(".mcap")
     assert run_vstig("decode", str(path), "-o", str(mcap)).returncode == 0
     again = run_vstig("decode", str(mcap), "--format", "jsonl")

@@ -29,6 +29,7 @@ from ..counters import Counters
 from ..extras import missing
 from ..values import ValueType, from_raw
 from ..wire import Message, encode
+from ..wording import shown_sender
 from .records import CAN_FRAMING, MESSAGE_FRAMING, CaptureError, Record, file_position, read_capture, sniff
 
 if TYPE_CHECKING:
@@ -40,7 +41,7 @@ if TYPE_CHECKING:
 __all__ = ["CSV_HEADER", "FORMATS", "CarriedMessages", "Decoded", "Decoder", "RecordFilter", "as_csv", "as_json",
            "as_text", "decode_file", "default_framings", "filter_records"]
 
-CSV_HEADER = "t,link,can_id,op,key,value,timestamp,robot\n"
+CSV_HEADER = "t,link,can_id,op,key,value,timestamp,robot,sender\n"
 
 
 @dataclass(frozen=True, slots=True)
@@ -230,15 +231,17 @@ def as_text(d: Decoded, value_type: ValueType = "uint16", stamp: str | None = No
     """One readable line; `stamp` replaces the time column (capture.time_columns)."""
     m = d.message
     can_id = f" id={d.can_id:03X}" if d.can_id is not None else ""
+    sender = f" sender={shown_sender(d.sender)}" if d.sender is not None else ""
     return (f"{stamp or f'({d.t:.6f})'} {d.link}{can_id} {m.op.name} key={m.key} value={from_raw(m.value, value_type)} "
-            f"ts={m.timestamp} robot={m.robot}")
+            f"ts={m.timestamp} robot={m.robot}{sender}")
 
 
 def as_csv(d: Decoded, value_type: ValueType = "uint16") -> str:
     m = d.message
     can_id = "" if d.can_id is None else str(d.can_id)
+    sender = "" if d.sender is None else str(d.sender)
     return (f"{d.t:.6f},{d.link},{can_id},{m.op.name},{m.key},{from_raw(m.value, value_type)},"
-            f"{m.timestamp},{m.robot}")
+            f"{m.timestamp},{m.robot},{sender}")
 
 
 FORMATS = {"text": as_text, "jsonl": as_json, "csv": as_csv}
