@@ -8,6 +8,9 @@ change it hears (`{"change": ...}`) as it comes, stamped with the wall-clock tim
     put KEY VALUE        the put service's answer
     get KEY              the get service's answer
     table                the table service's entries
+    puts N KEY VALUE     N put calls at once (values VALUE, VALUE+1, ...), and a get of KEY half a second later:
+                         {"puts": {"answers": [[seconds to the answer, taken, reason], ...], "get": seconds}}
+    tables N             N table calls at once: {"tables": [[seconds to the answer, entries], ...]}
     write KEY VALUE ROBOT   one sample on the write topic (timestamp 0: the gateway stamps it)
     listen TOPIC         subscribes to TOPIC under the namespace (vstig_msgs/Message), then {"listening": TOPIC}
     flood SECONDS [TOPIC]   writes as fast as rclpy publishes (on TOPIC under the namespace: default
@@ -24,6 +27,7 @@ import json
 import sys
 import threading
 import time
+from typing import Any
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -41,6 +45,35 @@ def say(record: dict[str, object]) -> None:
 
 def entry(e: object) -> list[int]:
     return [e.key, e.value, e.timestamp, e.robot]  # type: ignore[attr-defined]
+
+
+def timed(call: Any, start: float) -> list[float]:
+    """[seconds from `start` to the answer of `call`], filled as the executor's thread completes it."""
+    when: list[float] = []
+    call.add_done_callback(lambda _: when.append(time.monotonic() - start))
+    return when
+
+
+def answered(when: list[float]) -> float:
+    end = time.monotonic() + CALL_TIMEOUT
+    while not when:
+        assert time.monotonic() < end, "no answer in time"
+        time.sleep(0.001)
+    return when[0]
+
+
+def concurrent_calls(client: Any, requests: list[Any], then: Any = None) -> tuple[list[tuple[float, Any]], float]:
+    """`requests` called at once; `then` (a request to the get service) half a second later. Each answer with the
+    seconds it took, and the seconds `then` took."""
+    start = time.monotonic()
+    calls = [client.call_async(request) for request in requests]
+    times = [timed(call, start) for call in calls]
+    got = 0.0
+    if then is not None:
+        time.sleep(0.5)
+        asked = time.monotonic()
+        got = answered(timed(then[0].call_async(then[1]), asked))
+    return [(answered(when), call.result()) for when, call in zip(times, calls, strict=True)], got
 
 
 def main(namespace: str, wait: float) -> None:
@@ -82,6 +115,14 @@ def main(namespace: str, wait: float) -> None:
         elif command == "get":
             answer = clients["get"].call(Get.Request(key=args[0]), timeout_sec=CALL_TIMEOUT)
             say({"get": {"found": answer.found, "entry": entry(answer.entry)}})
+        elif command == "puts":
+            puts, got = concurrent_calls(clients["put"], [Put.Request(key=args[1], value=args[2] + n)
+                                                          for n in range(args[0])],
+                                         (clients["get"], Get.Request(key=args[1])))
+            say({"puts": {"answers": [[t, answer.taken, answer.reason] for t, answer in puts], "get": got}})
+        elif command == "tables":
+            tables, _ = concurrent_calls(clients["table"], [Table.Request() for _ in range(args[0])])
+            say({"tables": [[t, len(answer.entries)] for t, answer in tables]})
         elif command == "table":
             answer = clients["table"].call(Table.Request(), timeout_sec=CALL_TIMEOUT)
             say({"table": [entry(e) for e in answer.entries]})

@@ -407,3 +407,22 @@ with vstig_hw.join("can:virtual:api", "ros2:lab", robot_id=200) as swarm:
             peer.stop()
     finally:
         program.stop()
+
+
+def test_two_puts_at_once_and_the_rest_busy_at_once_while_a_get_is_answered(lab: Callable[..., Lab]) -> None:
+    """Six puts at once that no robot confirms (the robot is never stepped): two in flight, the four others answered
+    busy at once, and a get asked half a second in answered at once, not behind the puts."""
+    run = lab([PtyRobot(1)])
+    peer = run.peer()
+    peer.send("puts 6 11 300")
+    wait_for(lambda: bool(peer.records("puts")), 60)
+    answers = peer.records("puts")[-1]
+    puts, got = answers["answers"], answers["get"]
+    busy = [t for t, taken, reason in puts if reason.startswith("busy")]
+    waited = [t for t, taken, reason in puts if not reason.startswith("busy")]
+    assert len(busy) == 4 and max(busy) < 0.5, puts
+    assert len(waited) == 2 and not any(taken for _, taken, _ in puts), puts
+    assert min(waited) > 1.0 and max(waited) - min(waited) < 1.0, f"the two puts ran one after the other: {puts}"
+    assert got < 0.5, f"the get took {got:.2f} s behind the puts: {puts}"
+    seen = counters(run.close(), "ros2-lab")
+    assert seen["put"] == 6 and seen["put_busy"] == 4 and seen["get"] == 1, seen

@@ -42,7 +42,7 @@ from ..ros2msgs import ros_environment
 from ..wire import Message
 from .base import DeviceTransport, TransportError
 
-__all__ = ["CHANGE", "FRAME", "HEARD", "PutAnswer", "Ros2Options", "Ros2Transport", "Served"]
+__all__ = ["CHANGE", "FRAME", "HEARD", "PUTS_AT_ONCE", "PutAnswer", "Ros2Options", "Ros2Transport", "Served"]
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +55,8 @@ NO_LINK = 0xFFFF
 PIPE_BUF = 4096  # POSIX: a pipe write of at most this many bytes is never split nor interleaved
 START_TIMEOUT = 360.0  # seconds the child may take to start: the first on a machine builds the interfaces
 STATS_PERIOD = 1.0  # seconds between two counter snapshots sent for /diagnostics
-REQUEST_THREADS = 3  # two confirmed puts and one quick answer at once (the child refuses a third put)
+PUTS_AT_ONCE = 2  # confirmed puts in flight in the node process; one more is answered busy at once (put_busy)
+REQUEST_THREADS = PUTS_AT_ONCE + 2  # the puts in flight, a get and a table at once (the node asks no more)
 
 
 @dataclass(frozen=True, slots=True)

@@ -32,12 +32,14 @@ from typing import IO, Any
 from ..counters import Counters
 from ..framing.ros2 import CDR_SIZE, cdr_message, ros_name
 from ..wire import Message
-from .ros2 import CHANGE, FRAME, HEARD, Ros2Options
+from .ros2 import CHANGE, FRAME, HEARD, PUTS_AT_ONCE, Ros2Options
 
 WRITE_POLL = 0.05  # seconds between two takes from the write topic: what a ROS 2 write may wait
 DIAGNOSTICS_PERIOD = 1.0
-PUTS_AT_ONCE = 2  # confirmed puts in flight; one more is answered at once (put_busy)
 ANSWER_WAIT = 30.0  # seconds a service waits for the gateway's answer (a confirmed put takes up to ~11)
+# The executor's threads: the puts in flight, one answering further puts busy, and one each for get, table and
+# the two timers, so that none of them waits for a thread.
+EXECUTOR_THREADS = PUTS_AT_ONCE + 5
 _PROFILE = "fastdds_loopback.xml"
 _DROPS = ("drop_", "rx_lost", "rx_overflow", "tx_dropped", "tx_overflow", "put_busy", "behind")
 
@@ -93,10 +95,11 @@ class Ros2Node:
         self._dropped: dict[str, int] = {}  # per part, the drops the last /diagnostics sample counted
         self._stats: dict[str, dict[str, int]] = {}
         self._declare(config["served"])
-        self.executor = MultiThreadedExecutor(num_threads=PUTS_AT_ONCE + 1, context=self.context)
+        self.executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=self.context)
         self.executor.add_node(self.node)
 
     def _declare(self, served: bool) -> None:
+        from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
         msg, srv, node, options = self._types.msg, self._types.srv, self.node, self.options
@@ -110,17 +113,19 @@ class Ros2Node:
         # executor spins; a timer takes what `write_rate` allows, and Fast DDS drops the rest (rx_lost).
         self.intake = _node(f"{node.get_name()}_write", options.namespace, self.context)
         self.writes = self.intake.create_subscription(msg.Message, "write", _never, stream, raw=True)
-        node.create_timer(WRITE_POLL, self._take_writes)
+        # Each callback in a group of its own, so none waits for another (a default group runs one callback at a
+        # time): puts are reentrant, `_put` bounds those in flight and answers the rest busy at once.
+        node.create_timer(WRITE_POLL, self._take_writes, MutuallyExclusiveCallbackGroup())
         self.changes = None
         if served:
             self.changes = node.create_publisher(msg.Change, "changes", table)
-            node.create_service(srv.Put, "put", self._put)
-            node.create_service(srv.Get, "get", self._get)
-            node.create_service(srv.Table, "table", self._table)
+            node.create_service(srv.Put, "put", self._put, callback_group=ReentrantCallbackGroup())
+            node.create_service(srv.Get, "get", self._get, callback_group=MutuallyExclusiveCallbackGroup())
+            node.create_service(srv.Table, "table", self._table, callback_group=MutuallyExclusiveCallbackGroup())
         from diagnostic_msgs.msg import DiagnosticArray
 
         diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        node.create_timer(DIAGNOSTICS_PERIOD, lambda: self._diagnose(diagnostics))
+        node.create_timer(DIAGNOSTICS_PERIOD, lambda: self._diagnose(diagnostics), MutuallyExclusiveCallbackGroup())
 
     # -- to the gateway -------------------------------------------------------------
     def _count(self, name: str, n: int = 1) -> None:
