@@ -48,7 +48,7 @@ class BlabbermouthSpec:
 
 def parse_blabbermouth(spec: str, body: str) -> BlabbermouthSpec:
     """`body` is the spec after `blabbermouth:`."""
-    addresses, params = split_query(spec, body, _EXAMPLE, ("size", "deployment"), False)
+    addresses, params = split_query(spec, body, _EXAMPLE, ("size", "deployment"))
     robots = []
     for address in addresses.split(","):
         host, sep, port = address.strip().rpartition(":") if ":" in address else (address.strip(), "", "")

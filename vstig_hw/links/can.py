@@ -95,7 +95,7 @@ def parse_can(spec: str, body: str) -> CanSpec:
         raise bad(spec, f"interface {interface!r} is not a python-can interface name", _EXAMPLE)
     channel, params = split_query(spec, rest, _EXAMPLE, ("bitrate", "fd", "id_base", "extended", "stigmergy",
                                                          "filter", "echo"),
-                                  False, open_prefix=_BUS_PREFIX)
+                                  open_prefix=_BUS_PREFIX)
     if not channel or any(ch in channel for ch in "\0\n\r "):
         raise bad(spec, f"channel {channel!r} is missing or has spaces", _EXAMPLE)
     extended = flag(spec, _EXAMPLE, "extended", params["extended"]) if "extended" in params else False

@@ -1,9 +1,9 @@
 """What every link spec shares: `<scheme>:<body>[?key=value&...]`, as pyserial's URLs name a port.
 
 The query after the last `?` is ours. A pyserial URL (`socket://h:7000`,
-`rfc2217://...`) may carry its own options in the same query: keys we do not
-know stay with the URL. A plain device path has no options of its own, so an
-unknown key there is a typo and an error.
+`rfc2217://...`) may carry its own options in the same query: the keys its
+handler reads (`theirs`) stay with the URL. Any other key is a typo and an
+error naming it, the known keys and the closest one, on every kind of link.
 
 A bad spec raises ValueError with one line naming the bad part and a valid
 example; each medium's module passes its own example to these helpers.
@@ -12,8 +12,10 @@ example; each medium's module passes its own example to these helpers.
 from __future__ import annotations
 
 import re
+from difflib import get_close_matches
+from urllib.parse import unquote_plus
 
-__all__ = ["bad", "check_port", "flag", "integer", "safe_name", "split_query"]
+__all__ = ["bad", "check_port", "flag", "integer", "safe_name", "split_query", "unknown_key"]
 
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9._:-]+")
 
@@ -27,11 +29,23 @@ def bad(spec: str, problem: str, example: str) -> ValueError:
     return ValueError(f"bad link spec {spec!r}: {problem} (e.g. {example})")
 
 
-def split_query(spec: str, body: str, example: str, ours: tuple[str, ...], is_url: bool,
-                open_prefix: str | None = None) -> tuple[str, dict[str, str]]:
-    """Split `body` at its last '?' into (rest, our params); foreign keys stay on a URL.
+def unknown_key(spec: str, item: str, example: str, ours: tuple[str, ...], theirs: tuple[str, ...] = (),
+                whose: str = "") -> ValueError:
+    """The error for a key nobody reads: `item` (key=value) named, the known keys listed (ours, then `whose`
+    `theirs`: a pyserial URL's), the closest one suggested."""
+    key = item.partition("=")[0]
+    closest = get_close_matches(key, (*ours, *theirs), n=1, cutoff=0.6)
+    hint = f"did you mean {closest[0]}? " if closest else ""
+    also = f"; {whose} takes {', '.join(theirs)}" if theirs else ""
+    return bad(spec, f"unknown parameter {item!r} ({hint}known: {', '.join(ours) or 'none'}{also})", example)
+
+
+def split_query(spec: str, body: str, example: str, ours: tuple[str, ...], theirs: tuple[str, ...] = (),
+                open_prefix: str | None = None, whose: str = "") -> tuple[str, dict[str, str]]:
+    """Split `body` at its last '?' into (rest, our params); `theirs` (a pyserial URL's own keys) stay on the rest.
 
     Keys starting with `open_prefix` are ours too, whatever follows it (passed on as they are).
+    `whose` names the owner of `theirs` in the error for an unknown key ("pyserial's loop://").
     """
     if "?" not in body:
         return body, {}
@@ -46,12 +60,15 @@ def split_query(spec: str, body: str, example: str, ours: tuple[str, ...], is_ur
             if key in params:
                 raise bad(spec, f"parameter {key!r} given twice", example)
             params[key] = value
-        elif is_url and item:
+        elif not item:
+            raise bad(spec, "an empty parameter (a stray '&' or '?')", example)
+        elif unquote_plus(key) in theirs:  # read as the URL's handler reads it, percent-decoded
             foreign.append(item)
         else:
-            raise bad(spec, f"unknown parameter {item!r} (known: {', '.join(ours) or 'none'})", example)
+            raise unknown_key(spec, item, example, (*ours, f"{open_prefix}KEY") if open_prefix else ours, theirs,
+                              whose)
     if foreign:
-        rest = f"{rest}?{'&'.join(foreign)}"
+        rest = f"{rest}{'&' if '?' in rest else '?'}{'&'.join(foreign)}"  # one query, as pyserial reads it
     return rest, params
 
 

@@ -92,7 +92,7 @@ class Ros2Spec:
 def parse_ros2(spec: str, body: str) -> Ros2Spec:
     """`body` is the spec after `ros2:`."""
     swarm, params = split_query(spec, body, _EXAMPLE, ("namespace", "domain", "stigmergy", "discovery", "profile",
-                                                        "qos", "depth", "write_rate"), False)
+                                                        "qos", "depth", "write_rate"))
     if not _TOKEN.match(swarm):
         raise bad(spec, f"swarm name {swarm!r} must be letters, digits and '_', not starting with a digit (it is "
                         "one token of a ROS 2 namespace)", _EXAMPLE)

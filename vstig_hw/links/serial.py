@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
 
-from .grammar import bad, check_port, integer, safe_name, split_query
+from .grammar import bad, check_port, integer, safe_name, split_query, unknown_key
 from .link import Link
 
 if TYPE_CHECKING:
@@ -144,29 +144,63 @@ def _xbee(spec: str, example: str, params: dict[str, str], framing: str) -> dict
     return options
 
 
+# The options each of pyserial's own URL handlers reads (pyserial 3.5, serial/urlhandler/): any other key in a
+# spec is a typo. A scheme of another handler package (serial.protocol_handler_packages) gets none from a spec.
+PYSERIAL_URL_OPTIONS = {
+    "loop": ("logging",), "socket": ("logging",), "rfc2217": ("logging", "ign_set_control", "poll_modem", "timeout"),
+    "spy": ("file", "color", "raw", "all"), "alt": ("class",), "hwgrep": (), "cp2110": (),
+}
+_LOG_LEVELS = ("debug", "info", "warning", "error")  # logging=: any other value is a KeyError inside pyserial
+_HOST_PORT_SCHEMES = ("socket", "rfc2217")  # their handlers need <host>:<port> (else a TypeError inside pyserial)
 # pyserial URL handlers' parameters that open a file for writing: spy:// truncates `file=` as it opens.
 _WRITING_PARAMETERS = {"spy": ("file",)}
+_SERIAL_KEYS = ("baud", "framing", "expiry_ticks", "api", "dest", *_DIALECT_KEYS)
 
 
-def _port(spec: str, example: str, port: str) -> str:
-    """The port, present and clean, and no pyserial URL that would write a file the user did not name to vstig
-    (no --overwrite could guard it, and each reconnect would truncate it again)."""
+def _url_scheme(port: str) -> str:
+    return port.split("://", 1)[0].lower() if "://" in port else ""
+
+
+def _split(spec: str, body: str, example: str, ours: tuple[str, ...]) -> tuple[str, dict[str, str]]:
+    """Our keys from the query; a pyserial URL keeps the keys its handler reads, any other is a typo."""
+    scheme = _url_scheme(body)
+    return split_query(spec, body, example, ours, PYSERIAL_URL_OPTIONS.get(scheme, ()),
+                       whose=f"pyserial's {scheme}://")
+
+
+def _port(spec: str, example: str, port: str, ours: tuple[str, ...]) -> str:
+    """The port, present and clean; a pyserial URL with only the options (and values) its handler reads, and none
+    that would write a file the user did not name to vstig (no --overwrite could guard it, and each reconnect
+    would truncate it again). pyserial's handlers turn some of their own errors into a KeyError or TypeError."""
     port = check_port(spec, example, port)
-    parts = urlsplit(port) if "://" in port else None
-    for name in _WRITING_PARAMETERS.get(parts.scheme if parts else "", ()):
-        # read as pyserial reads it: the query after the first '?', percent-decoded (fil%65= is file=)
-        if parts and name in parse_qs(parts.query, keep_blank_values=True):
-            raise bad(spec, f"pyserial's {parts.scheme}:// writes {name}=..., and a link never writes files "
-                      f"(drop {name}=: {parts.scheme}:// then logs to stderr; `vstig record` keeps a capture)",
-                      example)
+    scheme = _url_scheme(port)
+    if scheme not in PYSERIAL_URL_OPTIONS:
+        return port
+    parts = urlsplit(port)
+    url = f"pyserial's {scheme}://"
+    # read as pyserial reads it: the query after the first '?', percent-decoded (fil%65= is file=)
+    for name, values in parse_qs(parts.query, keep_blank_values=True).items():
+        if name not in PYSERIAL_URL_OPTIONS[scheme]:
+            raise unknown_key(spec, name, example, ours, PYSERIAL_URL_OPTIONS[scheme], url)
+        if name in _WRITING_PARAMETERS.get(scheme, ()):
+            raise bad(spec, f"{url} writes {name}=..., and a link never writes files (drop {name}=: {scheme}:// "
+                      "then logs to stderr; `vstig record` keeps a capture)", example)
+        if name == "logging" and values[0] not in _LOG_LEVELS:
+            raise bad(spec, f"{url} logging={values[0]!r} is not one of {'|'.join(_LOG_LEVELS)}", example)
+    if scheme in _HOST_PORT_SCHEMES:
+        try:
+            number = parts.port
+        except ValueError:
+            number = None
+        if not parts.hostname or number is None:
+            raise bad(spec, f"{url} needs <host>:<port 0..65535>, e.g. {scheme}://localhost:7000", example)
     return port
 
 
 def parse_serial(spec: str, body: str) -> SerialSpec:
     """`body` is the spec after `serial:`."""
     example = _SERIAL_EXAMPLE
-    port, params = split_query(spec, body, example, ("baud", "framing", "expiry_ticks", "api", "dest",
-                                                     *_DIALECT_KEYS), "://" in body)
+    port, params = _split(spec, body, example, _SERIAL_KEYS)
     framing = params.get("framing", "cobs8")
     if framing not in SERIAL_FRAMINGS:
         raise bad(spec, f"framing={framing!r} is not one of {'|'.join(SERIAL_FRAMINGS)}", example)
@@ -181,8 +215,8 @@ def parse_serial(spec: str, body: str) -> SerialSpec:
     dialect = _dialect(spec, example, params, framing)
     if baud is None:
         baud = _default_baud(framing, dialect.get("dialect"))
-    return SerialSpec(port=_port(spec, example, port), baud=baud, framing=framing, expiry_ticks=expiry_ticks,
-                      **dialect, **_xbee(spec, example, params, framing))
+    return SerialSpec(port=_port(spec, example, port, _SERIAL_KEYS), baud=baud, framing=framing,
+                      expiry_ticks=expiry_ticks, **dialect, **_xbee(spec, example, params, framing))
 
 
 def _default_baud(framing: str, dialect: str | None) -> int:
@@ -196,8 +230,8 @@ def _default_baud(framing: str, dialect: str | None) -> int:
 
 def parse_ohc(spec: str, body: str) -> SerialSpec:
     """`body` is the spec after `kilobot-ohc:`."""
-    port, params = split_query(spec, body, _OHC_EXAMPLE, _DIALECT_KEYS, "://" in body)
-    return SerialSpec(port=_port(spec, _OHC_EXAMPLE, port), baud=OHC_BAUD, framing="kilobot-ohc",
+    port, params = _split(spec, body, _OHC_EXAMPLE, _DIALECT_KEYS)
+    return SerialSpec(port=_port(spec, _OHC_EXAMPLE, port, _DIALECT_KEYS), baud=OHC_BAUD, framing="kilobot-ohc",
                       **_dialect(spec, _OHC_EXAMPLE, params, "kilobot-ohc"))
 
 

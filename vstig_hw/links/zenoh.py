@@ -116,8 +116,7 @@ def _spec_endpoints(spec: str, key: str, text: str) -> tuple[str, ...]:
 def parse_zenoh(spec: str, body: str) -> ZenohSpec:
     """`body` is the spec after `zenoh:`; the key space (framing.zenoh) judges the swarm name."""
     swarm, params = split_query(spec, body, _EXAMPLE, ("mode", "connect", "listen", "config", "stigmergy", "scout",
-                                                                "max_sample", "echo"),
-                                False)
+                                                                "max_sample", "echo"))
     try:
         check_swarm(swarm)
     except ValueError as error:

@@ -111,6 +111,9 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
             port = serial.serial_for_url(self.port, exclusive=True, timeout=self._timeout, **self.settings)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise open_error(self.port, exc) from None
+        except (KeyError, TypeError) as exc:  # pyserial's URL handlers fail so on some bad URLs (specs check them)
+            raise TransportError(f"serial port {self.port}: pyserial cannot read this URL ({exc!r}); "
+                                 "`vstig links` shows the forms it takes") from None
         self._fresh = bool(self.preamble)
         fd = getattr(port, "fd", None)  # a POSIX device: pyserial opened it O_NONBLOCK; make sure of it
         if isinstance(fd, int):
