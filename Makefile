@@ -12,12 +12,16 @@ export _ROS_WHEELS_BOOTSTRAP_COMPLETE := 1
 
 .PHONY: demo test lint typecheck layers pytest docs bench sysdeps clean fuzz soak supervised chaos
 
+# setuptools' editable install of this layout (cli/ installs as vstig_cli) always ends with a 9-line "Editable
+# installation" note, a warning in pip's eyes: hidden by name, so any other build warning still shows.
+PIP_INSTALL := PYTHONWARNINGS='ignore:Editable installation:UserWarning' $(BIN)/python -m pip install --quiet
+
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 $(CORE_STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e .
+	$(PIP_INSTALL) -e .
 	touch $@
 
 # The compiled data path (vstig_hw._vstig) is built in place by the editable install, from libvstig and its glue:
@@ -25,11 +29,13 @@ $(CORE_STAMP): pyproject.toml | $(BIN)/python
 NATIVE_SOURCES := setup.py $(wildcard vstig_hw/_cext/*.[ch] firmware_spec/libvstig/*.[ch])
 
 $(STAMP): pyproject.toml $(NATIVE_SOURCES) | $(BIN)/python sysdeps
-	VSTIG_BUILD_NATIVE=1 $(BIN)/python -m pip install --quiet -e '.[test]'
+	VSTIG_BUILD_NATIVE=1 $(PIP_INSTALL) -e '.[test]'
 	touch $@
 
 demo: $(CORE_STAMP)
 	$(BIN)/vstig demo
+	@echo "next: . $(VENV)/bin/activate for vstig on PATH; $(BIN)/pip install -e '.[zenoh]' for gateways on many PCs"
+	@echo "      (README.md lists every extra); 'make test' installs them all and runs every check"
 
 # System packages the real-peer tests need (User-Mode Linux, can-utils, tshark, gcc).
 sysdeps:
@@ -91,7 +97,7 @@ CHAOS_SECONDS ?= 1800
 FUZZ_STAMP := $(VENV)/.fuzz-installed
 
 $(FUZZ_STAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[test,fuzz]'
+	$(PIP_INSTALL) -e '.[test,fuzz]'
 	touch $@
 
 fuzz: $(FUZZ_STAMP)

@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import tomllib
+import zipfile
 from importlib.metadata import distribution, packages_distributions
 from pathlib import Path
 
+import pytest
+from installs import PIP_TIMEOUT, clean_copy
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
@@ -42,3 +48,22 @@ def test_each_extra_names_the_libraries_pyproject_installs_with_it() -> None:
     (everything,) = extras["all"]
     assert Requirement(everything).extras == set(EXTRAS)
     assert "vstig-hw[all]" in extras["test"]  # `make test` runs every command and link kind
+
+
+@pytest.mark.slow
+def test_building_the_package_prints_no_setuptools_warning(tmp_path: Path) -> None:
+    """`make demo` opens with the install's output: a data file outside a declared package (the C sources, the IDL
+    folders) made setuptools print a screenful of warnings there. CC=false: the compiled part is optional, and
+    building it is not what this checks."""
+    source = clean_copy(tmp_path / "source")
+    done = subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--wheel-dir",
+                           str(tmp_path / "dist"), str(source)], capture_output=True, text=True, timeout=PIP_TIMEOUT,
+                          check=False, env={**os.environ, "CC": "false"})
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "BuildBackendWarning" not in done.stdout + done.stderr, done.stderr[-3000:]
+    (wheel,) = (tmp_path / "dist").glob("vstig_hw-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    data = {name for name in names if not name.endswith(".py") and ".dist-info/" not in name}
+    assert data == {"vstig_hw/py.typed", "vstig_hw/_vstig.pyi", "vstig_hw/transports/fastdds_loopback.xml",
+                    *(f"vstig_hw/ros2msgs/{part}.idl" for part in ("msg/Change", "msg/Entry", "msg/Message",
+                                                                      "srv/Get", "srv/Put", "srv/Table"))}
