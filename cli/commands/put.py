@@ -66,7 +66,7 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
             result = put_confirmed(node, key, raw, learn=0.0 if transmit_only else learn, wait=wait, tries=tries,
                                    confirm=not no_confirm, spent=time.monotonic() - started)
         except HearsItself as error:
-            raise click.ClickException(str(error)) from None
+            raise click.ClickException(f"{error.reason} (--no-confirm writes anyway)") from None
     problem = not_taken(result, key, name, wait, lambda entry: shown(entry, value_type), confirm=not no_confirm)
     if problem is not None:
         raise click.ClickException(problem)

@@ -74,8 +74,11 @@ def test_a_confirmed_put_on_a_pty_that_echoes_raises_hears_itself(echoing: Echoi
 def test_a_confirmed_put_on_pyserials_loop_raises_hears_itself(learn: float) -> None:
     with vstig_hw.join("serial:loop://?framing=cobs8", robot_id=ME) as swarm:
         started = time.monotonic()
-        with pytest.raises(vstig_hw.HearsItself):
+        with pytest.raises(vstig_hw.HearsItself) as caught:
             swarm.put(5, 1, confirm=True, timeout=2.0, learn=learn)
+        # the way to write anyway, as Python says it: not the CLI's flag
+        assert str(caught.value).endswith("(put(key, value, confirm=False) writes anyway)")
+        assert "--no-confirm" not in str(caught.value)
         assert time.monotonic() - started < 1.0 + learn  # found at once, not at the end of the wait
         assert swarm.put(6, 2) == Entry(2, 1, ME)  # an unconfirmed put still works there
 

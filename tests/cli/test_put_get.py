@@ -270,6 +270,7 @@ def test_put_on_a_radio_that_echoes_what_we_send_does_not_take_the_echo_for_an_a
         radio.close()
     assert put.returncode == 1 and put.stdout == ""
     assert "brings our own GETs back (robot id 33)" in put.stderr
+    assert put.stderr.rstrip().endswith("(--no-confirm writes anyway)") and "confirm=False" not in put.stderr
     assert sent and all(m.op is Op.GET for m in sent)  # found while learning: nothing was written
 
 

@@ -25,7 +25,12 @@ __all__ = ["HearsItself", "PutResult", "confirm_write", "get_newest", "not_taken
 
 class HearsItself(RuntimeError):
     """A link brings our own messages back (it echoes what it is sent), so no neighbour's answer can be told
-    from our echo: a confirmed write cannot be confirmed there."""
+    from our echo: a confirmed write cannot be confirmed there. `reason` is the message without the way to write
+    anyway, which the message names as Python code does it (`vstig put` names its --no-confirm instead)."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(f"{reason} (put(key, value, confirm=False) writes anyway)")
+        self.reason = reason
 
 
 def confirm_write(node: Node, key: int, value: int, *, learn: float = 0.0, wait: float = 2.0, tries: int = 3,
@@ -121,8 +126,7 @@ class _Driver:
         if machine.verdict is Verdict.HEARS_ITSELF:
             self._finish(HearsItself(
                 f"{machine.echoed_on} brings our own GETs back (robot id {machine.robot_id}): the radio echoes "
-                "what we send, or another robot uses that id; no neighbour's answer can be told from our echo "
-                "(--no-confirm writes anyway)"))
+                "what we send, or another robot uses that id; no neighbour's answer can be told from our echo"))
         else:
             self._finish(machine.result())
 
