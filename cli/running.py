@@ -102,6 +102,21 @@ class LinkSpecType(click.ParamType):  # type: ignore[type-arg]  # generic only f
 LINK = LinkSpecType()
 
 
+class LinkArguments(click.Argument):
+    """The LINKs of bridge, sniff and record (`type=LINK`, `nargs=-1`): more than one gateway takes
+    (vstig_hw.links.assemble.MAX_LINKS) are a usage error before a single one is parsed, from a config file too."""
+
+    def type_cast_value(self, ctx: click.Context, value: Any) -> Any:
+        from vstig_hw.links.assemble import LinkBuildError, check_link_count
+
+        if isinstance(value, list | tuple):
+            try:
+                check_link_count(len(value))
+            except LinkBuildError as error:
+                raise click.BadParameter(str(error), ctx, self) from None
+        return super().type_cast_value(ctx, value)
+
+
 # -- stdout and stderr that fail the way a command-line tool should.
 
 class PipeClosed(click.exceptions.Exit):

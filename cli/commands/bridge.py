@@ -17,6 +17,7 @@ from ..ops.metrics import metrics_option, metrics_served
 from ..options import Address, Finite, GuardChoice, guard_options, take_warnings
 from ..running import (
     LINK,
+    LinkArguments,
     build_links,
     describe_links,
     opened,
@@ -34,7 +35,7 @@ def _raw_note(robot_id: int | None) -> str:
 
 
 @click.command(cls=ConfiguredCommand)
-@click.argument("links", nargs=-1, required=True, type=LINK)
+@click.argument("links", nargs=-1, required=True, type=LINK, cls=LinkArguments)
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), help="The PC's robot id (required unless --raw).")
 @click.option("--tick", type=Finite(0.001, 60), default=DEFAULT_PERIOD, show_default=True,
               help="Control period in seconds.")

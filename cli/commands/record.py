@@ -34,6 +34,7 @@ from ..ops.metrics import metrics_option, metrics_served
 from ..options import Address, ByteSize, Finite, filter_options, overwrite_option, refuse_to_replace
 from ..running import (
     LINK,
+    LinkArguments,
     StatusLine,
     build_links,
     describe_links,
@@ -72,7 +73,7 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
 
 
 @click.command(cls=ConfiguredCommand)
-@click.argument("links", nargs=-1, required=True, type=LINK)
+@click.argument("links", nargs=-1, required=True, type=LINK, cls=LinkArguments)
 @click.option("-o", "--output", type=click.Path(path_type=str),
               help="FILE, or a folder for a timestamped name (the default: one here, as candump -l). "
                    f"CAN by extension: {' '.join(CAN_EXTENSIONS)} (.log is candump's); serial and zenoh: any name "

@@ -27,7 +27,7 @@ from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD, Listening, Node, Swar
 from ..gateway.oneshot import HearsItself, PutResult, confirm_write, not_taken
 from ..gateway.refresh import RoundRobinGet
 from ..gateway.ros2 import serve_ros2
-from ..links.assemble import LinkBuildError, assemble_links
+from ..links.assemble import LinkBuildError, assemble_links, check_link_count
 from ..links.link import Link, LinkSpec
 from ..links.registry import parse
 from ..values import VALUE_TYPES, ValueType, from_raw, to_raw
@@ -433,6 +433,7 @@ def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget
         if budget < 1:
             raise ValueError(f"budget must be at least 1 message per period (or None: no limit), got {budget}")
     try:
+        check_link_count(len(links))  # before a single spec is parsed: 40,000 of them are refused at once
         specs = [parse(link) if isinstance(link, str) else link for link in links]
     except ValueError as error:
         raise ValueError(f"links: {error}") from None

@@ -13,7 +13,13 @@ from ..counters import ENGINE_STATS
 from .link import Link, LinkSpec, NamesSenders
 from .registry import parse
 
-__all__ = ["LinkBuildError", "assemble_links", "check_robot_id"]
+__all__ = ["MAX_LINKS", "MAX_LINKS_OF_KIND", "LinkBuildError", "assemble_links", "check_link_count", "check_robot_id"]
+
+# How many links one gateway (a command, a join) takes (docs/reference/link-specs.md, "How many links"; DECISIONS.md):
+# a lab's radios, buses and PCs fit, and each costs a thread or two, so a stop stays well within its 2 s.
+MAX_LINKS = 64
+MAX_LINKS_OF_KIND = {"ros2": 2}  # each a ROS 2 process of its own (~80 MB, ~25 threads, up to 0.5 s to stop)
+LIMITS_DOCS = "docs/reference/link-specs.md"
 
 
 class LinkBuildError(ValueError):
@@ -22,6 +28,21 @@ class LinkBuildError(ValueError):
     def __init__(self, message: str, argument: str) -> None:
         super().__init__(message)
         self.argument = argument
+
+
+def check_link_count(count: int) -> None:
+    """LinkBuildError("links") when `count` links are more than one gateway takes: checked before any is parsed."""
+    if count > MAX_LINKS:
+        raise LinkBuildError(f"{count} links: one gateway takes at most {MAX_LINKS} (run several, each with its "
+                             f"own links; see {LIMITS_DOCS})", "links")
+
+
+def _check_kinds(specs: Sequence[LinkSpec | Link[Any]]) -> None:
+    kinds = [spec.kind for spec in specs if isinstance(spec, LinkSpec)]
+    for kind, most in MAX_LINKS_OF_KIND.items():
+        if kinds.count(kind) > most:
+            raise LinkBuildError(f"{kinds.count(kind)} {kind} links: one gateway takes at most {most} (see "
+                                 f"{LIMITS_DOCS})", "links")
 
 
 def check_robot_id(specs: Sequence[LinkSpec], robot_id: int) -> None:
@@ -38,8 +59,10 @@ def assemble_links(items: Sequence[str | LinkSpec | Link[Any]], robot_id: int = 
                    listen_only: bool = False) -> list[Link[Any]]:
     """One Link per item, a spec named after its device (made unique: radio, radio-2...); Links pass as they are.
 
-    A bad spec or item raises LinkBuildError("links") with one line naming it.
+    A bad spec or item, or more links than MAX_LINKS (MAX_LINKS_OF_KIND), raises LinkBuildError("links") with
+    one line naming it.
     """
+    check_link_count(len(items))
     specs: list[LinkSpec | Link[Any]] = []
     for number, item in enumerate(items):
         if isinstance(item, str):
@@ -52,6 +75,7 @@ def assemble_links(items: Sequence[str | LinkSpec | Link[Any]], robot_id: int = 
         else:
             raise LinkBuildError(f"link {number + 1} is a {type(item).__name__}: give a spec string "
                                  "(e.g. 'can:socketcan:can0') or a Link", "links")
+    _check_kinds(specs)
     if not listen_only:
         check_robot_id([spec for spec in specs if not isinstance(spec, Link)], robot_id)
     links: list[Link[Any]] = []
