@@ -17,6 +17,7 @@ An option given on the command line replaces the file's (a repeatable one's whol
 
 from __future__ import annotations
 
+import difflib
 import json
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -26,12 +27,14 @@ from click.core import ParameterSource
 
 from vstig_hw.inputs import InputFileError, parse_toml, read_regular, toml_line
 
-__all__ = ["CONFIG_MAX_BYTES", "ConfiguredCommand", "config_options"]
+__all__ = ["CONFIG_MAX_BYTES", "ConfiguredCommand", "config_options", "shown"]
 
 CONFIG_MAX_BYTES = 1 << 20  # a gateway's options and links fit in a few kilobytes
 _ARGV = "vstig.config.argv"  # ctx.meta: the command line as given, read again by --print-config
 _FILE = "vstig.config.file"  # ctx.meta: the file's values as text, by parameter name
 _PRINT = "vstig.config.print"
+_ECHO = 80  # characters of a value an error shows
+_MESSAGE = 1000  # characters of an error line
 
 Scalar = str | int | float | bool
 
@@ -99,16 +102,37 @@ def _load(ctx: click.Context, _param: click.Parameter, path: str | None) -> None
         where = f"{path}{toml_line(text, key)}"
         param = keys.get(key)
         if param is None:
-            raise click.UsageError(f"{where}: {key!r} is not an option of vstig {ctx.info_name} "
-                                   f"(the keys: {', '.join(keys)})")
+            raise click.UsageError(f"{where}: {shown(key)} is not an option of vstig {ctx.info_name}"
+                                   f"{_did_you_mean(key, keys)} (the keys: {', '.join(keys)})")
         raw = _as_text(value, param, f"{where}: {key}")
         try:
             param.process_value(ctx, raw)  # its type and callback: refused as on the command line
         except click.BadParameter as error:
-            raise click.UsageError(f"{where}: {key}: {error.message}") from None
+            raise click.UsageError(f"{where}: {key}: {_capped(error.message, raw)}") from None
         values[param.name or key] = raw
     ctx.meta[_FILE] = values
     ctx.default_map = {**(ctx.default_map or {}), **values}
+
+
+def _did_you_mean(key: str, keys: Iterable[str]) -> str:
+    """`robot_id`: did you mean robot-id? (the closest key, by difflib, if one is close)"""
+    close = difflib.get_close_matches(key.replace("_", "-").lower(), list(keys), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]}?" if close else ""
+
+
+def shown(value: str) -> str:
+    """A value as an error echoes it: quoted, and cut after _ECHO characters (a 1 MB string is not a line)."""
+    return repr(value) if len(value) <= _ECHO else f"{value[:_ECHO]!r}… ({len(value.encode())} bytes)"
+
+
+def _capped(message: str, raw: str | tuple[str, ...]) -> str:
+    """An option's error with each long value it echoes cut (click's own messages quote them whole)."""
+    for value in (raw,) if isinstance(raw, str) else raw:
+        if len(value) > _ECHO:
+            message = message.replace(repr(value), shown(value)).replace(value, shown(value))
+    if len(message) <= _MESSAGE:  # escaped forms the replace missed: cut the line itself
+        return message
+    return f"{message[:_MESSAGE]}… ({len(message.encode())} bytes)"
 
 
 def _many(param: click.Parameter) -> bool:

@@ -78,6 +78,32 @@ def test_a_bad_value_is_refused_naming_the_file_line_and_option(tmp_path: Path, 
     assert said in done.stderr and "Traceback" not in done.stderr
 
 
+@pytest.mark.parametrize(("key", "meant"), [("robot_id", "robot-id"), ("max_jump", "max-jump"), ("tikc", "tick"),
+                                           ("Larger-Value-Wins", "larger-value-wins")])
+def test_a_misspelled_key_gets_the_closest_one(tmp_path: Path, key: str, meant: str) -> None:
+    config = _write(tmp_path / "lab.toml", f'links = ["serial:loop://"]\n{key} = 1\n')
+    done = run_vstig("bridge", "--config", str(config))
+    assert done.returncode == 2 and f"lab.toml:2: {key!r} is not an option of vstig bridge; did you mean {meant}?" \
+        in done.stderr, done.stderr
+    far = _write(tmp_path / "far.toml", 'links = ["serial:loop://"]\nzzzzzz = 1\n')
+    assert "did you mean" not in run_vstig("bridge", "--config", str(far)).stderr  # nothing close: no guess
+
+
+MEGABYTE = "x" * 1_000_000
+
+
+@pytest.mark.parametrize("body", [f'tick = "{MEGABYTE}"', f'"{MEGABYTE}" = 1', f'links = ["serial:loop://", "{MEGABYTE}"]',
+                                  f'trust = ["{MEGABYTE}"]', f'foxglove = "{MEGABYTE}"'],
+                         ids=["value", "key", "link", "list item", "address"])
+def test_an_error_echoes_at_most_the_start_of_a_huge_value(tmp_path: Path, body: str) -> None:
+    links = "" if body.startswith("links") else 'links = ["serial:loop://"]'
+    config = _write(tmp_path / "lab.toml", f'robot-id = 1\n{links}\n{body}\n')
+    done = run_vstig("bridge", "--config", str(config))
+    assert done.returncode == 2 and "lab.toml:3" in done.stderr, done.stderr[:300]
+    assert "x" * 80 + "'… (1000000 bytes)" in done.stderr  # what it was, cut, and how long
+    assert max(len(line) for line in done.stderr.splitlines()) < 1200  # from a 1,000,143-byte line
+
+
 def test_a_bad_link_in_the_file_is_refused_as_on_the_command_line(tmp_path: Path) -> None:
     config = _write(tmp_path / "lab.toml", 'robot-id = 1\nlinks = ["serial:/dev/ttyUSB0", "bogus:x"]\n')
     done = run_vstig("bridge", "--config", str(config))
