@@ -25,6 +25,7 @@ from ..ops.metrics import metrics_option, metrics_served
 from ..options import VALUE_TYPE_HELP, Address, Finite, GuardChoice, filter_options, guard_options, take_warnings
 from ..running import (
     LINK,
+    LinkArguments,
     build_links,
     describe_links,
     must_hear,
@@ -62,7 +63,7 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 
 
 @click.command(cls=ConfiguredCommand)
-@click.argument("links", nargs=-1, required=True, type=LINK)
+@click.argument("links", nargs=-1, required=True, type=LINK, cls=LinkArguments)
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
               help=VALUE_TYPE_HELP)
