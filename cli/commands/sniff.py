@@ -18,6 +18,7 @@ from vstig_hw.gateway.ros2 import serve_ros2
 from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
+from vstig_hw.wording import counted, shown_sender
 
 from ..config import ConfiguredCommand, config_options
 from ..live import foxglove_option, live_view
@@ -35,31 +36,46 @@ from ..running import (
     run_until_stopped,
 )
 
-_TABLE_CHROME = 9  # lines a table needs besides its rows: title, borders, header, counters caption, a spare
+_TABLE_CHROME = 8  # lines a table needs besides its rows: title, header and its rule, counters caption, a spare
+# Short headers, so that the table fits 80 columns (docs/how-to/sniff.md explains each).
+_COLUMNS = ("key", "value", "ts", "robot", "age", "PUT", "GET", "conflicts", "stale", "refused")
+_STALE_WIDTH = 11  # characters of stale senders named in a row (at least one); "+N" counts the rest
 
 
 def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, height: int | None = None) -> Any:
     """The table, keys in order; on a terminal only the rows that fit, and the title says how many."""
+    from rich import box
     from rich.table import Table
 
     keys = sorted(view.keys)
     shown = keys if height is None else keys[:max(1, height - _TABLE_CHROME)]
-    title = f"vstig sniff: {view.messages} messages, {len(keys)} keys"
+    title = f"vstig sniff: {counted(view.messages, 'message')}, {counted(len(keys), 'key')}"
     if len(shown) < len(keys):
-        title += f" (keys {shown[0]}..{shown[-1]} fit here; --key K shows chosen ones)"
-    table = Table(title=title, caption=node.summary() if node else None)
-    for column in ("key", "value", "ts", "robot", "last seen", "PUT", "GET", "conflicts", "stale senders",
-                   "refused (latest)"):
-        table.add_column(column, justify="left" if column in ("stale senders", "refused (latest)") else "right")
+        title += f" (keys {shown[0]}..{shown[-1]} shown; --key K for others)"
+    # No side borders and one space between columns: ten columns fit 80 characters.
+    table = Table(title=title, caption=node.summary() if node else None, box=box.SIMPLE_HEAD, padding=(0, 0),
+                  show_edge=False)
+    for column in _COLUMNS:
+        table.add_column(column, justify="left" if column in ("stale", "refused") else "right")
     now = time.time()
     for key in shown:
         k = view.keys[key]
-        stale = k.stale_senders()
-        table.add_row(str(key), str(from_raw(k.value, value_type)), str(k.timestamp), str(k.robot),
-                      f"{now - k.last_seen:.1f}s ago", str(k.puts), str(k.gets), str(k.conflicts),
-                      ", ".join(map(str, stale[:12])) + (" ..." if len(stale) > 12 else ""),
-                      f"{k.refused} ({k.last_refused})" if k.refused else "")
+        # A key only ever asked for (empty GETs) holds no entry yet: "-", not a write of 0 by robot 0.
+        entry = (str(from_raw(k.value, value_type)), str(k.timestamp), str(k.robot)) if k.has_entry else ("-",) * 3
+        table.add_row(str(key), *entry, f"{now - k.last_seen:.1f}s", str(k.puts), str(k.gets), str(k.conflicts),
+                      _few(k.stale_senders()), f"{k.refused} {k.refused_reason}" if k.refused else "")
     return table
+
+
+def _few(senders: list[int]) -> str:
+    """The first stale senders that fit the column and how many more: `2 4 9 +10`."""
+    named = ""
+    for count, sender in enumerate(senders):
+        longer = f"{named} {shown_sender(sender)}".lstrip()
+        if named and len(longer) > _STALE_WIDTH:
+            return f"{named} +{len(senders) - count}"
+        named = longer
+    return named
 
 
 @click.command(cls=ConfiguredCommand)

@@ -205,7 +205,7 @@ def test_sniff_filters_what_it_shows_and_its_table_says_what_fits() -> None:
     for key in range(20):
         view.add(Heard(Message(Op.PUT, key, 1, 1, 2), "can0", 1.0, 2))
     table = _table(view, "uint16", height=12)
-    assert table.row_count == 3 and "keys 0..2 fit here; --key K shows chosen ones" in str(table.title)
+    assert table.row_count == 4 and "keys 0..3 shown; --key K for others" in str(table.title)  # no side borders
     assert _table(view, "uint16").row_count == 20
 
 

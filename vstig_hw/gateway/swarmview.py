@@ -39,6 +39,12 @@ class KeyView:
     contenders: set[int] = field(default_factory=set)  # robots that wrote the shown timestamp
     refused: int = 0  # messages a guarded bridge would refuse (shown, never part of the entry)
     last_refused: str = ""  # the latest of them and why, e.g. "jump: ts 32767 robot 9"
+    refused_reason: str = ""  # why the latest was refused, its drop counter without `drop_`: "jump"
+
+    @property
+    def has_entry(self) -> bool:
+        """False for a key only ever asked for (empty GETs): its value, timestamp and robot mean nothing yet."""
+        return self.timestamp != 0  # a PUT never carries timestamp 0 (SPEC section 2)
 
     def stale_senders(self) -> list[int]:
         return sorted(s for s, ts in self.sender_ts.items() if is_newer(self.timestamp, ts))
@@ -80,7 +86,8 @@ class SwarmView:
         msg = heard.message
         view = self._seen(msg.key, heard.t)
         view.refused += 1
-        view.last_refused = f"{reason.removeprefix('drop_')}: {msg.op.name} ts {msg.timestamp} robot {msg.robot}"
+        view.refused_reason = reason.removeprefix("drop_")
+        view.last_refused = f"{view.refused_reason}: {msg.op.name} ts {msg.timestamp} robot {msg.robot}"
 
     def _seen(self, key: int, t: float) -> KeyView:
         view = self.keys.get(key)

@@ -71,8 +71,8 @@ def _object(**properties: Any) -> dict[str, Any]:
 TABLE_SCHEMA = _object(
     messages=_INT, keys_total=_INT,
     rows={"type": "array", "items": _object(
-        key=_INT, value={"type": ["number", "null"]}, timestamp=_INT, robot=_INT, last_seen=_NUM,
-        last_seen_ago=_NUM, puts=_INT, gets=_INT, conflicts=_INT, stale_senders=_INTS, refused=_INT,
+        key=_INT, value={"type": ["number", "null"]}, timestamp=_INT, robot={"type": ["integer", "null"]},
+        last_seen=_NUM, last_seen_ago=_NUM, puts=_INT, gets=_INT, conflicts=_INT, stale_senders=_INTS, refused=_INT,
         last_refused=_STR)})
 WRITE_SCHEMA = _object(
     key=_INT, value=_INT, timestamp=_INT, robot=_INT, first_heard=_NUM, link=_STR, senders_total=_INT,
@@ -257,8 +257,10 @@ class LiveServer:
         rows = []
         for key in shown:
             k = keys[key]
-            rows.append({"key": key, "value": from_raw(k.value, self.value_type), "timestamp": k.timestamp,
-                         "robot": k.robot, "last_seen": k.last_seen, "last_seen_ago": round(now - k.last_seen, 3),
+            held = k.has_entry  # a key only ever asked for: no value, no robot (timestamp 0, as on the wire)
+            rows.append({"key": key, "value": from_raw(k.value, self.value_type) if held else None,
+                         "timestamp": k.timestamp, "robot": k.robot if held else None,
+                         "last_seen": k.last_seen, "last_seen_ago": round(now - k.last_seen, 3),
                          "puts": k.puts, "gets": k.gets, "conflicts": k.conflicts,
                          "stale_senders": k.stale_senders(), "refused": k.refused, "last_refused": k.last_refused})
         return {"messages": self._view.messages, "keys_total": len(keys), "rows": rows}
