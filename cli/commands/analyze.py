@@ -13,7 +13,7 @@ import click
 
 from vstig_hw.analysis import CONFLICT_RULES, DEFAULT_WINDOW, Analyzer, Conflict, Report, Traffic, WriteReport
 from vstig_hw.capture.analyzefile import Fed, analyze_captures
-from vstig_hw.capture.clock_notes import CaptureClock, Shift, read_clock_notes, shifts
+from vstig_hw.capture.clock_notes import CaptureClock, Shift, disputed, read_clock_notes, shifts
 from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError
 from vstig_hw.counters import Counters
@@ -52,12 +52,15 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @click.option("--conflict", type=click.Choice(CONFLICT_RULES), default="robot", show_default=True,
               help="Which of two writes with one timestamp is newer: the higher robot id (Buzz's default) "
                    "or the larger value (the paper's Figure 1).")
+@click.option("--trust-clock-notes", is_flag=True,
+              help="Merge captures on one clock through every clock offset they noted, also those no certificate "
+                   "proved (open links: any Zenoh peer can answer for any gateway's clock there).")
 @reading_options
 @filter_options
 @reports_errors
 def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plot: Path | None, overwrite: bool,
-            window: float, conflict: Conflict, value_type: ValueType, skip_bad: bool, id_base: str | None,
-            extended: bool, deployment: str | None, keep: Filter) -> None:
+            window: float, conflict: Conflict, trust_clock_notes: bool, value_type: ValueType, skip_bad: bool,
+            id_base: str | None, extended: bool, deployment: str | None, keep: Filter) -> None:
     """Measure convergence per write and bandwidth from captures.
 
     Convergence is how long each write took to reach every robot, the paper's measure.
@@ -69,7 +72,8 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     Serial links name no sender: for them, the first and last time each write was
     heard per link is reported instead. Several FILES are merged by time, on
     the first one's clock where their clock notes join them (captures that
-    zenoh links recorded on several PCs; the shift and its bound are said). The
+    zenoh links recorded on several PCs; the shift and its bound are said),
+    through offsets a TLS certificate proved unless --trust-clock-notes. The
     filters (--key, --robot, --sender, --op, --link, --since, --until) choose
     which messages count; --plot draws the first --key given. - reads stdin;
     pipes and <(...) work too, their type told by their first bytes.
@@ -86,7 +90,7 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     names = ", ".join(map(input_name, files))
     with contextlib.ExitStack() as spooled:  # stdin and pipes are copied to a file first
         readable = {spooled.enter_context(readable_capture(path, input_format)): input_name(path) for path in files}
-        clocks = _on_one_clock(readable)
+        clocks = _on_one_clock(readable, trust_clock_notes)
         try:
             drops, bad, filtered_out = _read(readable, analyzer, skip_bad, base, width, keep, deployment,
                                              [shift.seconds if shift else 0.0 for shift in clocks] if clocks else None)
@@ -118,19 +122,27 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     click.echo(summary + (f"; wrote {plot}" if plot else ""), err=True)
 
 
-def _on_one_clock(names: dict[str, str]) -> list[Shift | None]:
+def _on_one_clock(names: dict[str, str], trust: bool) -> list[Shift | None]:
     """Several captures whose clock notes join them: each one's shift onto the first's clock, said on stderr
-    (nothing when no capture names its clock: they merge on their own clocks, as before)."""
+    (nothing when no capture names its clock: they merge on their own clocks, as before); `trust`: through
+    unproved offsets too."""
     if len(names) < 2:
         return []
     clocks = [read_clock_notes(path) if _line_capture(path) else CaptureClock(None, []) for path in names]
     if not any(clock.clock for clock in clocks):
         return []
-    found = shifts(clocks)
+    found = shifts(clocks, trust_unproved=trust)
     first, *others = names.values()
+    if not trust:
+        for clock, proofs in sorted(disputed(clocks).items()):
+            click.echo(f"clock {clock}: answered for by more than one certificate ({', '.join(proofs)}): "
+                       "its offsets are not used", err=True)
+    unproved = 0 if trust else sum(trip.proof is None for clock in clocks for trip in clock.offsets)
     for name, shift in zip(others, found[1:], strict=True):
         if shift is None:
-            click.echo(f"{name}: no clock offset to {first}'s was measured: merged on its own clock", err=True)
+            why = (f"no proved clock offset joins it to {first}'s ({unproved} unproved not used: "
+                   "--trust-clock-notes uses them)") if unproved else f"no clock offset to {first}'s was measured"
+            click.echo(f"{name}: {why}: merged on its own clock", err=True)
         else:
             click.echo(f"{name}: on {first}'s clock: {-shift.seconds * 1e3:+.3f} ms "
                        f"(± {shift.error * 1e3:.3f} ms)", err=True)

@@ -7,7 +7,8 @@ What a scrape shows (prometheus_client's exposition, from `Node.stats()` read wh
 * `vstig_link_queued{link}`, `vstig_link_up{link}` (1 while its device is connected), `vstig_table_keys`;
 * `vstig_relay_latency_seconds`: a histogram, per batch a link read, of the time from the read to what it caused
   being handed to the other links' devices (written, or queued behind a slow one);
-* `vstig_clock_offset_seconds{peer}` and `..._error_seconds{peer}`: each Zenoh peer's clock against ours;
+* `vstig_clock_offset_seconds{peer,proved_by}` and `..._error_seconds{...}`: each Zenoh peer's clock against ours
+  (at most 64 peers a link: vstig_hw.clocks.MAX_PEERS);
 * `vstig_metrics_connections_total{outcome}`: the endpoint's own (served, evicted, timed_out, too_large).
 
 The endpoint is never in the data path and never stalls the gateway: a `PageServer` (page_server.py) serves
@@ -33,6 +34,7 @@ from ..options import LOOPBACK, Address, is_loopback, listen_address
 from .page_server import PageServer
 
 if TYPE_CHECKING:
+    from vstig_hw.clocks import ClockOffset
     from vstig_hw.gateway.node import Listening, Node
 
 __all__ = ["LATENCY_BUCKETS", "MetricsServer", "RelayLatency", "metrics_option", "metrics_served"]
@@ -98,8 +100,7 @@ class GatewayCollector:
         keys = node.engine.size() if node.engine is not None else None
         up = {link.name: link.transport.connected for link in node.links}
         buckets, total = self.latency.buckets(), self.latency.total
-        clocks = {peer: trip for link in node.links if (clock := getattr(link.transport, "clock", None)) is not None
-                  for peer, trip in clock.estimates().items()}
+        clocks = _clock_estimates(node)
         events = CounterMetricFamily("vstig_link_events", "Every counter of every link: units and messages moved, "
                                      "each drop by reason (docs/reference/counters.md).", labels=["link", "counter"])
         queued = GaugeMetricFamily("vstig_link_queued", "Units waiting in a link's outgoing queues.", labels=["link"])
@@ -128,12 +129,13 @@ class GatewayCollector:
                                     "handed to the other links' devices.", buckets=buckets, sum_value=total)
         if clocks:
             offset = GaugeMetricFamily("vstig_clock_offset_seconds", "A Zenoh peer's clock minus ours (the tightest "
-                                       "recent round trip).", labels=["peer"])
+                                       "recent round trip); proved_by: the certificate that proved who answered, "
+                                       "empty if none did.", labels=["peer", "proved_by"])
             bound = GaugeMetricFamily("vstig_clock_offset_error_seconds", "The bound of that offset: half its round "
-                                      "trip.", labels=["peer"])
-            for peer, trip in sorted(clocks.items()):
-                offset.add_metric([peer], trip.offset)
-                bound.add_metric([peer], trip.error)
+                                      "trip.", labels=["peer", "proved_by"])
+            for (peer, proof), trip in sorted(clocks.items()):
+                offset.add_metric([peer, proof], trip.offset)
+                bound.add_metric([peer, proof], trip.error)
             yield offset
             yield bound
         served = CounterMetricFamily("vstig_metrics_connections", "This endpoint's connections by outcome.",
@@ -144,6 +146,18 @@ class GatewayCollector:
         info = GaugeMetricFamily("vstig_info", "The gateway: version and mode.", labels=["version", "mode"])
         info.add_metric([__version__, node.mode.value], 1.0)
         yield info
+
+
+def _clock_estimates(node: Node) -> dict[tuple[str, str], ClockOffset]:
+    """Per peer clock and proof (empty: unproved), the tightest estimate any of the node's Zenoh links has."""
+    best: dict[tuple[str, str], ClockOffset] = {}
+    for link in node.links:
+        clock = getattr(link.transport, "clock", None)
+        for trip in clock.estimates() if clock is not None else ():
+            key = (trip.peer, trip.proof or "")
+            if key not in best or trip.error < best[key].error:
+                best[key] = trip
+    return best
 
 
 class MetricsServer:

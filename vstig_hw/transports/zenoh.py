@@ -37,7 +37,8 @@ or relayed through a router from a session beyond it) has no source of its own:
 None, the link as one source.
 
 Counters: `rx`, `tx` (samples), `tx_unheard` (published while no other session subscribed),
-`tx_dropped`, `rx_oversize`, `rx_overflow`, `lost`, `unreachable`, `reconnects`.
+`tx_dropped`, `rx_oversize`, `rx_overflow`, `lost`, `unreachable`, `reconnects`; the clock's answers refused
+(zenoh_clock): `clock_malformed`, `clock_repeated`, `clock_peers_over`.
 """
 
 from __future__ import annotations
@@ -199,7 +200,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
             raise TransportError(f"{self.name}: cannot subscribe to {self.subscription}: {one_line(exc)}") from None
         self._subscriber = subscriber
         if self.clock is not None:
-            self.clock.attach(session)
+            self.clock.attach(session, self.counters)
         self._connected = frozenset()
         self._transports = session.info.declare_transport_events_listener(self._transport_event, history=True)
         return session
