@@ -3,28 +3,26 @@ file, with readiness, a watchdog and restarts; printed, or written to -o FILE.""
 
 from __future__ import annotations
 
+import contextlib
+import grp
 import importlib
 import os
+import pwd
 import re
 import sys
 from pathlib import Path
 
 import click
 
-from ..options import overwrite_option, refuse_to_replace
+from ..config import shown
+from ..ops.unit import TEMPORARY, Needs, checked, needs_of, under, unit_text
+from ..ops.unit_file import write_new_file
+from ..options import overwrite_option
 from ..running import reports_errors
 
 COMMANDS = ("bridge", "sniff", "record")
+DYNAMIC_USER = "vstig"  # the user systemd makes for the unit (DynamicUser=), or a static one of that name
 _USER = re.compile(r"[a-z_][a-z0-9_-]{0,31}\Z")
-_PLAIN = re.compile(r"[A-Za-z0-9_./:=@+,-]+\Z")  # words ExecStart= takes as they are
-
-
-def _exec_word(word: str) -> str:
-    """One word of ExecStart= (systemd.service(5), "Command lines"): quoted where needed, % and $ doubled."""
-    word = word.replace("%", "%%").replace("$", "$$")
-    if _PLAIN.match(word):
-        return word
-    return '"' + word.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
 def _vstig() -> list[str]:
@@ -35,40 +33,88 @@ def _vstig() -> list[str]:
     return [sys.executable, "-m", "vstig_cli.main"]
 
 
-def _check(command: str, config: str, ctx: click.Context) -> None:
-    """Parse `vstig COMMAND --config FILE` as the service will (links, values, keys), without running it."""
+def _check(command: str, config: str, ctx: click.Context) -> dict[str, object]:
+    """Parse `vstig COMMAND --config FILE` as the service will (links, values, keys), without running it:
+    the parameters it would run with."""
     module = importlib.import_module(f"{__package__}.{command}")
     try:
-        module.command.make_context(command, ["--config", config], parent=ctx.find_root())
+        checked = module.command.make_context(command, ["--config", config], parent=ctx.find_root())
     except click.MissingParameter as error:
         missing = error.param.name if error.param else "more"
         raise click.UsageError(f"{config}: vstig {command} needs {missing}: set it in the file", ctx) from None
+    except click.UsageError as error:  # named as what was typed: vstig service, not the command it checks
+        raise click.UsageError(f"{error.format_message()} (checked as vstig {command} will read it)",
+                               ctx) from None
+    if command == "record" and not checked.params.get("output"):
+        raise click.UsageError(f"{config}: a record service needs output = \"/a/folder\" in the file "
+                               "(a service runs from /, which it cannot write)", ctx)
+    return dict(checked.params)
 
 
-def unit_text(command: str, config: str, *, watchdog: int, user: str | None, description: str) -> str:
-    exec_start = " ".join(_exec_word(word) for word in [*_vstig(), command, "--config", config])
-    lines = [
-        "# Written by `vstig service`: a gateway for days (docs/how-to/service.md).",
-        "[Unit]",
-        f"Description={description}",
-        "After=network-online.target",
-        "Wants=network-online.target",
-        "",
-        "[Service]",
-        "Type=notify",  # READY=1 once every link is open
-        "NotifyAccess=main",
-        f"ExecStart={exec_start}",
-        *([f"WatchdogSec={watchdog}"] if watchdog else []),
-        "TimeoutStartSec=60",  # opening may wait for devices and Zenoh peers
-        "TimeoutStopSec=15",  # a stop closes links and prints the counters in a few seconds
-        "Restart=on-failure",
-        "RestartSec=5",
-        *([f"User={user}", "SupplementaryGroups=dialout"] if user else []),  # dialout: serial radios on Debian
-        "",
-        "[Install]",
-        "WantedBy=multi-user.target",
-    ]
-    return "\n".join(lines) + "\n"
+def _user(name: str | None, needs: Needs) -> tuple[str | None, bool]:
+    """(User=, DynamicUser=) for --user NAME: an existing user, or by default one systemd makes; root warned."""
+    if name is None:
+        if any(under(path, TEMPORARY) for path in needs.reads + needs.writes):
+            raise click.UsageError("a service with its own user sees a /tmp of its own (PrivateTmp=): move "
+                                   f"{_in_tmp(needs)} out of /tmp, or give --user NAME")
+        _warn_unreadable(DYNAMIC_USER, needs)
+        return DYNAMIC_USER, True
+    if not _USER.match(name):
+        raise click.BadParameter(f"{shown(name)} is not a user name", param_hint="--user")
+    try:
+        account = pwd.getpwnam(name)
+    except KeyError:
+        raise click.BadParameter(
+            f"no user {name!r} on this machine: create it (useradd --system --no-create-home --shell "
+            f"/usr/sbin/nologin {name}), or leave --user out for a user systemd makes for the unit",
+            param_hint="--user") from None
+    if account.pw_uid == 0:
+        click.echo(f"warning: the unit runs the gateway as {name} (uid 0): a flaw in it, or in a library it loads, "
+                   "could change anything the sandbox leaves writable; leave --user out for a user of its own",
+                   err=True)
+        return None, False
+    _warn_unreadable(name, needs)
+    return name, False
+
+
+def _in_tmp(needs: Needs) -> str:
+    return next(path for path in needs.reads + needs.writes if under(path, TEMPORARY))
+
+
+def _warn_unreadable(name: str, needs: Needs) -> None:
+    """Warn for each file the service's user cannot reach: the service would fail at its start. A user
+    systemd makes has no files and no groups but dialout (for serial devices)."""
+    try:
+        account = pwd.getpwnam(name)
+        uid, groups = account.pw_uid, set(os.getgrouplist(name, account.pw_gid))
+    except KeyError:
+        uid, groups = -1, set()
+    if needs.serial:
+        with contextlib.suppress(KeyError):
+            groups.add(grp.getgrnam("dialout").gr_gid)
+    for path in needs.reads:
+        if not _reachable(path, uid, groups):
+            click.echo(f"warning: user {name} cannot read {path}: the service would fail to start", err=True)
+
+
+def _reachable(path: str, uid: int, groups: set[int]) -> bool:
+    """Whether uid (in groups) may search every folder up to `path` and read it, by the mode bits."""
+    parts = Path(path).parents
+    for item, bit in [*((folder, 1) for folder in reversed(parts)), (Path(path), 4)]:
+        try:
+            info = item.stat()
+        except OSError:
+            return False
+        shift = 6 if info.st_uid == uid else 3 if info.st_gid in groups else 0
+        if not (info.st_mode >> shift) & bit:
+            return False
+    return True
+
+
+def _program_files() -> list[str]:
+    """What the unit runs: vstig's script and the interpreter it names (a venv in a home folder needs
+    ProtectHome=read-only)."""
+    return list(dict.fromkeys([_vstig()[0], os.path.realpath(sys.executable)]))
 
 
 @click.command()
@@ -79,7 +125,8 @@ def unit_text(command: str, config: str, *, watchdog: int, user: str | None, des
 @click.option("--watchdog", type=click.IntRange(0, 3600), default=30, show_default=True,
               help="WatchdogSec: seconds without a ping from the gateway's loop before systemd restarts it "
                    "(0: no watchdog).")
-@click.option("--user", help="Run as this user (with the dialout group, for serial radios); default root.")
+@click.option("--user", help="Run as this existing user (with the dialout group, for serial radios); default: "
+                             f"a user systemd makes for the unit (User={DYNAMIC_USER}, DynamicUser=yes).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), metavar="FILE",
               help="Write the unit to FILE (e.g. /etc/systemd/system/vstig-lab.service) instead of stdout.")
 @overwrite_option("FILE")
@@ -99,18 +146,19 @@ def command(ctx: click.Context, config: str, gateway: str, watchdog: int, user: 
       vstig service --config /etc/vstig/lab.toml -o /etc/systemd/system/vstig-lab.service
       systemctl daemon-reload && systemctl enable --now vstig-lab
     """
-    if user is not None and not _USER.match(user):
-        raise click.BadParameter(f"{user!r} is not a user name", param_hint="--user")
-    if output is not None:
-        refuse_to_replace(output, overwrite)
-    absolute = os.path.abspath(config)
-    _check(gateway, absolute, ctx)
-    text = unit_text(gateway, absolute, watchdog=watchdog, user=user,
-                     description=f"vstig {gateway} ({os.path.basename(absolute)})")
+    absolute = checked("--config", os.path.abspath(config))
+    params = _check(gateway, absolute, ctx)
+    needs = needs_of(params, [absolute, *_program_files()])
+    name, dynamic = _user(user, needs)
+    for link in needs.unknown_devices:
+        click.echo(f"warning: {link}: vstig service does not know its devices, so the unit leaves DevicePolicy= "
+                   "out (add DeviceAllow= for them to close it)", err=True)
+    text = unit_text([*_vstig(), gateway, "--config", absolute],
+                     f"vstig {gateway} ({os.path.basename(absolute)})", needs,
+                     watchdog=watchdog, user=name, dynamic=dynamic)
     if output is None:
         click.echo(text, nl=False)
         return
-    with open(output, "w", encoding="utf-8") as file:
-        file.write(text)
+    write_new_file(output, text, overwrite=overwrite)
     click.echo(f"wrote {output}: systemctl daemon-reload, then systemctl enable --now {Path(output).stem}",
                err=True)

@@ -6,11 +6,14 @@ from __future__ import annotations
 
 import itertools
 import os
+import re
 import signal
 import socket
 import subprocess
+import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -68,23 +71,155 @@ def _env(address: str, **extra: str) -> dict[str, str]:
     return {**os.environ, "NOTIFY_SOCKET": address, "WATCHDOG_USEC": str(int(WATCHDOG_S * 1e6)), **extra}
 
 
-def test_the_unit_passes_systemd_analyze_verify(tmp_path: Path) -> None:
+@pytest.fixture
+def outside_tmp() -> Iterator[Path]:
+    """A folder a unit with its own user can see (its /tmp is its own)."""
+    with tempfile.TemporaryDirectory(dir="/dev/shm", prefix="vstig-service-") as folder:
+        yield Path(folder)
+
+
+LAB = 'links = ["serial:/dev/ttyUSB0?framing=epuck4", "can:socketcan:can0", "zenoh:lab"]\nrobot-id = 200\n'
+
+
+def _analyze(*args: str) -> subprocess.CompletedProcess[str]:
     analyze = require_tool("systemd-analyze", "systemd")
+    return subprocess.run([analyze, *args], capture_output=True, text=True, timeout=60, check=False)
+
+
+def _exposure(unit: Path) -> float:
+    """systemd-analyze security's overall exposure (0 safest, 10 UNSAFE) of a unit file, offline."""
+    done = _analyze("security", "--offline=true", "--no-pager", str(unit))
+    found = re.search(r"Overall exposure level for \S+: (\d+\.\d)", done.stdout)
+    assert found, done.stdout[-500:] + done.stderr
+    return float(found[1])
+
+
+def _settings(text: str) -> dict[str, list[str]]:
+    values: dict[str, list[str]] = {}
+    for line in text.splitlines():
+        key, sep, value = line.partition("=")
+        if sep and not line.startswith("#"):
+            values.setdefault(key, []).append(value)
+    return values
+
+
+def test_the_unit_passes_systemd_analyze_verify(tmp_path: Path) -> None:
     folder = tmp_path / "a lab's 100% folder"  # ExecStart= quoting: a space, a quote and a % specifier
     folder.mkdir()
     config = folder / "lab.toml"
-    config.write_text('links = ["serial:/dev/ttyUSB0?framing=epuck4", "can:socketcan:can0"]\nrobot-id = 200\n')
+    config.write_text(LAB)
     unit = tmp_path / "vstig-lab.service"
-    made = run_vstig("service", "--config", str(config), "--user", "vstig", "-o", str(unit))
+    made = run_vstig("service", "--config", str(config), "--user", "daemon", "-o", str(unit))
     assert made.returncode == 0, made.stderr
     text = unit.read_text()
     assert "Type=notify" in text and "WatchdogSec=30" in text and "Restart=on-failure" in text
-    checked = subprocess.run([analyze, "verify", str(unit)], capture_output=True, text=True, timeout=60, check=False)
+    checked = _analyze("verify", str(unit))
     assert checked.returncode == 0 and checked.stderr.strip() == "", checked.stderr
     quoted = '"' + str(config).replace("%", "%%") + '"'  # one word, % doubled (systemd.service(5))
     assert f"--config {quoted}\n" in text
-    again = run_vstig("service", "--config", str(config), "-o", str(unit))
+    assert "PrivateTmp=yes" not in text  # the config is in /tmp: a /tmp of its own would hide it
+    assert "warning: user daemon cannot read" in made.stderr  # pytest's folders are root's alone
+    again = run_vstig("service", "--config", str(config), "--user", "daemon", "-o", str(unit))
     assert again.returncode == 2 and "--overwrite" in again.stderr  # a unit the user has is not replaced
+
+
+@pytest.mark.parametrize(("body", "devices", "families"), [
+    (LAB, ["char-ttyUSB rw"], "AF_UNIX AF_CAN AF_INET AF_INET6 AF_NETLINK"),
+    ('links = ["serial:/dev/ttyACM3", "serial:loop://"]\nrobot-id = 1\n', ["char-ttyACM rw"], "AF_UNIX"),
+    ('links = ["can:virtual:lab", "serial:socket://localhost:7000"]\nrobot-id = 1\nmetrics = "9108"\n', [],
+     "AF_UNIX AF_INET AF_INET6"),
+], ids=["serial-can-zenoh", "serial-only", "no-devices"])
+def test_the_unit_is_sandboxed_to_what_its_config_needs(outside_tmp: Path, body: str, devices: list[str],
+                                                         families: str) -> None:
+    """issue 45: the unit scored 9.6 UNSAFE (9.2 with --user); sandboxed it must score 3.0 or better."""
+    config = outside_tmp / "lab.toml"
+    config.write_text(body)
+    unit = outside_tmp / "vstig-lab.service"
+    made = run_vstig("service", "--config", str(config), "-o", str(unit))
+    assert made.returncode == 0, made.stderr
+    settings = _settings(unit.read_text())
+    assert settings["User"] == ["vstig"] and settings["DynamicUser"] == ["yes"]  # not root, by default
+    assert settings["RestrictAddressFamilies"] == [families]
+    assert settings["CapabilityBoundingSet"] == [""] and settings["UMask"] == ["0077"]
+    assert settings["DevicePolicy"] == ["closed"] and settings.get("DeviceAllow", []) == devices
+    assert ("PrivateDevices" in settings) == (not devices)  # no device at all: a /dev of its own
+    assert ("SupplementaryGroups" in settings) == bool(devices)  # dialout for serial devices
+    assert _analyze("verify", str(unit)).stderr.strip() == ""
+    assert _exposure(unit) <= 3.0
+
+
+def test_root_is_warned_and_still_sandboxed(outside_tmp: Path) -> None:
+    config = outside_tmp / "lab.toml"
+    config.write_text(LAB)
+    unit = outside_tmp / "vstig-lab.service"
+    made = run_vstig("service", "--config", str(config), "--user", "root", "-o", str(unit))
+    assert made.returncode == 0 and "warning: the unit runs the gateway as root (uid 0)" in made.stderr
+    assert "User=" not in unit.read_text() and _exposure(unit) <= 3.5
+
+
+def test_a_user_that_does_not_exist_is_refused(outside_tmp: Path) -> None:
+    config = outside_tmp / "lab.toml"
+    config.write_text(LAB)
+    done = run_vstig("service", "--config", str(config), "--user", "nosuchuser")
+    assert done.returncode == 2 and "no user 'nosuchuser' on this machine" in done.stderr
+    assert "useradd --system" in done.stderr and done.stdout == ""
+
+
+@pytest.mark.parametrize("bad", ["\n", "\r", "\x01", "\x1b", "\x7f", "\x85"],
+                         ids=["LF", "CR", "SOH", "ESC", "DEL", "NEL"])
+def test_a_control_character_in_any_value_is_refused(outside_tmp: Path, bad: str) -> None:
+    """issue 45: a config path with a newline wrote its lines into Description= and ExecStart=."""
+    folder = outside_tmp / f"lab{bad}ExecStartPre=touch {outside_tmp}/pwned"
+    folder.mkdir(parents=True)
+    (folder / "lab.toml").write_text(LAB)
+    done = run_vstig("service", "--config", str(folder / "lab.toml"))
+    assert done.returncode == 2 and "--config '" in done.stderr and "holds a control character" in done.stderr
+    assert done.stdout == ""
+    named = outside_tmp / f"lab{bad}.toml"  # the description, from the file's name
+    named.write_text(LAB)
+    assert "holds a control character" in run_vstig("service", "--config", str(named)).stderr
+    record = outside_tmp / "record.toml"  # ReadWritePaths=, from the record output in the file
+    record.write_text(f'links = ["serial:loop://"]\noutput = "{outside_tmp}/caps{_toml(bad)}x/"\n')
+    (outside_tmp / f"caps{bad}x").mkdir()
+    done = run_vstig("service", "--command", "record", "--config", str(record))
+    assert done.returncode == 2 and "the folder recorded into '" in done.stderr, done.stderr
+    clean = outside_tmp / "clean.toml"
+    clean.write_text(LAB)
+    done = run_vstig("service", "--config", str(clean), "--user", f"x{bad}")
+    assert done.returncode == 2 and "is not a user name" in done.stderr
+
+
+def _toml(character: str) -> str:
+    return f"\\u{ord(character):04x}"
+
+
+def test_a_typo_in_the_config_is_named_as_vstig_service(outside_tmp: Path) -> None:
+    """issue 44: `vstig service --config typo.toml` printed `Usage: vstig bridge ...`."""
+    config = outside_tmp / "typo.toml"
+    config.write_text('links = ["serial:loop://"]\nrobot_id = 200\n')
+    done = run_vstig("service", "--config", str(config))
+    assert done.returncode == 2 and "Usage: vstig service" in done.stderr and "vstig bridge [" not in done.stderr
+    assert f"{config}:2: 'robot_id' is not an option of vstig bridge; did you mean robot-id?" in done.stderr
+    done = run_vstig("service", "--config", str(outside_tmp / "none.toml"))
+    assert done.returncode == 2 and "Usage: vstig service" in done.stderr and "none.toml" in done.stderr
+
+
+def test_the_default_user_cannot_see_a_config_in_tmp(tmp_path: Path) -> None:
+    config = tmp_path / "lab.toml"
+    config.write_text(LAB)
+    done = run_vstig("service", "--config", str(config))
+    assert done.returncode == 2 and f"move {config} out of /tmp, or give --user NAME" in done.stderr
+
+
+def test_a_record_service_needs_a_folder_to_record_into(outside_tmp: Path) -> None:
+    config = outside_tmp / "rec.toml"
+    config.write_text('links = ["serial:loop://"]\n')
+    done = run_vstig("service", "--command", "record", "--config", str(config))
+    assert done.returncode == 2 and "a record service needs output" in done.stderr
+    (outside_tmp / "caps").mkdir()
+    config.write_text(f'links = ["serial:loop://"]\noutput = "{outside_tmp}/caps"\n')
+    done = run_vstig("service", "--command", "record", "--config", str(config))
+    assert done.returncode == 0 and f"ReadWritePaths={outside_tmp}/caps\n" in done.stdout
 
 
 def test_service_refuses_a_config_the_gateway_would_refuse(tmp_path: Path) -> None:
