@@ -9,19 +9,24 @@ import os
 import re
 import signal
 import socket
+import stat
 import subprocess
+import sys
 import tempfile
 import threading
 import time
+from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
 
+import click
 import pytest
 from peers import has_open, run_vstig, start_vstig, stop
 from required import require_tool
 from robots import PtyRobot
 
 from vstig_cli.ops.notify import ServiceNotifier
+from vstig_cli.ops.unit_file import write_new_file
 from vstig_hw.gateway import Node
 from vstig_hw.links import parse
 
@@ -191,6 +196,76 @@ def test_a_control_character_in_any_value_is_refused(outside_tmp: Path, bad: str
 
 def _toml(character: str) -> str:
     return f"\\u{ord(character):04x}"
+
+
+def test_a_link_planted_at_the_output_is_never_followed(outside_tmp: Path) -> None:
+    """issue 45: the symlink check and open(output, "w") were 0.5 s apart: a planted link overwrote its target."""
+    config = outside_tmp / "lab.toml"
+    config.write_text(LAB)
+    target = outside_tmp / "passwd"
+    target.write_text("root:x:0:0\n")
+    unit = outside_tmp / "vstig-lab.service"
+    for dangling in (False, True):
+        unit.symlink_to(outside_tmp / "absent" if dangling else target)
+        for extra in ((), ("--overwrite",)):
+            done = run_vstig("service", "--config", str(config), "-o", str(unit), *extra)
+            assert done.returncode == 2 and f"{unit} is a symbolic link" in done.stderr, done.stderr
+        unit.unlink()
+    assert target.read_text() == "root:x:0:0\n" and not (outside_tmp / "absent").exists()
+    made = run_vstig("service", "--config", str(config), "-o", str(unit))
+    assert made.returncode == 0 and stat.S_IMODE(unit.stat().st_mode) == 0o644, made.stderr
+    before = unit.stat().st_ino
+    replaced = run_vstig("service", "--config", str(config), "--watchdog", "7", "-o", str(unit), "--overwrite")
+    assert replaced.returncode == 0 and "WatchdogSec=7" in unit.read_text()
+    assert unit.stat().st_ino != before  # a new file renamed over the old name, not the old one rewritten
+    assert [p.name for p in outside_tmp.iterdir() if p.name.endswith(".tmp")] == []
+
+
+_RACER = """
+import os, signal, sys
+swaps = 0
+def done(*_):
+    print(swaps)
+    sys.exit(0)
+signal.signal(signal.SIGTERM, done)
+while True:
+    try:
+        os.symlink(sys.argv[1], sys.argv[2])
+    except OSError:
+        pass
+    try:
+        os.unlink(sys.argv[2])
+    except OSError:
+        pass
+    swaps += 1
+"""
+
+
+def test_a_link_planted_at_any_moment_is_never_followed(outside_tmp: Path) -> None:
+    """The race itself: a process swaps the output between a link to a target and nothing, as fast as it can,
+    while units are written there with and without --overwrite. Whatever each write meets, the target is
+    never written through; each write either lands as a whole unit or is refused."""
+    target = outside_tmp / "target"
+    target.write_text("keep\n")
+    output = outside_tmp / "unit.service"
+    racer = subprocess.Popen([sys.executable, "-c", _RACER, str(target), str(output)], stdout=subprocess.PIPE,
+                             text=True)
+    outcomes: Counter[str] = Counter()
+    try:
+        time.sleep(0.3)  # racing
+        for n in range(400):
+            try:
+                write_new_file(str(output), f"unit {n}\n", overwrite=n % 2 == 1)
+                outcomes["written"] += 1
+            except click.UsageError as error:
+                assert "symbolic link" in error.message or "exists" in error.message, error.message
+                outcomes["refused"] += 1
+    finally:
+        racer.send_signal(signal.SIGTERM)
+        swaps = int(racer.communicate(timeout=10)[0])
+    assert target.read_text() == "keep\n" and swaps > 1000, swaps
+    assert outcomes["written"] > 0 and outcomes["refused"] > 0, outcomes  # both sides of the race were met
+    assert [p.name for p in outside_tmp.iterdir() if p.name.endswith(".tmp")] == []
 
 
 def test_a_typo_in_the_config_is_named_as_vstig_service(outside_tmp: Path) -> None:
