@@ -10,44 +10,87 @@ import click
 from vstig_hw.demo.swarm import DemoConfig, DemoReport, Medium, run_demo
 from vstig_hw.extras import require
 from vstig_hw.gateway import stop_on_signals
+from vstig_hw.wording import counted
 
 from ..options import Finite
 from ..running import reports_errors
 
+# What the gateway's engine did with each message it heard, in plain words (docs/reference/counters.md).
+_OUTCOMES = {
+    "stored": ("newer entry stored", "newer entries stored"),
+    "same": ("repeat of the entry held", "repeats of the entry held"),
+    "conflict": ("conflict (same timestamp, another robot: the larger value kept)",
+                 "conflicts (same timestamp, another robot: the larger value kept)"),
+    "answered": ("GET answered with a newer entry", "GETs answered with a newer entry"),
+    "stale": ("older PUT ignored", "older PUTs ignored"),
+    "unknown": ("empty GET for a key not held", "empty GETs for a key not held"),
+    "invalid": ("PUT with timestamp 0 refused", "PUTs with timestamp 0 refused"),
+}
+_LEGEND = """\
+  messages: the PUTs and GETs the medium's robots sent, in frames (CAN frames, radio packets).
+  lost: each frame reaches every other robot (and, on a radio, the gateway) as one copy;
+        --drop {drop:g} loses each copy with that probability, so lost is near {drop:.0%} of copies.
+  framing drops: frames a robot's framing threw away, by reason (docs/reference/counters.md)."""
 
-def _drops(medium: Medium) -> str:
-    """The medium's drops by reason, without their `drop_` prefix."""
+
+def _framing_drops(medium: Medium) -> str:
+    """The robots' framing drops by reason, without their `drop_` prefix."""
     prefix = "drop_"
     return " ".join(f"{k[len(prefix):]}={v}" for k, v in sorted(medium.counters.items()) if k.startswith(prefix)) or "-"
+
+
+def _lost(medium: Medium) -> str:
+    """Copies the air lost, of those sent: `706 of 1000 (71%)`."""
+    copies, lost = medium.counters["copies"], medium.counters["lost"]
+    return f"{lost} of {copies}" + (f" ({lost / copies:.0%})" if copies else "")
 
 
 def _live_table(step: int, media: list[Medium], agreed: int, total: int) -> Any:
     from rich.table import Table
 
     table = Table(title=f"step {step}: {agreed}/{total} robots hold the highest id")
-    for column in ("medium", "robots", "agree", "messages", "bytes", "drops"):
-        table.add_column(column, justify="left" if column in ("medium", "drops") else "right")
+    for column in ("medium", "robots", "agree", "messages", "bytes", "lost", "framing drops"):
+        table.add_column(column, justify="left" if column in ("medium", "framing drops") else "right")
     highest = total
     for medium in media:
         agree = sum(robot.entry(1) is not None and robot.entry(1).value == highest  # type: ignore[union-attr]
                     for robot in medium.robots)
         table.add_row(medium.name, str(len(medium.robots)), str(agree), str(medium.counters["messages"]),
-                      str(medium.counters["bytes"]), _drops(medium))
+                      str(medium.counters["bytes"]), _lost(medium), _framing_drops(medium))
     return table
 
 
-def _report(report: DemoReport) -> None:
+def _engine(outcomes: dict[str, int]) -> list[str]:
+    """`1 newer entry stored`, `94 repeats of the entry held`...: zeros left out."""
+    return [counted(outcomes[name], one, many) for name, (one, many) in _OUTCOMES.items() if outcomes.get(name)]
+
+
+def _report(report: DemoReport, drop: float) -> None:
+    robots = sum(len(m.robots) for m in report.media)
+    took = f"{counted(report.converged_at or report.steps, 'step')} ({report.seconds:.1f} s)"
     if report.converged_at is not None:
-        click.echo(f"converged: all {sum(len(m.robots) for m in report.media)} robots hold {report.highest} "
-                   f"after {report.converged_at} steps ({report.seconds:.1f} s)")
+        click.echo(f"converged: all {robots} robots hold {report.highest} after {took}")
     else:
-        click.echo(f"not converged after {report.steps} steps ({report.seconds:.1f} s)")
-    click.echo(f"{'medium':<8} {'robots':>6} {'messages':>9} {'bytes':>8}  drops by reason")
+        click.echo(f"not converged after {took}")
+    click.echo(f"{'medium':<7} {'robots':>6} {'messages':>8} {'frames':>6} {'bytes':>6}  {'lost':<18} framing drops")
     for medium in report.media:
-        click.echo(f"{medium.name:<8} {len(medium.robots):>6} {medium.counters['messages']:>9} "
-                   f"{medium.counters['bytes']:>8}  {_drops(medium)}")
+        c = medium.counters
+        click.echo(f"{medium.name:<7} {len(medium.robots):>6} {c['messages']:>8} {c['frames']:>6} {c['bytes']:>6}  "
+                   f"{_lost(medium):<18} {_framing_drops(medium)}")
+    click.echo(_LEGEND.format(drop=drop))
+    several = any("/" in name for name in report.gateway)  # names are "<gateway id>/<link>" then
+    click.echo(f"{'each gateway' if several else 'the gateway'}'s links (counters: docs/reference/counters.md):")
+    engines = {}
     for name, counters in report.gateway.items():
-        click.echo(f"gateway {name}: {counters.summary()}")
+        if name == "engine" or name.endswith("/engine"):
+            engines[name] = counters
+        else:
+            click.echo(f"  {name}: {counters.summary()}")
+    for name, counters in engines.items():
+        owner = f"gateway {name.split('/')[0]}" if several else "the gateway"
+        click.echo(f"{owner}'s engine, for each message it heard:")
+        for outcome in _engine(dict(counters)) or ["nothing heard"]:
+            click.echo(f"  {outcome}")
 
 
 @click.command()
@@ -88,6 +131,6 @@ def command(robots: int, drop: float, seed: int, step: float, max_steps: int, ga
             report = run_demo(config, line, stop)
     if report.interrupted:  # run_demo sets `stop` itself to end its gateways: that is no interruption
         click.echo("interrupted", err=True)
-    _report(report)
+    _report(report, drop)
     if report.converged_at is None and not report.interrupted:
-        raise click.ClickException(f"the swarm did not converge in {max_steps} steps")
+        raise click.ClickException(f"the swarm did not converge in {counted(max_steps, 'step')}")

@@ -11,6 +11,12 @@ robot on that radio, and the gateway, independently with drop probability P.
 The CAN bus is lossless, as CAN is; a CAN robot drops what it hears with the
 same P, so every medium sees the configured loss.
 
+Each medium counts `messages` (PUTs and GETs its robots sent), the `frames`
+(CAN frames, radio packets) and `bytes` they took, and `copies`: one per
+listener a frame reached (every other robot, and on a radio the gateway), of
+which `lost` were dropped with P. So `lost` is about P times `copies`, and
+many times `messages`: each frame has as many copies as listeners.
+
 The task is the paper's: every robot puts its id under one key at start, does a
 get every control step, and the larger value wins conflicts; the swarm has
 converged when every robot holds the highest id.
@@ -58,7 +64,15 @@ class DemoConfig:
 class Medium:
     name: str
     robots: list[Stigmergy] = field(default_factory=list)
-    counters: Counters = field(default_factory=Counters)  # messages, bytes, drops by reason
+    counters: Counters = field(default_factory=Counters)  # messages, frames, bytes, copies, lost, drop_<reason>
+
+    def lost_copy(self, drop: float, rng: random.Random) -> bool:
+        """One copy of a frame reaching one listener: True if the air loses it (probability `drop`)."""
+        self.counters["copies"] += 1
+        if rng.random() < drop:
+            self.counters["lost"] += 1
+            return True
+        return False
 
 
 @dataclass
@@ -94,8 +108,7 @@ class PtyRadio:
         return [p + b"\0" for p in packets if p]
 
     def _hear(self, index: int, packet: bytes) -> None:
-        if self.rng.random() < self.drop:
-            self.medium.counters["drop_radio_loss"] += 1
+        if self.medium.lost_copy(self.drop, self.rng):
             return
         robot = self.medium.robots[index]
         for msg in self.codecs[index].feed(packet):
@@ -111,13 +124,12 @@ class PtyRadio:
                 self.medium.counters["messages"] += 1
                 for unit in self.codecs[sender].encode(msg):
                     for packet in [p + b"\0" for p in unit.split(b"\0") if p]:
+                        self.medium.counters["frames"] += 1
                         self.medium.counters["bytes"] += len(packet)
                         for index in range(len(self.medium.robots)):
                             if index != sender:
                                 self._hear(index, packet)
-                        if self.rng.random() < self.drop:
-                            self.medium.counters["drop_radio_loss"] += 1
-                        else:
+                        if not self.medium.lost_copy(self.drop, self.rng):
                             to_gateway += packet
         if to_gateway:
             os.write(self.master, bytes(to_gateway))
@@ -147,8 +159,7 @@ class CanRobots:
     def step(self) -> None:
         for bus, codec, robot in zip(self.buses, self.codecs, self.medium.robots, strict=True):
             while (frame := bus.recv(0)) is not None:
-                if self.rng.random() < self.drop:
-                    self.medium.counters["drop_rx_loss"] += 1
+                if self.medium.lost_copy(self.drop, self.rng):
                     continue
                 for msg in codec.feed(frame):
                     robot.receive(msg)
@@ -156,6 +167,7 @@ class CanRobots:
             for msg in robot.drain(1):
                 self.medium.counters["messages"] += 1
                 for frame in codec.encode(msg):
+                    self.medium.counters["frames"] += 1
                     self.medium.counters["bytes"] += len(frame.data)
                     bus.send(frame)
 
