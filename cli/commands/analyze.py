@@ -19,7 +19,7 @@ from vstig_hw.capture.records import CaptureError
 from vstig_hw.counters import Counters
 from vstig_hw.extras import require
 from vstig_hw.values import ValueType, from_raw
-from vstig_hw.wording import shown_sender
+from vstig_hw.wording import counted, shown_sender
 
 from ..options import (
     Finite,
@@ -116,7 +116,7 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
         click.echo(json.dumps(result))
     else:
         _print_text(report, value_type)
-    summary = f"{report.messages} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
+    summary = counted(report.messages, "message") + (f", {counted(len(bad), 'bad line')} skipped" if bad else "")
     if drops:
         summary += f", dropped {drops.summary()}"
     click.echo(summary + (f"; wrote {plot}" if plot else ""), err=True)
@@ -228,7 +228,8 @@ def _seconds(t: float | None) -> str:
 
 def _print_text(report: Report, value_type: ValueType) -> None:
     start = report.start or 0.0
-    click.echo(f"capture: {report.messages} messages over {report.duration:.3f} s on {', '.join(report.links)}")
+    click.echo(f"capture: {counted(report.messages, 'message')} over {report.duration:.3f} s "
+               f"on {', '.join(report.links)}")
     if report.links_without_sender:
         click.echo(f"note: {', '.join(report.links_without_sender)} name no sender (serial): convergence cannot be "
                    "measured there; first and last time each write was heard per link shown")

@@ -16,6 +16,7 @@ from vstig_hw.capture.records import CAN_EXTENSIONS, MCAP_EXTENSION, CaptureErro
 from vstig_hw.capture.time_columns import TIME_STYLES, TimeColumn
 from vstig_hw.extras import require
 from vstig_hw.values import ValueType
+from vstig_hw.wording import counted
 
 from ..options import (
     echo_skipped,
@@ -50,7 +51,8 @@ def _convert(files: dict[str, str], output: str, skip_bad: bool, base: int | Non
     except CaptureError as error:
         raise named(error) from None
     echo_skipped(map(named, bad))
-    summary = f"{output}: {count} records from {len(files)} files" + (f", {len(bad)} bad lines skipped" if bad else "")
+    summary = (f"{output}: {counted(count, 'record')} from {counted(len(files), 'file')}"
+               + (f", {counted(len(bad), 'bad line')} skipped" if bad else ""))
     click.echo(summary + (f", dropped {drops.summary()}" if drops else ""), err=True)
     if link_names_lost(output):
         click.echo(f"{output} names no link: decode reads its frames back as one unnamed link", err=True)
@@ -110,7 +112,7 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, time_sty
                 raise renamed(error, readable, name) from None
         sys.stdout.flush()
         echo_skipped(renamed(error, readable, name) for error in bad)
-        summary = f"{name}: {count} messages" + (f", {len(bad)} bad lines skipped" if bad else "")
+        summary = f"{name}: {counted(count, 'message')}" + (f", {counted(len(bad), 'bad line')} skipped" if bad else "")
         if drops:
             summary += f", dropped {drops.summary()}"
         click.echo(summary, err=True)

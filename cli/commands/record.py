@@ -28,6 +28,7 @@ from vstig_hw.gateway import Mode, Node, stop_on_signals
 from vstig_hw.links import Link, LinkSpec
 from vstig_hw.links.can import CanSpec
 from vstig_hw.links.zenoh import ZenohSpec
+from vstig_hw.wording import counted
 
 from ..config import ConfiguredCommand, config_options
 from ..ops.metrics import metrics_option, metrics_served
@@ -169,7 +170,8 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
                 click.echo(f"{path} names no link: decode reads its frames back as one unnamed link", err=True)
             describe_links(node)
             line = StatusLine()
-            status = (lambda: line.show(f"{captures[0].records} units  {node.summary()}")) if line.live else None
+            status = ((lambda: line.show(f"{counted(captures[0].records, 'unit')}  {node.summary()}")) if line.live
+                      else None)
             try:
                 run_until_stopped(node, stop, status, duration)
             finally:
@@ -178,4 +180,4 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
         if captures:
             captures[0].close()  # after the node: its close() handed over every unit already read
     print_counters(node)
-    click.echo(f"{captures[0].records} units in {', '.join(captures[0].files)}", err=True)
+    click.echo(f"{counted(captures[0].records, 'unit')} in {', '.join(captures[0].files)}", err=True)

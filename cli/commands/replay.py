@@ -19,6 +19,7 @@ from vstig_hw.gateway import stop_on_signals
 from vstig_hw.links import Link, LinkSpec
 from vstig_hw.links.can import CanSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
+from vstig_hw.wording import counted
 
 from ..options import VALUE_TYPE_HELP, Finite, echo_skipped, filter_options, skip_bad_option
 from ..running import LINK, StatusLine, build_links, lossless, open_unless_stopped, reports_errors
@@ -67,7 +68,7 @@ class _CountingSender:
         self.sent += 1
         if self.line.live and time.monotonic() >= self.next_draw:
             self.next_draw = time.monotonic() + 0.5
-            self.line.show(f"sent {self.sent} units  " + "  ".join(f"{link.name}: {link.stats().summary()}"
+            self.line.show(f"sent {counted(self.sent, 'unit')}  " + "  ".join(f"{link.name}: {link.stats().summary()}"
                                                                      for link in self.links))
 
 
@@ -222,14 +223,15 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     stats = [link.stats() for link in targets.values()]
     sent = sum(s["tx"] for s in stats)
     lost = sum(s["tx_dropped"] + s["tx_timeout"] for s in stats)
-    over = f" over {passes_done} passes" if loop else f" in {done.took:.3f} s (logged {done.logged:.3f} s)"
-    click.echo(f"sent {sent} units{over}" + (f"; {lost} the links could not send" if lost else "")
+    over = (f" over {counted(passes_done, 'pass', 'passes')}" if loop
+            else f" in {done.took:.3f} s (logged {done.logged:.3f} s)")
+    click.echo(f"sent {counted(sent, 'unit')}{over}" + (f"; {lost} the links could not send" if lost else "")
                + ("; stopped by a signal" if done.stopped else ""), err=True)
     for link in targets.values():
         click.echo(f"{link.name}: {link.stats().summary()}", err=True)
     if verbose:
         click.echo(f"replay thread: {done.scheduling}", err=True)
     if unmapped:
-        skipped = ", ".join(f"{name} ({count} units)" for name, count in sorted(unmapped.items()))
+        skipped = ", ".join(f"{name} ({counted(count, 'unit')})" for name, count in sorted(unmapped.items()))
         click.echo(f"skipped links with no --onto: {skipped}", err=True)
     echo_skipped(bad)

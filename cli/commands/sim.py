@@ -21,6 +21,7 @@ from vstig_hw.sim.experiment import MAX_RUNS, MAX_WORKERS, MOTION, TOPOLOGY_NAME
 from vstig_hw.sim.grid import Cell
 from vstig_hw.sim.topology import BODY_RADIUS, DENSITY, RANGE
 from vstig_hw.wire import U16_MAX
+from vstig_hw.wording import counted
 
 from ..options import Finite, finite, overwrite_option, refuse_links_in, refuse_to_replace
 
@@ -168,8 +169,8 @@ def _capture(config: Config, seed: int, path: str) -> None:
         result = capture_run(config, seed_for(config, seed, 0), path)
     except ValueError as error:  # an extension no CAN writer knows
         raise click.UsageError(str(error)) from None
-    ending = f"converged at step {result.steps}" if result.steps is not None else f"{result.steps_run} steps"
-    click.echo(f"captured run 0 ({ending}, {result.messages} messages) to {path}", err=True)
+    ending = f"converged at step {result.steps}" if result.steps is not None else counted(result.steps_run, "step")
+    click.echo(f"captured run 0 ({ending}, {counted(result.messages, 'message')}) to {path}", err=True)
 
 
 def _steps_line(s: Summary) -> str:
@@ -197,7 +198,8 @@ def _split_note(s: Summary, moving: bool = False) -> str:
 
 def _unconverged_note(s: Summary, max_steps: int) -> None:
     if s.converged < s.runs:
-        click.echo(f"note: {s.runs - s.converged} of {s.runs} runs did not converge within {max_steps} steps "
+        click.echo(f"note: {s.runs - s.converged} of {counted(s.runs, 'run')} did not converge within "
+                   f"{counted(max_steps, 'step')} "
                    "(raise --max-steps)", err=True)
 
 
@@ -261,8 +263,8 @@ def _unconverged_cells(cells: list[Cell]) -> None:
     for cell in cells:
         if cell.summary.converged < cell.summary.runs:
             c = cell.config
-            click.echo(f"note: {_label(c)}: {cell.summary.runs - cell.summary.converged} "
-                       f"runs did not converge within {c.max_steps} steps", err=True)
+            click.echo(f"note: {_label(c)}: {counted(cell.summary.runs - cell.summary.converged, 'run')} "
+                       f"did not converge within {counted(c.max_steps, 'step')}", err=True)
 
 
 def _draw_snapshot(config: Config, seed: int, step: int, path: Path) -> None:

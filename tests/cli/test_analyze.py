@@ -198,7 +198,7 @@ def test_bad_line_names_file_and_line_and_skip_bad_counts_it(tmp_path: Path) -> 
     code, _, err = invoke(str(log))
     assert code == 1 and f"{log}:8: not a candump line" in err and "Traceback" not in err
     code, out, err = invoke(str(log), "--skip-bad", "--json")
-    assert code == 0 and "1 bad lines skipped" in err and f"skipped {log}:8" in err
+    assert code == 0 and "1 bad line skipped" in err and f"skipped {log}:8" in err
     assert json.loads(out)["capture"]["bad_lines_skipped"] == 1
 
 

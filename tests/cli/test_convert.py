@@ -49,7 +49,8 @@ def _convert(*args: str) -> str:
 def test_every_format_that_names_links_converts_and_decodes_back_the_same(tmp_path: Path, log: Path,
                                                                           ext: str) -> None:
     out = tmp_path / f"converted{ext}"
-    assert f"{out}: {len(TRAFFIC)} records from 1 files" in _convert(str(log), "-o", str(out))
+    said = _convert(str(log), "-o", str(out))
+    assert f"{out}: {len(TRAFFIC)} records from 1 file" in said and "1 files" not in said, said
     original, back = _rows(log), _rows(out)
     if ext == ".mcap":  # an MCAP capture holds messages: no CAN IDs
         original = [{k: v for k, v in row.items() if k != "can_id"} for row in original]

@@ -85,7 +85,7 @@ def test_record_and_replay_show_a_live_counter_line_on_a_terminal(tmp_path: Path
         code, shown = run_vstig_on_a_terminal_stderr("replay", str(capture), "--onto", f"serial:{radio.path}")
     finally:
         radio.close()
-    assert code == 0 and b"\r\x1b[Ksent 1 units" in shown, shown
+    assert code == 0 and b"\r\x1b[Ksent 1 unit " in shown, shown
 
 
 def test_replay_onto_another_can_id_scheme_re_encodes_in_its_ids(tmp_path: Path) -> None:

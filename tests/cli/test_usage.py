@@ -63,7 +63,7 @@ def test_skip_bad_counts_and_continues(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["decode", str(bad), "--skip-bad", "--format", "csv"])
     assert result.exit_code == 0
     assert result.stdout.splitlines()[0] == "t,link,can_id,op,key,value,timestamp,robot,sender"
-    assert len(result.stdout.splitlines()) == 3 and "1 bad lines skipped" in result.stderr
+    assert len(result.stdout.splitlines()) == 3 and "1 bad line skipped" in result.stderr
 
 
 def test_debug_shows_the_traceback(tmp_path: Path) -> None:
@@ -107,7 +107,7 @@ def test_damaged_python_can_files_name_the_record_and_honour_skip_bad(tmp_path: 
     assert result.exit_code == 1 and f"{damaged}: record 2: cannot read as .csv" in result.stderr
     result = CliRunner().invoke(cli, ["decode", str(damaged), "--skip-bad"])
     assert result.exit_code == 0 and len(result.stdout.splitlines()) == 1
-    assert "1 bad lines skipped" in result.stderr and "record 2" in result.stderr
+    assert "1 bad line skipped" in result.stderr and "record 2" in result.stderr
     empty = tmp_path / "empty.blf"
     empty.write_bytes(b"")
     result = CliRunner().invoke(cli, ["decode", str(empty)])
@@ -127,7 +127,7 @@ def test_serial_capture_damage_names_file_and_line(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["decode", str(cap)])
     assert result.exit_code == 1 and f"{cap}:2: unknown serial framing 'bogus'" in result.stderr
     result = CliRunner().invoke(cli, ["decode", str(cap), "--skip-bad"])
-    assert result.exit_code == 0 and "1 bad lines skipped" in result.stderr
+    assert result.exit_code == 0 and "1 bad line skipped" in result.stderr
     cap.write_text("# vstig serial capture v2\n(1.000000) radio cobs8 rx 00\n")
     result = CliRunner().invoke(cli, ["decode", str(cap)])
     assert result.exit_code == 1 and f"{cap}:1: serial capture 'v2' is not a version this vstig-hw reads" \
@@ -231,4 +231,4 @@ def test_a_garbage_line_in_an_asc_file_is_file_line_not_silence(tmp_path: Path) 
     result = CliRunner().invoke(cli, ["decode", str(asc)])
     assert result.exit_code == 1 and f"{asc}:7: not an ASC line: 'garbage here'" in result.stderr
     result = CliRunner().invoke(cli, ["decode", str(asc), "--skip-bad"])
-    assert result.exit_code == 0 and len(result.stdout.splitlines()) == 3 and "1 bad lines skipped" in result.stderr
+    assert result.exit_code == 0 and len(result.stdout.splitlines()) == 3 and "1 bad line skipped" in result.stderr
