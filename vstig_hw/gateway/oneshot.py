@@ -17,6 +17,7 @@ from collections.abc import Callable
 
 from ..engine import Entry
 from ..wire import KEY_MAX, Message
+from ..wording import counted
 from .confirm import ConfirmedWrite, PutResult, Send, Verdict
 from .node import Listening, Node, SwarmClosed
 
@@ -159,7 +160,7 @@ def not_taken(result: PutResult, key: int, where: str, wait: float, show: Callab
     if result.superseded:
         assert result.holds is not None
         return (f"key {key}: the swarm holds {show(result.holds)} on {where}, not our write ({ours}), "
-                f"after {result.tries} writes")
+                f"after {counted(result.tries, 'write')}")
     if confirm and not result.confirmed:
         said = f"the last entry heard was {show(result.heard)}" if result.heard else "nothing was heard for the key"
         return f"key {key}: no neighbour on {where} took our write ({ours}) within {wait:g} s; {said}"
