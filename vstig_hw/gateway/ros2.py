@@ -9,7 +9,9 @@ owns what they carry, in the Node's terms:
 * the counters go to /diagnostics, once a second (`tick` listener);
 * `put` is a confirmed write (`oneshot.confirm_write`, as `vstig put` makes it): the
   service answers the entry a neighbour took, or why not and what the swarm holds;
-  `get` reads the table (sending nothing), `table` all of it;
+  `get` reads the table (sending nothing), `table` all of it, from a snapshot that every call asked
+  before it was taken shares, taken at most once a TABLE_SPACING (`TableSnapshots`): no number of
+  calls holds the Node's lock more often, and the node process is sent each snapshot once;
 * a PUT a ROS 2 node writes with timestamp 0 gets the timestamp after our entry.
 
 The services run on the transport's request threads and reach the Node as any
@@ -22,13 +24,21 @@ live view and recordings are composed; everything the part does to the Node is i
 from __future__ import annotations
 
 import concurrent.futures
+import threading
+import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from ..engine import Entry
 from ..framing.ros2 import Ros2Framing
 from ..links.link import Link
 from ..timestamps import next_timestamp
-from ..transports.ros2 import PutAnswer, Ros2Transport  # no rclpy at import: it loads when the node opens
+from ..transports.ros2 import (  # no rclpy at import: it loads when the node opens
+    TABLE_RECORD,
+    PutAnswer,
+    Ros2Transport,
+    TableSnapshot,
+)
 from ..wire import KEY_MAX, Message
 from .node import SwarmClosed
 from .oneshot import HearsItself, confirm_write, not_taken
@@ -36,16 +46,48 @@ from .oneshot import HearsItself, confirm_write, not_taken
 if TYPE_CHECKING:
     from .node import Node
 
-__all__ = ["PUT_TRIES", "PUT_WAIT", "Ros2Part", "serve_ros2"]
+__all__ = ["PUT_TRIES", "PUT_WAIT", "TABLE_SPACING", "Ros2Part", "TableSnapshots", "serve_ros2"]
 
 PUT_WAIT = 2.0  # seconds a confirmed write waits for a neighbour, as `vstig put --wait`
 PUT_TRIES = 3
 _GRACE = 5.0  # seconds beyond its writes' waits a put may take before the service gives up on the loop
+TABLE_SPACING = 0.2  # seconds at least between two snapshots of a changing table (each holds the Node's lock)
 
 
 def serve_ros2(node: Node) -> list[Ros2Part]:
     """A part for every link whose transport serves ROS 2, attached to `node`."""
     return [Ros2Part(node, link, link.transport) for link in node.links if isinstance(link.transport, Ros2Transport)]
+
+
+class TableSnapshots:
+    """The table as the `table` service answers it: a call gets the newest snapshot if the table has not changed
+    since, or if it was taken after the call was asked; else a new one, taken no sooner than TABLE_SPACING after
+    the last. So 50 calls at once cost the Node's lock one or two snapshots, and calls in a loop five a second."""
+
+    def __init__(self, take: Callable[[], list[tuple[int, Entry]]]) -> None:
+        self._take = take
+        self._taking = threading.Lock()  # one snapshot at a time; the calls behind it share it
+        self.changes = 0  # changes of the table seen (`changed`, on the data path under the Node's lock)
+        self.taken = 0  # snapshots taken
+        self._last = TableSnapshot(0, b"")
+        self._last_changes = -1
+        self._taken_at = -TABLE_SPACING
+
+    def changed(self) -> None:
+        self.changes += 1
+
+    def snapshot(self) -> TableSnapshot:
+        asked = time.monotonic()
+        with self._taking:
+            if self._last_changes == self.changes or self._taken_at >= asked:
+                return self._last
+            time.sleep(max(0.0, self._taken_at + TABLE_SPACING - time.monotonic()))
+            changes, self._taken_at = self.changes, time.monotonic()
+            pack = TABLE_RECORD.pack
+            records = b"".join([pack(key, *entry) for key, entry in sorted(self._take())])
+            self.taken += 1
+            self._last, self._last_changes = TableSnapshot(self._last.serial + 1, records), changes
+            return self._last
 
 
 def _shown(entry: Entry) -> str:
@@ -59,6 +101,7 @@ class Ros2Part:
         self.node = node
         self.transport = transport
         self._where = ", ".join(other.name for other in node.links)
+        self.snapshots = TableSnapshots(node.entries)
         transport.serve(self if node.engine is not None else None, [other.name for other in node.links])
         if node.engine is not None and isinstance(link.framing, Ros2Framing):
             link.framing.stamp = self._stamp
@@ -70,6 +113,7 @@ class Ros2Part:
         self.transport.publish_heard(link, messages, sender)
 
     def _changed(self, key: int, old: Entry | None, new: Entry, link: str | None, sender: int | None) -> None:
+        self.snapshots.changed()
         self.transport.publish_change(key, old, new, link, sender)
 
     def _tick(self, node: Node) -> None:
@@ -103,5 +147,5 @@ class Ros2Part:
         engine = self.node.engine
         return engine.entry(key) if engine is not None and key <= KEY_MAX else None  # one dict lookup: atomic
 
-    def table(self) -> list[tuple[int, Entry]]:
-        return self.node.entries() if self.node.engine is not None else []  # a snapshot, taken under the lock
+    def table(self) -> TableSnapshot:
+        return self.snapshots.snapshot()  # served only where the Node has a table (`serve`)

@@ -42,7 +42,8 @@ from ..ros2msgs import ros_environment
 from ..wire import Message
 from .base import DeviceTransport, TransportError
 
-__all__ = ["CHANGE", "FRAME", "HEARD", "PUTS_AT_ONCE", "PutAnswer", "Ros2Options", "Ros2Transport", "Served"]
+__all__ = ["CHANGE", "FRAME", "HEARD", "PUTS_AT_ONCE", "TABLE_PAGE", "TABLE_RECORD", "PutAnswer", "Ros2Options",
+           "Ros2Transport", "Served", "TableSnapshot"]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +53,8 @@ HEARD = struct.Struct("<HqHHHH")  # H records: link index, sender (as wire_sende
 # C records: key, has_old, old and new entry (value, timestamp, robot), link index (NO_LINK: none), sender
 CHANGE = struct.Struct("<HBHHHHHHHq")
 NO_LINK = 0xFFFF
+TABLE_RECORD = struct.Struct("<HHHH")  # a table snapshot's records: key, value, timestamp, robot; by key
+TABLE_PAGE = struct.Struct("<II")  # T frames: the snapshot's serial and its first record's index, then records
 PIPE_BUF = 4096  # POSIX: a pipe write of at most this many bytes is never split nor interleaved
 START_TIMEOUT = 360.0  # seconds the child may take to start: the first on a machine builds the interfaces
 STATS_PERIOD = 1.0  # seconds between two counter snapshots sent for /diagnostics
@@ -78,12 +81,18 @@ class PutAnswer:
     reason: str  # why not ("" when taken)
 
 
+@dataclass(frozen=True, slots=True)
+class TableSnapshot:
+    serial: int  # a new number for each snapshot taken: the node process keeps the last one it was sent
+    records: bytes  # TABLE_RECORD, one per key, by key
+
+
 class Served(Protocol):
     """What a gateway answers through the services (gateway.ros2)."""
 
     def put(self, key: int, value: int) -> PutAnswer: ...
     def get(self, key: int) -> Entry | None: ...
-    def table(self) -> list[tuple[int, Entry]]: ...
+    def table(self) -> TableSnapshot: ...
 
 
 class _Child:
@@ -96,6 +105,7 @@ class _Child:
         self.fd = process.stdin.fileno()
         self.out = process.stdout.fileno()
         self.buffer = b""
+        self.table = 0  # the serial of the table snapshot it was sent whole (0: none)
 
 
 class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
@@ -176,6 +186,19 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
             return False
         finally:
             self._writing.release()
+
+    def _send_pages(self, child: _Child, snapshot: TableSnapshot) -> None:
+        """A table snapshot in T frames that each fit a pipe write whole, waiting for room between them: on a
+        request thread; the data path's frames go between the pages, never behind the whole table."""
+        step = (PIPE_BUF - FRAME.size - TABLE_PAGE.size) // TABLE_RECORD.size * TABLE_RECORD.size
+        records = snapshot.records
+        for start in range(0, max(len(records), 1), step):
+            page = TABLE_PAGE.pack(snapshot.serial, start // TABLE_RECORD.size) + records[start:start + step]
+            while not self._send_frame(b"T", page):
+                if child.process.poll() is not None:
+                    return
+                select.select([], [child.fd], [], 0.1)
+        child.table = snapshot.serial
 
     def _send_whole(self, child: _Child, kind: bytes, payload: bytes) -> None:
         """A frame of any size (an answer, a table), waiting for room: on a request thread, never the data path."""
@@ -298,7 +321,10 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
                 entry = served.get(request["get"])
                 answer.update(entry=None if entry is None else list(entry))
             else:
-                answer.update(entries=[[key, *entry] for key, entry in sorted(served.table())])
+                snapshot = served.table()
+                if child.table != snapshot.serial:
+                    self._send_pages(child, snapshot)
+                answer.update(table=snapshot.serial, count=len(snapshot.records) // TABLE_RECORD.size)
         except Exception as error:  # nothing a request does may end the link: the service says why
             log.exception("%s: answering %s failed", self.name, request)
             answer.update(taken=False, entry=None, reason=f"the gateway failed: {type(error).__name__}: {error}")

@@ -8,6 +8,7 @@ stdin and reads frames from our stdout (the protocol: `ros2.py`):
          C  changes of the table       -> <ns>/changes            (vstig_msgs/Change, keyed)
          B  what the gateway broadcasts -> <ns>/broadcast          (CDR, as the framing encoded it)
          A  the answer to a request we asked;  S  the gateway's counters -> /diagnostics
+         T  a page of a table snapshot (before the answer that names it; we keep the last one)
     out  W  what ROS 2 nodes wrote on <ns>/write (at most write_rate a second)
          Q  a service request (put, get, table) for the gateway to answer
          K  what we counted since the last K (once a second and when we end)
@@ -32,10 +33,11 @@ from typing import IO, Any
 from ..counters import Counters
 from ..framing.ros2 import CDR_SIZE, cdr_message, ros_name
 from ..wire import Message
-from .ros2 import CHANGE, FRAME, HEARD, PUTS_AT_ONCE, Ros2Options
+from .ros2 import CHANGE, FRAME, HEARD, PUTS_AT_ONCE, TABLE_PAGE, TABLE_RECORD, Ros2Options
 
 WRITE_POLL = 0.05  # seconds between two takes from the write topic: what a ROS 2 write may wait
 DIAGNOSTICS_PERIOD = 1.0
+NICENESS = 10  # the node's CPU comes after the data path's: a flood it receives costs the gateway's threads little
 ANSWER_WAIT = 30.0  # seconds a service waits for the gateway's answer (a confirmed put takes up to ~11)
 # The executor's threads: the puts in flight, one answering further puts busy, and one each for get, table and
 # the two timers, so that none of them waits for a thread.
@@ -94,6 +96,8 @@ class Ros2Node:
         self._sequences: dict[str, int] = {}  # a writer's GID -> the last sequence number taken from it
         self._dropped: dict[str, int] = {}  # per part, the drops the last /diagnostics sample counted
         self._stats: dict[str, dict[str, int]] = {}
+        self._pages: tuple[int, list[bytes]] = (0, [])  # the table snapshot coming in: serial, its pages so far
+        self._table_entries: tuple[int, list[Any]] = (0, [])  # the last snapshot answered, as Entry messages
         self._declare(config["served"])
         self.executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=self.context)
         self.executor.add_node(self.node)
@@ -200,6 +204,11 @@ class Ros2Node:
             if waiting is not None:
                 waiting[1].append(answer)
                 waiting[0].set()
+        elif kind == b"T":
+            serial, first = TABLE_PAGE.unpack_from(payload)
+            pages = [] if first == 0 or serial != self._pages[0] else self._pages[1]
+            pages.append(payload[TABLE_PAGE.size:])
+            self._pages = (serial, pages)
         elif kind == b"S":
             self._stats = json.loads(payload)
 
@@ -276,7 +285,16 @@ class Ros2Node:
     def _table(self, request: Any, response: Any) -> Any:
         self._count("table", 1)
         answer = self._ask({"table": True})
-        response.entries = [self._entry(key, fields) for key, *fields in (answer or {}).get("entries", [])]
+        serial = (answer or {}).get("table", 0)
+        if serial and serial != self._table_entries[0]:  # a snapshot we have not answered yet: its pages are in
+            pages = self._pages
+            records = b"".join(pages[1]) if pages[0] == serial else b""
+            if len(records) != answer["count"] * TABLE_RECORD.size:  # pages lost: the gateway restarted us?
+                self._count("drop_table", 1)
+                return response
+            self._table_entries = (serial, [self._entry(key, fields) for key, *fields
+                                            in TABLE_RECORD.iter_unpack(records)])
+        response.entries = self._table_entries[1] if serial else []
         return response
 
     def _diagnose(self, publisher: Any) -> None:
@@ -317,6 +335,7 @@ def _never(_: object) -> None:
 
 def main(argv: list[str]) -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the gateway, which closes our stdin
+    os.nice(NICENESS)  # before any thread starts: every thread of ours yields the CPU to the gateway's
     out = sys.stdout.buffer
     try:
         node = Ros2Node(json.loads(argv[0]), out)
