@@ -15,7 +15,7 @@ from pathlib import Path
 import click
 
 from ..config import shown
-from ..ops.unit import TEMPORARY, Needs, checked, needs_of, under, unit_text
+from ..ops.unit import HOMES, TEMPORARY, Needs, checked, home_bind, needs_of, under, unit_text
 from ..ops.unit_file import write_new_file
 from ..options import overwrite_option
 from ..running import reports_errors
@@ -99,8 +99,9 @@ def _warn_unreadable(name: str, needs: Needs) -> None:
 
 def _reachable(path: str, uid: int, groups: set[int]) -> bool:
     """Whether uid (in groups) may search every folder up to `path` and read it, by the mode bits."""
-    parts = Path(path).parents
-    for item, bit in [*((folder, 1) for folder in reversed(parts)), (Path(path), 4)]:
+    shown_from = Path(home_bind(path)) if under(path, HOMES) else Path("/")  # ProtectHome=tmpfs: homes are 0755
+    folders = [folder for folder in reversed(Path(path).parents) if shown_from in (folder, *folder.parents)]
+    for item, bit in [*((folder, 1) for folder in folders), (Path(path), 4)]:
         try:
             info = item.stat()
         except OSError:

@@ -13,13 +13,14 @@ import stat
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from functools import cache
+from pathlib import Path
 from typing import Any
 
 import click
 
 from ..config import shown
 
-__all__ = ["HOMES", "TEMPORARY", "Needs", "checked", "exec_word", "needs_of", "under", "unit_text"]
+__all__ = ["HOMES", "TEMPORARY", "Needs", "checked", "exec_word", "home_bind", "needs_of", "under", "unit_text"]
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")  # C0, DEL and C1: a newline would start a directive of its own
 _PLAIN = re.compile(r"[A-Za-z0-9_./:=@+,-]+\Z")  # words systemd takes as they are
@@ -149,15 +150,34 @@ def under(path: str, roots: Iterable[str]) -> bool:
     return any(path == root or path.startswith(root + "/") for root in roots)
 
 
+def home_bind(path: str) -> str:
+    """What of a home folder a unit shows for `path`: its first part below the home (/root/.pyenv for
+    /root/.pyenv/versions/3.11/bin/python), so a user other than the home's owner may still reach it."""
+    depth = next(len(Path(root).parts) + (root != "/root") for root in HOMES if under(path, (root,)))
+    return str(Path(*Path(path).parts[:depth + 1]))
+
+
+def _homes(needs: Needs) -> list[str]:
+    """ProtectHome=: every home hidden (tmpfs), but what the gateway reads or writes there bound back."""
+    reads = [home_bind(path) for path in needs.reads if under(path, HOMES)]
+    writes = [path for path in needs.writes if under(path, HOMES)]
+    if not reads and not writes:
+        return ["ProtectHome=yes"]
+    return ["ProtectHome=tmpfs",
+            *(f"BindReadOnlyPaths={_path_word(path, 'the file')}" for path in dict.fromkeys(reads)),
+            *(f"BindPaths={_path_word(path, 'the folder recorded into')}" for path in writes)]
+
+
 def _sandbox(needs: Needs) -> list[str]:
     """The [Service] lines that confine the gateway to what `needs` names."""
     paths = [*needs.reads, *needs.writes]
     lines = [
         "NoNewPrivileges=yes",
         "ProtectSystem=strict",  # everything read-only but ReadWritePaths=
-        f"ProtectHome={'read-only' if any(under(p, HOMES) for p in paths) else 'yes'}",
+        *_homes(needs),
         *([] if any(under(p, TEMPORARY) for p in paths) else ["PrivateTmp=yes"]),
-        *(f"ReadWritePaths={_path_word(folder, 'the folder recorded into')}" for folder in needs.writes),
+        *(f"ReadWritePaths={_path_word(folder, 'the folder recorded into')}" for folder in needs.writes
+          if not under(folder, HOMES)),
         "ProtectKernelTunables=yes", "ProtectKernelModules=yes", "ProtectKernelLogs=yes",
         "ProtectControlGroups=yes", "ProtectClock=yes", "ProtectHostname=yes", "ProtectProc=invisible",
         "ProcSubset=pid", "RestrictNamespaces=yes", "RestrictRealtime=yes", "RestrictSUIDSGID=yes",

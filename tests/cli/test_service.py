@@ -4,6 +4,7 @@ links are open, WATCHDOG=1 from its loop only while the loop runs, STOPPING=1 an
 
 from __future__ import annotations
 
+import grp
 import itertools
 import os
 import re
@@ -21,7 +22,8 @@ from pathlib import Path
 
 import click
 import pytest
-from peers import has_open, run_vstig, start_vstig, stop
+from peers import has_open, run_vstig, start_vstig, stop, wait_for
+from real_systemd import RealSystemd
 from required import require_tool
 from robots import PtyRobot
 
@@ -398,3 +400,48 @@ def test_the_environment_is_taken_out_for_children() -> None:
     notifier.close()
     assert ServiceNotifier.from_environment({"NOTIFY_SOCKET": "relative/path"}) is None
     assert ServiceNotifier.from_environment({}) is None
+
+
+def _status(systemd: RealSystemd, pid: int) -> dict[str, str]:
+    """/proc/PID/status in the manager's PID namespace."""
+    fields = (line.partition(":") for line in systemd.run("cat", f"/proc/{pid}/status").stdout.splitlines())
+    return {key: value.strip() for key, _, value in fields}
+
+
+def test_the_gateway_runs_under_its_sandboxed_unit_in_a_real_systemd(outside_tmp: Path) -> None:
+    """issue 45: whether the gateway still runs under the sandbox, shown: the unit `vstig service` writes (its
+    own dynamic user, every setting) started by a real systemd, the robots' writes crossing it, then stopped."""
+    writer, reader = PtyRobot(5), PtyRobot(6, watch=(7,))
+    dialout = grp.getgrnam("dialout").gr_gid
+    for radio in (writer.radio.path, reader.radio.path):  # as udev leaves a USB radio: root:dialout 0660
+        os.chown(radio, 0, dialout)
+        os.chmod(radio, 0o660)
+    outside_tmp.chmod(0o755)  # as /etc/vstig: the service's user reads the config
+    config = outside_tmp / "lab.toml"
+    config.write_text(f'links = ["{writer.spec}", "{reader.spec}"]\nrobot-id = 200\ntick = 0.05\n')
+    units = outside_tmp / "units"
+    units.mkdir()
+    made = run_vstig("service", "--config", str(config), "--watchdog", "5", "-o", str(units / "vstig-lab.service"))
+    assert made.returncode == 0 and "warning" not in made.stderr, made.stderr
+    sentinel = tempfile.NamedTemporaryFile(prefix="vstig-sentinel-")  # noqa: SIM115  # the host's /tmp, untouched
+    try:
+        with RealSystemd(units) as systemd:
+            started = systemd.systemctl("start", "vstig-lab")  # Type=notify: returns once READY=1 came
+            assert started.returncode == 0, started.stderr + systemd.run("journalctl", "-u", "vstig-lab").stdout
+            pid = int(systemd.show("vstig-lab", "MainPID"))
+            seen = _status(systemd, pid)
+            assert seen["Uid"].split()[0] != "0" and str(dialout) in seen["Groups"].split()  # DynamicUser
+            assert seen["NoNewPrivs"] == "1" and int(seen["CapBnd"], 16) == 0 and seen["Seccomp"] == "2"
+            wait_for(lambda: reader.value(7) == 42, 30,
+                     step=lambda: (writer.put(7, 42), reader.step(), time.sleep(0.05)))
+            time.sleep(6)  # past WatchdogSec=5: pinging, not restarted
+            assert systemd.show("vstig-lab", "NRestarts") == "0" and systemd.show("vstig-lab", "MainPID") == str(pid)
+            stopped = systemd.systemctl("stop", "vstig-lab")
+            assert stopped.returncode == 0, stopped.stderr
+            assert systemd.show("vstig-lab", "Result") == "success"
+            assert systemd.show("vstig-lab", "ExecMainStatus") == "0"
+        assert os.path.exists(sentinel.name)
+    finally:
+        sentinel.close()
+        writer.close()
+        reader.close()
