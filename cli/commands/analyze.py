@@ -274,5 +274,5 @@ def _print_traffic(report: Report) -> None:
         click.echo(row(f"link {name}", traffic))
     for sender, traffic in report.senders.items():
         click.echo(row(f"sender {shown_sender(sender)}", traffic))
-    click.echo(f"PUTs: {report.first_copies} first copies, {report.rebroadcasts} re-broadcasts; "
-               f"conflicts: {report.conflicts} writes share a key and timestamp with another robot's write")
+    click.echo(f"PUTs: {report.first_copies} first copies, {report.rebroadcasts} re-broadcasts; conflicts: "
+               f"{counted(report.conflicts, 'write')} sharing a key and timestamp with another robot's write")

@@ -148,7 +148,7 @@ def command(ctx: click.Context, /, topology: str, robots: int, drop: float, runs
     if as_json:
         click.echo(json.dumps({**summary.as_json(), "config": {**vars(config), "seed": seed}}))
         return
-    click.echo(f"{_label(config)}: {runs} runs, seed {seed}")
+    click.echo(f"{_label(config)}: {counted(runs, 'run')}, seed {seed}")
     click.echo(_steps_line(summary))
     click.echo(_bandwidth_line(summary, config.control_step))
     click.echo(f"graph: mean degree {summary.mean_degree:.2f}" + _split_note(summary, config.topology == MOTION))
@@ -246,7 +246,8 @@ def _run_grid(title: str, configs: list[Config], runs: int, seed: int, workers: 
 
     started = time.monotonic()
     with _progress() as progress:
-        bar = progress.add_task(f"{title}, {runs} runs x {len(configs)} conditions", total=runs * len(configs))
+        bar = progress.add_task(f"{title}, {counted(runs, 'run')} x {counted(len(configs), 'condition')}",
+                                total=runs * len(configs))
 
         def done(task: Task, result: RunResult) -> None:
             progress.advance(bar)

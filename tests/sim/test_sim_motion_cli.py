@@ -29,7 +29,7 @@ def test_motion_text_names_density_and_speed() -> None:
     result = CliRunner().invoke(cli, ["sim", "--topology", "motion", "--density", "1", "--speed", "0.2", "--robots",
                                       "20", "--runs", "1", "--workers", "1"])
     assert result.exit_code == 0, result.output
-    assert "motion D=1 S=0.2 N=20 P=0.0: 1 runs, seed 1" in result.output
+    assert "motion D=1 S=0.2 N=20 P=0.0: 1 run, seed 1" in result.output
     assert "runs started split into components" in result.output and "which motion had to join" in result.output
 
 

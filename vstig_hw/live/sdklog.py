@@ -28,6 +28,7 @@ import time
 from typing import TextIO
 
 from ..counters import Counters
+from ..wording import counted
 
 __all__ = ["CLOSE_TRY_AGAIN", "LINES_BURST", "LINES_PER_S", "SdkLog", "safe_line"]
 
@@ -113,7 +114,7 @@ class SdkLog(logging.Handler):
             self.viewers.add(address)
             return
         self.counters["viewers_refused"] += 1
-        why = f"{len(self.viewers)} viewers already (--foxglove-viewers {self.cap})"
+        why = f"{counted(len(self.viewers), 'viewer')} already (--foxglove-viewers {self.cap})"
         peer = _address(address)
         fd = self._socket_of(peer) if peer is not None else None
         if fd is None:  # not found (the SDK's address form changed?): taken in rather than left half-open
