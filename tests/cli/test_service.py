@@ -23,6 +23,7 @@ from pathlib import Path
 import click
 import pytest
 from peers import has_open, run_vstig, start_vstig, stop, wait_for
+from ports import free_port
 from real_systemd import RealSystemd
 from required import require_tool
 from robots import PtyRobot
@@ -408,7 +409,8 @@ def _status(systemd: RealSystemd, pid: int) -> dict[str, str]:
     return {key: value.strip() for key, _, value in fields}
 
 
-def test_the_gateway_runs_under_its_sandboxed_unit_in_a_real_systemd(outside_tmp: Path) -> None:
+@pytest.mark.parametrize("zenoh", [False, True], ids=["serial", "serial-zenoh-metrics"])
+def test_the_gateway_runs_under_its_sandboxed_unit_in_a_real_systemd(outside_tmp: Path, zenoh: bool) -> None:
     """issue 45: whether the gateway still runs under the sandbox, shown: the unit `vstig service` writes (its
     own dynamic user, every setting) started by a real systemd, the robots' writes crossing it, then stopped."""
     writer, reader = PtyRobot(5), PtyRobot(6, watch=(7,))
@@ -418,7 +420,8 @@ def test_the_gateway_runs_under_its_sandboxed_unit_in_a_real_systemd(outside_tmp
         os.chmod(radio, 0o660)
     outside_tmp.chmod(0o755)  # as /etc/vstig: the service's user reads the config
     config = outside_tmp / "lab.toml"
-    config.write_text(f'links = ["{writer.spec}", "{reader.spec}"]\nrobot-id = 200\ntick = 0.05\n')
+    zenoh_lines = f', "zenoh:lab"]\nmetrics = "{free_port()}"\n' if zenoh else "]\n"  # AF_INET, AF_NETLINK
+    config.write_text(f'robot-id = 200\ntick = 0.05\nlinks = ["{writer.spec}", "{reader.spec}"{zenoh_lines}')
     units = outside_tmp / "units"
     units.mkdir()
     made = run_vstig("service", "--config", str(config), "--watchdog", "5", "-o", str(units / "vstig-lab.service"))
@@ -432,6 +435,9 @@ def test_the_gateway_runs_under_its_sandboxed_unit_in_a_real_systemd(outside_tmp
             seen = _status(systemd, pid)
             assert seen["Uid"].split()[0] != "0" and str(dialout) in seen["Groups"].split()  # DynamicUser
             assert seen["NoNewPrivs"] == "1" and int(seen["CapBnd"], 16) == 0 and seen["Seccomp"] == "2"
+            mounts = {line.split()[4]: line.split()[5] for line in
+                      systemd.run("cat", f"/proc/{pid}/mountinfo").stdout.splitlines()}
+            assert mounts["/"].startswith("ro") and mounts["/tmp"].startswith("rw")  # ProtectSystem, PrivateTmp
             wait_for(lambda: reader.value(7) == 42, 30,
                      step=lambda: (writer.put(7, 42), reader.step(), time.sleep(0.05)))
             time.sleep(6)  # past WatchdogSec=5: pinging, not restarted
