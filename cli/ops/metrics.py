@@ -9,10 +9,12 @@ What a scrape shows (prometheus_client's exposition, from `Node.stats()` read wh
   being handed to the other links' devices (written, or queued behind a slow one);
 * `vstig_clock_offset_seconds{peer,proved_by}` and `..._error_seconds{...}`: each Zenoh peer's clock against ours
   (at most 64 peers a link: vstig_hw.clocks.MAX_PEERS);
-* `vstig_metrics_connections_total{outcome}`: the endpoint's own (served, evicted, timed_out, too_large).
+* `vstig_metrics_connections_total{outcome}`: the endpoint's own (served, evicted, timed_out, too_large,
+  bad_host, bad_request).
 
 The endpoint is never in the data path and never stalls the gateway: a `PageServer` (page_server.py) serves
-it, bounded in connections, bytes and time. The latency histogram is counted under the Node's lock in a few
+it, bounded in connections, bytes and time, to requests whose Host names it (an IP address, localhost, the
+listening host, a `--metrics-host NAME`). The latency histogram is counted under the Node's lock in a few
 list operations; prometheus_client only formats the page.
 """
 
@@ -20,8 +22,10 @@ from __future__ import annotations
 
 import bisect
 import contextlib
+import functools
+import re
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
 import click
@@ -40,6 +44,7 @@ if TYPE_CHECKING:
 __all__ = ["LATENCY_BUCKETS", "MetricsServer", "RelayLatency", "metrics_option", "metrics_served"]
 
 DOCS = "docs/how-to/service.md"
+_NAMES = "vstig.metrics.names"  # ctx.meta: the --metrics-host names, for metrics_served
 LATENCY_BUCKETS = (0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0)
 
 
@@ -54,10 +59,33 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> A
     return address
 
 
-metrics_option = click.option(
-    "--metrics", metavar="[HOST:]PORT", callback=_address,
-    help=f"Serve Prometheus metrics (every counter, table size, link states, relay latency) at "
-         f"http://HOST:PORT/metrics, on {LOOPBACK} unless HOST is given. Needs the metrics extra. See {DOCS}.")
+_HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9.-]{0,252})")
+
+
+def _names(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]) -> tuple[str, ...]:
+    for value in values:
+        if not _HOST_NAME.fullmatch(value):
+            raise click.BadParameter(f"{value[:80]!r} is not a host name (e.g. gateway.lab)", ctx, param)
+    return values
+
+
+def metrics_option(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Add --metrics (the command receives it as `metrics`) and --metrics-host (kept for `metrics_served`)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, metrics_names: tuple[str, ...], **kwargs: Any) -> Any:
+        click.get_current_context().meta[_NAMES] = metrics_names
+        return fn(*args, **kwargs)
+
+    wrapper = click.option(
+        "--metrics-host", "metrics_names", multiple=True, metavar="NAME", callback=_names,
+        help="Also answer scrapes that call this PC NAME (their Host header); IP addresses, localhost and the "
+             "--metrics HOST always are, any other name is refused (421) against DNS rebinding. Repeatable.")(wrapper)
+    return click.option(
+        "--metrics", metavar="[HOST:]PORT", callback=_address,
+        help=f"Serve Prometheus metrics (every counter, table size, link states, relay latency) at "
+             f"http://HOST:PORT/metrics, on {LOOPBACK} unless HOST is given. Needs the metrics extra. "
+             f"See {DOCS}.")(wrapper)
 
 
 class RelayLatency:
@@ -163,7 +191,7 @@ def _clock_estimates(node: Node) -> dict[tuple[str, str], ClockOffset]:
 class MetricsServer:
     """The /metrics endpoint of one Node: its collector on a PageServer, and the Node's latency hook."""
 
-    def __init__(self, node: Node, host: str, port: int) -> None:
+    def __init__(self, node: Node, host: str, port: int, names: tuple[str, ...] = ()) -> None:
         from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 
         self.latency = RelayLatency()
@@ -171,7 +199,7 @@ class MetricsServer:
         self._listening: Listening | None = None
         self.registry = CollectorRegistry(auto_describe=False)
         self.server = PageServer(host, port, b"/metrics", CONTENT_TYPE_LATEST.encode(),
-                                 lambda: generate_latest(self.registry))
+                                 lambda: generate_latest(self.registry), names)
         self.connections = self.server.connections
         self.registry.register(GatewayCollector(node, self.latency, self.connections))
         self.host, self.port, self.url = self.server.host, self.server.port, self.server.url
@@ -188,14 +216,15 @@ class MetricsServer:
 
 @contextlib.contextmanager
 def metrics_served(node: Node, address: Address | None) -> Iterator[MetricsServer | None]:
-    """Serve `node`'s metrics at `address` for the duration (nothing when None). Enter it before the node opens:
-    a port in use or a bad host fails before any link opens."""
+    """Serve `node`'s metrics at `address` for the duration (nothing when None), to the command's --metrics-host
+    names too. Enter it before the node opens: a port in use or a bad host fails before any link opens."""
     if address is None:
         yield None
         return
     host, port = address
+    ctx = click.get_current_context(silent=True)
     try:
-        server = MetricsServer(node, host, port)
+        server = MetricsServer(node, host, port, ctx.meta.get(_NAMES, ()) if ctx is not None else ())
     except OSError as error:
         raise click.ClickException(f"--metrics {host}:{port}: cannot listen: {error.strerror or error}") from None
     if not is_loopback(host):
