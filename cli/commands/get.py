@@ -7,7 +7,7 @@ import time
 import click
 
 from vstig_hw.gateway import Node
-from vstig_hw.gateway.oneshot import get_newest
+from vstig_hw.gateway.oneshot import get_newest, unreached
 from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType
 
@@ -39,6 +39,7 @@ def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: Va
         raise click.BadParameter(f"{name} only transmits: no neighbour can answer", param_hint="'--on'")
     with node:
         entry = get_newest(node, key, max(0.0, wait - (time.monotonic() - started)))
+        why = unreached(node.links)  # while the link is open: it names where it dials and found nobody
     if entry is None:
-        raise click.ClickException(f"no neighbour on {name} answered for key {key} within {wait:g} s")
+        raise click.ClickException(f"no neighbour on {name} answered for key {key} within {wait:g} s{why}")
     click.echo(f"key={key} {shown(entry, value_type)}")

@@ -8,7 +8,7 @@ import click
 
 from vstig_hw.engine import Entry
 from vstig_hw.gateway import Node
-from vstig_hw.gateway.oneshot import HearsItself, not_taken, put_confirmed
+from vstig_hw.gateway.oneshot import HearsItself, not_taken, put_confirmed, unreached
 from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
@@ -67,9 +67,10 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
                                    confirm=not no_confirm, spent=time.monotonic() - started)
         except HearsItself as error:
             raise click.ClickException(f"{error.reason} (--no-confirm writes anyway)") from None
+        why = unreached(node.links)  # while the link is open: it names where it dials and found nobody
     problem = not_taken(result, key, name, wait, lambda entry: shown(entry, value_type), confirm=not no_confirm)
     if problem is not None:
-        raise click.ClickException(problem)
+        raise click.ClickException(problem + why)
     click.echo(f"put key={key} {shown(result.written, value_type)} on {name}"
                + (" (not confirmed: --no-confirm)" if no_confirm else ""))
     if result.shown is not None and result.shown != result.written:  # taken: a robot wrote on top of it

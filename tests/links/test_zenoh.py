@@ -169,23 +169,42 @@ def test_two_links_exchange_a_batch_as_one_sample_named_by_its_sender() -> None:
         second.close()
 
 
-def test_losing_every_peer_is_logged_once_and_counted(caplog: pytest.LogCaptureFixture) -> None:
-    first, second = _pair()
+def test_a_link_that_connects_losing_every_peer_is_logged_once_and_counted(
+        caplog: pytest.LogCaptureFixture) -> None:
+    listener, dialer = _pair()
     try:
-        _until(lambda: first.transport.session.info.peers_zid())  # type: ignore[attr-defined]
-        first.receive(1.1)  # the link notices its peer once a second
+        _until(lambda: dialer.transport.session.info.peers_zid())  # type: ignore[attr-defined]
+        dialer.receive(1.1)  # the link notices its peer once a second
         with caplog.at_level(logging.WARNING):
-            second.close()
+            listener.close()
             end = time.monotonic() + 20
-            while not first.transport.counters["lost"] and time.monotonic() < end:
-                first.receive(0.2)
+            while not dialer.transport.counters["lost"] and time.monotonic() < end:
+                dialer.receive(0.2)
             for _ in range(10):
-                first.receive(0.2)
+                dialer.receive(0.2)
     finally:
-        first.close()
-    assert first.transport.counters["lost"] == 1
+        dialer.close()
+    assert dialer.transport.counters["lost"] == 1
     assert [r.getMessage() for r in caplog.records] == ["zenoh-lab: lost every Zenoh peer; Zenoh reconnects "
                                                        "with backoff"]
+
+
+def test_a_listener_whose_last_peer_left_says_so_at_info_and_counts_no_loss(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Peers come to a listener and leave when done (a `vstig put`): that is no outage."""
+    listener, dialer = _pair()
+    try:
+        _until(lambda: listener.transport.session.info.peers_zid())  # type: ignore[attr-defined]
+        listener.receive(1.1)  # the link notices its peer once a second
+        with caplog.at_level(logging.INFO, logger="vstig_hw.transports.zenoh"):
+            dialer.close()
+            _until(lambda: listener.receive(0.2) == [] and any("left" in r.getMessage() for r in caplog.records))
+    finally:
+        listener.close()
+    [endpoint] = listener.transport.listening  # type: ignore[attr-defined]
+    assert [(r.levelno, r.getMessage()) for r in caplog.records if r.name.endswith("zenoh")] == [
+        (logging.INFO, f"zenoh-lab: the last Zenoh peer left; listening on {endpoint}")]
+    assert listener.transport.counters["lost"] == 0 and listener.transport.counters["unreachable"] == 0
 
 
 def test_a_client_with_no_router_retries_with_backoff_instead_of_failing(caplog: pytest.LogCaptureFixture) -> None:

@@ -72,7 +72,7 @@ def test_only_gateways_with_the_labs_credentials_join(tmp_path: Path, deployment
         assert out == ""  # it read nothing
         rows = [json.loads(line) for line in colleague.communicate(timeout=20)[0].splitlines()]
         assert rows and rows[0]["value"] == 42 and rows[0]["sender"] == 1  # where a lab member reads it all
-        assert "no Zenoh peer reachable yet" in err and "Traceback" not in err
+        assert "zenoh-lab: reached nobody at connect=tls/" in err and "Traceback" not in err
 
         put = subprocess.run([VSTIG, "put", "9", "666", "--learn", "0", "--wait", "2", "--on",
                               intruder.replace("zenoh:lab?", "zenoh:lab?mode=client&")],

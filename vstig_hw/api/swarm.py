@@ -24,12 +24,13 @@ from ..counters import Counters
 from ..engine import ConflictLost, ConflictResolver, Entry, higher_robot_wins
 from ..gateway.guard import DEFAULT_MAX_JUMP, Guard
 from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD, Listening, Node, SwarmClosed
-from ..gateway.oneshot import HearsItself, PutResult, confirm_write, not_taken
+from ..gateway.oneshot import HearsItself, PutResult, confirm_write, not_taken, unreached
 from ..gateway.refresh import RoundRobinGet
 from ..gateway.ros2 import serve_ros2
 from ..links.assemble import LinkBuildError, assemble_links, check_link_count
 from ..links.link import Link, LinkSpec
 from ..links.registry import parse
+from ..transports.base import TransportError
 from ..values import VALUE_TYPES, ValueType, from_raw, to_raw
 from ..wire import KEY_MAX, check_field
 from .changes import DEFAULT_BUFFER, Change, ChangeHub, OnChange, Subscription, Watch
@@ -331,7 +332,7 @@ class Swarm:
         """The entry a neighbour showed it took; NotTaken naming what the swarm holds if none did."""
         problem = not_taken(result, key, ", ".join(self.links), timeout, self._shown)
         if problem is not None:
-            raise NotTaken(problem, key, result)
+            raise NotTaken(problem + unreached(self._node.links), key, result)
         return result.written
 
     # -- inside ------------------------------------------------------------------------
@@ -421,6 +422,9 @@ def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget
     period), the jump guard's `max_jump` (None: off) or a whole `guard`, the
     conflict rule (`onconflict`; default: higher robot id wins), a GET of one key
     per period (`refresh`), and how values read (`value_type`).
+
+    A link told to connect somewhere (a zenoh link's `connect=`) that reaches nobody there within its wait
+    (3 s) raises TransportError naming the endpoints, as a missing serial port does.
     """
     if not links:
         raise ValueError("links: join needs at least one link, e.g. join('can:socketcan:can0', robot_id=200)")
@@ -449,7 +453,12 @@ def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget
                   specs=None if any(isinstance(spec, Link) for spec in specs) or guard is not None
                   else [spec for spec in specs if not isinstance(spec, Link)],
                   options=options)
-    return swarm.open()
+    swarm.open()
+    why = unreached(built)
+    if why:  # a program would otherwise write into the void, with one log line at most to tell it
+        swarm.close()
+        raise TransportError(why.removeprefix("; "))
+    return swarm
 
 
 def check_key(key: int) -> None:

@@ -13,15 +13,17 @@ from __future__ import annotations
 
 import concurrent.futures
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import Any
 
 from ..engine import Entry
+from ..links.link import Link
 from ..wire import KEY_MAX, Message
 from ..wording import counted
 from .confirm import ConfirmedWrite, PutResult, Send, Verdict
 from .node import Listening, Node, SwarmClosed
 
-__all__ = ["HearsItself", "PutResult", "confirm_write", "get_newest", "not_taken", "put_confirmed"]
+__all__ = ["HearsItself", "PutResult", "confirm_write", "get_newest", "not_taken", "put_confirmed", "unreached"]
 
 
 class HearsItself(RuntimeError):
@@ -165,6 +167,12 @@ def not_taken(result: PutResult, key: int, where: str, wait: float, show: Callab
         said = f"the last entry heard was {show(result.heard)}" if result.heard else "nothing was heard for the key"
         return f"key {key}: no neighbour on {where} took our write ({ours}) within {wait:g} s; {said}"
     return None
+
+
+def unreached(links: Sequence[Link[Any]]) -> str:
+    """"; <link> reached nobody at connect=..." for each link told to connect that reaches nobody now ("" if
+    none): why nothing answered, for the end of a failed put's or get's line. Read it while the links are open."""
+    return "".join(f"; {link.name} {why}" for link in links if (why := link.unreached))
 
 
 class _Asker:

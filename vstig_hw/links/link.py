@@ -73,6 +73,11 @@ class Link(Generic[Unit]):
         """Where the link listens and connects, in one line ("": nothing to say)."""
         return self.transport.about
 
+    @property
+    def unreached(self) -> str | None:
+        """Where the link was told to connect and reaches nobody now (a zenoh link's connect=), or None."""
+        return self.transport.unreached
+
     def open(self) -> None:
         """Open the device; a link already open stays as it is (a Link object may be handed over open)."""
         if not self.opened:

@@ -47,9 +47,10 @@ EXAMPLES = {
 }
 # For `vstig links`: what the options mean beyond the grammar.
 NOTES = {
-    "serial": "serial: the query after the last '?' is ours; keys we do not know stay with a pyserial URL "
-              "(socket://, rfc2217://). Defaults: baud=115200, framing=cobs8. A serial link carries one "
-              "stigmergy: its framings have no stigmergy field. epuck4's expiry_ticks (default 3) is how many "
+    "serial": "serial: the query after the last '?' is ours; a pyserial URL (socket://, rfc2217://...) keeps "
+              "the keys its handler reads (logging=...), and any other key is a typo. Defaults: baud=115200, "
+              "framing=cobs8. A serial link carries one stigmergy: its framings have no stigmergy field. "
+              "epuck4's expiry_ticks (default 3) is how many "
               "control periods a message's three words may take to arrive (firmware_spec/SPEC.md 6.2.2).",
     "kilobot-ohc": "kilobot-ohc: transmit only, at the overhead controller's fixed 38400 baud.",
     "bittybuzz": "bittybuzz: Kilobots running BittyBuzz, through a bridge radio (framing=kilobot) or the overhead "

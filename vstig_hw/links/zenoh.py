@@ -418,7 +418,7 @@ def zenoh_link_from_spec(spec: ZenohSpec, name: str, *, robot_id: int = 0,
         f"connecting to {', '.join(connecting)}" if connecting else "",
         "scouting by multicast" if _json(first, "scouting/multicast/enabled") is not False else "")))
     transport = ZenohTransport(make_config, space.subscription, name=name, block=spec.block,
-                               expects_peer=bool(connecting) or _mode(first) == "client",
+                               expects_peer=bool(connecting) or _mode(first) == "client", connecting=tuple(connecting),
                                listening=tuple(_endpoints(first, "listen/endpoints")), reaches=reaches,
                                rebind=fresh_listener if ours else None, peer_wait=spec.peer_wait,
                                max_sample=spec.max_sample, clock=ZenohClock(space.clock_prefix))

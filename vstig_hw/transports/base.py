@@ -63,7 +63,9 @@ class Transport(abc.ABC, Generic[Unit]):
     * `deliver_to`: hand what is heard to a callback on the device's own thread
       (Zenoh's subscriber); default: nothing calls back, the reader thread reads;
     * `listening`: the endpoints others reach it by (a Zenoh link's listeners);
-      default: none; `about`: one line on where it listens and connects, for a start line.
+      default: none; `about`: one line on where it listens and connects, for a start line;
+    * `unreached`: why nothing can be heard, where it was told to reach someone and reaches nobody
+      (a Zenoh link's connect=); default: None.
     """
 
     name: str  # how the user named the device, for messages and counters
@@ -102,6 +104,11 @@ class Transport(abc.ABC, Generic[Unit]):
     def about(self) -> str:
         """Where it listens and connects, in one line for a start line ("": nothing to say)."""
         return ""
+
+    @property
+    def unreached(self) -> str | None:
+        """Where it was told to connect and reaches nobody now, in words that follow its name; None if not so."""
+        return None
 
 
 class Backoff:

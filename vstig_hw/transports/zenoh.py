@@ -11,6 +11,9 @@ session has no peer or router left (or none ever came), that is logged once and
 counted (`lost`, `unreachable`), and its return too (`reconnects`). A client
 whose router is down at start cannot even open a session: then the session is
 reopened here with exponential backoff from `read`, as the CAN transport does.
+A session that dials (`connect=`, or a client) and reaches nobody names the endpoints
+(`unreached`: in that line, and in `put`, `get` and `join`'s errors). A listener's peers
+come and go (a `vstig put` leaves when done): the last one leaving is an info line, not a loss.
 
 A listener port the caller picked for us (`rebind`) may be taken by another
 program before the session binds it: then the session opens on a fresh port,
@@ -47,6 +50,7 @@ import collections
 import ctypes
 import logging
 import os
+import stat
 import threading
 import time
 from collections.abc import Callable
@@ -113,6 +117,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         name: str,
         block: bool = False,
         expects_peer: bool = False,
+        connecting: tuple[str, ...] = (),
         listening: tuple[str, ...] = (),
         reaches: str = "",
         rebind: Callable[[], tuple[str, ...]] | None = None,
@@ -133,6 +138,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         self.congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self._make_config = make_config
         self._expects_peer = expects_peer  # told to connect somewhere: finding nobody is worth a line
+        self._connecting = connecting  # the endpoints it dials, named when it reaches nobody
         # How long open() may take in all while it waits for that peer (a one-shot command's budget bounds it).
         self._peer_wait = _FIRST_PEER_WAIT_S if peer_wait is None else peer_wait
         self._lock = threading.Lock()  # session changes (read thread) against publishing (loop thread)
@@ -160,6 +166,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         super().open()
         if self._expects_peer and self.connected:
             self._await_peer(self._opened_at + self._peer_wait - time.monotonic())
+        self._next_poll = time.monotonic() + _PEER_POLL_S  # not at once: `join` raises for nobody reached instead
 
     def _await_peer(self, seconds: float) -> None:
         """Wait (briefly) for the peer or router we connect to, so what we send first is not sent to nobody."""
@@ -177,6 +184,27 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         """Where it listens and connects, for the start line (print it after open: the port may change then)."""
         listening = f"listening on {', '.join(self.listening)}" if self.listening else ""
         return "; ".join(filter(None, (listening, self._reaches)))
+
+    @property
+    def unreached(self) -> str | None:
+        """While a session told to connect has no peer or router: where it dials, named, and what is known of why."""
+        if not self._expects_peer or self._peers_now():
+            return None
+        if not self._connecting:  # a client with no connect=: it looks for a router by scouting
+            return "found no Zenoh router (no connect= names one; scouting found none)"
+        where = ", ".join(endpoint + _local_reason(endpoint) for endpoint in self._connecting)
+        return (f"reached nobody at connect={where}: is it up, and does it accept our certificates and "
+                "credentials?")
+
+    def _peers_now(self) -> int:
+        session = self._device
+        if session is None:
+            return 0
+        try:
+            info = session.info
+            return len(info.peers_zid()) + len(info.routers_zid())
+        except zenoh.ZError:
+            return 0
 
     @property
     def session(self) -> zenoh.Session | None:
@@ -331,11 +359,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         if now < self._next_poll:
             return
         self._next_poll = now + _PEER_POLL_S
-        try:
-            info = session.info
-            others = len(info.peers_zid()) + len(info.routers_zid())
-        except zenoh.ZError:
-            return
+        others = self._peers_now()
         if others and not self._had_peer:
             self._had_peer = True
             if self._reported_alone:
@@ -344,12 +368,29 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
                 self._reported_alone = False
         elif not others and self._had_peer:
             self._had_peer = False
-            self._reported_alone = True
-            self.counters["lost"] += 1
-            log.warning("%s: lost every Zenoh peer; Zenoh reconnects with backoff", self.name)
+            if self._expects_peer:  # what it dials is gone
+                self._reported_alone = True
+                self.counters["lost"] += 1
+                log.warning("%s: lost every Zenoh peer; Zenoh reconnects with backoff", self.name)
+            else:  # peers come to a listener and leave when done (a one-shot `vstig put`): nothing was lost
+                log.info("%s: the last Zenoh peer left; listening on %s", self.name, ", ".join(self.listening))
         elif not others and self._expects_peer and not self._reported_alone \
                 and now - self._opened_at > _UNREACHABLE_AFTER_S:
             self._reported_alone = True
             self.counters["unreachable"] += 1
-            log.warning("%s: no Zenoh peer reachable yet (are they up, and do they accept our certificates and "
-                        "credentials?); Zenoh keeps retrying with backoff", self.name)
+            log.warning("%s: %s; Zenoh keeps retrying with backoff", self.name, self.unreached)
+
+
+def _local_reason(endpoint: str) -> str:
+    """Why a unix socket endpoint cannot answer, where its path shows it (" (no such socket file)"); else ""."""
+    protocol, _, address = endpoint.partition("/")
+    if protocol != "unixsock-stream":
+        return ""
+    path = address.split("?", 1)[0].split("#", 1)[0]
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return " (no such socket file)"
+    except OSError as exc:
+        return f" ({exc.strerror})"
+    return "" if stat.S_ISSOCK(mode) else " (not a socket)"
