@@ -174,6 +174,8 @@ def _sandbox(needs: Needs) -> list[str]:
     lines = [
         "NoNewPrivileges=yes",
         "ProtectSystem=strict",  # everything read-only but ReadWritePaths=
+        "PrivateMounts=yes",
+        *([] if needs.families else ["PrivateNetwork=yes"]),  # serial only: no network (a CAN bus is one)
         *_homes(needs),
         *([] if any(under(p, TEMPORARY) for p in paths) else ["PrivateTmp=yes"]),
         *(f"ReadWritePaths={_path_word(folder, 'the folder recorded into')}" for folder in needs.writes

@@ -152,6 +152,7 @@ def test_the_unit_is_sandboxed_to_what_its_config_needs(outside_tmp: Path, body:
     assert settings["DevicePolicy"] == ["closed"] and settings.get("DeviceAllow", []) == devices
     assert ("PrivateDevices" in settings) == (not devices)  # no device at all: a /dev of its own
     assert ("SupplementaryGroups" in settings) == bool(devices)  # dialout for serial devices
+    assert ("PrivateNetwork" in settings) == (families == "AF_UNIX")  # serial only: no network at all
     assert _analyze("verify", str(unit)).stderr.strip() == ""
     assert _exposure(unit) <= 3.0
 
