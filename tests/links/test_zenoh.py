@@ -169,12 +169,16 @@ def test_two_links_exchange_a_batch_as_one_sample_named_by_its_sender() -> None:
         second.close()
 
 
+def _noticing_its_peer(link: Link[ZenohSample]) -> None:
+    _until(lambda: link.transport.session.info.peers_zid())  # type: ignore[attr-defined]
+    link.receive(1.1)  # the link notices its peer once a second
+
+
 def test_a_link_that_connects_losing_every_peer_is_logged_once_and_counted(
         caplog: pytest.LogCaptureFixture) -> None:
     listener, dialer = _pair()
     try:
-        _until(lambda: dialer.transport.session.info.peers_zid())  # type: ignore[attr-defined]
-        dialer.receive(1.1)  # the link notices its peer once a second
+        _noticing_its_peer(dialer)
         with caplog.at_level(logging.WARNING):
             listener.close()
             end = time.monotonic() + 20
@@ -194,8 +198,7 @@ def test_a_listener_whose_last_peer_left_says_so_at_info_and_counts_no_loss(
     """Peers come to a listener and leave when done (a `vstig put`): that is no outage."""
     listener, dialer = _pair()
     try:
-        _until(lambda: listener.transport.session.info.peers_zid())  # type: ignore[attr-defined]
-        listener.receive(1.1)  # the link notices its peer once a second
+        _noticing_its_peer(listener)
         with caplog.at_level(logging.INFO, logger="vstig_hw.transports.zenoh"):
             dialer.close()
             _until(lambda: listener.receive(0.2) == [] and any("left" in r.getMessage() for r in caplog.records))
