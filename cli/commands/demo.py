@@ -27,10 +27,11 @@ _OUTCOMES = {
     "invalid": ("PUT with timestamp 0 refused", "PUTs with timestamp 0 refused"),
 }
 _LEGEND = """\
-  messages: the PUTs and GETs the medium's robots sent, in frames (CAN frames, radio packets).
-  lost: each frame reaches every other robot (and, on a radio, the gateway) as one copy;
-        --drop {drop:g} loses each copy with that probability, so lost is near {drop:.0%} of copies.
-  framing drops: frames a robot's framing threw away, by reason (docs/reference/counters.md)."""
+  messages: the PUTs and GETs its robots sent; frames: the CAN frames or radio
+  packets carrying them. lost: each frame reaches every other robot (on a radio
+  the gateway too) as one copy, and --drop {drop:g} loses each copy apart: lost is
+  near {drop:.0%} of copies. framing drops: frames a robot's framing threw away, by
+  reason. Every column and counter: docs/reference/counters.md."""
 
 
 def _framing_drops(medium: Medium) -> str:
@@ -46,17 +47,21 @@ def _lost(medium: Medium) -> str:
 
 
 def _live_table(step: int, media: list[Medium], agreed: int, total: int) -> Any:
+    from rich import box
     from rich.table import Table
 
-    table = Table(title=f"step {step}: {agreed}/{total} robots hold the highest id")
-    for column in ("medium", "robots", "agree", "messages", "bytes", "lost", "framing drops"):
-        table.add_column(column, justify="left" if column in ("medium", "framing drops") else "right")
+    table = Table(title=f"step {step}: {agreed}/{total} robots hold the highest id", box=box.SIMPLE_HEAD,
+                  show_edge=False)
+    # The summary's columns but the framing drops (the summary has them): a row never wraps at 80 columns.
+    for column in ("medium", "robots", "agree", "messages", "frames", "bytes", "lost"):
+        table.add_column(column, justify="left" if column == "medium" else "right")
     highest = total
     for medium in media:
         agree = sum(robot.entry(1) is not None and robot.entry(1).value == highest  # type: ignore[union-attr]
                     for robot in medium.robots)
-        table.add_row(medium.name, str(len(medium.robots)), str(agree), str(medium.counters["messages"]),
-                      str(medium.counters["bytes"]), _lost(medium), _framing_drops(medium))
+        c = medium.counters
+        table.add_row(medium.name, str(len(medium.robots)), str(agree), str(c["messages"]), str(c["frames"]),
+                      str(c["bytes"]), _lost(medium))
     return table
 
 
@@ -72,11 +77,13 @@ def _report(report: DemoReport, drop: float) -> None:
         click.echo(f"converged: all {robots} robots hold {report.highest} after {took}")
     else:
         click.echo(f"not converged after {took}")
-    click.echo(f"{'medium':<7} {'robots':>6} {'messages':>8} {'frames':>6} {'bytes':>6}  {'lost':<18} framing drops")
+    click.echo(f"{'medium':<7} {'robots':>6} {'messages':>8} {'frames':>6} {'bytes':>6}  lost")
     for medium in report.media:
         c = medium.counters
         click.echo(f"{medium.name:<7} {len(medium.robots):>6} {c['messages']:>8} {c['frames']:>6} {c['bytes']:>6}  "
-                   f"{_lost(medium):<18} {_framing_drops(medium)}")
+                   f"{_lost(medium)}")
+    dropped = [f"{medium.name} {_framing_drops(medium)}" for medium in report.media if _framing_drops(medium) != "-"]
+    click.echo(f"framing drops: {'; '.join(dropped) or 'none'}")
     click.echo(_LEGEND.format(drop=drop))
     several = any("/" in name for name in report.gateway)  # names are "<gateway id>/<link>" then
     click.echo(f"{'each gateway' if several else 'the gateway'}'s links (counters: docs/reference/counters.md):")
@@ -97,7 +104,7 @@ def _report(report: DemoReport, drop: float) -> None:
 @click.option("--robots", default=30, show_default=True, type=click.IntRange(6, 240),
               help="Swarm size, split over the three media.")
 @click.option("--drop", default=0.75, show_default=True, type=Finite(0, 0.95),
-              help="Probability that a robot (or the gateway, on a radio) misses a message.")
+              help="Probability that a robot (or the gateway, on a radio) misses a frame: each copy is lost apart.")
 @click.option("--seed", default=1, show_default=True, type=int, help="Random seed: the same seed, the same run.")
 @click.option("--step", default=0.1, show_default=True, type=Finite(0.01, 1.0),
               help="Seconds per control step.")
