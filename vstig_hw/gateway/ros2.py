@@ -134,7 +134,9 @@ class Ros2Part:
         try:
             result = confirm_write(node, key, value, learn=0.0, wait=PUT_WAIT, tries=PUT_TRIES).result(
                 timeout=PUT_WAIT * PUT_TRIES + _GRACE)
-        except (HearsItself, SwarmClosed) as error:
+        except HearsItself as error:  # the service confirms every put: no way to write anyway to name
+            return PutAnswer(False, None, key, error.reason)
+        except SwarmClosed as error:
             return PutAnswer(False, None, key, str(error))
         except concurrent.futures.TimeoutError:
             return PutAnswer(False, None, key, "the gateway's loop did not take the write in time")
