@@ -18,6 +18,9 @@ unconditionally and mypy checks a new medium against them:
   IDs, zenoh keys, BuzzKH4 frame headers; `names_senders` says it does); default None;
 * `source_of`: who really sent a unit, where the medium says more than the sender
   it claims (a zenoh session; `names_sources` says it does); default None;
+* `link_quality_of`: RSSI or link quality of a unit, where the medium reports it per
+  unit (`reports_link_quality` says it does; no framing does today: an XBee Receive
+  Packet, 0x90, carries no RSSI); default None, and the roster shows none;
 * `transmit_only`: nothing ever comes back (an overhead controller): `feed`
   raises TransmitOnlyError, and a link built on it never decodes.
 """
@@ -41,6 +44,7 @@ class Framing(abc.ABC, Generic[Unit]):
     transmit_only: ClassVar[bool] = False  # True: `feed` raises TransmitOnlyError (nothing comes back)
     names_senders: ClassVar[bool] = False  # True: `sender_of` reads who transmitted a unit from the unit itself
     names_sources: ClassVar[bool] = False  # True: `source_of` says more than the sender a unit claims
+    reports_link_quality: ClassVar[bool] = False  # True: `link_quality_of` reads RSSI/quality from a unit
 
     @abc.abstractmethod
     def encode(self, msg: Message) -> list[Unit]:
@@ -64,6 +68,10 @@ class Framing(abc.ABC, Generic[Unit]):
 
     def source_of(self, unit: Unit) -> str | None:
         """Who really sent `unit`, where the medium says more than the sender it claims; None otherwise."""
+        return None
+
+    def link_quality_of(self, unit: Unit) -> int | None:
+        """The RSSI or link quality the medium reports with `unit` (`reports_link_quality`); None otherwise."""
         return None
 
 

@@ -1,0 +1,286 @@
+"""Who is in the swarm: per robot, where and when it was heard, what it wrote and asked, and its state.
+
+Pure bookkeeping, sans-I/O: a gateway feeds it what passed its guard (`take`, the
+signature of the Node's `messages` listener: one call per unit, no `Heard` built),
+what its guard refused (`refuse`) and the time (`sweep`, every control period);
+views read `snapshot()` and are told each state change (`on_change`).
+
+Who a robot is: the sender where the medium names one (a CAN ID's sender field, an
+XBee 64-bit source, a zenoh gateway id, a BuzzKH4 frame's robot); on a medium that
+names none (a cobs8 radio) the writer id of the PUTs heard, and `named_by` says which.
+There, a GET names nobody (its robot field is its entry's writer, not the asker): such
+GETs are counted in `unattributed`, never guessed.
+
+States: `alive`; `quiet` once not heard for longer than `quiet_after` (default three
+control periods) and than three of its own usual gaps (a robot that talks once a second
+is not quiet after 0.3 s); `gone` once not heard for `gone_after`. Each change is
+logged once, counted in `changes` and told to `on_change`.
+
+Behind: a robot whose messages show an entry for a key older than the newest this
+gateway has heard for it (a GET's or PUT's timestamp; an empty GET holds nothing) is
+flagged `behind` on that key once that lasts `behind_after`; one message showing the
+newest (or newer) clears it. On a medium naming no sender only PUTs count, so it names
+the writer whose old write is still being sent.
+
+Bounded: at most `max_robots` robots (default 4,096); a new one past that takes a
+`gone` robot's place, else is counted in `untracked` and never stored. Each robot
+keeps at most MAX_BEHIND_KEYS keys it lags on (more: `behind_untracked`).
+"""
+
+from __future__ import annotations
+
+import array
+import enum
+import logging
+import math
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ..links.link import Heard
+from ..timestamps import TS_NONE, is_newer
+from ..wire import GET_BIT, KEY_MAX, Message
+
+__all__ = ["DEFAULT_MAX_ROBOTS", "RobotState", "RobotView", "Roster", "StateChange"]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_MAX_ROBOTS = 4096
+QUIET_PERIODS = 3  # control periods of silence (and usual gaps) before a robot is quiet
+GONE_PERIODS = 100  # control periods of silence before it is gone: 10 s at the default 0.1 s
+BEHIND_PERIODS = 3  # control periods a robot may show an old entry before it is flagged behind
+MAX_BEHIND_KEYS = 64  # keys one robot may lag on that the roster remembers
+RATE_WINDOW = 1.0  # seconds: the time constant of the recent message rate
+_GAP_WEIGHT = 0.25  # how fast a robot's usual gap follows its latest one
+
+
+class RobotState(enum.Enum):
+    ALIVE = "alive"
+    QUIET = "quiet"
+    GONE = "gone"
+
+
+STATE_ORDER = {RobotState.ALIVE: 0, RobotState.QUIET: 1, RobotState.GONE: 2}  # how views sort
+
+
+@dataclass(frozen=True)
+class RobotView:
+    """One robot as the roster saw it at `snapshot` time (what every view shows)."""
+
+    robot: int
+    named_by: str  # "sender": the medium named it; "writer": the writer id of the PUTs heard
+    links: tuple[str, ...]
+    state: RobotState
+    first_heard: float
+    last_heard: float
+    last_heard_s: float  # seconds since, at the snapshot
+    rate: float  # messages per second, recent
+    messages: int
+    writes: int
+    gets: int
+    behind: tuple[int, ...]  # keys it has shown an older entry for, longer than behind_after
+    refused: int  # messages of its the guard refused
+    quality: int | None  # link quality where the medium reports it (none does today)
+
+    def as_json(self) -> dict[str, object]:
+        return {"robot": self.robot, "sender": self.robot if self.named_by == "sender" else None,
+                "named_by": self.named_by, "links": list(self.links), "state": self.state.value,
+                "last_heard_s": round(self.last_heard_s, 3), "rate": round(self.rate, 2),
+                "messages": self.messages, "writes": self.writes, "gets": self.gets,
+                "behind": list(self.behind), "refused": self.refused, "quality": self.quality}
+
+
+@dataclass(frozen=True)
+class StateChange:
+    robot: int
+    old: RobotState
+    new: RobotState
+    t: float
+    links: tuple[str, ...]
+
+
+class _Robot:
+    __slots__ = ("behind_since", "counted", "first", "gap", "gets", "last", "links", "messages", "named",
+                 "quality", "rate", "refused", "state", "who", "writes")
+
+    def __init__(self, who: int, named: bool, t: float) -> None:
+        self.who, self.named = who, named
+        self.links: set[str] = set()
+        self.first = self.last = t
+        self.gap = 0.0  # its usual gap between units heard (0: heard once)
+        self.messages = self.writes = self.gets = self.refused = 0
+        self.counted = 0  # `messages` at the last sweep (the rate's count)
+        self.rate = 0.0
+        self.behind_since: dict[int, float] = {}  # key -> when it first showed an older entry for it
+        self.quality: int | None = None
+        self.state = RobotState.ALIVE
+
+
+StateListener = Callable[[StateChange], None]
+
+
+class Roster:
+    def __init__(self, period: float = 0.1, *, quiet_after: float | None = None, gone_after: float | None = None,
+                 behind_after: float | None = None, max_robots: int = DEFAULT_MAX_ROBOTS) -> None:
+        self.quiet_after = QUIET_PERIODS * period if quiet_after is None else quiet_after
+        self.gone_after = GONE_PERIODS * period if gone_after is None else gone_after
+        self.behind_after = BEHIND_PERIODS * period if behind_after is None else behind_after
+        for name, value in (("quiet_after", self.quiet_after), ("gone_after", self.gone_after),
+                            ("behind_after", self.behind_after)):
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number of seconds, got {value!r}")
+        if self.gone_after <= self.quiet_after:
+            raise ValueError(f"gone_after ({self.gone_after:g} s) must be longer than quiet_after "
+                             f"({self.quiet_after:g} s)")
+        if max_robots < 1:
+            raise ValueError(f"max_robots must be at least 1, got {max_robots!r}")
+        self.max_robots = max_robots
+        self._robots: dict[int, _Robot] = {}
+        self._newest = array.array("H", bytes(2 * (KEY_MAX + 1)))  # key -> newest timestamp heard (0: none)
+        self.untracked = 0  # robots heard while the roster was full of robots not gone
+        self.behind_untracked = 0  # keys a robot lagged on past MAX_BEHIND_KEYS
+        self.unattributed = 0  # messages naming nobody: GETs on a medium that names no sender
+        self.changes: Counter[str] = Counter()  # "alive->quiet": how often
+        self.on_change: list[StateListener] = []
+        self._swept = math.nan  # when `sweep` last ran
+        self._gone = 0  # robots tracked whose state is gone
+
+    # -- what the gateway heard: the hot path ---------------------------------------------
+    def take(self, link: str, t: float, sender: int | None, messages: list[Message]) -> None:
+        """What one unit carried past the guard (the Node's `messages` listener)."""
+        if sender is not None:
+            robot = self._robots.get(sender) or self._new(sender, True, t)
+            if robot is not None:
+                self._heard(robot, link, t, len(messages))
+                self._show(robot, messages, t, True)
+            return
+        robots = self._robots
+        for msg in messages:
+            if msg[0] & GET_BIT:
+                self.unattributed += 1
+                continue
+            robot = robots.get(msg[3]) or self._new(msg[3], False, t)
+            if robot is not None:
+                self._heard(robot, link, t, 1)
+                self._show(robot, (msg,), t, False)
+
+    def _heard(self, robot: _Robot, link: str, t: float, count: int) -> None:
+        gap = t - robot.last
+        if gap > 0:
+            robot.gap += (gap - robot.gap) * _GAP_WEIGHT if robot.gap else gap
+        robot.last = t
+        robot.messages += count
+        if link not in robot.links:
+            robot.links.add(link)
+        if robot.state is not RobotState.ALIVE:
+            self._change(robot, RobotState.ALIVE, t)
+
+    def _show(self, robot: _Robot, messages: list[Message] | tuple[Message, ...], t: float, asks: bool) -> None:
+        """Count its writes and GETs, and whether each shows an entry older than the newest heard."""
+        newest = self._newest
+        behind = robot.behind_since
+        for word, _value, ts, _writer in messages:
+            key = word & KEY_MAX
+            if word & GET_BIT:
+                robot.gets += 1
+            else:
+                robot.writes += 1
+            held = newest[key]
+            if ts == held:
+                if behind:
+                    behind.pop(key, None)
+            elif is_newer(ts, held):
+                newest[key] = ts
+                if behind:
+                    behind.pop(key, None)
+            elif (ts != TS_NONE or asks) and key not in behind:
+                if len(behind) < MAX_BEHIND_KEYS:
+                    behind[key] = t
+                else:
+                    self.behind_untracked += 1
+
+    def refuse(self, heard: Heard, reason: str) -> None:
+        """A message the guard refused (the Node's `refused` listener): counted to whoever it names."""
+        msg = heard.message
+        who, named = (heard.sender, True) if heard.sender is not None else (msg.robot, False)
+        if heard.sender is None and msg[0] & GET_BIT:
+            self.unattributed += 1
+            return
+        robot = self._robots.get(who) or self._new(who, named, heard.t)
+        if robot is not None:
+            robot.refused += 1
+
+    def _new(self, who: int, named: bool, t: float) -> _Robot | None:
+        robots = self._robots
+        if len(robots) >= self.max_robots and not self._evict_gone():
+            self.untracked += 1
+            return None
+        robot = robots[who] = _Robot(who, named, t)
+        return robot
+
+    def _evict_gone(self) -> bool:
+        """Forget the gone robot heard longest ago, to make room; False if none is gone."""
+        if not self._gone:  # a flood of new ids into a full roster of live robots costs no scan
+            return False
+        oldest = min((r for r in self._robots.values() if r.state is RobotState.GONE), key=lambda r: r.last)
+        del self._robots[oldest.who]
+        self._gone -= 1
+        return True
+
+    # -- time ------------------------------------------------------------------------
+    def sweep(self, now: float) -> None:
+        """The time is `now` (the gateway's clock, as `take`'s): rates, states, and who is behind."""
+        dt = now - self._swept
+        smoothing = 1.0 - math.exp(-dt / RATE_WINDOW) if dt > 0 else 0.0  # nan on the first sweep: no rate yet
+        for robot in list(self._robots.values()):
+            if smoothing:
+                heard = robot.messages - robot.counted
+                robot.rate += (heard / dt - robot.rate) * smoothing
+                robot.counted = robot.messages
+            silent = now - robot.last
+            if silent > self.gone_after:
+                state = RobotState.GONE
+            elif silent > self.quiet_after and silent > QUIET_PERIODS * robot.gap:
+                state = RobotState.QUIET
+            else:
+                state = RobotState.ALIVE
+            if state is not robot.state:
+                self._change(robot, state, now)
+        if not dt <= 0:  # (nan on the first sweep)
+            self._swept = now
+
+    def _change(self, robot: _Robot, state: RobotState, t: float) -> None:
+        old, robot.state = robot.state, state
+        self._gone += (state is RobotState.GONE) - (old is RobotState.GONE)
+        self.changes[f"{old.value}->{state.value}"] += 1
+        links = tuple(sorted(robot.links))
+        log.info("robot %d (%s on %s): %s -> %s", robot.who, "sender" if robot.named else "writer",
+                 ", ".join(links), old.value, state.value)
+        change = StateChange(robot.who, old, state, t, links)
+        for listener in self.on_change:
+            listener(change)
+
+    # -- what views read --------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self._robots)
+
+    def snapshot(self, now: float) -> list[RobotView]:
+        """Every robot tracked, sorted by state (alive, quiet, gone) then id."""
+        views = [self._view(robot, now) for robot in self._robots.values()]
+        views.sort(key=lambda v: (STATE_ORDER[v.state], v.robot))
+        return views
+
+    def _view(self, robot: _Robot, now: float) -> RobotView:
+        lag = self.behind_after
+        behind = tuple(sorted(key for key, since in robot.behind_since.items() if now - since >= lag))
+        return RobotView(robot.who, "sender" if robot.named else "writer", tuple(sorted(robot.links)), robot.state,
+                         robot.first, robot.last, max(0.0, now - robot.last), robot.rate, robot.messages,
+                         robot.writes, robot.gets, behind, robot.refused, robot.quality)
+
+    def counts(self) -> dict[tuple[str, RobotState], int]:
+        """(link, state) -> robots in that state heard on that link (the metrics' series: not one per robot)."""
+        out: Counter[tuple[str, RobotState]] = Counter()
+        for robot in self._robots.values():
+            for link in robot.links:
+                out[link, robot.state] += 1
+        return dict(out)
