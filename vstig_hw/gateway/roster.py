@@ -36,6 +36,7 @@ import math
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from ..links.link import Heard
 from ..timestamps import TS_NONE, is_newer
@@ -90,8 +91,9 @@ class RobotView:
                 "behind": list(self.behind), "refused": self.refused, "quality": self.quality}
 
 
-@dataclass(frozen=True)
-class StateChange:
+class StateChange(NamedTuple):
+    """Robot `robot` went from `old` to `new` at `t` (the gateway's wall clock); `links`: where it was heard."""
+
     robot: int
     old: RobotState
     new: RobotState
@@ -266,13 +268,15 @@ class Roster:
 
     def snapshot(self, now: float) -> list[RobotView]:
         """Every robot tracked, sorted by state (alive, quiet, gone) then id."""
-        views = [self._view(robot, now) for robot in self._robots.values()]
+        # Copies taken in one step each (a C-level list of a dict or a set), so that a view may be made on
+        # another thread than the one feeding the roster: what it shows may be a message old, never torn.
+        views = [self._view(robot, now) for robot in list(self._robots.values())]
         views.sort(key=lambda v: (STATE_ORDER[v.state], v.robot))
         return views
 
     def _view(self, robot: _Robot, now: float) -> RobotView:
         lag = self.behind_after
-        behind = tuple(sorted(key for key, since in robot.behind_since.items() if now - since >= lag))
+        behind = tuple(sorted(key for key, since in list(robot.behind_since.items()) if now - since >= lag))
         return RobotView(robot.who, "sender" if robot.named else "writer", tuple(sorted(robot.links)), robot.state,
                          robot.first, robot.last, max(0.0, now - robot.last), robot.rate, robot.messages,
                          robot.writes, robot.gets, behind, robot.refused, robot.quality)
@@ -280,7 +284,7 @@ class Roster:
     def counts(self) -> dict[tuple[str, RobotState], int]:
         """(link, state) -> robots in that state heard on that link (the metrics' series: not one per robot)."""
         out: Counter[tuple[str, RobotState]] = Counter()
-        for robot in self._robots.values():
-            for link in robot.links:
+        for robot in list(self._robots.values()):
+            for link in sorted(robot.links):
                 out[link, robot.state] += 1
         return dict(out)

@@ -1,0 +1,44 @@
+"""A Node's roster, fed by the Node's own listeners: what bridge, sniff, record and the API keep.
+
+`keep_roster(node)` listens to what passed the guard (`messages`: one call per unit,
+no `Heard` built), what the guard refused (`refused`) and the ticks (`tick`: the
+roster's clock, every control period). Views read `snapshot()` from any thread, and
+`on_change` tells each state change on the thread that saw it (under the Node's lock:
+quick, never waiting). `cancel()` stops the feeding.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+from .roster import RobotView, Roster, StateListener
+
+if TYPE_CHECKING:
+    from .node import Node
+
+__all__ = ["KeptRoster", "keep_roster"]
+
+
+class KeptRoster:
+    def __init__(self, node: Node, roster: Roster) -> None:
+        self.roster = roster
+        self.listening = node.listen(messages=roster.take, refused=roster.refuse, tick=self._sweep)
+
+    def _sweep(self, _node: Node) -> None:
+        self.roster.sweep(time.time())  # the clock the readers stamp what they read with
+
+    def snapshot(self) -> list[RobotView]:
+        """Every robot now, sorted by state then id (safe from any thread)."""
+        return self.roster.snapshot(time.time())
+
+    def on_change(self, listener: StateListener) -> None:
+        self.roster.on_change.append(listener)
+
+    def cancel(self) -> None:
+        self.listening.cancel()
+
+
+def keep_roster(node: Node, roster: Roster | None = None) -> KeptRoster:
+    """Keep `roster` (default: one with the default thresholds for the Node's period) fed by `node`."""
+    return KeptRoster(node, Roster(node.period) if roster is None else roster)
