@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import itertools
 import os
-import time
 import tty
 
 import can
@@ -16,7 +15,7 @@ from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import can_framing_for
 from vstig_hw.gateway import Mode, Node
 from vstig_hw.gateway.kept_roster import keep_roster
-from vstig_hw.gateway.roster import Roster, RobotState, StateChange
+from vstig_hw.gateway.roster import RobotState, Roster, StateChange
 from vstig_hw.links import parse
 
 _ids = itertools.count()
