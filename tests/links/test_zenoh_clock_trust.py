@@ -110,29 +110,41 @@ def _analyze(*argv: str) -> tuple[dict[str, object] | None, str]:
     return shift, done.stderr
 
 
+def _record_with_a_forger(folder: Path, a_link: str, b_link: str, connect: tuple[str, ...],
+                          forged: Callable[[str, str], dict[str, float]]) -> tuple[Path, Path]:
+    """a.cap and b.cap, recorded from `a_link` and `b_link` while a forger connected to `connect` publishes writes
+    and answers clock queries under the clock ids `forged(a's clock, b's clock)` maps to the seconds it adds."""
+    a_cap, b_cap = folder / "a.cap", folder / "b.cap"
+    stop = threading.Event()
+    with _recording(a_link, "-o", str(a_cap)), _recording(b_link, "-o", str(b_cap)):
+        _wait(lambda: bool(_clock_of(a_cap) and _clock_of(b_cap)), 60)
+        forger = _session(*connect)
+        writer = None
+        try:
+            answers = [_answer_for(forger, clock, ahead)
+                       for clock, ahead in forged(_clock_of(a_cap), _clock_of(b_cap)).items()]
+            writer = _publish_writes(forger, stop)
+            _wait(lambda: "clock-offset" in a_cap.read_text() and "clock-offset" in b_cap.read_text(), 60)
+            time.sleep(2 * PROBE_EVERY_S)  # a few more rounds
+        finally:
+            stop.set()
+            if writer is not None:
+                writer.join(5)
+            forger.close()  # type: ignore[no-untyped-call]
+    assert answers
+    return a_cap, b_cap
+
+
 def test_a_forged_clock_answer_does_not_move_the_merge(tmp_path: Path) -> None:
     """Two recorders on one machine (true offset ~0) that only a forger joins: it answers each under the other's
     clock id, 1000 s off. The offsets reach the captures, unproved; analyze merges nothing through them."""
     config = tmp_path / "no-gossip.json5"
     config.write_text(NO_GOSSIP)
     a_port, b_port = free_port(), free_port()
-    a_cap, b_cap = tmp_path / "a.cap", tmp_path / "b.cap"
-    stop = threading.Event()
-    with _recording(f"zenoh:lab?listen=tcp/127.0.0.1:{a_port}&config={config}", "-o", str(a_cap)), \
-            _recording(f"zenoh:lab?listen=tcp/127.0.0.1:{b_port}&config={config}", "-o", str(b_cap)):
-        _wait(lambda: bool(_clock_of(a_cap) and _clock_of(b_cap)), 30)
-        forger = _session(f"tcp/127.0.0.1:{a_port}", f"tcp/127.0.0.1:{b_port}")
-        try:
-            answers = [_answer_for(forger, _clock_of(b_cap), FORGED_S),
-                       _answer_for(forger, _clock_of(a_cap), -FORGED_S)]
-            writer = _publish_writes(forger, stop)
-            _wait(lambda: "clock-offset" in a_cap.read_text() and "clock-offset" in b_cap.read_text(), 30)
-            time.sleep(2 * PROBE_EVERY_S)
-        finally:
-            stop.set()
-            forger.close()  # type: ignore[no-untyped-call]
-    writer.join(5)
-    assert answers
+    a_cap, b_cap = _record_with_a_forger(
+        tmp_path, f"zenoh:lab?listen=tcp/127.0.0.1:{a_port}&config={config}",
+        f"zenoh:lab?listen=tcp/127.0.0.1:{b_port}&config={config}",
+        (f"tcp/127.0.0.1:{a_port}", f"tcp/127.0.0.1:{b_port}"), lambda a, b: {b: FORGED_S, a: -FORGED_S})
 
     shift, said = _analyze(str(a_cap), str(b_cap))
     assert shift is None, said  # left on its own clock: the truth here, within the capture's own jitter
@@ -153,23 +165,10 @@ def test_gateways_a_certificate_names_merge_through_their_own_answers(tmp_path: 
         configs[name] = tmp_path / f"{name}.json5"
         configs[name].write_text(mtls_config(lab, name).replace('protocols: ["tls"]', 'protocols: ["tls", "tcp"]'))
     tls_port, tcp_port = free_port(), free_port()
-    a_cap, b_cap = tmp_path / "a.cap", tmp_path / "b.cap"
-    stop = threading.Event()
-    with _recording(f"zenoh:lab?listen=tls/localhost:{tls_port},tcp/127.0.0.1:{tcp_port}&config={configs['gw-a']}",
-                    "-o", str(a_cap)), \
-            _recording(f"zenoh:lab?connect=tls/localhost:{tls_port}&config={configs['gw-b']}", "-o", str(b_cap)):
-        _wait(lambda: bool(_clock_of(a_cap) and _clock_of(b_cap)), 30)
-        forger = _session(f"tcp/127.0.0.1:{tcp_port}")
-        try:
-            answer = _answer_for(forger, _clock_of(b_cap), FORGED_S)
-            writer = _publish_writes(forger, stop)
-            _wait(lambda: "clock-offset" in a_cap.read_text() and "clock-offset" in b_cap.read_text(), 30)
-            time.sleep(2 * PROBE_EVERY_S)
-        finally:
-            stop.set()
-            forger.close()  # type: ignore[no-untyped-call]
-    writer.join(5)
-    assert answer is not None
+    a_cap, b_cap = _record_with_a_forger(
+        tmp_path, f"zenoh:lab?listen=tls/localhost:{tls_port},tcp/127.0.0.1:{tcp_port}&config={configs['gw-a']}",
+        f"zenoh:lab?connect=tls/localhost:{tls_port}&config={configs['gw-b']}", (f"tcp/127.0.0.1:{tcp_port}",),
+        lambda a, b: {b: FORGED_S})
 
     shift, said = _analyze(str(a_cap), str(b_cap))
     assert isinstance(shift, dict) and abs(float(str(shift["shift_s"]))) < 0.01, said  # ~0: the truth
@@ -203,7 +202,7 @@ def test_a_clock_id_flood_and_malformed_answers_are_counted_and_bounded(tmp_path
     capture = tmp_path / "f.cap"
     with _recording(f"zenoh:lab?listen=tcp/127.0.0.1:{port}", "-o", str(capture),
                     "--metrics", f"127.0.0.1:{metrics}") as recorder:
-        _wait(lambda: bool(_clock_of(capture)), 30)
+        _wait(lambda: bool(_clock_of(capture)), 60)
         time.sleep(2 * PROBE_EVERY_S)
         before = _rss_kb(recorder.pid)
         flooder = _session(f"tcp/127.0.0.1:{port}")
