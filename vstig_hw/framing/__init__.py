@@ -14,6 +14,7 @@ from .cobs8 import Cobs8Framing
 from .epuck4 import Epuck4Framing
 from .kilobot import KilobotFraming
 from .kilobot_ohc import KilobotOhcFraming, TransmitOnlyError
+from .mavlink import MavlinkFraming
 from .xbee import XBeeApi2Framing, XBeeFraming
 
 __all__ = ["SERIAL_FRAMINGS", "SerialFraming", "TransmitOnlyError", "make_serial_framing"]
@@ -22,7 +23,7 @@ __all__ = ["SERIAL_FRAMINGS", "SerialFraming", "TransmitOnlyError", "make_serial
 
 SERIAL_FRAMINGS: dict[str, type[SerialFraming]] = {
     framing.name: framing for framing in (Cobs8Framing, Epuck4Framing, KilobotFraming, KilobotOhcFraming,
-                                          XBeeFraming, XBeeApi2Framing)
+                                          XBeeFraming, XBeeApi2Framing, MavlinkFraming)
 }
 
 

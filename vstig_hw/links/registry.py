@@ -25,6 +25,7 @@ SCHEMES: dict[str, tuple[str, str]] = {
     "blabbermouth": ("blabbermouth", "parse_blabbermouth"),
     "zenoh": ("zenoh", "parse_zenoh"),
     "ros2": ("ros2", "parse_ros2"),
+    "mavlink": ("mavlink", "parse_mavlink"),
 }
 _ANY_EXAMPLE = "serial:/dev/ttyUSB0?baud=115200"  # for a spec whose scheme names no module
 

@@ -1,0 +1,394 @@
+"""`mavlink`: our 8-byte messages in MAVLink 2 TUNNEL (#385) messages, optionally signed (SPEC.md 6.10).
+
+A MAVLink 2 frame (mavlink.io, "Serialization")::
+
+    0xFD | len | incompat | compat | seq | sysid | compid | msgid (u24 LE) | payload (len) | crc (u16 LE)
+         [| link id | timestamp (u48 LE) | signature (6)]   when incompat has bit 0x01 (signed)
+
+crc is CRC-16/MCRF4XX (X.25) over everything after the 0xFD up to the payload's end, then the message's
+CRC_EXTRA byte (147 for TUNNEL, 50 for HEARTBEAT). A payload's trailing zero bytes are not sent (at least one
+byte is). TUNNEL's payload, in wire order: payload_type (u16 LE), target_system, target_component,
+payload_length, payload[128]. Ours: payload_type `PAYLOAD_TYPE`, payload = up to 16 messages back to back.
+
+The signature is the first 6 bytes of SHA-256(key | the frame from the 0xFD through the crc | link id |
+timestamp); the timestamp counts 10 microseconds since 2015-01-01 00:00 UTC. With a key, a frame that is not
+signed is `unsigned`, a wrong signature `signature`, and a timestamp not newer than the last one accepted from
+the same (sysid, compid, link id) `replay`; all are dropped and counted.
+
+`MavlinkStreamReader` cuts a byte stream (a telemetry radio's UART, a UDP datagram) into frames; what a receiver
+does with each frame (SPEC.md 6.10.3) is `MavlinkFraming.feed`'s. Every reason a frame gives no message is a
+counted drop, never raised. Everything here is pure but the signer's clock, which a caller may replace.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import struct
+import threading
+import time
+from collections.abc import Callable, Iterable, Sequence
+from typing import ClassVar
+
+from ..counters import Counters
+from ..crc import crc16_mcrf4xx
+from ..wire import MESSAGE_SIZE, Message, decode_many, encode
+from .base import SerialFraming
+
+__all__ = [
+    "BROADCAST",
+    "COMP_ID",
+    "HEARTBEAT",
+    "KEY_SIZE",
+    "MAX_PER_TUNNEL",
+    "PAYLOAD_TYPE",
+    "STREAMS_KEPT",
+    "TUNNEL",
+    "MavlinkFraming",
+    "MavlinkStreamReader",
+    "Signing",
+    "frame",
+    "heartbeat_payload",
+    "sender_name",
+    "signing_timestamp",
+    "tunnel_payload",
+]
+
+STX = 0xFD  # MAVLink 2
+STX_V1 = 0xFE  # MAVLink 1: counted, never taken
+SIGNED = 0x01  # incompat_flags: a signature follows the crc
+HEADER = 10  # 0xFD through msgid
+SIGNATURE = 13  # link id, timestamp (6), signature (6)
+TUNNEL = 385
+HEARTBEAT = 0
+CRC_EXTRA = {TUNNEL: 147, HEARTBEAT: 50}  # the messages a link sends and checks; others' crc cannot be checked
+PAYLOAD_TYPE = 0xB571  # ours, in the range MAVLink leaves for local use (32768..65535); SPEC.md 6.10.1
+BROADCAST = 0  # target_system 0: every system
+COMP_ID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER: a companion computer's component id
+MAX_PER_TUNNEL = 16  # TUNNEL's payload holds 128 bytes
+KEY_SIZE = 32
+STREAMS_KEPT = 1024  # (sysid, compid, link id) streams whose last timestamp is kept; SPEC.md 6.10.4
+NEW_STREAM_WINDOW = 6_000_000  # 60 s in 10 us units: a new stream's first timestamp may be this much behind
+_EPOCH_2015 = 1420070400  # 2015-01-01 00:00:00 UTC in Unix seconds
+_TUNNEL_HEAD = struct.Struct("<HBBB")  # payload_type, target_system, target_component, payload_length
+_TUNNEL_SIZE = _TUNNEL_HEAD.size + MAX_PER_TUNNEL * MESSAGE_SIZE  # 133: the payload before truncation
+MAX_FRAME = HEADER + 255 + 2 + SIGNATURE
+# HEARTBEAT (#0): custom_mode 0, type MAV_TYPE_ONBOARD_CONTROLLER (18), autopilot MAV_AUTOPILOT_INVALID (8),
+# base_mode 0, system_status MAV_STATE_ACTIVE (4), mavlink_version 3: a component MAVLink tools list, no vehicle.
+_HEARTBEAT = struct.pack("<IBBBBB", 0, 18, 8, 0, 4, 3)
+
+
+def heartbeat_payload() -> bytes:
+    return _HEARTBEAT
+
+
+def signing_timestamp(now: float) -> int:
+    """A signing timestamp: 10 microsecond units since 2015-01-01 00:00 UTC."""
+    return int((now - _EPOCH_2015) * 100_000)
+
+
+def sender_name(sender: int) -> str:
+    """`sysid/compid` of a sender id (sysid << 8 | compid), as a log line shows it."""
+    return f"{sender >> 8}/{sender & 0xFF}"
+
+
+def tunnel_payload(data: bytes, target_system: int = BROADCAST, target_component: int = 0,
+                   payload_type: int = PAYLOAD_TYPE) -> bytes:
+    """A TUNNEL's payload carrying `data` (at most 128 bytes), before truncation."""
+    return _TUNNEL_HEAD.pack(payload_type, target_system, target_component, len(data)) + data + \
+        bytes(MAX_PER_TUNNEL * MESSAGE_SIZE - len(data))
+
+
+def _signature(key: bytes, signed_part: bytes) -> bytes:
+    return hashlib.sha256(key + signed_part).digest()[:6]
+
+
+def frame(msgid: int, payload: bytes, *, seq: int, sysid: int, compid: int, key: bytes | None = None,
+          link_id: int = 0, timestamp: int = 0, crc_extra: int | None = None) -> bytes:
+    """One MAVLink 2 frame as on the wire: the payload's trailing zeros cut, signed when `key` is given."""
+    body = payload.rstrip(b"\x00") or b"\x00"
+    head = struct.pack("<BBBBBBB", STX, len(body), SIGNED if key is not None else 0, 0, seq & 0xFF, sysid,
+                       compid) + msgid.to_bytes(3, "little")
+    extra = CRC_EXTRA[msgid] if crc_extra is None else crc_extra
+    crc = crc16_mcrf4xx(bytes((extra,)), crc16_mcrf4xx(head[1:] + body))
+    wire = head + body + crc.to_bytes(2, "little")
+    if key is None:
+        return wire
+    tail = bytes((link_id,)) + timestamp.to_bytes(6, "little")
+    return wire + tail + _signature(key, wire + tail)
+
+
+class Signing:
+    """One key's two sides: the timestamps a link signs with, and the last one accepted per stream.
+
+    Sent timestamps never go backwards and never repeat (one more than the last when the clock has not moved).
+    Received ones are kept per (sysid, compid, link id), at most `STREAMS_KEPT` of them (the least recently
+    heard is forgotten first); a stream not seen before must not start more than 60 s behind the newest
+    timestamp accepted on the link, so a forgotten stream's old frames stay refused.
+    """
+
+    def __init__(self, key: bytes, link_id: int = 0, clock: Callable[[], float] = time.time) -> None:
+        if len(key) != KEY_SIZE:
+            raise ValueError(f"a MAVLink signing key is {KEY_SIZE} bytes, got {len(key)}")
+        if not 0 <= link_id <= 0xFF:
+            raise ValueError(f"a MAVLink link id is 0..255, got {link_id}")
+        self.key = key
+        self.link_id = link_id
+        self.clock = clock
+        self._sent = 0
+        self._heard: dict[tuple[int, int, int], int] = {}
+        self._newest = 0
+
+    def next_timestamp(self) -> int:
+        self._sent = max(self._sent + 1, signing_timestamp(self.clock()))
+        return self._sent
+
+    def check(self, wire: bytes | memoryview) -> str | None:
+        """The drop reason for this whole frame (None: accepted, and its timestamp remembered)."""
+        if not wire[2] & SIGNED:
+            return "unsigned"
+        end = len(wire) - 6
+        if not hmac.compare_digest(_signature(self.key, bytes(wire[:end])), bytes(wire[end:])):
+            return "signature"
+        stream = (wire[5], wire[6], wire[end - 7])
+        stamp = int.from_bytes(wire[end - 6:end], "little")
+        last = self._heard.get(stream)
+        if stamp <= (self._newest - NEW_STREAM_WINDOW if last is None else last):
+            return "replay"
+        self._heard.pop(stream, None)
+        self._heard[stream] = stamp  # re-inserted: the dict's order is the order streams were last heard
+        if len(self._heard) > STREAMS_KEPT:
+            del self._heard[next(iter(self._heard))]
+        self._newest = max(self._newest, stamp)
+        return None
+
+
+class MavlinkStreamReader:
+    """A byte stream in, whole frames out (bytes as on the wire); bad units counted in `drops` by reason.
+
+    - `noise`: bytes before a 0xFD or 0xFE (one drop per run; none after a bad frame: they are its remains);
+    - `incompat_flags`: a MAVLink 2 header with a flag other than signing (no receiver knows its length);
+    - `crc`: a TUNNEL or HEARTBEAT whose crc does not match (the only messages whose CRC_EXTRA a link knows);
+    - `truncated`: the stream ended (`flush`) inside a frame.
+    After a bad frame the search for the next starts at the byte after its start byte. A MAVLink 1 frame, and
+    a MAVLink 2 frame of another message, are cut by their length alone and handed on (the framing counts them).
+    """
+
+    def __init__(self, drops: Counters, prefix: str = "") -> None:
+        self.drops = drops
+        self._names = {reason: prefix + reason for reason in ("noise", "incompat_flags", "crc", "truncated")}
+        self._buf = bytearray()
+        self._counted = False  # the bytes being skipped are already counted
+
+    @property
+    def holding(self) -> bool:
+        return bool(self._buf)
+
+    def feed(self, chunk: bytes | bytearray | memoryview) -> list[bytes]:
+        self._buf += chunk
+        return self._cut(final=False)
+
+    def flush(self) -> list[bytes]:
+        """The stream ends here: a frame still arriving is `truncated`; frames after its start are returned."""
+        frames = self._cut(final=True)
+        self.reset()
+        return frames
+
+    def reset(self) -> None:
+        self._buf.clear()
+        self._counted = False
+
+    def _drop(self, reason: str) -> None:
+        self.drops[self._names[reason]] += 1
+        self._counted = True
+
+    def _cut(self, final: bool) -> list[bytes]:
+        buf = self._buf
+        frames: list[bytes] = []
+        pos = 0
+        while True:
+            start = _next_start(buf, pos)
+            if (len(buf) if start < 0 else start) > pos and not self._counted:
+                self._drop("noise")
+            if start < 0:
+                del buf[:]
+                return frames
+            verdict = self._frame_at(buf, start)
+            if verdict is None:
+                if not final:
+                    del buf[:start]
+                    return frames
+                verdict = "truncated"
+            if isinstance(verdict, str):
+                self._drop(verdict)
+                pos = start + 1
+                continue
+            frames.append(bytes(buf[start:verdict]))
+            pos = verdict
+            self._counted = False
+
+    @staticmethod
+    def _frame_at(buf: bytearray, start: int) -> int | str | None:
+        """The end of the frame at `start`, a drop reason, or None while it is still arriving."""
+        have = len(buf) - start
+        if buf[start] == STX_V1:
+            if have < 2:
+                return None
+            end = start + buf[start + 1] + 8
+            return end if len(buf) >= end else None
+        if have < 3:
+            return None
+        flags = buf[start + 2]
+        if flags & ~SIGNED:
+            return "incompat_flags"
+        length = buf[start + 1]
+        end = start + HEADER + length + 2 + (SIGNATURE if flags & SIGNED else 0)
+        if have < HEADER:
+            return None
+        extra = CRC_EXTRA.get(int.from_bytes(buf[start + 7:start + 10], "little"))
+        if len(buf) < end:
+            return None
+        if extra is not None:
+            crc_at = start + HEADER + length
+            crc = crc16_mcrf4xx(bytes((extra,)), crc16_mcrf4xx(memoryview(buf)[start + 1:crc_at]))
+            if crc != buf[crc_at] | buf[crc_at + 1] << 8:
+                return "crc"
+        return end
+
+
+def _next_start(buf: bytearray, pos: int) -> int:
+    v2, v1 = buf.find(STX, pos), buf.find(STX_V1, pos)
+    if v2 < 0 or v1 < 0:
+        return max(v2, v1)
+    return min(v2, v1)
+
+
+class MavlinkFraming(SerialFraming):
+    """Our messages in MAVLink 2 TUNNEL messages, from (`sysid`, `compid`), signed when `signing` is given.
+
+    A unit is one frame as on the wire (the link's transport cuts them; a unit holding anything else is read
+    with the same reader, so nothing raises). `sender_of` a TUNNEL is sysid << 8 | compid.
+    """
+
+    name = "mavlink"
+    names_senders = True
+    default_baud = 57600  # SiK radios' factory UART rate
+    preamble = b""  # a 0xFD starts every frame
+    replays_received: ClassVar[bool] = False  # a received frame carries another's sysid (and signature): re-encode
+
+    def __init__(self, sysid: int = 1, compid: int = COMP_ID, *, target: int = BROADCAST,
+                 signing: Signing | None = None) -> None:
+        for what, number, low in (("sysid", sysid, 1), ("compid", compid, 1), ("target", target, 0)):
+            if isinstance(number, bool) or not isinstance(number, int) or not low <= number <= 255:
+                raise ValueError(f"mavlink {what} must be {low}..255, got {number!r}")
+        self.drops = Counters()
+        self.sysid, self.compid, self.target = sysid, compid, target
+        self.signing = signing
+        self._seq = 0
+        self._lock = threading.Lock()  # heartbeats go out from the link's reader thread: one sequence for both
+        self._reader = MavlinkStreamReader(self.drops)
+        self._last: tuple[bytes | None, int | None] = (None, None)
+
+    # -- sending -------------------------------------------------------------------
+    def _frame(self, msgid: int, payload: bytes) -> bytes:
+        with self._lock:
+            seq, self._seq = self._seq, (self._seq + 1) & 0xFF
+            signing = self.signing
+            if signing is None:
+                return frame(msgid, payload, seq=seq, sysid=self.sysid, compid=self.compid)
+            return frame(msgid, payload, seq=seq, sysid=self.sysid, compid=self.compid, key=signing.key,
+                         link_id=signing.link_id, timestamp=signing.next_timestamp())
+
+    def encode(self, msg: Message) -> list[bytes]:
+        return [self._frame(TUNNEL, tunnel_payload(encode(msg), self.target))]
+
+    def encode_batch(self, messages: Sequence[Message]) -> list[bytes]:
+        """As few TUNNELs as hold the messages, in order, 16 to a TUNNEL."""
+        data = b"".join(map(encode, messages))
+        step = MAX_PER_TUNNEL * MESSAGE_SIZE
+        return [self._frame(TUNNEL, tunnel_payload(data[i:i + step], self.target)) for i in range(0, len(data), step)]
+
+    def heartbeat(self) -> bytes:
+        """The HEARTBEAT that announces this component (once a second, from the link)."""
+        return self._frame(HEARTBEAT, _HEARTBEAT)
+
+    # -- receiving -----------------------------------------------------------------
+    def feed(self, unit: bytes) -> list[Message]:
+        messages: list[Message] = []
+        sender = None
+        for wire in self._frames(unit):
+            heard = self._messages(wire)
+            if heard:
+                messages.extend(heard)
+                sender = wire[5] << 8 | wire[6] if sender is None else sender
+        self._last = (unit, sender)
+        return messages
+
+    def _messages(self, wire: bytes) -> list[Message]:
+        """The messages of one whole frame, or none and the reason counted (SPEC.md 6.10.3)."""
+        drops = self.drops
+        if wire[0] == STX_V1:
+            drops["mavlink1"] += 1
+            return []
+        if self.signing is not None:
+            refused = self.signing.check(wire)
+            if refused is not None:
+                drops[refused] += 1
+                return []
+        if int.from_bytes(wire[7:10], "little") != TUNNEL:
+            drops["other_message"] += 1
+            return []
+        payload = wire[HEADER:HEADER + wire[1]]
+        payload += bytes(_TUNNEL_SIZE - len(payload)) if len(payload) < _TUNNEL_SIZE else b""
+        payload_type, target_system, target_component, length = _TUNNEL_HEAD.unpack_from(payload)
+        if payload_type != PAYLOAD_TYPE:
+            drops["other_payload_type"] += 1
+            return []
+        if target_system not in (BROADCAST, self.sysid) or target_component not in (0, self.compid):
+            drops["not_for_us"] += 1
+            return []
+        if not length or length % MESSAGE_SIZE or length > MAX_PER_TUNNEL * MESSAGE_SIZE:
+            drops["bad_length"] += 1
+            return []
+        return decode_many(payload[_TUNNEL_HEAD.size:_TUNNEL_HEAD.size + length])
+
+    def sender_of(self, unit: bytes) -> int | None:
+        """sysid << 8 | compid of the TUNNEL that is this unit; None for anything else."""
+        last_unit, sender = self._last
+        if unit is last_unit:
+            return sender
+        frames = self._frames(unit, count=False)
+        return frames[0][5] << 8 | frames[0][6] if frames and frames[0][0] == STX else None
+
+    def narrow(self, unit: bytes, messages: Iterable[Message]) -> bytes | None:
+        """The same TUNNEL (sender, sequence, target) carrying only `messages`, unsigned; None for none."""
+        frames = self._frames(unit, count=False)
+        data = b"".join(encode(m) for m in messages)
+        if not frames or frames[0][0] != STX or not data:
+            return None
+        wire = frames[0]
+        payload = wire[HEADER:HEADER + wire[1]] + bytes(_TUNNEL_SIZE)
+        return frame(TUNNEL, tunnel_payload(data, payload[2], payload[3]), seq=wire[4], sysid=wire[5],
+                     compid=wire[6])
+
+    def _frames(self, unit: bytes, count: bool = True) -> list[bytes]:
+        # The common case, one whole frame: checked in place, without the reader's buffer.
+        if len(unit) > HEADER + 2 and unit[0] == STX and not unit[2] & ~SIGNED \
+                and len(unit) == HEADER + unit[1] + 2 + (SIGNATURE if unit[2] & SIGNED else 0) \
+                and _crc_ok(unit):
+            return [unit]
+        reader = self._reader if count else MavlinkStreamReader(Counters())
+        return reader.feed(unit) + reader.flush()  # a unit is whole: what it did not complete never will
+
+    def reset(self) -> None:
+        """No partial state between units."""
+
+
+def _crc_ok(wire: bytes) -> bool:
+    """A frame's crc matches, where its message's CRC_EXTRA is known (elsewhere it cannot be checked)."""
+    extra = CRC_EXTRA.get(int.from_bytes(wire[7:10], "little"))
+    if extra is None:
+        return True
+    crc_at = HEADER + wire[1]
+    return crc16_mcrf4xx(bytes((extra,)), crc16_mcrf4xx(memoryview(wire)[1:crc_at])) == \
+        wire[crc_at] | wire[crc_at + 1] << 8

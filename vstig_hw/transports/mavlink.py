@@ -1,0 +1,248 @@
+"""MAVLink transports: a telemetry radio's UART, or UDP as the MAVLink world routes it (udpin, udpout).
+
+Whatever the device, a unit is one MAVLink frame exactly as on the wire (framing/mavlink.py's reader cuts the
+bytes), so captures hold whole frames and the framing knows each frame's sender. What is not a frame is counted
+under `drop_<reason>` (`drop_noise`, `drop_crc`, `drop_incompat_flags`, `drop_truncated`) and never handed on.
+
+Both kinds also
+- announce the gateway: `heartbeat` (the framing's HEARTBEAT) goes out once a second from the reader thread, so
+  MAVLink tools list the component (none while listen-only, or while a udpin link has heard no peer);
+- pace what they send to `air_rate` (bits a second on the air; a SiK radio's AIR_SPEED): at most half of it,
+  `AIR_SHARE`, is ours, the rest the ground station's and the other vehicles'. A unit the budget has no room
+  for is not taken by `write_nowait` (the link's writer waits for room in `write`), so what waits stays in the
+  gateway's outlet, shared fairly among its sources, as on any slow device.
+
+`udpin` binds the address it is given (a loopback one unless asked otherwise) and sends to the last address a
+datagram came from, as MAVLink's own udpin does; `udpout` sends to the router's address and hears only it (a
+connected socket). Neither routes: what it hears goes to the gateway alone.
+"""
+
+from __future__ import annotations
+
+import errno
+import select
+import socket
+import time
+from collections.abc import Callable
+from typing import Any
+
+from ..framing.mavlink import MAX_FRAME, MavlinkStreamReader
+from .base import DeviceTransport, TransportError
+from .serial import SerialTransport
+
+__all__ = ["AIR_SHARE", "HEARTBEAT_PERIOD", "AirBudget", "MavlinkSerialTransport", "MavlinkUdpTransport"]
+
+HEARTBEAT_PERIOD = 1.0  # seconds between HEARTBEATs, MAVLink's usual rate
+AIR_SHARE = 0.5  # of a radio's air rate a link uses at most
+_DATAGRAM = 65535
+
+
+class AirBudget:
+    """Bytes a link may send: `rate` a second, at most `burst` saved up (a token bucket)."""
+
+    def __init__(self, air_rate: int, clock: Callable[[], float] = time.monotonic) -> None:
+        self.rate = air_rate * AIR_SHARE / 8
+        self.burst = max(self.rate / 4, 2.0 * MAX_FRAME)
+        self.clock = clock
+        self._tokens = self.burst
+        self._at = clock()
+
+    def _refill(self) -> float:
+        now = self.clock()
+        self._tokens = min(self.burst, self._tokens + (now - self._at) * self.rate)
+        self._at = now
+        return self._tokens
+
+    def take(self, size: int) -> bool:
+        """Spend `size` bytes if there is room for them now."""
+        if self._refill() < min(size, self.burst):
+            return False
+        self._tokens -= size
+        return True
+
+    def charge(self, size: int) -> None:
+        """Spend `size` bytes that go out anyway (a HEARTBEAT)."""
+        self._refill()
+        self._tokens -= size
+
+    def wait(self, size: int) -> float:
+        """Seconds until `size` bytes fit."""
+        return max(0.0, (min(size, self.burst) - self._refill()) / self.rate)
+
+
+class _Mavlink:
+    """What both MAVLink transports add to their device: cutting, heartbeats, pacing."""
+
+    counters: Any
+    heartbeat: Callable[[], bytes] | None
+    budget: AirBudget | None
+
+    def _mavlink_init(self, heartbeat: Callable[[], bytes] | None, air_rate: int | None) -> None:
+        self.heartbeat = heartbeat
+        self.budget = None if air_rate is None else AirBudget(air_rate)
+        self._next_beat = 0.0
+        self._reader = MavlinkStreamReader(self.counters, prefix="drop_")
+
+    def cut(self, data: bytes) -> list[bytes]:
+        """The frames this whole chunk holds (a datagram, or what a read took: see `flush_after`)."""
+        return self._reader.feed(data)
+
+    def _beat_due(self) -> bytes | None:
+        """The HEARTBEAT to send now, if one is due."""
+        if self.heartbeat is None:
+            return None
+        now = time.monotonic()
+        if now < self._next_beat:
+            return None
+        self._next_beat = now + HEARTBEAT_PERIOD
+        beat = self.heartbeat()
+        if self.budget is not None:
+            self.budget.charge(len(beat))
+        self.counters["heartbeats"] += 1
+        return beat
+
+    def _room(self, unit: bytes) -> bool:
+        return self.budget is None or self.budget.take(len(unit))
+
+    def _pace(self, unit: bytes, closed: Any) -> None:
+        """Wait until the air budget has room for `unit` (the writer thread's blocking write)."""
+        budget = self.budget
+        while budget is not None and not budget.take(len(unit)):
+            if closed.wait(budget.wait(len(unit))):
+                return
+
+
+class MavlinkSerialTransport(_Mavlink, SerialTransport):
+    """A telemetry radio (SiK, RFD900, a mesh radio) on a UART: Transport[bytes] of whole MAVLink frames."""
+
+    quiet_after = 0.1  # seconds without a byte after which a frame still arriving is cut short
+
+    def __init__(self, port: str, baudrate: int = 57600, *, heartbeat: Callable[[], bytes] | None = None,
+                 air_rate: int | None = None, **options: Any) -> None:
+        super().__init__(port, baudrate, **options)
+        self._mavlink_init(heartbeat, air_rate)
+        self._last_byte = 0.0
+
+    def _open_device(self) -> Any:
+        port = super()._open_device()
+        self._reader.reset()
+        return port
+
+    def _read_device(self, device: Any, timeout: float) -> list[bytes]:
+        beat = self._beat_due()
+        if beat is not None:
+            SerialTransport.write(self, beat)
+        chunks = super()._read_device(device, min(timeout, HEARTBEAT_PERIOD))
+        if chunks:
+            self._last_byte = time.monotonic()
+            return self.cut(chunks[0])
+        if self._reader.holding and time.monotonic() - self._last_byte > self.quiet_after:
+            return self._reader.flush()
+        return []
+
+    def write_nowait(self, unit: bytes) -> bytes | None:
+        return super().write_nowait(unit) if self._room(unit) else unit
+
+    def write(self, unit: bytes) -> None:
+        self._pace(unit, self._closed)
+        super().write(unit)
+
+
+class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
+    """MAVLink over UDP: `udpin` (bind `address`, answer the last sender) or `udpout` (send to `address`)."""
+
+    device_word = "UDP socket"
+    lost_counter = "disconnects"
+
+    def __init__(self, mode: str, address: tuple[str, int], *, heartbeat: Callable[[], bytes] | None = None,
+                 air_rate: int | None = None, name: str | None = None) -> None:
+        if mode not in ("udpin", "udpout"):
+            raise ValueError(f"a MAVLink UDP link is udpin or udpout, got {mode!r}")
+        super().__init__(name or f"{mode}:{address[0]}:{address[1]}", (0.1, 2.0))
+        self.mode, self.address = mode, address
+        self.peer: tuple[str, int] | None = None if mode == "udpin" else address
+        self.listening = (f"udp/{address[0]}:{address[1]}",) if mode == "udpin" else ()
+        self._mavlink_init(heartbeat, air_rate)
+
+    @property
+    def about(self) -> str:
+        if self.mode == "udpin":
+            return f"listening on udp {self.address[0]}:{self.address[1]}"
+        return f"sending to udp {self.address[0]}:{self.address[1]}"
+
+    def _open_device(self) -> socket.socket:
+        try:
+            family = socket.getaddrinfo(self.address[0], self.address[1], type=socket.SOCK_DGRAM)[0][0]
+            sock = socket.socket(family, socket.SOCK_DGRAM)
+        except OSError as exc:
+            raise TransportError(f"MAVLink {self.mode}:{self.address[0]}:{self.address[1]}: {exc}") from None
+        try:
+            if self.mode == "udpin":
+                sock.bind(self.address)
+            else:
+                sock.connect(self.address)  # hears the router alone
+        except OSError as exc:
+            sock.close()
+            raise TransportError(f"MAVLink {self.mode}:{self.address[0]}:{self.address[1]}: "
+                                 f"{exc.strerror or exc}") from None
+        sock.setblocking(False)
+        return sock
+
+    def _close_device(self, device: socket.socket) -> None:
+        device.close()
+
+    def _read_device(self, device: socket.socket, timeout: float) -> list[bytes]:
+        beat = self._beat_due() if self.peer is not None else None
+        if beat is not None:
+            self._send(device, beat)
+        if not select.select([device], [], [], min(timeout, HEARTBEAT_PERIOD))[0]:
+            return []
+        frames: list[bytes] = []
+        for _ in range(64):  # what has come, a bounded number of datagrams per read
+            try:
+                data, source = device.recvfrom(_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                break
+            except ConnectionRefusedError:  # an ICMP answer to an earlier send: nobody at the router's address yet
+                self.counters["tx_refused"] += 1
+                continue
+            self.counters["rx_bytes"] += len(data)
+            self.counters["rx_datagrams"] += 1
+            if self.mode == "udpin":
+                self.peer = source
+            frames += self._reader.feed(data) + self._reader.flush()  # a datagram is whole
+        return frames
+
+    def _write_device(self, device: socket.socket, unit: bytes) -> None:
+        self._send(device, unit)
+
+    def _send(self, device: socket.socket, unit: bytes) -> None:
+        peer = self.peer
+        if peer is None:
+            self.counters["tx_no_peer"] += 1  # udpin: nobody has spoken to us yet
+            return
+        try:
+            if self.mode == "udpout":
+                device.send(unit)
+            else:
+                device.sendto(unit, peer)
+        except ConnectionRefusedError:
+            self.counters["tx_refused"] += 1
+            return
+        except OSError as exc:
+            if exc.errno in (errno.EAGAIN, errno.ENOBUFS):
+                self._not_taken("tx_busy")
+                return
+            raise
+        self._sent()
+        self.counters["tx_bytes"] += len(unit)
+
+    def write_nowait(self, unit: bytes) -> bytes | None:
+        if not self._room(unit):
+            return unit
+        DeviceTransport.write(self, unit)  # a datagram goes whole or not at all: never half taken
+        return None
+
+    def write(self, unit: bytes) -> None:
+        self._pace(unit, self._closed)
+        super().write(unit)
