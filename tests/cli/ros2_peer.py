@@ -13,8 +13,8 @@ change it hears (`{"change": ...}`) as it comes, stamped with the wall-clock tim
     tables N             N table calls at once: {"tables": [[seconds to the answer, entries], ...]}
     write KEY VALUE ROBOT   one sample on the write topic (timestamp 0: the gateway stamps it)
     listen TOPIC         subscribes to TOPIC under the namespace (vstig_msgs/Message), then {"listening": TOPIC}
-    flood SECONDS [TOPIC]   writes as fast as rclpy publishes (on TOPIC under the namespace: default
-                         write), then {"flooded": N}
+    flood SECONDS [TOPIC [mixed]]   writes as fast as rclpy publishes (on TOPIC under the namespace: default
+                         write; mixed: valid, out of range and garbage), then {"flooded": {kind: N}}
     quit
 
 It subscribes to `changes` as a late joiner would (reliable, transient-local,
@@ -24,6 +24,7 @@ depth 1 a key), so what it prints first is the table the gateway already held.
 from __future__ import annotations
 
 import json
+import random
 import sys
 import threading
 import time
@@ -38,9 +39,14 @@ from vstig_msgs.srv import Get, Put, Table
 CALL_TIMEOUT = 20.0
 
 
+_SAYING = threading.Lock()  # the main thread answers while the executor's prints changes: one line at a time
+
+
 def say(record: dict[str, object]) -> None:
-    sys.stdout.write(json.dumps(record) + "\n")
-    sys.stdout.flush()
+    line = json.dumps(record) + "\n"
+    with _SAYING:
+        sys.stdout.write(line)
+        sys.stdout.flush()
 
 
 def entry(e: object) -> list[int]:
@@ -76,6 +82,35 @@ def concurrent_calls(client: Any, requests: list[Any], then: Any = None) -> tupl
     return [(answered(when), call.result()) for when, call in zip(times, calls, strict=True)], got
 
 
+def flood(target: Any, seconds: float, mixed: bool) -> dict[str, int]:
+    """Publish on `target` as fast as rclpy does for `seconds`: PUTs of one key, or `mixed`, in every 10 samples 7
+    PUTs and GETs of keys from 1000 up, 2 out of range (a key above 32767, an op that is neither PUT nor GET) and
+    one payload of random bytes. How many of each were sent."""
+    rng = random.Random(45)
+    sample, bad = (Message(op=Message.PUT, key=9, value=1, timestamp=0, robot=999, sender=-1) for _ in range(2))
+    sent = {"valid": 0, "out_of_range": 0, "garbage": 0}
+    end = time.monotonic() + seconds
+    n = 0
+    while time.monotonic() < end:
+        n += 1
+        turn = n % 10 if mixed else 0
+        if turn < 7:
+            sample.value = n & 0xFFFF
+            if mixed:  # PUTs and GETs of keys from 1000 up, stamped or not, from many robots
+                sample.op, sample.key = n & 1, n * 7919 % 31768 + 1000
+                sample.timestamp, sample.robot = n & 0xFFFF, n & 0x3FF
+            target.publish(sample)
+            sent["valid"] += 1
+        elif turn < 9:
+            bad.key, bad.op = (40000, Message.PUT) if turn == 7 else (9, 7)
+            target.publish(bad)
+            sent["out_of_range"] += 1
+        else:
+            target.publish(rng.randbytes(rng.randrange(0, 25)))  # Fast DDS sends no more than the type can be
+            sent["garbage"] += 1
+    return sent
+
+
 def main(namespace: str, wait: float) -> None:
     rclpy.init()
     node = rclpy.create_node("ros2_peer")
@@ -89,7 +124,8 @@ def main(namespace: str, wait: float) -> None:
 
     changes = node.create_subscription(Change, f"{namespace}/changes", changed, table_qos)
     writes = node.create_publisher(Message, f"{namespace}/write", 100)
-    clients = {name: node.create_client(kind, f"{namespace}/{name}")
+    burst = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    clients = {name: node.create_client(kind, f"{namespace}/{name}", qos_profile=burst)  # 50 calls at once
                for name, kind in (("put", Put), ("get", Get), ("table", Table))}
     executor = SingleThreadedExecutor()
     executor.add_node(node)
@@ -134,14 +170,8 @@ def main(namespace: str, wait: float) -> None:
             node.create_subscription(Message, f"{namespace}/{args[0]}", lambda _: None, 10)
             say({"listening": args[0]})
         elif command == "flood":
-            sample, end, sent = Message(op=Message.PUT, key=9, value=1, timestamp=0, robot=999, sender=-1), \
-                time.monotonic() + float(args[0]), 0
             target = writes if len(args) < 2 else node.create_publisher(Message, f"{namespace}/{args[1]}", 100)
-            while time.monotonic() < end:
-                sample.value = sent & 0xFFFF
-                target.publish(sample)
-                sent += 1
-            say({"flooded": sent})
+            say({"flooded": flood(target, float(args[0]), len(args) > 2 and args[2] == "mixed")})
     executor.shutdown()
     node.destroy_node()
     rclpy.try_shutdown()

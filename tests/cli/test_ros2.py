@@ -20,6 +20,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -259,7 +260,7 @@ def _radio_to_radio(sender: PtyPeer, receiver: PtyPeer, key: int, count: int) ->
         sender.write(b"".join(framing.encode(Message(Op.PUT, key, n, n + 1, 7))))
         got: list[Message] = []
         while not any(m.key == key and m.value == n for m in got):
-            assert time.monotonic() - start < 2.0, "the relay never came"
+            assert time.monotonic() - start < 2.0, f"the relay of key {key} value {n} never came"
             if select.select([receiver.master], [], [], 0.5)[0]:
                 got += framing.feed(os.read(receiver.master, 65536))
         delays.append(time.monotonic() - start)
@@ -267,25 +268,101 @@ def _radio_to_radio(sender: PtyPeer, receiver: PtyPeer, key: int, count: int) ->
     return delays
 
 
-def test_a_ros2_flood_does_not_delay_radio_to_radio_traffic(lab: Callable[..., Lab]) -> None:
-    """A ROS 2 node floods the write topic as fast as rclpy publishes. It takes a core of this machine, so the
-    anchor is the same flood on a topic the gateway does not subscribe to: what the gateway adds shows apart."""
+def _quantile(delays: list[float], q: float) -> float:
+    return sorted(delays)[min(len(delays) - 1, int(q * len(delays)))]
+
+
+def _until_relaying(sender: PtyPeer, receiver: PtyPeer, key: int = 19) -> None:
+    """A PUT written on one radio, newer each time, until the other reads it: the bridge relays (its ptys opened)."""
+    framing = make_serial_framing("cobs8")
+    got: list[Message] = []
+    for stamp in range(1, 300):
+        sender.write(b"".join(framing.encode(Message(Op.PUT, key, stamp, stamp, 7))))
+        if select.select([receiver.master], [], [], 0.1)[0]:
+            got += framing.feed(os.read(receiver.master, 65536))
+        if any(m.key == key for m in got):
+            return
+    raise AssertionError("the bridge never relayed one radio's PUT to the other")
+
+
+FLOODERS = 1  # ROS 2 nodes flooding at once, each as fast as rclpy publishes (~4x the issue's 9k samples a second)
+
+
+def test_a_ros2_flood_of_valid_and_garbage_writes_leaves_radio_to_radio_traffic_its_fair_share(
+        lab: Callable[..., Lab]) -> None:
+    """ROS 2 nodes flood the write topic as fast as rclpy publishes: PUTs and GETs of every key, keys and ops out of
+    range, random payloads. The flooders take this machine's cores, so the anchor is the same flood on a topic the
+    gateway does not subscribe to, in the same run, in turns with it (other work on the machine comes and goes):
+    what the gateway and its node process add shows apart. The fair-share goal: p99 at most 250 ms, p50 within 2x
+    the anchor's (or 1 ms more)."""
     a, b = PtyRobot(1), PtyRobot(2)  # their radios only: the test writes and reads the frames itself
     run = lab([a, b])
-    peer = run.peer()
-    p50 = {}
-    for n, topic in enumerate(("elsewhere", "write")):
-        peer.send(f"flood 5 {topic}")
-        time.sleep(1.0)
-        p50[topic] = statistics.median(_radio_to_radio(a.radio, b.radio, 20 + n, 50))
-        wait_for(lambda n=n: len(peer.records("flooded")) > n, 30)
-    sent = peer.records("flooded")[-1]
+    peers = [run.peer() for _ in range(FLOODERS)]
+    _until_relaying(a.radio, b.radio)
+    delays: dict[str, list[float]] = {"elsewhere": [], "write": []}
+    start = time.monotonic()
+    for turn in range(6):
+        topic = ("elsewhere", "write")[turn % 2]
+        for peer in peers:
+            peer.send(f"flood 3 {topic} mixed")
+        time.sleep(0.5)
+        delays[topic] += _radio_to_radio(a.radio, b.radio, 20 + turn, 60)
+        wait_for(lambda turn=turn: all(len(peer.records("flooded")) > turn for peer in peers), 30)
+    sent = Counter[str]()  # on the write topic: every other flood
+    for peer in peers:
+        for flooded in peer.records("flooded")[1::2]:
+            sent.update(flooded)
+    seconds = time.monotonic() - start
     seen = counters(run.close(), "ros2-lab")
-    shown = f"p50 {p50['elsewhere'] * 1000:.2f} ms flooding elsewhere, {p50['write'] * 1000:.2f} flooding write; {seen}"
-    assert p50["write"] < 1.5 * p50["elsewhere"] + 0.0005, shown
-    assert seen["rx"] <= 500 * 7, seen  # write_rate=500 a second, over the flood's ~5 s
-    assert seen["rx_lost"] > sent / 2, seen  # dropped inside Fast DDS, and counted
-    assert seen["rx"] + seen["rx_lost"] <= sent
+    p50, p99 = ({topic: _quantile(d, q) for topic, d in delays.items()} for q in (0.5, 0.99))
+    shown = (f"p50/p99 {p50['elsewhere'] * 1e3:.2f}/{p99['elsewhere'] * 1e3:.1f} ms flooding elsewhere, "
+             f"{p50['write'] * 1e3:.2f}/{p99['write'] * 1e3:.1f} flooding write; sent {dict(sent)}; {seen}")
+    assert p99["write"] <= 0.25, shown
+    assert p50["write"] <= max(2 * p50["elsewhere"], p50["elsewhere"] + 0.001), shown
+    assert seen["rx"] + seen["drop_bad_cdr"] <= 500 * seconds, shown  # taken at write_rate=500 a second
+    assert seen["drop_bad_cdr"] > 0, shown  # the garbage taken was refused in the node process, and counted
+    assert sum(sent.values()) / 2 < seen["rx_lost"], shown  # the rest dropped inside Fast DDS, and counted
+    assert seen["rx"] + seen["drop_bad_cdr"] + seen["rx_lost"] <= sum(sent.values()), shown
+
+
+def _fill(radio: PtyPeer, keys: int, robot: int) -> None:
+    """PUTs of keys 0..keys-1 written on `radio`, paced as the gateway's intake takes them."""
+    framing = make_serial_framing("cobs8")
+    for start in range(0, keys, 250):
+        radio.write(b"".join(b"".join(framing.encode(Message(Op.PUT, key, key & 0xFFFF, 1, robot)))
+                             for key in range(start, min(keys, start + 250))))
+        time.sleep(0.05)
+
+
+def test_fifty_table_calls_at_once_on_an_18k_key_table_leave_radio_to_radio_traffic_its_fair_share(
+        lab: Callable[..., Lab]) -> None:
+    """The table service's answers come from one snapshot shared by the calls asked before it was taken, sent to
+    the node process once: 50 calls at once on an 18k-key table cost the gateway one or two snapshots, not 50 walks
+    of the table under its lock, and radio -> radio keeps the fair-share goal against the same run without them."""
+    a, b = PtyRobot(1), PtyRobot(2)
+    run = lab([a, b])
+    peer = run.peer()
+    _fill(b.radio, 18_000, 9)  # from B: the relays of the fill queue for A's radio, not for B's
+    end = time.monotonic() + 60
+    while not peer.records("table") or len(peer.records("table")[-1]) < 18_000:
+        assert time.monotonic() < end, f"the table never held the fill: {len(peer.records('table')[-1])} keys"
+        asked = len(peer.records("table"))
+        peer.send("table")
+        wait_for(lambda asked=asked: len(peer.records("table")) > asked, 20)
+    quiet = _radio_to_radio(a.radio, b.radio, 30_000, 100)
+    peer.send("tables 50")
+    time.sleep(0.1)
+    loaded = _radio_to_radio(a.radio, b.radio, 30_001, 100)
+    wait_for(lambda: bool(peer.records("tables")) or peer.process.poll() is not None, 60)
+    assert peer.records("tables"), "".join(peer.errors)[-2000:]
+    answers = peer.records("tables")[-1]
+    seen = counters(run.close(), "ros2-lab")
+    shown = (f"p50/p99 {_quantile(quiet, 0.5) * 1e3:.2f}/{_quantile(quiet, 0.99) * 1e3:.1f} ms quiet, "
+             f"{_quantile(loaded, 0.5) * 1e3:.2f}/{_quantile(loaded, 0.99) * 1e3:.1f} ms under 50 table calls; "
+             f"answered in {min(t for t, _ in answers):.2f}..{max(t for t, _ in answers):.2f} s; {seen}")
+    assert all(count >= 18_000 for _, count in answers), shown
+    assert _quantile(loaded, 0.99) <= 0.25, shown
+    assert _quantile(loaded, 0.5) <= max(2 * _quantile(quiet, 0.5), _quantile(quiet, 0.5) + 0.001), shown
 
 
 @pytest.fixture

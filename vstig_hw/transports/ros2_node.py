@@ -11,7 +11,8 @@ stdin and reads frames from our stdout (the protocol: `ros2.py`):
          T  a page of a table snapshot (before the answer that names it; we keep the last one)
     out  W  what ROS 2 nodes wrote on <ns>/write (at most write_rate a second)
          Q  a service request (put, get, table) for the gateway to answer
-         K  what we counted since the last K (once a second and when we end)
+         K  what we counted since the last K (once a second and when we end), with the writes refused here
+            (`drop_bad_cdr`: not a vstig_msgs/Message, a key or an op out of range)
 
 It ends when its stdin closes (the gateway closed the link, or died), and ignores
 SIGINT: Ctrl-C is the gateway's to handle, which then closes us.
@@ -31,13 +32,14 @@ from importlib.resources import files
 from typing import IO, Any
 
 from ..counters import Counters
-from ..framing.ros2 import CDR_SIZE, cdr_message, ros_name
+from ..framing.ros2 import CDR_SIZE, cdr_message, message_of_cdr, ros_name
 from ..wire import Message
 from .ros2 import CHANGE, FRAME, HEARD, PUTS_AT_ONCE, TABLE_PAGE, TABLE_RECORD, Ros2Options
 
 WRITE_POLL = 0.05  # seconds between two takes from the write topic: what a ROS 2 write may wait
 DIAGNOSTICS_PERIOD = 1.0
 NICENESS = 10  # the node's CPU comes after the data path's: a flood it receives costs the gateway's threads little
+SERVICE_DEPTH = 1000  # requests a service holds while it answers others
 ANSWER_WAIT = 30.0  # seconds a service waits for the gateway's answer (a confirmed put takes up to ~11)
 # The executor's threads: the puts in flight, one answering further puts busy, and one each for get, table and
 # the two timers, so that none of them waits for a thread.
@@ -123,9 +125,14 @@ class Ros2Node:
         self.changes = None
         if served:
             self.changes = node.create_publisher(msg.Change, "changes", table)
-            node.create_service(srv.Put, "put", self._put, callback_group=ReentrantCallbackGroup())
-            node.create_service(srv.Get, "get", self._get, callback_group=MutuallyExclusiveCallbackGroup())
-            node.create_service(srv.Table, "table", self._table, callback_group=MutuallyExclusiveCallbackGroup())
+            # Requests wait in the service's history while its group is busy: ROS 2's default (10) drops the oldest
+            # of a burst unanswered, and its caller waits for ever.
+            asked = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=SERVICE_DEPTH,
+                               reliability=ReliabilityPolicy.RELIABLE)
+            for kind, name, answer, group in ((srv.Put, "put", self._put, ReentrantCallbackGroup()),
+                                              (srv.Get, "get", self._get, MutuallyExclusiveCallbackGroup()),
+                                              (srv.Table, "table", self._table, MutuallyExclusiveCallbackGroup())):
+                node.create_service(kind, name, answer, qos_profile=asked, callback_group=group)
         from diagnostic_msgs.msg import DiagnosticArray
 
         diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -224,15 +231,22 @@ class Ros2Node:
         self._tokens = min(float(rate), self._tokens + (now - self._refilled) * rate)
         self._refilled = now
         taken: list[list[Any]] = []
+        garbage = 0
         subscription = self.writes
         while self._tokens >= 1.0:
             with subscription.handle:  # rclpy's executor takes a sample this way (Subscription.handle)
                 sample = subscription.handle.take_message(subscription.msg_type, True)
             if sample is None:
                 break
-            self._tokens -= 1.0
+            self._tokens -= 1.0  # garbage costs its taking too: a garbage flood is bounded as any other
             payload, info = sample
-            taken.append([payload.hex(), self._writer_of(info)])
+            source = self._writer_of(info)
+            if message_of_cdr(payload) is None:  # refused here, not shipped to the gateway's data path
+                garbage += 1
+            else:
+                taken.append([payload.hex(), source])
+        if garbage:
+            self._count("drop_bad_cdr", garbage)
         if taken:
             self._count("rx", len(taken))
             self._send(b"W", json.dumps(taken).encode())
