@@ -1,15 +1,52 @@
 """A confirmed write as a state machine: pure (no I/O, no thread, no clock), like the engine.
 
 Fed what links heard, what our table holds and the time, it says what to send
-and, once, its verdict, which never changes after (h11's named states and
-transitions are the model). `oneshot.confirm_write` drives it on a Node for
-`vstig put` and the Python API alike.
+and, once, its verdict, which never changes after. h11's `_state.py` is the
+model: each input is read as one `Event`, and one table (`TRANSITIONS`) maps
+(state, event) to the next state, what to send and the verdict it reaches; an
+event the table lacks for a state is a bug (`UnexpectedEvent`), never ignored.
+The machine also decides which messages concern the write (our key, not our
+own frames), so its driver feeds it everything links heard. `oneshot.confirm_write`
+drives it on a Node for `vstig put` and the Python API alike.
 
-    LEARNING --(learn s)--> WAITING --(a neighbour shows it)--> DONE: TAKEN
-        |                     | \\--(superseded, tries left)--> WAITING (written again)
-        |                     |  \\-(superseded, no try left)--> DONE: SUPERSEDED
-        |                     \\---(wait s)--------------------> DONE: UNANSWERED
-        \\-------(our own probe comes back)-------------------> DONE: HEARS_ITSELF
+The table, as `diagram()` renders it (a test holds this text equal to it;
+`python -m vstig_hw.gateway.confirm` prints it):
+
+    IDLE
+        --start, learning first-----> LEARNING / probe
+        --start---------------------> WRITING / probe, write
+        --start, unconfirmed--------> WRITING / write
+    LEARNING
+        --step (odd)----------------> itself / probe
+        --step (even)---------------> itself / ask
+        --time limit----------------> WRITING / write
+        --our probe came back-------> DONE: HEARS_ITSELF
+        stays on: heard; table holds ours
+    WRITING
+        --stored--------------------> WAITING / probe
+        --stored, unconfirmed-------> DONE: UNCONFIRMED
+    WAITING
+        --step (odd)----------------> itself / probe
+        --step (even)---------------> itself / ask
+        --time limit----------------> DONE: UNANSWERED
+        --our probe came back-------> DONE: HEARS_ITSELF
+        --our entry shown-----------> DONE: TAKEN
+        --a rival at our timestamp--> CONTESTED
+        --a write one past ours-----> DONE: TAKEN
+        --superseded, tries left----> WRITING / write
+        --superseded, no try left---> DONE: SUPERSEDED
+        stays on: heard; table holds ours
+    CONTESTED
+        --step (odd)----------------> itself / probe
+        --step (even)---------------> itself / ask
+        --time limit----------------> DONE: UNANSWERED
+        --our probe came back-------> DONE: HEARS_ITSELF
+        --our entry shown-----------> DONE: TAKEN
+        --superseded, tries left----> WRITING / write
+        --superseded, no try left---> DONE: SUPERSEDED
+        stays on: heard; a rival at our timestamp; a write one past ours; table holds ours
+    DONE
+        takes every event and stays: the verdict never changes
 
 The rules:
 
@@ -52,12 +89,16 @@ from ..engine import Entry
 from ..timestamps import TS_NONE, next_timestamp
 from ..wire import Message, Op
 
-__all__ = ["ConfirmedWrite", "PutResult", "Send", "State", "Verdict"]
+__all__ = ["TRANSITIONS", "ConfirmedWrite", "Event", "PutResult", "Send", "State", "Transition", "UnexpectedEvent",
+           "Verdict", "diagram"]
 
 
 class State(enum.Enum):
+    IDLE = "idle"  # not started
     LEARNING = "learning"  # asking what the swarm holds, before the first write
+    WRITING = "writing"  # a write asked for: the driver tells `wrote` what it stored before anything else
     WAITING = "waiting"  # our write is out: waiting for a neighbour to show it
+    CONTESTED = "contested"  # waiting, but an entry with our timestamp from another robot was heard
     DONE = "done"  # the verdict is fixed
 
 
@@ -73,6 +114,122 @@ class Send(enum.Enum):
     PROBE = "probe"  # an empty GET for the key under our id, sent at once ahead of every queue
     ASK = "ask"  # a GET carrying our view (the paper's read)
     WRITE = "write"  # put the value; the driver then tells `wrote` the entry it stored
+
+
+class Event(enum.Enum):
+    """One input, as the machine reads it (the value labels it in the diagram)."""
+
+    LEARN_FIRST = "start, learning first"
+    START = "start"
+    START_UNCONFIRMED = "start, unconfirmed"
+    STEP_PROBE = "step (odd)"  # a control step within the time limit: they alternate a probe and an ask
+    STEP_ASK = "step (even)"
+    DEADLINE = "time limit"  # a control step past the learning or the write's wait
+    STORED = "stored"  # `wrote`: our table stored the write
+    STORED_UNCONFIRMED = "stored, unconfirmed"
+    ECHOED = "our probe came back"  # an empty GET under our id that names no sender (confirming only)
+    HEARD = "heard"  # a neighbour's entry that shows nothing about our write
+    SHOWN = "our entry shown"  # a neighbour's message carries our exact entry
+    RIVAL = "a rival at our timestamp"  # another robot's entry with our write's timestamp (a conflict)
+    BUILT_ON = "a write one past ours"  # another robot's entry one timestamp past our write
+    HELD = "table holds ours"  # our table's entry changed, to our write or before any write
+    SUPERSEDED = "superseded, tries left"  # our table's entry is no longer our write
+    LAST_SUPERSEDED = "superseded, no try left"
+
+
+@dataclass(frozen=True)
+class Transition:
+    """Where an event leads from a state: the next state, what to send, and the verdict it reaches (if any)."""
+
+    to: State
+    sends: tuple[Send, ...] = ()
+    verdict: Verdict | None = None
+
+
+def _steps(state: State) -> dict[Event, Transition]:
+    """A control step within the time limit: `state` asks again, a probe and a view in turn."""
+    return {Event.STEP_PROBE: Transition(state, (Send.PROBE,)), Event.STEP_ASK: Transition(state, (Send.ASK,))}
+
+
+def _waiting(state: State, built_on: Transition) -> dict[Event, Transition]:
+    """Our write is out (WAITING, or CONTESTED: they differ only in what a write one past ours shows)."""
+    return {
+        **_steps(state),
+        Event.DEADLINE: Transition(State.DONE, verdict=Verdict.UNANSWERED),
+        Event.ECHOED: Transition(State.DONE, verdict=Verdict.HEARS_ITSELF),
+        Event.HEARD: Transition(state),
+        Event.SHOWN: Transition(State.DONE, verdict=Verdict.TAKEN),
+        Event.RIVAL: Transition(State.CONTESTED),
+        Event.BUILT_ON: built_on,
+        Event.HELD: Transition(state),
+        Event.SUPERSEDED: Transition(State.WRITING, (Send.WRITE,)),  # newer: the engine writes one past what it holds
+        Event.LAST_SUPERSEDED: Transition(State.DONE, verdict=Verdict.SUPERSEDED),
+    }
+
+
+# The whole machine. A state takes only the events listed for it; DONE takes every event and changes nothing.
+TRANSITIONS: dict[State, dict[Event, Transition]] = {
+    State.IDLE: {
+        Event.LEARN_FIRST: Transition(State.LEARNING, (Send.PROBE,)),
+        Event.START: Transition(State.WRITING, (Send.PROBE, Send.WRITE)),  # the probe goes right before the write
+        Event.START_UNCONFIRMED: Transition(State.WRITING, (Send.WRITE,)),
+    },
+    State.LEARNING: {
+        **_steps(State.LEARNING),
+        Event.DEADLINE: Transition(State.WRITING, (Send.WRITE,)),
+        Event.ECHOED: Transition(State.DONE, verdict=Verdict.HEARS_ITSELF),
+        Event.HEARD: Transition(State.LEARNING),
+        Event.HELD: Transition(State.LEARNING),
+    },
+    State.WRITING: {  # the driver makes the write and tells `wrote` before anything else (under the Node's lock)
+        # a second probe right after the write: every holder of the key answers now, a gateway that took it included
+        Event.STORED: Transition(State.WAITING, (Send.PROBE,)),
+        Event.STORED_UNCONFIRMED: Transition(State.DONE, verdict=Verdict.UNCONFIRMED),
+    },
+    State.WAITING: _waiting(State.WAITING, Transition(State.DONE, verdict=Verdict.TAKEN)),  # its writer held ours
+    # a write one past our timestamp may be built on the rival instead: it shows nothing
+    State.CONTESTED: _waiting(State.CONTESTED, Transition(State.CONTESTED)),
+    State.DONE: {event: Transition(State.DONE) for event in Event},
+}
+
+
+def diagram() -> str:
+    """The transition table as text, for the module docstring: each state, where each event takes it and what it
+    sends; the events a state takes without moving or sending on one line."""
+    width = max(len(event.value) for event in Event) + 4
+    lines: list[str] = []
+    for state, events in TRANSITIONS.items():
+        lines.append(state.name)
+        quiet = [event.value for event, step in events.items() if step == Transition(state)]
+        if len(quiet) == len(Event):
+            lines.append("    takes every event and stays: the verdict never changes")
+            continue
+        for event, step in events.items():
+            if step != Transition(state):
+                to = "itself" if step.to is state else step.to.name
+                verdict = f": {step.verdict.name}" if step.verdict else ""
+                sends = f" / {', '.join(send.value for send in step.sends)}" if step.sends else ""
+                lines.append(f"    --{event.value}".ljust(width + 4, "-") + f"> {to}{verdict}{sends}")
+        if quiet:
+            lines += _packed("    stays on: ", quiet, "        ")
+    return "\n".join(lines)
+
+
+def _packed(first: str, items: list[str], then: str, width: int = 100) -> list[str]:
+    """`items` joined by "; " on lines of at most `width` (never one split), the first after `first`."""
+    lines = [first]
+    for item in items:
+        start = lines[-1] in (first, then)
+        if not start and len(lines[-1]) + 2 + len(item) > width:
+            lines[-1] += ";"
+            lines.append(then)
+            start = True
+        lines[-1] += item if start else "; " + item
+    return lines
+
+
+class UnexpectedEvent(RuntimeError):
+    """An input the table has no transition for in the current state: a bug in the machine or its driver."""
 
 
 @dataclass(frozen=True)
@@ -104,7 +261,8 @@ class ConfirmedWrite:
     waits for a neighbour (`first_wait` for the first: a caller that spent some
     of its budget opening links gives less); `tries`: writes at most. Without
     `confirm` it learns as asked, writes once and is done (UNCONFIRMED). Every input takes `now`
-    (any monotonic clock) and returns what to send, in order.
+    (any monotonic clock) and returns what to send, in order. Each input is read as an `Event` and
+    moves by `TRANSITIONS`; once DONE, nothing it is told changes anything.
     """
 
     def __init__(self, key: int, robot_id: int, *, learn: float = 0.0, wait: float = 2.0, tries: int = 3,
@@ -114,7 +272,7 @@ class ConfirmedWrite:
         self.key, self.robot_id = key, robot_id
         self.learn, self.wait, self.tries, self.confirm = learn, wait, tries, confirm
         self.first_wait = wait if first_wait is None else first_wait
-        self.state = State.LEARNING
+        self.state = State.IDLE
         self.verdict: Verdict | None = None
         self.written: Entry | None = None  # our last write (None: not written yet)
         self.made = 0  # writes made
@@ -123,84 +281,74 @@ class ConfirmedWrite:
         self.shown: Entry | None = None  # what showed the write was taken
         self.echoed_on: str | None = None  # the link our own probe came back on
         self.deadline = 0.0  # when the current phase ends (learning, or the current write's wait)
-        self._probed: set[str] = set()  # links our probe came back on (none: it cannot have)
-        self._rival = False  # an entry with our write's timestamp from another robot was heard
-        self._superseded = False  # our last write was superseded: it can no longer be taken (written again)
-        self._asked = 0  # control steps asked in
+        self._steps = 0  # control steps asked in
 
     # -- inputs -----------------------------------------------------------------------
     def start(self, now: float) -> list[Send]:
         """Begin: probe (and write, unless learning first)."""
         if self.learn > 0:
             self.deadline = now + self.learn
-            return [Send.PROBE]
-        return [Send.PROBE, Send.WRITE] if self.confirm else [Send.WRITE]
+            return _sends(self._move(Event.LEARN_FIRST))
+        return _sends(self._move(Event.START if self.confirm else Event.START_UNCONFIRMED))
 
     def wrote(self, entry: Entry, now: float) -> list[Send]:
         """The write asked for was made: `entry` is what our table stored."""
-        self.written = self.holds = entry
-        self.made += 1
-        self._rival = self._superseded = False
-        if not self.confirm:
-            self._decide(Verdict.UNCONFIRMED)
-            return []
-        self.state = State.WAITING
-        self.deadline = now + (self.first_wait if self.made == 1 else self.wait)
-        return [Send.PROBE]  # every holder of the key answers now, a gateway that took it included
+        step = self._move(Event.STORED if self.confirm else Event.STORED_UNCONFIRMED)
+        if step is not None:
+            self.written = self.holds = entry
+            self.made += 1
+            self.deadline = now + (self.first_wait if self.made == 1 else self.wait)
+        return _sends(step)
 
     def heard(self, message: Message, link: str, sender: int | None, now: float) -> list[Send]:
-        """A message for our key, heard on `link` from `sender` (None: the medium names none)."""
-        if self.state is State.DONE or message.key != self.key:
-            return []
-        if sender is not None and sender == self.robot_id:  # our own frame, named as ours (CAN IDs)
+        """A message heard on `link` from `sender` (None: the medium names none). One for another key, one of
+        our own frames, or an empty GET that is not our probe back, does not concern this write."""
+        if message.key != self.key or sender == self.robot_id:  # another key, or our own frame named as ours
             return []
         if message.timestamp == TS_NONE:
-            if message.op is Op.GET and message.robot == self.robot_id and sender is None:
-                self._probed.add(link)  # our own probe, back: this link echoes what we send
-                if self.confirm:
-                    self.echoed_on = link
-                    self._decide(Verdict.HEARS_ITSELF)
-            return []
+            if not (self.confirm and message.op is Op.GET and message.robot == self.robot_id and sender is None):
+                return []  # a neighbour's question (a relayed empty GET names its relay), or nothing to judge
+            step = self._move(Event.ECHOED)
+            if step is not None:
+                self.echoed_on = link  # our own probe, back: this link echoes what we send
+            return _sends(step)
         entry = Entry(message.value, message.timestamp, message.robot)
-        self.last_heard = entry
-        written = self.written
-        if self.state is not State.WAITING or written is None or self._superseded or link in self._probed:
-            return []
-        if entry == written:
-            self._taken(entry)
-        elif entry.timestamp == written.timestamp and entry.robot != written.robot:
-            self._rival = True  # a conflict: a write one past our timestamp may be built on either entry
-        elif (entry.timestamp == next_timestamp(written.timestamp) and entry.robot != self.robot_id
-              and not self._rival):
-            self._taken(entry)  # its writer held ours: it wrote on top of it
-        return []
+        step = self._move(self._shows(entry))
+        if step is not None:
+            self.last_heard = entry
+            if step.verdict is Verdict.TAKEN:
+                self.shown = entry
+        return _sends(step)
+
+    def heard_on(self, link: str, sender: int | None, messages: list[Message], now: float) -> list[Send]:
+        """What a link heard, as the Node tells it: `heard` for each message in turn."""
+        return [send for message in messages for send in self.heard(message, link, sender, now)]
 
     def changed(self, holds: Entry | None, now: float) -> list[Send]:
         """What a message heard did to our table's entry for the key (not our own writes)."""
-        if self.state is State.DONE:
+        written = self.written
+        if written is None or holds == written:
+            event = Event.HELD
+        else:
+            event = Event.SUPERSEDED if self.made < self.tries else Event.LAST_SUPERSEDED
+        step = self._move(event)
+        if step is not None:
+            self.holds = holds
+        return _sends(step)
+
+    def table_changed(self, key: int, holds: Entry | None, link: str | None, now: float) -> list[Send]:
+        """The Node's change notice: `changed` when a message heard on `link` moved our key's entry; another
+        key, or our own write (`link` None: `wrote` told it), does not concern this write."""
+        if key != self.key or link is None:
             return []
-        self.holds = holds
-        if self.state is not State.WAITING or holds == self.written:
-            return []
-        if self.made < self.tries:
-            if self._superseded:
-                return []  # written again already asked for
-            self._superseded = True
-            return [Send.WRITE]  # newer than what superseded it: the engine writes one past what it holds
-        self._decide(Verdict.SUPERSEDED)
-        return []
+        return self.changed(holds, now)
 
     def tick(self, now: float) -> list[Send]:
-        """A control step: the time limits, then one question."""
-        if self.state is State.DONE:
-            return []
+        """A control step: the time limit, else one question."""
         if now >= self.deadline:
-            if self.state is State.LEARNING:
-                return [Send.WRITE]
-            self._decide(Verdict.UNANSWERED)
-            return []
-        self._asked += 1
-        return [Send.ASK if self._asked % 2 == 0 else Send.PROBE]
+            return _sends(self._move(Event.DEADLINE))
+        self._steps += 1
+        return _sends(self._move(Event.STEP_ASK if self._steps % 2 == 0 else Event.STEP_PROBE))
 
     # -- outputs ------------------------------------------------------------------------
     @property
@@ -214,10 +362,37 @@ class ConfirmedWrite:
         return PutResult(self.verdict, self.written, self.made, self.holds, self.last_heard, self.shown)
 
     # -- inside -------------------------------------------------------------------------
-    def _taken(self, shown: Entry) -> None:
-        self.shown = shown
-        self._decide(Verdict.TAKEN)
+    def _shows(self, entry: Entry) -> Event:
+        """What a neighbour's `entry` shows about our last write (whether it counts is the table's)."""
+        written = self.written
+        if written is None:
+            return Event.HEARD
+        if entry == written:
+            return Event.SHOWN
+        if entry.timestamp == written.timestamp and entry.robot != written.robot:
+            return Event.RIVAL
+        if entry.timestamp == next_timestamp(written.timestamp) and entry.robot != self.robot_id:
+            return Event.BUILT_ON
+        return Event.HEARD
 
-    def _decide(self, verdict: Verdict) -> None:
-        self.verdict = verdict
-        self.state = State.DONE
+    def _move(self, event: Event) -> Transition | None:
+        """Take `event` by the table: the next state and the verdict it reaches. None once DONE, which takes
+        every event and changes nothing (the caller then records nothing either)."""
+        step = TRANSITIONS[self.state].get(event)
+        if step is None:
+            raise UnexpectedEvent(f"key {self.key}: the confirmed write cannot take '{event.value}' while "
+                                  f"{self.state.value} (a bug in its driver or its table)")
+        if self.state is State.DONE:
+            return None
+        self.state = step.to
+        if step.verdict is not None:
+            self.verdict = step.verdict
+        return step
+
+
+def _sends(step: Transition | None) -> list[Send]:
+    return list(step.sends) if step is not None else []
+
+
+if __name__ == "__main__":
+    print(diagram())

@@ -2,11 +2,11 @@
 
 `confirm_write` drives a `confirm.ConfirmedWrite` (the pure state machine: its
 docstring has the rules) on a Node, for the CLI and the Python API alike: the
-machine hears what the links heard for the key (a `messages` listener, on the
-reader's thread as it arrives), what that did to our table (`change`), and each
-control step (`tick`); what it asks to send goes out through the Node; its
-verdict completes a Future the moment it is reached. The Node's own threads run
-it: nothing else schedules it.
+machine hears everything the links heard (a `messages` listener, on the
+reader's thread as it arrives: the machine picks what concerns the write), what
+that did to our table (`change`), and each control step (`tick`); what it asks
+to send goes out through the Node; its verdict completes a Future the moment it
+is reached. The Node's own threads run it: nothing else schedules it.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any
 
 from ..engine import Entry
 from ..links.link import Link
-from ..wire import KEY_MAX, Message
+from ..wire import Message
 from ..wording import counted
 from .confirm import ConfirmedWrite, PutResult, Send, Verdict
 from .node import Listening, Node, SwarmClosed
@@ -82,17 +82,10 @@ class _Driver:
 
     # -- what the Node tells ---------------------------------------------------------
     def _heard(self, link: str, t: float, sender: int | None, messages: list[Message]) -> None:
-        machine, key = self.machine, self.machine.key
-        for msg in messages:
-            if msg[0] & KEY_MAX == key:  # the head: op bit and key
-                machine.heard(msg, link, sender, time.monotonic())
-        if machine.done:
-            self._settle()
+        self._do(self.machine.heard_on(link, sender, messages, time.monotonic()))
 
     def _changed(self, key: int, old: Entry | None, new: Entry, link: str | None, sender: int | None) -> None:
-        if key != self.machine.key or link is None:  # our own writes are told too: the machine knows them
-            return
-        self._do(self.machine.changed(new, time.monotonic()))
+        self._do(self.machine.table_changed(key, new, link, time.monotonic()))
 
     def _tick(self, node: Node) -> None:
         self._do(self.machine.tick(time.monotonic()))
