@@ -196,7 +196,8 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
         return (f"reached nobody at connect={where}: is it up, and does it accept our certificates and "
                 "credentials?")
 
-    def _peers_now(self) -> int:
+    def _peers_now(self) -> int | None:
+        """Peers and routers connected now; None when the session cannot tell (closing)."""
         session = self._device
         if session is None:
             return 0
@@ -204,7 +205,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
             info = session.info
             return len(info.peers_zid()) + len(info.routers_zid())
         except zenoh.ZError:
-            return 0
+            return None
 
     @property
     def session(self) -> zenoh.Session | None:
@@ -360,6 +361,8 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
             return
         self._next_poll = now + _PEER_POLL_S
         others = self._peers_now()
+        if others is None:
+            return
         if others and not self._had_peer:
             self._had_peer = True
             if self._reported_alone:
