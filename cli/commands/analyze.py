@@ -13,7 +13,6 @@ import click
 
 from vstig_hw.analysis import CONFLICT_RULES, DEFAULT_WINDOW, Analyzer, Conflict, Report, Traffic, WriteReport
 from vstig_hw.capture.analyzefile import Fed, analyze_captures
-from vstig_hw.capture.clock_notes import CaptureClock, Shift, disputed, read_clock_notes, shifts
 from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError
 from vstig_hw.counters import Counters
@@ -21,6 +20,7 @@ from vstig_hw.extras import require
 from vstig_hw.values import ValueType, from_raw
 from vstig_hw.wording import counted, shown_sender
 
+from ..clock_merge import on_one_clock
 from ..options import (
     Finite,
     echo_skipped,
@@ -90,7 +90,7 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     names = ", ".join(map(input_name, files))
     with contextlib.ExitStack() as spooled:  # stdin and pipes are copied to a file first
         readable = {spooled.enter_context(readable_capture(path, input_format)): input_name(path) for path in files}
-        clocks = _on_one_clock(readable, trust_clock_notes)
+        clocks = on_one_clock(readable, trust_clock_notes)
         try:
             drops, bad, filtered_out = _read(readable, analyzer, skip_bad, base, width, keep, deployment,
                                              [shift.seconds if shift else 0.0 for shift in clocks] if clocks else None)
@@ -120,38 +120,6 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     if drops:
         summary += f", dropped {drops.summary()}"
     click.echo(summary + (f"; wrote {plot}" if plot else ""), err=True)
-
-
-def _on_one_clock(names: dict[str, str], trust: bool) -> list[Shift | None]:
-    """Several captures whose clock notes join them: each one's shift onto the first's clock, said on stderr
-    (nothing when no capture names its clock: they merge on their own clocks, as before); `trust`: through
-    unproved offsets too."""
-    if len(names) < 2:
-        return []
-    clocks = [read_clock_notes(path) if _line_capture(path) else CaptureClock(None, []) for path in names]
-    if not any(clock.clock for clock in clocks):
-        return []
-    found = shifts(clocks, trust_unproved=trust)
-    first, *others = names.values()
-    if not trust:
-        for clock, proofs in sorted(disputed(clocks).items()):
-            click.echo(f"clock {clock}: answered for by more than one certificate ({', '.join(proofs)}): "
-                       "its offsets are not used", err=True)
-    unproved = 0 if trust else sum(trip.proof is None for clock in clocks for trip in clock.offsets)
-    for name, shift in zip(others, found[1:], strict=True):
-        if shift is None:
-            why = (f"no proved clock offset joins it to {first}'s ({unproved} unproved not used: "
-                   "--trust-clock-notes uses them)") if unproved else f"no clock offset to {first}'s was measured"
-            click.echo(f"{name}: {why}: merged on its own clock", err=True)
-        else:
-            click.echo(f"{name}: on {first}'s clock: {-shift.seconds * 1e3:+.3f} ms "
-                       f"(± {shift.error * 1e3:.3f} ms)", err=True)
-    return found
-
-
-def _line_capture(path: str) -> bool:
-    with open(path, "rb") as file:
-        return file.read(8) == b"# vstig "
 
 
 def _read(names: dict[str, str], analyzer: Analyzer, skip_bad: bool, base: int | None, width: bool | None,

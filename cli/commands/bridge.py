@@ -3,18 +3,22 @@
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import click
 
+from vstig_hw.api.recording import Recording, link_medium
+from vstig_hw.capture.plan import capture_medium
 from vstig_hw.engine import larger_value_wins
+from vstig_hw.extras import require
 from vstig_hw.gateway import DEFAULT_BUDGET, DEFAULT_PERIOD, Mode, Node, RoundRobinGet, favour_latency, stop_on_signals
 from vstig_hw.gateway.ros2 import serve_ros2
-from vstig_hw.links import LinkSpec
+from vstig_hw.links import Link, LinkSpec
 
 from ..config import ConfiguredCommand, config_options
 from ..live import foxglove_option, live_view
 from ..ops.metrics import metrics_option, metrics_served
-from ..options import Address, Finite, GuardChoice, guard_options, take_warnings
+from ..options import Address, Finite, GuardChoice, guard_options, overwrite_option, refuse_to_replace, take_warnings
 from ..running import (
     LINK,
     LinkArguments,
@@ -48,14 +52,18 @@ def _raw_note(robot_id: int | None) -> str:
               help="GET one key of the table per tick, round-robin, as a robot's program would: repairs gateways "
                    "that were apart (network partition, restart) without waiting for the next write.")
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
+@click.option("--record", "record", type=click.Path(path_type=str), metavar="FILE",
+              help="Record every link's traffic, heard and sent, and the gateway's own decisions into FILE "
+                   "(formats as vstig record -o; docs/how-to/why.md).")
+@overwrite_option("the --record FILE")
 @foxglove_option
 @metrics_option
 @guard_options
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
-            larger: bool, refresh: bool, duration: float | None, foxglove: Address | None, foxglove_viewers: int,
-            metrics: Address | None, guard: GuardChoice) -> None:
+            larger: bool, refresh: bool, duration: float | None, record: str | None, overwrite: bool,
+            foxglove: Address | None, foxglove_viewers: int, metrics: Address | None, guard: GuardChoice) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
     The status line and the counters printed on exit have each link's counters
@@ -80,16 +88,23 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     vstig bridge can:socketcan:can0 zenoh:lab?connect=tcp/10.0.0.5:7447 --robot-id 201
 
     --foxglove 8765 shows the swarm live in Foxglove (docs/how-to/live-view.md).
+
+    --record FILE keeps a capture of every link, what the bridge hears and what it sends, with
+    notes of what it decided (refusals, drops, overflows, conflicts): vstig why reads it.
     """
     if robot_id is None and not raw:
         raise click.UsageError("--robot-id is required (the PC's id in the swarm), or use --raw")
     if raw and len(links) < 2:
         raise click.UsageError("--raw needs at least two links to bridge")
     built = build_links(links, robot_id or 0)
+    if record is not None:
+        _check_record_file(record, built, overwrite)
     firewall = guard.build(built)
+    # A recording bridge relays on the Python path, whose writes the recording sees (Recording).
     node = Node(built, robot_id or 0, mode=Mode.RAW if raw else Mode.ENGINE,
                 period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
-                onconflict=larger_value_wins if larger else None, guard=firewall)
+                onconflict=larger_value_wins if larger else None, guard=firewall, pure=record is not None)
+    recording = None if record is None else Recording(node, record, overwrite=True)
     if refresh and not raw:
         node.listen(tick=RoundRobinGet())
     serve_ros2(node)
@@ -116,3 +131,16 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     for warning in take_warnings(firewall):
         click.echo(warning, err=True)
     print_counters(node)
+    if recording is not None:
+        click.echo(f"{recording.records} units in {', '.join(recording.files)}", err=True)
+
+
+def _check_record_file(path: str, links: list[Link[Any]], overwrite: bool) -> None:
+    """--record's file, checked as vstig record checks -o, before any link opens."""
+    try:
+        medium = capture_medium(path, [link_medium(link) for link in links])
+    except ValueError as error:
+        raise click.UsageError(f"--record {error}") from None
+    refuse_to_replace(path, overwrite)
+    if medium == "mcap":
+        require("mcap", f"vstig bridge --record {path}")

@@ -164,6 +164,7 @@ class Node:
         onconflict: ConflictResolver | None = None,
         count_outcomes: bool = False,
         guard: Guard | None = None,
+        pure: bool = False,
     ) -> None:
         self.links = list(links)
         if not self.links:
@@ -178,8 +179,10 @@ class Node:
         self.robot_id = robot_id
         self.label = f"the gateway on {', '.join(names)}"  # what errors call this node ("... is closed: why")
         # A relaying Node's parts are compiled where this install has the compiled path (`compiled`): the same
-        # interfaces, so everything below works on either; VSTIG_PURE=1 keeps them Python.
-        compiled = compiled_for(mode is not Mode.LISTEN, self.links)
+        # interfaces, so everything below works on either; VSTIG_PURE=1 keeps them Python, and so does `pure` (a
+        # recording bridge: the compiled outlets write to the device where no recorder sees what they send).
+        compiled = None if pure else compiled_for(mode is not Mode.LISTEN, self.links)
+        self.compiled = compiled is not None
         # what links hear passes it before the engine, a relay or a listener sees it
         self.guard = guard if compiled is None else jump_guard(guard)
         self._wake = Wakeup()  # one token wakes the waiting loop (a call, a window or a slow device's room opening)

@@ -76,6 +76,31 @@ class LinkWriter:
     def __len__(self) -> int:
         return self._queued
 
+    def tap(self, written: Callable[[Any], None]) -> Callable[[], None]:
+        """Tell `written(unit)` of every unit (or a byte unit's part) the device took from now on (a recording
+        bridge's sends); returns the call that stops it. The device's writes are wrapped while tapped, so a
+        writer nobody taps pays nothing."""
+        write, write_nowait = self._write, self._write_nowait
+
+        def tapped_write(unit: Any) -> None:
+            write(unit)
+            written(unit)
+
+        def tapped_write_nowait(unit: Any) -> Any:
+            rest = write_nowait(unit)
+            if rest is None:
+                written(unit)
+            elif isinstance(unit, bytes) and len(rest) < len(unit):  # a byte stream took the unit's head
+                written(unit[:len(unit) - len(rest)])
+            return rest
+
+        self._write, self._write_nowait = tapped_write, tapped_write_nowait
+
+        def untap() -> None:
+            self._write, self._write_nowait = write, write_nowait
+
+        return untap
+
     def room(self) -> int:
         """How many more messages the outlet may hand over now (at most `hold` wait for the device)."""
         if not self._queued and self._rest is None:  # holds nothing (only this caller adds; the thread takes away)

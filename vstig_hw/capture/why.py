@@ -1,0 +1,189 @@
+"""Why a sender holds the entry it holds for a key at a time: the newest write's path and one verdict per sender.
+
+Read from a `Trace` (capture.trace): the newest write that existed at T (one the guard refused does not
+count), where it was first heard and each link and sender that showed it next, what the recording gateway
+did with it (its sends and decision notes), and for each sender what it last showed and why it is not the
+newest, as a `cause` a program can test and a line a person reads (docs/how-to/why.md lists them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from .decision_notes import ENGINE_NOTES, QUEUED, Decision
+from .trace import Shown, Trace, newer_entry
+
+__all__ = ["CAUSES", "Answer", "Hop", "Verdict", "explain"]
+
+# What a verdict's `cause` may be (None: the sender holds the newest write, no cause).
+CAUSES = ("unheard", "never_asked", "refused", "conflict_lost", "never_sent", "deaf", "behind", "not_heard_since")
+_NEAR = 1.0  # seconds around an event within which a decision note is taken as about it (a note is per tick)
+_FULL_OUTLET = ("tx_overflow", QUEUED)
+
+
+@dataclass(frozen=True)
+class Hop:
+    t: float
+    link: str
+    sender: str  # who showed it; for a send, the link it went out on
+    sent: bool
+    delay: float  # seconds since the previous hop
+
+
+@dataclass(frozen=True)
+class Verdict:
+    sender: str
+    cause: str | None
+    line: str
+    last_heard: float | None
+    shown: Shown | None  # the last entry it showed for the key, at or before T
+
+
+@dataclass
+class Answer:
+    key: int
+    at: float
+    newest: Shown | None  # the first showing of the newest write at T
+    path: list[Hop] = field(default_factory=list)
+    did: list[str] = field(default_factory=list)  # what the gateway did with the newest write, in words
+    verdicts: list[Verdict] = field(default_factory=list)
+
+
+def explain(trace: Trace, key: int, robot: str | None = None, at: float | None = None) -> Answer:
+    """The answer for `key` at `at` seconds after the capture's start (None: its end); `robot` limits the
+    verdicts to one sender (a sender id, or a serial link's name), else every sender that showed the key."""
+    at = trace.end if at is None else at
+    shown = [s for s in trace.of(key) if s.t <= at]
+    refused = {entry for d in trace.decisions if (entry := d.entry) is not None and d.t <= at + _NEAR}
+    newest = _newest(shown, key, refused)
+    answer = Answer(key, at, newest)
+    if newest is not None:
+        answer.path = _path(shown, newest)
+        answer.did = _did(trace, shown, newest, key, refused)
+    senders = [robot] if robot is not None else sorted({s.sender for s in shown if not s.sent})
+    answer.verdicts = [_verdict(trace, shown, newest, key, sender, at, refused) for sender in senders]
+    return answer
+
+
+def _newest(shown: list[Shown], key: int, refused: set[tuple[int, int, int]]) -> Shown | None:
+    best: Shown | None = None
+    for s in shown:
+        if s.holds and (key, s.ts, s.robot) not in refused and (best is None or newer_entry(s.entry, best.entry)):
+            best = s
+    return best
+
+
+def _path(shown: list[Shown], newest: Shown) -> list[Hop]:
+    """The first showing of the write per (link, sender), in time order, each with its delay after the last."""
+    hops: list[Hop] = []
+    seen: set[tuple[str, str, bool]] = set()
+    for s in shown:
+        if s.t < newest.t or s.entry != newest.entry:
+            continue
+        where = (s.link, s.sender, s.sent)
+        if where in seen:
+            continue
+        seen.add(where)
+        hops.append(Hop(s.t, s.link, s.sender, s.sent, s.t - hops[-1].t if hops else 0.0))
+    return hops
+
+
+def _did(trace: Trace, shown: list[Shown], newest: Shown, key: int, refused: set[tuple[int, int, int]]) -> list[str]:
+    """What the recording gateway did with the newest write: from its sends and its decision notes."""
+    did: list[str] = []
+    sends: dict[str, int] = {}
+    for s in shown:
+        if s.sent and s.entry == newest.entry:
+            sends[s.link] = sends.get(s.link, 0) + 1
+    if sends:
+        did.append("stored it and sent it on " + ", ".join(f"{link} ({n}x)" for link, n in sorted(sends.items())))
+    lost = {s.entry for s in shown if s.ts == newest.ts and s.robot != newest.robot}
+    for ts, robot in sorted(lost):
+        note = _note_near(trace, newest.t, lambda d: d.link == ENGINE_NOTES and d.reason == "conflict")
+        counted = f" (the gateway counted a conflict at {note.t:.2f} s)" if note else ""
+        did.append(f"robot {robot}'s write of the same timestamp {ts} lost the conflict to it{counted}")
+    for d in trace.decisions:
+        if d.names_a_message and d.key == key and d.t >= newest.t - _NEAR and (d.key, d.ts, d.robot) in refused:
+            did.append(f"refused robot {d.robot}'s ts {d.ts} on {d.link} at {d.t:.2f} s ({d.reason})")
+    heard_on = newest.link
+    intake = _note_near(trace, newest.t, lambda d: d.link == heard_on and d.reason == "drop_intake")
+    if intake is not None:
+        did.append(f"the fair share dropped {intake.count} messages heard on {heard_on} at {intake.t:.2f} s "
+                   "(drop_intake)")
+    return did
+
+
+def _note_near(trace: Trace, t: float, wanted: Callable[[Decision], bool]) -> Decision | None:
+    return next((d for d in trace.decisions if abs(d.t - t) <= _NEAR and wanted(d)), None)
+
+
+def _verdict(trace: Trace, shown: list[Shown], newest: Shown | None, key: int, sender: str, at: float,
+             refused: set[tuple[int, int, int]]) -> Verdict:
+    times = [t for t in trace.heard.get(sender, []) if t <= at]
+    last_heard = times[-1] if times else None
+    mine = [s for s in shown if s.sender == sender and not s.sent]
+    last = mine[-1] if mine else None
+    if last_heard is None:
+        return Verdict(sender, "unheard", f"{sender} was never heard before {at:.2f} s", None, None)
+    if last is None:
+        line = f"{sender} never asked for key {key}: it showed no entry for it (last heard at {last_heard:.2f} s)"
+        return Verdict(sender, "never_asked", line + _sent_to(shown, newest, trace, sender), last_heard, None)
+    if last.holds and (key, last.ts, last.robot) in refused:
+        reasons = sorted({d.reason for d in trace.decisions if d.names_a_message and d.key == key
+                          and d.ts == last.ts and d.robot == last.robot})
+        return Verdict(sender, "refused", f"{sender} was refused by the guard ({', '.join(reasons)}): it shows ts "
+                       f"{last.ts}, which the gateway never took", last_heard, last)
+    if newest is None or (last.holds and last.entry == newest.entry):
+        line = f"{sender} holds the newest write" + (f" (ts {newest.ts} by robot {newest.robot})" if newest else "")
+        return Verdict(sender, None, line + f", shown at {last.t:.2f} s: no cause", last_heard, last)
+    if last.holds and last.ts == newest.ts:
+        return Verdict(sender, "conflict_lost", f"{sender} lost the conflict to robot {newest.robot}'s write (same "
+                       f"timestamp {newest.ts}, higher id)", last_heard, last)
+    return _not_reached(trace, shown, newest, sender, last, last_heard, at)
+
+
+def _sends_to(shown: list[Shown], newest: Shown | None, trace: Trace, sender: str) -> list[Shown]:
+    """The gateway's sends of the newest write (or a newer entry) on the links `sender` is heard on."""
+    if newest is None:
+        return []
+    links = trace.links_of.get(sender, set())
+    return [s for s in shown if s.sent and s.link in links and s.t >= newest.t
+            and (s.entry == newest.entry or newer_entry(s.entry, newest.entry))]
+
+
+def _sent_to(shown: list[Shown], newest: Shown | None, trace: Trace, sender: str) -> str:
+    sends = _sends_to(shown, newest, trace, sender)
+    return f"; ts {sends[0].ts} was sent to it at {sends[0].t:.2f} s" if sends and newest else ""
+
+
+def _not_reached(trace: Trace, shown: list[Shown], newest: Shown, sender: str, last: Shown, last_heard: float,
+                 at: float) -> Verdict:
+    held = f"ts {last.ts}" if last.holds else "no entry"
+    sends = _sends_to(shown, newest, trace, sender)
+    links = sorted(trace.links_of.get(sender, set()))
+    if not sends:
+        where = ", ".join(links)
+        full = [d for d in trace.decisions if d.link in links and d.reason in _FULL_OUTLET and d.count
+                and newest.t - _NEAR <= d.t <= at]
+        if full:
+            why = "tx_overflow" if any(d.reason == "tx_overflow" for d in full) else \
+                f"up to {max(d.count for d in full)} messages waiting, the device taking none"
+            line = f"never sent on {where} (the gateway's queue for it was full: {why})"
+        elif not any(s.sent for s in shown) and not any(d.link in links for d in trace.decisions):
+            line = f"never sent on {where} (the capture holds nothing the gateway sent there: bridge --record)"
+        else:
+            line = f"never sent on {where}"
+        return Verdict(sender, "never_sent", f"{line}; {sender} shows {held}", last_heard, last)
+    first = sends[0]
+    if last_heard < first.t:
+        return Verdict(sender, "not_heard_since", f"sent {len(sends)} times from {first.t:.2f} s; {sender} not heard "
+                       f"since {last_heard:.2f} s", last_heard, last)
+    before = [s for s in shown if s.sender == sender and not s.sent and s.t < first.t]
+    moved = before and any(s.holds and (not before[-1].holds or newer_entry(s.entry, before[-1].entry))
+                           for s in shown if s.sender == sender and not s.sent and s.t >= first.t)
+    if moved:
+        return Verdict(sender, "behind", f"{sender} is behind: it shows {held} while ts {newest.ts} was sent to it "
+                       f"at {first.t:.2f} s", last_heard, last)
+    return Verdict(sender, "deaf", f"sent {len(sends)} times, never shown back ({sender}'s radio deaf since "
+                   f"{first.t:.2f} s: it still shows {held})", last_heard, last)
