@@ -24,6 +24,7 @@ from ..config import ConfiguredCommand, config_options
 from ..live import foxglove_option, live_view
 from ..ops.metrics import metrics_option, metrics_served
 from ..options import VALUE_TYPE_HELP, Address, Finite, GuardChoice, filter_options, guard_options, take_warnings
+from ..robots import ROBOTS_KEY, RobotRows, ViewKeys, fit_few, robots_table, roster_options, start_roster
 from ..running import (
     LINK,
     LinkArguments,
@@ -69,18 +70,15 @@ def _table(view: SwarmView, value_type: ValueType, node: Node | None = None, hei
 
 def _few(senders: list[int]) -> str:
     """The first stale senders that fit the column and how many more: `2 4 9 +10`."""
-    named = ""
-    for count, sender in enumerate(senders):
-        longer = f"{named} {shown_sender(sender)}".lstrip()
-        if named and len(longer) > _STALE_WIDTH:
-            return f"{named} +{len(senders) - count}"
-        named = longer
-    return named
+    return fit_few([shown_sender(sender) for sender in senders], _STALE_WIDTH)
 
 
 @click.command(cls=ConfiguredCommand)
 @click.argument("links", nargs=-1, required=True, type=LINK, cls=LinkArguments)
 @click.option("--jsonl", is_flag=True, help="Print one JSON object per message instead of the live table.")
+@click.option("--robots", is_flag=True,
+              help=f"One row per robot instead of per key (key {ROBOTS_KEY} switches the live table); with "
+                   "--jsonl, one JSON object per robot every second.")
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
               help=VALUE_TYPE_HELP)
 @click.option("--larger-value-wins", "larger", is_flag=True,
@@ -89,16 +87,17 @@ def _few(senders: list[int]) -> str:
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
 @click.option("--hide-refused", is_flag=True,
               help="Leave out what the guard options would refuse (it is still counted under the table).")
+@roster_options
 @foxglove_option
 @metrics_option
 @filter_options
 @guard_options
 @config_options
 @reports_errors
-def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, larger: bool, duration: float | None,
-            hide_refused: bool, foxglove: Address | None, foxglove_viewers: int, metrics: Address | None,
-            keep: Filter,
-            guard: GuardChoice) -> None:
+def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: ValueType, larger: bool,
+            duration: float | None, hide_refused: bool, quiet_after: float | None, gone_after: float | None,
+            max_robots: int, foxglove: Address | None, foxglove_viewers: int, metrics: Address | None,
+            keep: Filter, guard: GuardChoice) -> None:
     """Decode what each LINK hears live, per key; passive: never transmits.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
@@ -117,6 +116,10 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
 
     --foxglove 8765 serves the same live, to Foxglove (docs/how-to/live-view.md): every
     message, the table, each write's spread and the counters.
+
+    --robots shows who is in the swarm (docs/how-to/robots.md): per robot its links, when
+    it was last heard, its rate, writes and GETs, the keys it is behind on, and its state
+    (alive, quiet after --quiet-after, gone after --gone-after).
     """
     for link in links:
         must_hear(link, "sniff")
@@ -126,6 +129,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
     # The engine never transmits: it counts what each message would do to a robot that heard them all.
     node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule)
     serve_ros2(node)
+    kept = start_roster(node, quiet_after, gone_after, max_robots)
     view = SwarmView(rule) if rule else SwarmView()
     listeners: list[Callable[[Heard, str | None], None]] = [
         lambda message, reason: view.add(message) if reason is None else view.refuse(message, reason)]
@@ -142,6 +146,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
         import json
 
         out = sys.stdout
+        rows = RobotRows(kept, out) if robots else None
 
         # The same row as `decode --format jsonl` (can_id on CAN links only, sender where the medium names one),
         # and `refused`: the drop counter a guarded bridge would count it under, or null.
@@ -158,13 +163,18 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
             out.write(json.dumps(row) + "\n")
             out.flush()
 
-        listeners.append(emit)
+        if rows is None:
+            listeners.append(emit)
+        else:
+            node.listen(tick=rows)
         node.listen(tick=lambda _node: _warn(firewall))
         with (stop_on_signals() as stop,
               live_view(node, foxglove, value_type=value_type, larger_value_wins=larger, viewers=foxglove_viewers),
               metrics_served(node, metrics), opened(node, stop)):
             describe_links(node)
             run_until_stopped(node, stop, duration=duration)
+        if rows is not None:
+            rows.write()  # the roster as the sniff ends
         _warn(firewall)
         print_counters(node)
         return
@@ -177,11 +187,17 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, value_type: ValueType, lar
         if not sys.stdout.isatty():
             click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
                        "(--jsonl streams every message instead)", err=True)
-        with Live(_table(view, value_type, node), refresh_per_second=4, transient=False) as live:
-            def redraw() -> None:  # only what fits the terminal (a pipe gets every key, once, at the end)
+        showing = [robots]  # the robots table (else the keys'); the key switches
+
+        def table(height: int | None = None) -> Any:
+            return robots_table(kept.roster, node, height) if showing[0] else _table(view, value_type, node, height)
+
+        with ViewKeys().reading() as keys, Live(table(), refresh_per_second=4, transient=False) as live:
+            def redraw() -> None:  # only what fits the terminal (a pipe gets every row, once, at the end)
                 _warn(firewall)  # on a terminal, Live prints stderr above the table
+                showing[0] ^= keys.pressed().lower().count(ROBOTS_KEY) % 2 == 1
                 height = live.console.size.height if live.console.is_terminal else None
-                live.update(_table(view, value_type, node, height))
+                live.update(table(height))
 
             describe_links(node)
             run_until_stopped(node, stop, redraw, duration)
