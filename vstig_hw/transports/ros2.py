@@ -13,9 +13,12 @@ of this transport's own (a confirmed put waits seconds).
 A child that dies is an outage: logged once, counted (`lost`), and started again
 with backoff. Closing the link closes its stdin, and the child ends.
 
+A table answer is a snapshot (gateway.ros2.TableSnapshots) sent in pages, each a pipe write of
+its own, once per snapshot: the child keeps the last one.
+
 Counters: `rx` (writes taken), `tx` (broadcasts), `drop_behind`, and the child's: `rx_lost` (writes Fast
-DDS dropped: a writer above `write_rate`), `published` (heard and change samples), `put`, `put_busy`,
-`get`, `table`.
+DDS dropped: a writer above `write_rate`), `drop_bad_cdr` (writes refused), `published` (heard and change
+samples), `put`, `put_busy`, `get`, `table`, `drop_table`.
 """
 
 from __future__ import annotations
