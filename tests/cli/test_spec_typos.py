@@ -32,6 +32,8 @@ TYPOS = [
     ("blabbermouth", "blabbermouth:127.0.0.1?size=64&deployment=lab.toml&sise=64", "sise", "size"),
     ("zenoh", "zenoh:lab?conect=tcp/127.0.0.1:7447", "conect", "connect"),
     ("ros2", "ros2:lab?domian=7", "domian", "domain"),
+    ("mavlink", "mavlink:serial:/dev/ttyUSB0?bauds=57600", "bauds", "baud"),
+    ("mavlink udp", "mavlink:udpin:127.0.0.1:14560?sysd=12", "sysd", "sysid"),
 ]
 
 
