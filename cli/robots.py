@@ -37,8 +37,10 @@ _STYLE = {RobotState.ALIVE: "green", RobotState.QUIET: "yellow", RobotState.GONE
 
 
 def roster_options(fn: F) -> F:
-    """--quiet-after, --gone-after, --max-robots: the roster's thresholds (every gateway keeps one)."""
+    """--quiet-after, --gone-after, --max-robots: the roster's thresholds (every gateway keeps one); --no-roster."""
     for option in reversed([
+        click.option("--no-roster", is_flag=True,
+                     help="Keep no roster of robots (docs/how-to/robots.md): a little less CPU per message."),
         click.option("--quiet-after", type=Finite(0.0, min_open=True), metavar="SECONDS",
                      help=f"A robot not heard for this long (and for {QUIET_PERIODS} of its usual gaps) is quiet "
                           f"[default: {QUIET_PERIODS} control periods]."),
@@ -51,8 +53,12 @@ def roster_options(fn: F) -> F:
     return fn
 
 
-def start_roster(node: Node, quiet_after: float | None, gone_after: float | None, max_robots: int) -> KeptRoster:
-    """The node's roster with the options' thresholds; a usage error (exit 2) names a bad pair."""
+def start_roster(node: Node, no_roster: bool, quiet_after: float | None, gone_after: float | None,
+                 max_robots: int) -> KeptRoster | None:
+    """The node's roster with the options' thresholds (None: --no-roster); a usage error (exit 2) names a bad
+    pair."""
+    if no_roster:
+        return None
     try:
         roster = Roster(node.period, quiet_after=quiet_after, gone_after=gone_after, max_robots=max_robots)
     except ValueError as error:  # the options' ranges leave only this: gone not after quiet

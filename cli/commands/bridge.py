@@ -19,6 +19,7 @@ from ..config import ConfiguredCommand, config_options
 from ..live import foxglove_option, live_view
 from ..ops.metrics import metrics_option, metrics_served
 from ..options import Address, Finite, GuardChoice, guard_options, overwrite_option, refuse_to_replace, take_warnings
+from ..robots import roster_options, start_roster
 from ..running import (
     LINK,
     LinkArguments,
@@ -56,6 +57,7 @@ def _raw_note(robot_id: int | None) -> str:
               help="Record every link's traffic, heard and sent, and the gateway's own decisions into FILE "
                    "(formats as vstig record -o; docs/how-to/why.md).")
 @overwrite_option("the --record FILE")
+@roster_options
 @foxglove_option
 @metrics_option
 @guard_options
@@ -63,6 +65,7 @@ def _raw_note(robot_id: int | None) -> str:
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
             larger: bool, refresh: bool, duration: float | None, record: str | None, overwrite: bool,
+            no_roster: bool, quiet_after: float | None, gone_after: float | None, max_robots: int,
             foxglove: Address | None, foxglove_viewers: int, metrics: Address | None, guard: GuardChoice) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
@@ -105,6 +108,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
                 period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
                 onconflict=larger_value_wins if larger else None, guard=firewall, pure=record is not None)
     recording = None if record is None else Recording(node, record, overwrite=True)
+    start_roster(node, no_roster, quiet_after, gone_after, max_robots)  # who is heard: --metrics, the live view
     if refresh and not raw:
         node.listen(tick=RoundRobinGet())
     serve_ros2(node)

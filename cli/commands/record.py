@@ -33,6 +33,7 @@ from vstig_hw.wording import counted
 from ..config import ConfiguredCommand, config_options
 from ..ops.metrics import metrics_option, metrics_served
 from ..options import Address, ByteSize, Finite, filter_options, overwrite_option, refuse_to_replace
+from ..robots import roster_options, start_roster
 from ..running import (
     LINK,
     LinkArguments,
@@ -84,12 +85,14 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
 @click.option("--max-bytes", type=ByteSize(), help="Rotate to FILE_001.ext, FILE_002.ext... past this size (e.g. 10M); "
                                   "an existing numbered file is skipped, never replaced.")
 @click.option("--for", "duration", type=Finite(0.0), help="Stop after this many seconds.")
+@roster_options
 @metrics_option
 @filter_options
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: int | None,
-            duration: float | None, metrics: Address | None, keep: Filter) -> None:
+            duration: float | None, no_roster: bool, quiet_after: float | None, gone_after: float | None,
+            max_robots: int, metrics: Address | None, keep: Filter) -> None:
     """Record the LINKS' traffic into a file until Ctrl-C (passive: never transmits).
 
     The links are opened before the file, and an existing capture is never replaced
@@ -114,6 +117,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
     if medium == "mcap":
         require("mcap", f"vstig record -o {path}")  # before the links open
     node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
+    start_roster(node, no_roster, quiet_after, gone_after, max_robots)  # who is heard: --metrics
     # Units become messages again for an .mcap file and for filters that look into messages: robot dialects'
     # links name the deployment file that maps their keys.
     deployment = next((d for spec in links if (d := getattr(spec, "deployment", None))), None)

@@ -95,9 +95,9 @@ def _few(senders: list[int]) -> str:
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: ValueType, larger: bool,
-            duration: float | None, hide_refused: bool, quiet_after: float | None, gone_after: float | None,
-            max_robots: int, foxglove: Address | None, foxglove_viewers: int, metrics: Address | None,
-            keep: Filter, guard: GuardChoice) -> None:
+            duration: float | None, hide_refused: bool, no_roster: bool, quiet_after: float | None,
+            gone_after: float | None, max_robots: int, foxglove: Address | None, foxglove_viewers: int,
+            metrics: Address | None, keep: Filter, guard: GuardChoice) -> None:
     """Decode what each LINK hears live, per key; passive: never transmits.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
@@ -123,13 +123,15 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
     """
     for link in links:
         must_hear(link, "sniff")
+    if robots and no_roster:
+        raise click.UsageError("--robots shows the roster: give --robots or --no-roster, not both")
     rule = larger_value_wins if larger else None
     built = build_links(links, listen_only=True)
     firewall = guard.build(built)
     # The engine never transmits: it counts what each message would do to a robot that heard them all.
     node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule)
     serve_ros2(node)
-    kept = start_roster(node, quiet_after, gone_after, max_robots)
+    kept = start_roster(node, no_roster, quiet_after, gone_after, max_robots)
     view = SwarmView(rule) if rule else SwarmView()
     listeners: list[Callable[[Heard, str | None], None]] = [
         lambda message, reason: view.add(message) if reason is None else view.refuse(message, reason)]
@@ -146,7 +148,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
         import json
 
         out = sys.stdout
-        rows = RobotRows(kept, out) if robots else None
+        rows = RobotRows(kept, out) if kept is not None and robots else None
 
         # The same row as `decode --format jsonl` (can_id on CAN links only, sender where the medium names one),
         # and `refused`: the drop counter a guarded bridge would count it under, or null.
@@ -187,10 +189,12 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
         if not sys.stdout.isatty():
             click.echo("stdout is not a terminal: the table is printed once, when sniff ends "
                        "(--jsonl streams every message instead)", err=True)
-        showing = [robots]  # the robots table (else the keys'); the key switches
+        showing = [robots]  # the robots table (else the keys'); the key switches (unless --no-roster)
 
         def table(height: int | None = None) -> Any:
-            return robots_table(kept.roster, node, height) if showing[0] else _table(view, value_type, node, height)
+            if kept is not None and showing[0]:
+                return robots_table(kept.roster, node, height)
+            return _table(view, value_type, node, height)
 
         with ViewKeys().reading() as keys, Live(table(), refresh_per_second=4, transient=False) as live:
             def redraw() -> None:  # only what fits the terminal (a pipe gets every row, once, at the end)

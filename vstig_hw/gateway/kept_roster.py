@@ -10,6 +10,7 @@ quick, never waiting). `cancel()` stops the feeding.
 from __future__ import annotations
 
 import time
+import weakref
 from typing import TYPE_CHECKING
 
 from .roster import RobotView, Roster, StateListener
@@ -20,10 +21,20 @@ if TYPE_CHECKING:
 __all__ = ["KeptRoster", "keep_roster"]
 
 
+_KEPT: weakref.WeakKeyDictionary[Node, KeptRoster] = weakref.WeakKeyDictionary()
+
+
 class KeptRoster:
     def __init__(self, node: Node, roster: Roster) -> None:
         self.roster = roster
         self.listening = node.listen(messages=roster.take, refused=roster.refuse, tick=self._sweep)
+        _KEPT[node] = self
+
+    @staticmethod
+    def of(node: Node) -> KeptRoster | None:
+        """The roster kept for `node` (the latest `keep_roster`), for the views built on the node alone:
+        metrics, the live view, a ROS 2 topic; None if it keeps none (`--no-roster`)."""
+        return _KEPT.get(node)
 
     def _sweep(self, _node: Node) -> None:
         self.roster.sweep(time.time())  # the clock the readers stamp what they read with
@@ -37,6 +48,9 @@ class KeptRoster:
 
     def cancel(self) -> None:
         self.listening.cancel()
+        for node, kept in list(_KEPT.items()):
+            if kept is self:
+                del _KEPT[node]
 
 
 def keep_roster(node: Node, roster: Roster | None = None) -> KeptRoster:
