@@ -26,9 +26,11 @@ def plot_key(trace: Trace, answer: Answer, path: Path) -> None:
 
     matplotlib.use("Agg")  # files only
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     shown = [s for s in trace.of(answer.key) if s.t <= answer.at]
     named = [v.sender for v in answer.verdicts]
+    causes = {v.sender: v.cause or "no cause" for v in answer.verdicts}
     counts: dict[str, int] = {}
     for s in shown:
         if not s.sent:
@@ -51,15 +53,18 @@ def plot_key(trace: Trace, answer: Answer, path: Path) -> None:
             if xs:
                 top.step(xs, ys, where="post", color=_COLOURS[index % len(_COLOURS)],
                          linestyle=_DASHES[index // len(_COLOURS) % len(_DASHES)], marker=".", markersize=2,
-                         label=sender)
+                         label=f"{sender}: {causes[sender]}" if sender in causes else sender)
         if answer.newest is not None:
             top.axvline(answer.newest.t, color="grey", linewidth=0.8, linestyle=":")
             top.annotate(f"write ts {answer.newest.ts}", (answer.newest.t, answer.newest.ts), fontsize=6.5,
                          xytext=(3, 3), textcoords="offset points")
         top.axvline(answer.at, color="black", linewidth=0.8)
+        top.annotate(f"T = {answer.at:.2f} s", (answer.at, 1), xycoords=("data", "axes fraction"), fontsize=6.5,
+                     xytext=(-3, -8), textcoords="offset points", ha="right")
+        top.yaxis.set_major_locator(MaxNLocator(integer=True))
         top.set_ylabel("timestamp shown")
         top.set_title(f"key {answer.key}: what each sender showed")
-        top.legend(loc="lower right", ncols=2)
+        top.legend(loc="upper left", bbox_to_anchor=(1.01, 1), title="sender: verdict")
         links = sorted({s.link for s in shown if s.sent})
         for row, link in enumerate(links):
             times = [s.t for s in shown if s.sent and s.link == link]

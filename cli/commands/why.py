@@ -107,7 +107,7 @@ def _as_text(answer: Answer, trace: Trace) -> str:
         for hop in answer.path[1:]:
             who = f"sent on {hop.link}" if hop.sent else f"shown by {hop.sender} on {hop.link}"
             lines.append(f"    {hop.t:8.2f} s  +{hop.delay:.3f} s  {who}")
-        lines.extend(f"  the gateway {did}" for did in answer.did)
+        lines.extend(f"  {did}" for did in answer.did)
     for verdict in answer.verdicts:
         shown = verdict.shown
         heard = "never heard" if verdict.last_heard is None else f"last heard at {verdict.last_heard:.2f} s"

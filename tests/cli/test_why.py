@@ -177,3 +177,38 @@ def test_replay_table_and_why_agree_on_the_newest_write_at_t(capture: tuple[Path
     for key in (DEAF, FULL, CONFLICT, NEVER):
         newest = _why(path, "--key", str(key), "--at", str(at))["newest"]
         assert rows.get(key) == (None if newest is None else (newest["ts"], newest["robot"])), (key, at)
+
+
+DOCS_PLOT = Path(__file__).parents[2] / "docs" / "how-to" / "img" / "why-key1.png"
+
+
+def test_the_plot_is_written_and_a_second_one_is_not_replaced(capture: tuple[Path, dict[str, Robot]],
+                                                             tmp_path: Path) -> None:
+    """The PNG of docs/how-to/why.md comes from here: VSTIG_WRITE_DOCS_PLOT=1 writes it there too."""
+    path, robots = capture
+    png = tmp_path / "key1.png"
+    result = run_vstig("why", str(path), "--key", str(DEAF), "--plot", str(png))
+    assert result.returncode == 0, result.stderr
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+    again = run_vstig("why", str(path), "--key", str(DEAF), "--plot", str(png))
+    assert again.returncode == 2 and "--overwrite" in again.stderr
+    if os.environ.get("VSTIG_WRITE_DOCS_PLOT") == "1":
+        DOCS_PLOT.parent.mkdir(exist_ok=True)
+        DOCS_PLOT.write_bytes(png.read_bytes())
+
+
+def test_bad_input_is_one_line(capture: tuple[Path, dict[str, Robot]], tmp_path: Path) -> None:
+    path, _ = capture
+    missing_key = run_vstig("why", str(path))
+    assert missing_key.returncode == 2 and "--key" in missing_key.stderr
+    junk = tmp_path / "junk.cap"
+    junk.write_text("# vstig serial capture v1\nnot a line\n")
+    broken = run_vstig("why", str(junk), "--key", "1")
+    assert broken.returncode == 1 and "junk.cap:2" in broken.stderr and "Traceback" not in broken.stderr
+    unknown = run_vstig("why", str(path), "--key", "1", "--robot", "nobody")
+    assert unknown.returncode == 0 and "no such sender" in unknown.stderr
+    assert json.loads(run_vstig("why", str(path), "--key", "1", "--robot", "nobody", "--json").stdout)[
+        "senders"][0]["cause"] == "unheard"
+    recorded_twice = run_vstig("bridge", "serial:/dev/null", "--robot-id", "1", "--record", str(path))
+    assert recorded_twice.returncode == 2 and "--overwrite" in recorded_twice.stderr
+    assert path.stat().st_size > 0

@@ -97,15 +97,20 @@ def _did(trace: Trace, shown: list[Shown], newest: Shown, key: int, refused: set
         if s.sent and s.entry == newest.entry:
             sends[s.link] = sends.get(s.link, 0) + 1
     if sends:
-        did.append("stored it and sent it on " + ", ".join(f"{link} ({n}x)" for link, n in sorted(sends.items())))
+        did.append("the gateway stored it and sent it on "
+                   + ", ".join(f"{link} ({n}x)" for link, n in sorted(sends.items())))
     lost = {s.entry for s in shown if s.ts == newest.ts and s.robot != newest.robot}
     for ts, robot in sorted(lost):
         note = _note_near(trace, newest.t, lambda d: d.link == ENGINE_NOTES and d.reason == "conflict")
         counted = f" (the gateway counted a conflict at {note.t:.2f} s)" if note else ""
         did.append(f"robot {robot}'s write of the same timestamp {ts} lost the conflict to it{counted}")
+    refusals: dict[tuple[int | None, int | None, str, str], list[float]] = {}
     for d in trace.decisions:
-        if d.names_a_message and d.key == key and d.t >= newest.t - _NEAR and (d.key, d.ts, d.robot) in refused:
-            did.append(f"refused robot {d.robot}'s ts {d.ts} on {d.link} at {d.t:.2f} s ({d.reason})")
+        if d.key == key and d.t >= newest.t - _NEAR and d.entry in refused:
+            refusals.setdefault((d.robot, d.ts, d.link, d.reason), []).append(d.t)
+    for (writer, stamp, link, reason), times in sorted(refusals.items(), key=lambda item: item[1][0]):
+        did.append(f"the gateway refused robot {writer}'s ts {stamp} on {link} {len(times)}x from {times[0]:.2f} s "
+                   f"({reason})")
     heard_on = newest.link
     intake = _note_near(trace, newest.t, lambda d: d.link == heard_on and d.reason == "drop_intake")
     if intake is not None:
