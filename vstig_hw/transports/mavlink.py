@@ -12,9 +12,10 @@ Both kinds also
   for is not taken by `write_nowait` (the link's writer waits for room in `write`), so what waits stays in the
   gateway's outlet, shared fairly among its sources, as on any slow device.
 
-`udpin` binds the address it is given (a loopback one unless asked otherwise) and sends to the last address a
-datagram came from, as MAVLink's own udpin does; `udpout` sends to the router's address and hears only it (a
-connected socket). Neither routes: what it hears goes to the gateway alone.
+`udpin` binds the address it is given (a loopback one unless asked otherwise) and sends to every address a
+datagram came from in the last `PEER_TIMEOUT` seconds, at most `MAX_PEERS` (the most recently heard): MAVLink's
+own udpin answers the last sender alone, which one stray datagram would divert. `udpout` sends to the router's
+address and hears only it (a connected socket). Neither routes: what it hears goes to the gateway alone.
 """
 
 from __future__ import annotations
@@ -30,10 +31,13 @@ from ..framing.mavlink import MAX_FRAME, MavlinkStreamReader
 from .base import DeviceTransport, TransportError
 from .serial import SerialTransport
 
-__all__ = ["AIR_SHARE", "HEARTBEAT_PERIOD", "AirBudget", "MavlinkSerialTransport", "MavlinkUdpTransport"]
+__all__ = ["AIR_SHARE", "HEARTBEAT_PERIOD", "MAX_PEERS", "PEER_TIMEOUT", "AirBudget", "MavlinkSerialTransport",
+           "MavlinkUdpTransport"]
 
 HEARTBEAT_PERIOD = 1.0  # seconds between HEARTBEATs, MAVLink's usual rate
 AIR_SHARE = 0.5  # of a radio's air rate a link uses at most
+MAX_PEERS = 8  # addresses a udpin link sends to at most
+PEER_TIMEOUT = 10.0  # seconds a udpin link keeps sending to an address it no longer hears from
 _DATAGRAM = 65535
 
 
@@ -160,7 +164,7 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
             raise ValueError(f"a MAVLink UDP link is udpin or udpout, got {mode!r}")
         super().__init__(name or f"{mode}:{address[0]}:{address[1]}", (0.1, 2.0))
         self.mode, self.address = mode, address
-        self.peer: tuple[str, int] | None = None if mode == "udpin" else address
+        self.peers: dict[tuple[str, int], float] = {} if mode == "udpin" else {address: float("inf")}
         self.listening = (f"udp/{address[0]}:{address[1]}",) if mode == "udpin" else ()
         self._mavlink_init(heartbeat, air_rate)
 
@@ -192,7 +196,7 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
         device.close()
 
     def _read_device(self, device: socket.socket, timeout: float) -> list[bytes]:
-        beat = self._beat_due() if self.peer is not None else None
+        beat = self._beat_due() if self.peers else None
         if beat is not None:
             self._send(device, beat)
         if not select.select([device], [], [], min(timeout, HEARTBEAT_PERIOD))[0]:
@@ -209,33 +213,46 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
             self.counters["rx_bytes"] += len(data)
             self.counters["rx_datagrams"] += 1
             if self.mode == "udpin":
-                self.peer = source
+                self._heard_from(source)
             frames += self._reader.feed(data) + self._reader.flush()  # a datagram is whole
         return frames
 
     def _write_device(self, device: socket.socket, unit: bytes) -> None:
         self._send(device, unit)
 
+    def _heard_from(self, source: tuple[str, int]) -> None:
+        peers = self.peers
+        peers.pop(source, None)
+        peers[source] = time.monotonic() + PEER_TIMEOUT  # re-inserted: the order is the order last heard
+        if len(peers) > MAX_PEERS:
+            del peers[next(iter(peers))]
+
     def _send(self, device: socket.socket, unit: bytes) -> None:
-        peer = self.peer
-        if peer is None:
-            self.counters["tx_no_peer"] += 1  # udpin: nobody has spoken to us yet
+        now = time.monotonic()
+        for peer in [peer for peer, until in list(self.peers.items()) if until < now]:
+            del self.peers[peer]
+        if not self.peers:
+            self.counters["tx_no_peer"] += 1  # udpin: nobody has spoken to us lately
             return
-        try:
-            if self.mode == "udpout":
-                device.send(unit)
-            else:
-                device.sendto(unit, peer)
-        except ConnectionRefusedError:
-            self.counters["tx_refused"] += 1
-            return
-        except OSError as exc:
-            if exc.errno in (errno.EAGAIN, errno.ENOBUFS):
+        sent = False
+        for peer in list(self.peers):
+            try:
+                if self.mode == "udpout":
+                    device.send(unit)
+                else:
+                    device.sendto(unit, peer)
+            except ConnectionRefusedError:  # nobody there (an ICMP answer): the others still get it
+                self.counters["tx_refused"] += 1
+                continue
+            except OSError as exc:
+                if exc.errno not in (errno.EAGAIN, errno.ENOBUFS):
+                    raise
                 self._not_taken("tx_busy")
-                return
-            raise
-        self._sent()
-        self.counters["tx_bytes"] += len(unit)
+                continue
+            sent = True
+            self.counters["tx_bytes"] += len(unit)
+        if sent:
+            self._sent()
 
     def write_nowait(self, unit: bytes) -> bytes | None:
         if not self._room(unit):
