@@ -17,8 +17,9 @@ from ..counters import Counters
 from ..engine import ConflictLost, ConflictResolver, Entry
 from ..gateway.guard import DEFAULT_MAX_JUMP, Guard
 from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD
+from ..gateway.roster import RobotView, Roster, StateChange
 from ..values import ValueType
-from .changes import DEFAULT_BUFFER, AsyncWatch
+from .changes import DEFAULT_BUFFER, AsyncWatch, Change
 from .recording import Recording
 from .swarm import DEFAULT_WAIT, LinkLike, Swarm, SwarmClosed, check_key, checked_keys
 from .swarm import join as join_sync
@@ -105,11 +106,23 @@ class AsyncSwarm:
         """As `Swarm.stats`."""
         return await asyncio.to_thread(self.sync.stats)
 
-    def watch(self, keys: Iterable[int] | None = None, *, buffer: int = DEFAULT_BUFFER) -> AsyncWatch:
+    def watch(self, keys: Iterable[int] | None = None, *, buffer: int = DEFAULT_BUFFER) -> AsyncWatch[Change]:
         """As `Swarm.watch`, as an async iterator on the running loop: `async for change in swarm.watch()`."""
         swarm = self.sync
-        watch = AsyncWatch(checked_keys(keys), buffer)
+        watch: AsyncWatch[Change] = AsyncWatch(checked_keys(keys), buffer)
         swarm._subscribe(watch)
+        return watch
+
+    def robots(self) -> list[RobotView]:
+        """As `Swarm.robots` (a snapshot taken at once: a plain method)."""
+        return self.sync.robots()
+
+    def watch_robots(self, robots: Iterable[int] | None = None, *,
+                     buffer: int = DEFAULT_BUFFER) -> AsyncWatch[StateChange]:
+        """As `Swarm.watch_robots`, as an async iterator: `async for change in swarm.watch_robots()`."""
+        swarm = self.sync
+        watch: AsyncWatch[StateChange] = AsyncWatch(None if robots is None else list(robots), buffer)
+        swarm._subscribe_robots(watch)
         return watch
 
     def onconflict(self, rule: ConflictResolver) -> ConflictResolver:
@@ -138,9 +151,9 @@ class AsyncSwarm:
 def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget: int | None = DEFAULT_BUDGET,
          max_jump: int | None = DEFAULT_MAX_JUMP, guard: Guard | None = None,
          onconflict: ConflictResolver | None = None, onconflictlost: ConflictLost | None = None,
-         refresh: bool = True, value_type: ValueType = "uint16") -> AsyncSwarm:
+         refresh: bool = True, value_type: ValueType = "uint16", roster: Roster | None = None) -> AsyncSwarm:
     """`vstig_hw.join`'s arguments; an AsyncSwarm that joins on `async with` (or `await swarm.open()`)."""
     options: dict[str, Any] = {"robot_id": robot_id, "period": period, "budget": budget, "max_jump": max_jump,
                                "guard": guard, "onconflict": onconflict, "onconflictlost": onconflictlost,
-                               "refresh": refresh, "value_type": value_type}
+                               "refresh": refresh, "value_type": value_type, "roster": roster}
     return AsyncSwarm(lambda: join_sync(*links, **options))

@@ -6,8 +6,9 @@ falls behind loses the oldest changes, counted in `overflow` (the newest says
 what the table holds now), and the gateway never waits for it.
 
 `Watch` is read from a thread (an iterator), `AsyncWatch` from an asyncio loop
-(an async iterator), and an `on_change` callback runs on a thread of its own
-reading a Watch, so a callback that calls back into the swarm (even a
+(an async iterator); both carry a table's `Change`s (`Watch[Change]`) or the
+roster's state changes (`Watch[StateChange]`: `Swarm.watch_robots`). And an
+`on_change` callback runs on a thread of its own reading a Watch, so a callback that calls back into the swarm (even a
 confirmed put) waits for the gateway thread, which is free, instead of
 deadlocking it.
 """
@@ -21,11 +22,11 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
-from typing import NamedTuple
+from typing import Any, Generic, NamedTuple, TypeVar
 
 from ..engine import Entry
 
-__all__ = ["DEFAULT_BUFFER", "AsyncWatch", "Change", "ChangeHub", "OnChange", "Subscription", "Watch"]
+__all__ = ["DEFAULT_BUFFER", "AsyncWatch", "Change", "ChangeHub", "Hub", "OnChange", "Subscription", "Watch"]
 
 DEFAULT_BUFFER = 4096  # changes a subscription holds before the oldest are dropped (counted)
 
@@ -47,7 +48,11 @@ class Change(NamedTuple):
     sender: int | None
 
 
-class Subscription:
+# What a subscription carries: a Change, or a roster's StateChange; `keys` chooses by its first field (a key, a robot).
+Item = TypeVar("Item", bound=tuple[Any, ...])
+
+
+class Subscription(Generic[Item]):
     """A bounded buffer of changes, filled by the gateway thread; `overflow` counts the changes dropped."""
 
     def __init__(self, keys: Iterable[int] | None, buffer: int) -> None:
@@ -58,13 +63,13 @@ class Subscription:
         self.overflow = 0
         self.delivered = 0
         self.closed = False
-        self._changes: collections.deque[Change] = collections.deque()
+        self._changes: collections.deque[Item] = collections.deque()
         self._waiting = False
-        self._hub: ChangeHub | None = None
+        self._hub: Hub[Item] | None = None
 
-    def offer(self, change: Change) -> None:
+    def offer(self, change: Item) -> None:
         """Called on the gateway thread: never blocks."""
-        if self.keys is not None and change.key not in self.keys:
+        if self.keys is not None and change[0] not in self.keys:
             return
         changes = self._changes
         if len(changes) >= self.buffer:
@@ -85,7 +90,7 @@ class Subscription:
         self.closed = True
         self._wake()
 
-    def _pop(self) -> Change | None:
+    def _pop(self) -> Item | None:
         try:
             change = self._changes.popleft()
         except IndexError:
@@ -97,14 +102,14 @@ class Subscription:
         raise NotImplementedError
 
 
-class Watch(Subscription):
+class Watch(Subscription[Item]):
     """Changes as a blocking iterator, for a thread; it ends when the swarm closes (or `close`)."""
 
     def __init__(self, keys: Iterable[int] | None = None, buffer: int = DEFAULT_BUFFER) -> None:
         super().__init__(keys, buffer)
         self._event = threading.Event()
 
-    def get(self, timeout: float | None = None) -> Change | None:
+    def get(self, timeout: float | None = None) -> Item | None:
         """The next change, waiting up to `timeout` seconds (None: for ever); None on timeout or once closed."""
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
@@ -124,16 +129,16 @@ class Watch(Subscription):
             self._event.wait(left)
             self._waiting = False
 
-    def __iter__(self) -> Iterator[Change]:
+    def __iter__(self) -> Iterator[Item]:
         return self
 
-    def __next__(self) -> Change:
+    def __next__(self) -> Item:
         change = self.get()
         if change is None:
             raise StopIteration
         return change
 
-    def __enter__(self) -> Watch:
+    def __enter__(self) -> Watch[Item]:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -143,7 +148,7 @@ class Watch(Subscription):
         self._event.set()
 
 
-class AsyncWatch(Subscription):
+class AsyncWatch(Subscription[Item]):
     """Changes as an async iterator on the asyncio loop that made it; it ends when the swarm closes."""
 
     def __init__(self, keys: Iterable[int] | None = None, buffer: int = DEFAULT_BUFFER) -> None:
@@ -151,7 +156,7 @@ class AsyncWatch(Subscription):
         self._loop = asyncio.get_running_loop()
         self._future: asyncio.Future[None] | None = None
 
-    async def get(self) -> Change | None:
+    async def get(self) -> Item | None:
         """The next change; None once closed and drained."""
         while True:
             change = self._pop()
@@ -168,10 +173,10 @@ class AsyncWatch(Subscription):
             finally:
                 self._waiting = False
 
-    def __aiter__(self) -> AsyncWatch:
+    def __aiter__(self) -> AsyncWatch[Item]:
         return self
 
-    async def __anext__(self) -> Change:
+    async def __anext__(self) -> Item:
         change = await self.get()
         if change is None:
             raise StopAsyncIteration
@@ -193,7 +198,7 @@ def _settle(future: asyncio.Future[None]) -> None:
 class OnChange:
     """An `on_change` callback running on a thread of its own, fed by a Watch; `cancel` stops it."""
 
-    def __init__(self, callback: Callable[[Change], object], watch: Watch, errors: Callable[[], None]) -> None:
+    def __init__(self, callback: Callable[[Change], object], watch: Watch[Change], errors: Callable[[], None]) -> None:
         self.callback = callback
         self.watch = watch
         self._errors = errors
@@ -221,16 +226,16 @@ class OnChange:
                 self._errors()
 
 
-class ChangeHub:
-    """The subscriptions of one swarm; `publish` is the Node's `on_change` listener (gateway thread)."""
+class Hub(Generic[Item]):
+    """The subscriptions of one swarm to one kind of change; `offer` hands one to each (gateway thread)."""
 
     def __init__(self, attach: Callable[[bool], None]) -> None:
         self._attach = attach  # called with True when the first subscription comes, False when the last goes
-        self._subscriptions: tuple[Subscription, ...] = ()  # replaced, never mutated: the gateway reads it unlocked
+        self._subscriptions: tuple[Subscription[Item], ...] = ()  # replaced, never mutated: read unlocked
         self._lock = threading.Lock()
         self.closed = False
 
-    def add(self, subscription: Subscription) -> None:
+    def add(self, subscription: Subscription[Item]) -> None:
         """Start handing changes to `subscription` (closed at once if the hub is)."""
         with self._lock:
             if self.closed:
@@ -241,7 +246,7 @@ class ChangeHub:
             if len(self._subscriptions) == 1:
                 self._attach(True)
 
-    def remove(self, subscription: Subscription) -> None:
+    def remove(self, subscription: Subscription[Item]) -> None:
         """Stop handing changes to `subscription`."""
         with self._lock:
             if subscription not in self._subscriptions:
@@ -250,9 +255,8 @@ class ChangeHub:
             if not self._subscriptions and not self.closed:
                 self._attach(False)
 
-    def publish(self, key: int, old: Entry | None, new: Entry, link: str | None, sender: int | None) -> None:
+    def offer(self, change: Item) -> None:
         """Offer one change to every subscription (the gateway thread; never blocks)."""
-        change = Change(key, old, new, link, sender)
         for subscription in self._subscriptions:
             subscription.offer(change)
 
@@ -268,3 +272,12 @@ class ChangeHub:
     def overflow(self) -> int:
         """Changes dropped, summed over the subscriptions."""
         return sum(s.overflow for s in self._subscriptions)
+
+
+class ChangeHub(Hub[Change]):
+    """A swarm's table's subscriptions; `publish` is the Node's `change` listener (gateway thread)."""
+
+    def publish(self, key: int, old: Entry | None, new: Entry, link: str | None, sender: int | None) -> None:
+        change = Change(key, old, new, link, sender)
+        for subscription in self._subscriptions:  # (`offer`'s loop, a call less per change)
+            subscription.offer(change)

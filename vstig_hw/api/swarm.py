@@ -23,17 +23,19 @@ from typing import Any, TypeVar
 from ..counters import Counters
 from ..engine import ConflictLost, ConflictResolver, Entry, higher_robot_wins
 from ..gateway.guard import DEFAULT_MAX_JUMP, Guard
+from ..gateway.kept_roster import keep_roster
 from ..gateway.node import DEFAULT_BUDGET, DEFAULT_PERIOD, Listening, Node, SwarmClosed
 from ..gateway.oneshot import HearsItself, PutResult, confirm_write, not_taken, unreached
 from ..gateway.refresh import RoundRobinGet
 from ..gateway.ros2 import serve_ros2
+from ..gateway.roster import RobotView, Roster, StateChange
 from ..links.assemble import LinkBuildError, assemble_links, check_link_count
 from ..links.link import Link, LinkSpec
 from ..links.registry import parse
 from ..transports.base import TransportError
 from ..values import VALUE_TYPES, ValueType, from_raw, to_raw
 from ..wire import KEY_MAX, check_field
-from .changes import DEFAULT_BUFFER, Change, ChangeHub, OnChange, Subscription, Watch
+from .changes import DEFAULT_BUFFER, Change, ChangeHub, Hub, OnChange, Subscription, Watch
 from .recording import Recording
 from .tables import MAX_TABLE, specs_for_table, table_of
 
@@ -72,7 +74,7 @@ class Swarm:
     def __init__(self, links: Sequence[Link[Any]], robot_id: int, *, period: float, budget: int | None,
                  guard: Guard | None, onconflict: ConflictResolver | None, onconflictlost: ConflictLost | None,
                  refresh: bool, value_type: ValueType, specs: Sequence[LinkSpec] | None = None,
-                 options: dict[str, Any] | None = None) -> None:
+                 options: dict[str, Any] | None = None, roster: Roster | None = None) -> None:
         if value_type not in VALUE_TYPES:
             raise ValueError(f"value_type must be one of {', '.join(VALUE_TYPES)}, got {value_type!r}")
         self.value_type: ValueType = value_type
@@ -91,6 +93,9 @@ class Swarm:
         if refresh:
             self._node.listen(tick=RoundRobinGet())
         serve_ros2(self._node)  # ros2: links publish what the Node hears and answer put, get and table
+        self._roster = keep_roster(self._node, roster)  # who is heard: `robots`, `watch_robots`
+        self._robot_hub: Hub[StateChange] = Hub(lambda _attach: None)  # the roster is fed whether watched or not
+        self._roster.on_change(self._robot_hub.offer)
         self._hub = ChangeHub(self._attach_hub)
         self._hub_listening: Listening | None = None
         self._callbacks: list[OnChange] = []
@@ -254,13 +259,13 @@ class Swarm:
         return hook
 
     # -- changes -------------------------------------------------------------------
-    def watch(self, keys: Iterable[int] | None = None, *, buffer: int = DEFAULT_BUFFER) -> Watch:
+    def watch(self, keys: Iterable[int] | None = None, *, buffer: int = DEFAULT_BUFFER) -> Watch[Change]:
         """An iterator of every Change to the table from now on (only `keys`, if given), until the swarm closes.
 
         It holds at most `buffer` changes a reader has not taken: past that the
         oldest are dropped and counted in `overflow`; the gateway never waits.
         """
-        watch = Watch(checked_keys(keys), buffer)
+        watch: Watch[Change] = Watch(checked_keys(keys), buffer)
         self._subscribe(watch)
         return watch
 
@@ -274,11 +279,27 @@ class Swarm:
         """
         if not callable(callback):
             raise TypeError(f"on_change needs a function (change), got {callback!r}")
-        watch = Watch(checked_keys(keys), buffer)
+        watch: Watch[Change] = Watch(checked_keys(keys), buffer)
         self._subscribe(watch)
         handle = OnChange(callback, watch, self._hook_failed)
         self._callbacks.append(handle)
         return handle
+
+    # -- who is in the swarm ---------------------------------------------------------
+    def robots(self) -> list[RobotView]:
+        """Every robot the swarm's links heard, sorted by state (alive, quiet, gone) then id: who (a sender
+        the medium names, else a writer id), links, last heard, rate, writes, GETs, keys it is behind on
+        (docs/how-to/robots.md)."""
+        self._check_open()
+        return self._roster.snapshot()
+
+    def watch_robots(self, robots: Iterable[int] | None = None, *,
+                     buffer: int = DEFAULT_BUFFER) -> Watch[StateChange]:
+        """An iterator of every robot's state change from now on (alive, quiet, gone; only `robots`, if given),
+        until the swarm closes; bounded as `watch` is."""
+        watch: Watch[StateChange] = Watch(None if robots is None else list(robots), buffer)
+        self._subscribe_robots(watch)
+        return watch
 
     # -- captures ------------------------------------------------------------------
     def record(self, path: str | os.PathLike[str], *, overwrite: bool = False,
@@ -351,6 +372,7 @@ class Swarm:
     def _node_closed(self) -> None:
         """The gateway closed (close(), or its loop failed): every watch ends."""
         self._hub.close()
+        self._robot_hub.close()
 
     def _raw(self, key: int, value: float | str) -> int:
         check_key(key)
@@ -371,9 +393,13 @@ class Swarm:
             raise SwarmClosed(f"{self._node.label} is closed: it is not open yet")
         self._node.check_open()
 
-    def _subscribe(self, watch: Subscription) -> None:
+    def _subscribe(self, watch: Subscription[Change]) -> None:
         self._check_open()
         self._hub.add(watch)
+
+    def _subscribe_robots(self, watch: Subscription[StateChange]) -> None:
+        self._check_open()
+        self._robot_hub.add(watch)
 
     def _attach_hub(self, attach: bool) -> None:
         """The gateway tells changes only while someone watches: without, it keeps its fast path."""
@@ -412,7 +438,7 @@ class Swarm:
 def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget: int | None = DEFAULT_BUDGET,
          max_jump: int | None = DEFAULT_MAX_JUMP, guard: Guard | None = None,
          onconflict: ConflictResolver | None = None, onconflictlost: ConflictLost | None = None,
-         refresh: bool = True, value_type: ValueType = "uint16") -> Swarm:
+         refresh: bool = True, value_type: ValueType = "uint16", roster: Roster | None = None) -> Swarm:
     """Join the swarm on every link as robot `robot_id`; the open Swarm (a context manager).
 
     `links` are spec strings in the CLI's grammar ("can:socketcan:can0",
@@ -421,7 +447,8 @@ def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget
     defaults: the control `period` (s), the `budget` (messages per link per
     period), the jump guard's `max_jump` (None: off) or a whole `guard`, the
     conflict rule (`onconflict`; default: higher robot id wins), a GET of one key
-    per period (`refresh`), and how values read (`value_type`).
+    per period (`refresh`), and how values read (`value_type`). `roster`: who is in
+    the swarm (`robots`), a `vstig_hw.gateway.roster.Roster` with thresholds of your own.
 
     A link told to connect somewhere (a zenoh link's `connect=`) that reaches nobody there within its wait
     (3 s) raises TransportError naming the endpoints, as a missing serial port does.
@@ -452,7 +479,7 @@ def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget
                   onconflict=onconflict, onconflictlost=onconflictlost, refresh=refresh, value_type=value_type,
                   specs=None if any(isinstance(spec, Link) for spec in specs) or guard is not None
                   else [spec for spec in specs if not isinstance(spec, Link)],
-                  options=options)
+                  options=options, roster=roster)
     swarm.open()
     why = unreached(built)
     if why:  # a program would otherwise write into the void, with one log line at most to tell it
