@@ -488,11 +488,17 @@ with vstig_hw.join("can:virtual:api", "ros2:lab", robot_id=200) as swarm:
 
 def test_two_puts_at_once_and_the_rest_busy_at_once_while_a_get_is_answered(lab: Callable[..., Lab]) -> None:
     """Six puts at once that no robot confirms (the robot is never stepped): two in flight, the four others answered
-    busy at once, and a get asked half a second in answered at once, not behind the puts."""
+    busy at once, and a get asked half a second in answered at once, not behind the puts; so is a sample another
+    node writes meanwhile (the write topic's timer)."""
     run = lab([PtyRobot(1)])
-    peer = run.peer()
+    peer, writer = run.peer(), run.peer()
     peer.send("puts 6 11 300")
+    time.sleep(0.3)
+    written = time.time()
+    writer.send("write 12 5 9")
     wait_for(lambda: bool(peer.records("puts")), 60)
+    wrote = [c["t"] - written for c in writer.records("change") if c["change"]["key"] == 12]
+    assert wrote and wrote[0] < 0.5, f"the write reached the table {wrote} s after it was published"
     answers = peer.records("puts")[-1]
     puts, got = answers["answers"], answers["get"]
     busy = [t for t, taken, reason in puts if reason.startswith("busy")]
