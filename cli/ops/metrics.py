@@ -9,6 +9,9 @@ What a scrape shows (prometheus_client's exposition, from `Node.stats()` read wh
   being handed to the other links' devices (written, or queued behind a slow one);
 * `vstig_clock_offset_seconds{peer,proved_by}` and `..._error_seconds{...}`: each Zenoh peer's clock against ours
   (at most 64 peers a link: vstig_hw.clocks.MAX_PEERS);
+* `vstig_robots{link,state}`: robots the roster holds per link and state (alive, quiet, gone; never one series
+  per robot), `vstig_robot_state_changes_total{from,to}`, `vstig_robots_untracked_total` (heard while the roster
+  was full); none with --no-roster (docs/how-to/robots.md);
 * `vstig_metrics_connections_total{outcome}`: the endpoint's own (served, evicted, timed_out, too_large,
   bad_host, bad_request).
 
@@ -166,6 +169,7 @@ class GatewayCollector:
                 bound.add_metric([peer, proof], trip.error)
             yield offset
             yield bound
+        yield from _robot_families(node)
         served = CounterMetricFamily("vstig_metrics_connections", "This endpoint's connections by outcome.",
                                      labels=["outcome"])
         for outcome, value in sorted(self.connections.items()):
@@ -174,6 +178,33 @@ class GatewayCollector:
         info = GaugeMetricFamily("vstig_info", "The gateway: version and mode.", labels=["version", "mode"])
         info.add_metric([__version__, node.mode.value], 1.0)
         yield info
+
+
+def _robot_families(node: Node) -> Iterator[Any]:
+    """The roster's series: robots per link and state, state changes, robots it had no room for."""
+    from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+
+    from vstig_hw.gateway.kept_roster import KeptRoster
+    from vstig_hw.gateway.roster import RobotState
+
+    kept = KeptRoster.of(node)
+    if kept is None:
+        return
+    roster = kept.roster
+    counts = roster.counts()
+    robots = GaugeMetricFamily("vstig_robots", "Robots heard on a link, by state (docs/how-to/robots.md).",
+                               labels=["link", "state"])
+    for link in node.links:
+        for state in RobotState:  # every state from the start: a series that appears late breaks rate()
+            robots.add_metric([link.name, state.value], counts.get((link.name, state), 0))
+    yield robots
+    changes = CounterMetricFamily("vstig_robot_state_changes", "Robots' state changes (alive, quiet, gone).",
+                                  labels=["from", "to"])
+    for change, value in sorted(roster.changes.items()):
+        changes.add_metric(change.split("->"), value)
+    yield changes
+    yield CounterMetricFamily("vstig_robots_untracked", "Robots heard while the roster was full (--max-robots).",
+                              value=roster.untracked)
 
 
 def _clock_estimates(node: Node) -> dict[tuple[str, str], ClockOffset]:
