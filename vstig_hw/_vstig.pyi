@@ -6,6 +6,7 @@ from typing import Any
 
 from .counters import Counters
 from .engine import Entry, Outcome, Stigmergy
+from .gateway.delivery_state import DeliveryState
 from .gateway.fairshare import FairFifo, FairQueue
 from .gateway.guard import Guard
 from .gateway.outlet import Outlet as _Outlet
@@ -17,6 +18,8 @@ from .links.link import Link
 from .wire import Message
 
 KEYS: int
+# The attribute names the C uses on each declared Python type ("module:qualname"), from module.c's one table.
+DECLARED: dict[str, tuple[str, ...]]
 
 def setup(message: type[Message], entry: type[Entry], outcomes: tuple[Outcome, ...],
           rules: tuple[Any, Any, Any]) -> None: ...
@@ -58,7 +61,7 @@ class Relay(RawRelay): ...
 class Path:
     fast: bool
     stopping: bool
-    def __init__(self, node: object, lock: object, deliver: Callable[[int, float, list[Any]], None],
+    def __init__(self, state: DeliveryState, lock: object, deliver: Callable[[int, float, list[Any]], None],
                  links: list[Link[Any]], receivers: list[Receiver | None], reads: list[int],
                  part: _Seat | RawRelay | None, guard: Guard | None, outlets: list[_Outlet], *,
                  listeners: list[Sequence[Any]], told: list[tuple[Callable[..., None], ...]], heard: type,

@@ -459,7 +459,7 @@ def test_the_compiled_delivery_tells_each_link_s_sender(compiled: ModuleType) ->
                 [api_frame(receive_packet(0x0013A20040A1B2C3, encode(sent)))] if framing == "xbee" else \
                 list(make_serial_framing(framing).encode(sent))
             (node._deliver if node._path is None else node._deliver_compiled)(index, 1_700_000_000.0, units)
-        assert node._failure is None
+        assert node._state.failure is None
     assert told[1] == told[0]
     senders = dict(told[0])
     assert senders["radio"] is senders["words"] is senders["kilo"] is None

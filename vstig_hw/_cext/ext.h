@@ -34,18 +34,36 @@ typedef struct {
 
 extern vx_python_t vx_py;
 
-/* The counter and attribute names the data path uses, interned once (module init). */
+/* Every name the data path uses: the counters it adds to, and each attribute or method it reads or calls on a
+ * Python object, interned once (module init). module.c's table is the one list: it says which declared Python type
+ * (or module) each attribute belongs to, `DECLARED` exports it, and tests/native/test_native_declared.py fails when
+ * one is not declared there (a slot, an annotation, a method or property). No attribute is looked up by any other
+ * name. */
 typedef struct {
+    /* counters (keys of a Counters, not attributes) */
     PyObject *in, *out, *tx, *tx_bytes, *rx, *rx_bytes, *superseded, *drop_overflow, *not_echoed, *drop_write_error,
         *drop_intake, *unsent_at_close, *drop_jump, *dropped_at_stop;
-    PyObject *a_fd, *a_fresh, *a_preamble, *a_device, *a_outage, *a_idle, *a_active, *a_sparse, *a_socket;
-    PyObject *m_submit, *m_room, *m_push, *m_drain, *m_close, *m_units_of, *m_fileno, *m_acquire, *m_release;
+    /* vstig_hw.gateway.delivery_state.DeliveryState, and its Wakeup */
+    PyObject *reader_thread, *failure, *wake, *retry_at, *sleep_until, *wake_on_arrival, *set;
+    /* vstig_hw.transports.base.CompiledHandle, and the transports that give one */
+    PyObject *fd, *fresh, *preamble, *device, *outage, *compiled_handle, *counters, *failed, *channel,
+        *note_error_frame, *api, *quiet_after, *holds, *note_report;
+    /* a SocketCAN bus (socketcan_drops.DropCountingBus) and its socket */
+    PyObject *socket, *fileno, *read_elsewhere, *poll_counts, *note_kernel_drops;
+    /* Link, LinkWriter, the fair share's lines, Guard, Stigmergy, the Encoder, the Node's lock */
+    PyObject *name, *transport, *units_of, *one_domain, *idle, *submit, *room, *close, *hold, *active, *sparse,
+        *push, *drain, *filter, *check, *read_only, *confines, *put, *get, *encode_batch, *acquire, *release;
+    /* a python-can Message; the time module's clocks */
+    PyObject *arbitration_id, *is_extended_id, *is_fd, *is_remote_frame, *is_error_frame, *data, *time, *monotonic;
 } vx_names_t;
 
 extern vx_names_t vx_n;
 
 /* A counter name, interned once ("in", "out", "drop_jump"...). */
 PyObject *vx_name(const char *name);
+
+/* obj.<name>(*args), args built by Py_BuildValue's `format` (in parentheses: always a tuple); new reference. */
+PyObject *vx_call(PyObject *obj, PyObject *name, const char *format, ...);
 
 /* counters[name] += n on a Counters (a dict subclass); -1 with an exception set on failure. */
 int vx_count(PyObject *counters, PyObject *name, Py_ssize_t n);

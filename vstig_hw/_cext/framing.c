@@ -84,18 +84,16 @@ int vx_rx_harvest(vx_rx_t *rx) {
     return rx->kind == VX_EPUCK4 ? vx_harvest_drops(&rx->epuck4.drops, rx->drops) : 0;
 }
 
-static PyObject *ATTR[6]; /* the python-can Message attributes a frame is read from */
-
 int vx_frame_of(PyObject *unit, vstig_can_frame_t *frame) {
-    static const char *const names[6] = {"arbitration_id", "is_extended_id", "is_fd", "is_remote_frame",
-                                         "is_error_frame", "data"};
+    /* the python-can Message attributes a frame is read from */
+    PyObject *const names[6] = {vx_n.arbitration_id, vx_n.is_extended_id, vx_n.is_fd, vx_n.is_remote_frame,
+                                vx_n.is_error_frame, vx_n.data};
     PyObject *value[6] = {NULL, NULL, NULL, NULL, NULL, NULL};
     Py_buffer data;
     int i, status = -1;
     unsigned long id;
     for (i = 0; i < 6; i++) {
-        if (ATTR[i] == NULL && (ATTR[i] = PyUnicode_InternFromString(names[i])) == NULL) goto done;
-        if ((value[i] = PyObject_GetAttr(unit, ATTR[i])) == NULL) goto done;
+        if ((value[i] = PyObject_GetAttr(unit, names[i])) == NULL) goto done;
     }
     id = PyLong_AsUnsignedLong(value[0]);
     if (PyErr_Occurred()) goto done;

@@ -1,6 +1,7 @@
 /* vstig_hw._vstig: the module, `setup`, and the conversions every type shares. See ext.h. */
 #include "ext.h"
 
+#include <stdarg.h>
 #include <string.h>
 
 #include "path.h"
@@ -8,28 +9,112 @@
 vx_python_t vx_py;
 vx_names_t vx_n;
 
+/* The declared Python types (or modules) the data path reads or calls attributes of, as `module:qualname`. */
+#define DELIVERY_STATE "vstig_hw.gateway.delivery_state:DeliveryState"
+#define WAKEUP "vstig_hw.wakeup:Wakeup"
+#define HANDLE "vstig_hw.transports.base:CompiledHandle"
+#define DEVICE_TRANSPORT "vstig_hw.transports.base:DeviceTransport"
+#define CAN_TRANSPORT "vstig_hw.transports.can:CanTransport"
+#define XBEE_TRANSPORT "vstig_hw.transports.xbee:XBeeTransport"
+#define SOCKETCAN_BUS "vstig_hw.transports.socketcan_drops:KernelDropCountingBus"
+#define LINK "vstig_hw.links.link:Link"
+#define WRITER "vstig_hw.gateway.writer:LinkWriter"
+#define FAIR_QUEUE "vstig_hw.gateway.fairshare:FairQueue"
+#define FAIR_FIFO "vstig_hw.gateway.fairshare:FairFifo"
+#define GUARD "vstig_hw.gateway.guard:Guard"
+#define ENGINE "vstig_hw.engine:Stigmergy"
+#define ENCODER "vstig_hw._vstig:Encoder"
+#define LOCK "_thread:RLock"
+#define CAN_MESSAGE_TYPE "can.message:Message"
+#define TIME "time"
+
+/* The one list of the names the data path uses: each with the declared type it belongs to (NULL: a counter). A
+ * name used on two types is listed under each. */
+static const struct {
+    PyObject **slot;
+    const char *name;
+    const char *declared_on;
+} NAMES[] = {
+    {&vx_n.in, "in", NULL}, {&vx_n.out, "out", NULL}, {&vx_n.tx, "tx", NULL}, {&vx_n.tx_bytes, "tx_bytes", NULL},
+    {&vx_n.rx, "rx", NULL}, {&vx_n.rx_bytes, "rx_bytes", NULL}, {&vx_n.superseded, "superseded", NULL},
+    {&vx_n.drop_overflow, "drop_overflow", NULL}, {&vx_n.not_echoed, "not_echoed", NULL},
+    {&vx_n.drop_write_error, "drop_write_error", NULL}, {&vx_n.drop_intake, "drop_intake", NULL},
+    {&vx_n.unsent_at_close, "unsent_at_close", NULL}, {&vx_n.drop_jump, "drop_jump", NULL},
+    {&vx_n.dropped_at_stop, "dropped_at_stop", NULL},
+    {&vx_n.reader_thread, "reader_thread", DELIVERY_STATE}, {&vx_n.failure, "failure", DELIVERY_STATE},
+    {&vx_n.wake, "wake", DELIVERY_STATE}, {&vx_n.retry_at, "retry_at", DELIVERY_STATE},
+    {&vx_n.sleep_until, "sleep_until", DELIVERY_STATE}, {&vx_n.wake_on_arrival, "wake_on_arrival", DELIVERY_STATE},
+    {&vx_n.set, "set", WAKEUP},
+    {&vx_n.fd, "fd", HANDLE}, {&vx_n.fresh, "fresh", HANDLE}, {&vx_n.preamble, "preamble", HANDLE},
+    {&vx_n.device, "device", HANDLE}, {&vx_n.outage, "outage", HANDLE},
+    {&vx_n.compiled_handle, "compiled_handle", DEVICE_TRANSPORT}, {&vx_n.counters, "counters", DEVICE_TRANSPORT},
+    {&vx_n.failed, "failed", DEVICE_TRANSPORT},
+    {&vx_n.channel, "channel", CAN_TRANSPORT}, {&vx_n.note_error_frame, "note_error_frame", CAN_TRANSPORT},
+    {&vx_n.api, "api", XBEE_TRANSPORT}, {&vx_n.quiet_after, "quiet_after", XBEE_TRANSPORT},
+    {&vx_n.holds, "holds", XBEE_TRANSPORT}, {&vx_n.note_report, "note_report", XBEE_TRANSPORT},
+    {&vx_n.fileno, "fileno", SOCKETCAN_BUS}, {&vx_n.read_elsewhere, "read_elsewhere", SOCKETCAN_BUS},
+    {&vx_n.poll_counts, "poll_counts", SOCKETCAN_BUS}, {&vx_n.note_kernel_drops, "note_kernel_drops", SOCKETCAN_BUS},
+    {&vx_n.name, "name", LINK}, {&vx_n.counters, "counters", LINK}, {&vx_n.transport, "transport", LINK},
+    {&vx_n.units_of, "units_of", LINK}, {&vx_n.one_domain, "one_domain", LINK},
+    {&vx_n.idle, "idle", WRITER}, {&vx_n.submit, "submit", WRITER}, {&vx_n.room, "room", WRITER},
+    {&vx_n.close, "close", WRITER}, {&vx_n.hold, "hold", WRITER},
+    {&vx_n.active, "active", FAIR_QUEUE}, {&vx_n.sparse, "sparse", FAIR_QUEUE}, {&vx_n.push, "push", FAIR_QUEUE},
+    {&vx_n.drain, "drain", FAIR_QUEUE},
+    {&vx_n.active, "active", FAIR_FIFO}, {&vx_n.sparse, "sparse", FAIR_FIFO}, {&vx_n.push, "push", FAIR_FIFO},
+    {&vx_n.drain, "drain", FAIR_FIFO},
+    {&vx_n.filter, "filter", GUARD}, {&vx_n.check, "check", GUARD}, {&vx_n.read_only, "read_only", GUARD},
+    {&vx_n.confines, "confines", GUARD},
+    {&vx_n.put, "put", ENGINE}, {&vx_n.get, "get", ENGINE}, {&vx_n.encode_batch, "encode_batch", ENCODER},
+    {&vx_n.acquire, "acquire", LOCK}, {&vx_n.release, "release", LOCK},
+    {&vx_n.arbitration_id, "arbitration_id", CAN_MESSAGE_TYPE}, {&vx_n.is_extended_id, "is_extended_id",
+    CAN_MESSAGE_TYPE}, {&vx_n.is_fd, "is_fd", CAN_MESSAGE_TYPE}, {&vx_n.is_remote_frame, "is_remote_frame",
+    CAN_MESSAGE_TYPE}, {&vx_n.is_error_frame, "is_error_frame", CAN_MESSAGE_TYPE},
+    {&vx_n.data, "data", CAN_MESSAGE_TYPE},
+    {&vx_n.time, "time", TIME}, {&vx_n.monotonic, "monotonic", TIME},
+};
+
 static int intern_names(void) {
-    struct {
-        PyObject **slot;
-        const char *name;
-    } names[] = {
-        {&vx_n.in, "in"}, {&vx_n.out, "out"}, {&vx_n.tx, "tx"}, {&vx_n.tx_bytes, "tx_bytes"}, {&vx_n.rx, "rx"},
-        {&vx_n.rx_bytes, "rx_bytes"}, {&vx_n.superseded, "superseded"}, {&vx_n.drop_overflow, "drop_overflow"},
-        {&vx_n.not_echoed, "not_echoed"}, {&vx_n.drop_write_error, "drop_write_error"},
-        {&vx_n.drop_intake, "drop_intake"}, {&vx_n.unsent_at_close, "unsent_at_close"},
-        {&vx_n.drop_jump, "drop_jump"}, {&vx_n.dropped_at_stop, "dropped_at_stop"},
-        {&vx_n.a_fd, "_fd"}, {&vx_n.a_fresh, "_fresh"}, {&vx_n.a_preamble, "preamble"}, {&vx_n.a_device, "_device"},
-        {&vx_n.a_outage, "_outage"}, {&vx_n.a_idle, "idle"}, {&vx_n.a_active, "active"}, {&vx_n.a_sparse, "sparse"},
-        {&vx_n.a_socket, "socket"},
-        {&vx_n.m_submit, "submit"}, {&vx_n.m_room, "room"}, {&vx_n.m_push, "push"}, {&vx_n.m_drain, "drain"},
-        {&vx_n.m_close, "close"}, {&vx_n.m_units_of, "units_of"}, {&vx_n.m_fileno, "fileno"},
-        {&vx_n.m_acquire, "acquire"}, {&vx_n.m_release, "release"},
-    };
     size_t i;
-    for (i = 0; i < sizeof names / sizeof names[0]; i++) {
-        if ((*names[i].slot = vx_name(names[i].name)) == NULL) return -1;
+    for (i = 0; i < sizeof NAMES / sizeof NAMES[0]; i++) {
+        if ((*NAMES[i].slot = vx_name(NAMES[i].name)) == NULL) return -1;
     }
     return 0;
+}
+
+/* DECLARED: {"module:qualname": (attribute names...)} from NAMES, for the test that holds them declared. */
+static PyObject *declared_names(void) {
+    PyObject *declared = PyDict_New();
+    size_t i;
+    for (i = 0; declared != NULL && i < sizeof NAMES / sizeof NAMES[0]; i++) {
+        PyObject *names, *one, *grown;
+        if (NAMES[i].declared_on == NULL) continue;
+        names = PyDict_GetItemString(declared, NAMES[i].declared_on); /* borrowed */
+        one = PyTuple_Pack(1, *NAMES[i].slot);
+        grown = one == NULL || names == NULL ? Py_XNewRef(one) : PySequence_Concat(names, one);
+        if (grown == NULL || PyDict_SetItemString(declared, NAMES[i].declared_on, grown) < 0) Py_CLEAR(declared);
+        Py_XDECREF(one);
+        Py_XDECREF(grown);
+    }
+    return declared;
+}
+
+PyObject *vx_call(PyObject *obj, PyObject *name, const char *format, ...) {
+    PyObject *method = PyObject_GetAttr(obj, name), *args, *result;
+    va_list va;
+    if (method == NULL) return NULL;
+    va_start(va, format);
+    args = Py_VaBuildValue(format, va);
+    va_end(va);
+    if (args == NULL || !PyTuple_Check(args)) {
+        if (args != NULL) PyErr_Format(PyExc_SystemError, "vx_call's format must build a tuple: %s", format);
+        Py_DECREF(method);
+        Py_XDECREF(args);
+        return NULL;
+    }
+    result = PyObject_Call(method, args, NULL);
+    Py_DECREF(method);
+    Py_DECREF(args);
+    return result;
 }
 
 PyObject *vx_name(const char *name) {
@@ -190,7 +275,7 @@ static int add_type(PyObject *module, PyTypeObject *type, const char *name) {
 }
 
 PyMODINIT_FUNC PyInit__vstig(void) {
-    PyObject *module = PyModule_Create(&module_def);
+    PyObject *module = PyModule_Create(&module_def), *declared;
     int reason;
     if (module == NULL) return NULL;
     vx_py.names = PyDict_New();
@@ -214,6 +299,10 @@ PyMODINIT_FUNC PyInit__vstig(void) {
         add_type(module, &vx_PathType, "Path") < 0)
         goto fail;
     if (PyModule_AddIntConstant(module, "KEYS", VSTIG_KEYS) < 0) goto fail;
+    if ((declared = declared_names()) == NULL || PyModule_AddObject(module, "DECLARED", declared) < 0) {
+        Py_XDECREF(declared);
+        goto fail;
+    }
     return module;
 fail:
     Py_DECREF(module);

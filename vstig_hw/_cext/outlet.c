@@ -35,13 +35,13 @@ static int attribute_true(PyObject *obj, PyObject *name) {
 }
 
 /* The writer holds nothing and writes nothing now (LinkWriter.idle): a batch may go straight to the device. */
-static int writer_idle(vx_outlet_t *o) { return attribute_true(o->writer, vx_n.a_idle); }
+static int writer_idle(vx_outlet_t *o) { return attribute_true(o->writer, vx_n.idle); }
 
 /* writer.submit(units, messages) with the exception Outlet._hand counts as drop_write_error. */
 static int writer_submit(vx_outlet_t *o, PyObject *units, Py_ssize_t messages) {
     PyObject *count = PyLong_FromSsize_t(messages), *done;
     if (count == NULL) return -1;
-    done = PyObject_CallMethodObjArgs(o->writer, vx_n.m_submit, units, count, NULL);
+    done = PyObject_CallMethodObjArgs(o->writer, vx_n.submit, units, count, NULL);
     Py_DECREF(count);
     if (done != NULL) {
         Py_DECREF(done);
@@ -69,11 +69,11 @@ static int submit_through_writer(vx_outlet_t *o, const vstig_msg_t *msgs, size_t
     int status;
     if (o->encoder != NULL) {
         PyObject *list = message_list(msgs, n);
-        units = list == NULL ? NULL : PyObject_CallMethod(o->encoder, "encode_batch", "O", list);
+        units = list == NULL ? NULL : PyObject_CallMethodOneArg(o->encoder, vx_n.encode_batch, list);
         Py_XDECREF(list);
     } else {
         PyObject *list = message_list(msgs, n);
-        units = list == NULL ? NULL : PyObject_CallMethodObjArgs(o->link, vx_n.m_units_of, list, NULL);
+        units = list == NULL ? NULL : PyObject_CallMethodObjArgs(o->link, vx_n.units_of, list, NULL);
         Py_XDECREF(list);
     }
     if (units == NULL) {
@@ -87,9 +87,9 @@ static int submit_through_writer(vx_outlet_t *o, const vstig_msg_t *msgs, size_t
 }
 
 #ifndef _WIN32
-/* A serial transport's open fd (SerialTransport._fd), or -1 when it has none now (lost, or no fd at all). */
+/* A serial transport's open fd (its CompiledHandle's), or -1 when it has none now (lost, or no fd at all). */
 static int serial_fd(vx_port_t *p) {
-    PyObject *fd = PyObject_GetAttr(p->transport, vx_n.a_fd);
+    PyObject *fd = PyObject_GetAttr(p->handle, vx_n.fd);
     long value;
     if (fd == NULL) return -2;
     value = fd == Py_None ? -1 : PyLong_AsLong(fd);
@@ -113,10 +113,10 @@ static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         PyErr_NoMemory();
         return -1;
     }
-    fresh = PyObject_GetAttr(p->transport, vx_n.a_fresh);
+    fresh = PyObject_GetAttr(p->handle, vx_n.fresh);
     if (fresh == NULL) goto error;
     if (PyObject_IsTrue(fresh) == 1) { /* the first write since the port opened: the preamble goes first */
-        PyObject *preamble = PyObject_GetAttr(p->transport, vx_n.a_preamble);
+        PyObject *preamble = PyObject_GetAttr(p->handle, vx_n.preamble);
         if (preamble == NULL || !PyBytes_Check(preamble) || PyBytes_GET_SIZE(preamble) > 16) {
             Py_XDECREF(preamble);
             Py_DECREF(fresh);
@@ -126,7 +126,7 @@ static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         at = (size_t)PyBytes_GET_SIZE(preamble);
         memcpy(buf, PyBytes_AS_STRING(preamble), at);
         Py_DECREF(preamble);
-        if (PyObject_SetAttr(p->transport, vx_n.a_fresh, Py_False) < 0) {
+        if (PyObject_SetAttr(p->handle, vx_n.fresh, Py_False) < 0) {
             Py_DECREF(fresh);
             goto error;
         }
@@ -156,8 +156,8 @@ done:
     return status;
 }
 
-int vx_socketcan_fd(PyObject *transport, PyObject **device_seen, int *fd_seen, int read_here) {
-    PyObject *device = PyObject_GetAttr(transport, vx_n.a_device), *outage, *sock, *fd, *done;
+int vx_socketcan_fd(PyObject *handle, PyObject **device_seen, int *fd_seen, int read_here) {
+    PyObject *device = PyObject_GetAttr(handle, vx_n.device), *outage, *fd, *done;
     int in_outage;
     long value;
     if (device == NULL) return -2;
@@ -165,7 +165,7 @@ int vx_socketcan_fd(PyObject *transport, PyObject **device_seen, int *fd_seen, i
         Py_DECREF(device);
         return -1;
     }
-    outage = PyObject_GetAttr(transport, vx_n.a_outage); /* a reopened bus is back only once a call on it worked */
+    outage = PyObject_GetAttr(handle, vx_n.outage); /* a reopened bus is back only once a call on it worked */
     in_outage = outage == NULL ? -1 : PyObject_IsTrue(outage);
     Py_XDECREF(outage);
     if (in_outage != 0) {
@@ -176,13 +176,12 @@ int vx_socketcan_fd(PyObject *transport, PyObject **device_seen, int *fd_seen, i
         Py_DECREF(device);
         return *fd_seen;
     }
-    sock = PyObject_GetAttr(device, vx_n.a_socket);
-    fd = sock == NULL ? NULL : PyObject_CallMethodNoArgs(sock, vx_n.m_fileno);
-    Py_XDECREF(sock);
+    fd = PyObject_CallMethodNoArgs(device, vx_n.fileno);
     value = fd == NULL ? -1 : PyLong_AsLong(fd);
     Py_XDECREF(fd);
     /* a reader of the socket tells the bus so: what is left unread at its close is then counted */
-    done = PyErr_Occurred() ? NULL : read_here ? PyObject_CallMethod(device, "read_elsewhere", NULL) : Py_NewRef(device);
+    done = PyErr_Occurred() ? NULL : read_here ? PyObject_CallMethodNoArgs(device, vx_n.read_elsewhere)
+                                                : Py_NewRef(device);
     if (done == NULL) {
         Py_DECREF(device);
         return -2;
@@ -214,7 +213,7 @@ static int write_socketcan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     size_t count, i, base, extra, sent_messages = 0;
     uint8_t raw[72];
     PyObject *rest;
-    int fd = vx_socketcan_fd(p->transport, &p->device, &p->fd, 0), status = 1;
+    int fd = vx_socketcan_fd(p->handle, &p->device, &p->fd, 0), status = 1;
     if (fd < -1) return -1;
     if (fd < 0) return 0;
     if (n > 64 && (frames = PyMem_Malloc(n * sizeof *frames)) == NULL) {
@@ -275,13 +274,13 @@ static int hand(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n, int idle) {
 /* ---- the share and the window: Outlet's push and flush ------------------------------------- */
 
 static int note_backlog(vx_outlet_t *o) {
-    o->backlog = attribute_true(o->queue, vx_n.a_active);
+    o->backlog = attribute_true(o->queue, vx_n.active);
     return o->backlog < 0 ? -1 : 0;
 }
 
 /* len(queue.sparse): the sparse sources waiting, each first in the lines with one message; -1 with an exception */
 static Py_ssize_t sparse_waiting(vx_outlet_t *o) {
-    PyObject *sparse = PyObject_GetAttr(o->queue, vx_n.a_sparse);
+    PyObject *sparse = PyObject_GetAttr(o->queue, vx_n.sparse);
     Py_ssize_t count;
     if (sparse == NULL) return -1;
     count = PyObject_Length(sparse);
@@ -294,7 +293,7 @@ static int enqueue(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n, long link,
     PyObject *list = message_list(msgs, n), *refused;
     Py_ssize_t count;
     if (list == NULL) return -1;
-    refused = PyObject_CallMethod(o->queue, "push", "OlO", list, link, sub);
+    refused = vx_call(o->queue, vx_n.push, "(OlO)", list, link, sub);
     Py_DECREF(list);
     if (refused == NULL) return -1;
     count = PyLong_AsSsize_t(refused);
@@ -359,7 +358,7 @@ static long room(vx_outlet_t *o, int *idle) {
     *idle = writer_idle(o);
     if (*idle < 0) return -1;
     if (*idle) return o->hold;
-    answer = PyObject_CallMethodNoArgs(o->writer, vx_n.m_room);
+    answer = PyObject_CallMethodNoArgs(o->writer, vx_n.room);
     if (answer == NULL) return -1;
     value = PyLong_AsLong(answer);
     Py_DECREF(answer);
@@ -369,7 +368,7 @@ static long room(vx_outlet_t *o, int *idle) {
 
 /* queue.drain(allowed) as C messages; the caller frees *out. */
 static int drain_lines(vx_outlet_t *o, long allowed, vstig_msg_t **out, size_t *n) {
-    PyObject *batch = PyObject_CallMethod(o->queue, "drain", "l", allowed);
+    PyObject *batch = vx_call(o->queue, vx_n.drain, "(l)", allowed);
     Py_ssize_t i, len;
     *out = NULL;
     *n = 0;
@@ -470,11 +469,11 @@ static PyObject *Outlet_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
     self->encoder = encoder == Py_None ? NULL : Py_NewRef(encoder);
     self->keep_all = keep_all;
     self->not_queued = Py_NewRef(keep_all ? vx_n.drop_overflow : vx_n.superseded);
-    self->counters = PyObject_GetAttrString(link, "counters");
-    self->port.transport = PyObject_GetAttrString(link, "transport");
-    self->port.counters = self->port.transport == NULL ? NULL : PyObject_GetAttrString(self->port.transport,
-                                                                                       "counters");
-    hold_obj = PyObject_GetAttrString(writer, "hold");
+    self->counters = PyObject_GetAttr(link, vx_n.counters);
+    self->port.transport = PyObject_GetAttr(link, vx_n.transport);
+    self->port.counters = self->port.transport == NULL ? NULL : PyObject_GetAttr(self->port.transport,
+                                                                                 vx_n.counters);
+    hold_obj = PyObject_GetAttr(writer, vx_n.hold);
     self->hold = hold_obj == NULL ? -1 : PyLong_AsLong(hold_obj);
     Py_XDECREF(hold_obj);
     if (self->counters == NULL || self->port.counters == NULL || PyErr_Occurred() || note_backlog(self) < 0)
@@ -487,6 +486,15 @@ static PyObject *Outlet_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
     }
     if (self->port.kind != VX_PORT_PYTHON && self->encoder == NULL) {
         PyErr_SetString(PyExc_ValueError, "writing straight to a device needs the link's Encoder");
+        goto fail;
+    }
+    /* a device written here: the transport's declared handle on it (its fd, its bus) */
+    self->port.handle = self->port.kind == VX_PORT_PYTHON
+                            ? Py_NewRef(Py_None)
+                            : PyObject_CallMethodNoArgs(self->port.transport, vx_n.compiled_handle);
+    if (self->port.handle == NULL) goto fail;
+    if (self->port.handle == Py_None && self->port.kind != VX_PORT_PYTHON) {
+        PyErr_SetString(PyExc_TypeError, "writing straight to a device needs its transport's compiled handle");
         goto fail;
     }
     return (PyObject *)self;
@@ -506,6 +514,7 @@ static int Outlet_traverse(vx_outlet_t *self, visitproc visit, void *arg) {
     Py_VISIT(self->port.transport);
     Py_VISIT(self->port.counters);
     Py_VISIT(self->port.device);
+    Py_VISIT(self->port.handle);
     return 0;
 }
 
@@ -521,6 +530,7 @@ static int Outlet_clear(vx_outlet_t *self) {
     Py_CLEAR(self->port.transport);
     Py_CLEAR(self->port.counters);
     Py_CLEAR(self->port.device);
+    Py_CLEAR(self->port.handle);
     return 0;
 }
 
@@ -566,7 +576,7 @@ static Py_ssize_t Outlet_len(vx_outlet_t *self) {
 static PyObject *Outlet_close(vx_outlet_t *self, PyObject *unused) {
     /* Outlet.close: the device takes what is queued (briefly), then the writer stops */
     (void)unused;
-    return PyObject_CallMethodNoArgs(self->writer, vx_n.m_close);
+    return PyObject_CallMethodNoArgs(self->writer, vx_n.close);
 }
 
 static PyObject *Outlet_get_keep_all(vx_outlet_t *self, void *closure) {

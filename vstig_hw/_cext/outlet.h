@@ -17,6 +17,7 @@ typedef struct {
     uint8_t kind;
     PyObject *transport; /* the link's transport */
     PyObject *counters;  /* its counters */
+    PyObject *handle;    /* a device written here: transport.compiled_handle() (CompiledHandle), else None */
     PyObject *device;    /* SocketCAN: the bus `fd` was read from */
     int fd;
 } vx_port_t;
@@ -45,10 +46,10 @@ extern PyTypeObject vx_OutletType;
 int vx_outlet_push(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n, long link, PyObject *sub);
 int vx_outlet_flush(vx_outlet_t *o, double now, double *retry);
 
-/* The fd of the SocketCAN bus a CAN transport has open now, cached per bus in *device_seen and *fd_seen (a new
- * bus is told it is read here if `read_here`); -1 when it has none or is in an outage (the transport's own calls
- * tell when a reopened bus works), -2 with an exception. */
-int vx_socketcan_fd(PyObject *transport, PyObject **device_seen, int *fd_seen, int read_here);
+/* The fd of the SocketCAN bus a CAN transport has open now (`handle`: its CompiledHandle), cached per bus in
+ * *device_seen and *fd_seen (a new bus is told it is read here if `read_here`); -1 when it has none or is in an
+ * outage (the transport's own calls tell when a reopened bus works), -2 with an exception. */
+int vx_socketcan_fd(PyObject *handle, PyObject **device_seen, int *fd_seen, int read_here);
 
 /* The counter `name` on these counters, +n (shared by the parts). */
 #define VX_COUNT(counters, name, n) vx_count((counters), vx_name(name), (n))

@@ -39,7 +39,7 @@ static int is_python_guard(PyObject *guard) { return guard != Py_None && !PyObje
 int vx_relay_take(vx_relay_t *r, Py_ssize_t index, const vstig_msg_t *msgs, size_t n, PyObject *sub) {
     Py_ssize_t i;
     if (r->guard_is_python) { /* heard, never passed on, from a read-only link */
-        PyObject *read_only = PyObject_CallMethod(r->guard, "read_only", "O", PyList_GET_ITEM(r->names, index));
+        PyObject *read_only = PyObject_CallMethodOneArg(r->guard, vx_n.read_only, PyList_GET_ITEM(r->names, index));
         int yes = read_only == NULL ? -1 : PyObject_IsTrue(read_only);
         Py_XDECREF(read_only);
         if (yes) return yes < 0 ? -1 : 0;
@@ -64,7 +64,7 @@ static PyObject *Relay_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     self->guard_is_python = is_python_guard(guard);
     self->names = PyList_New(PyList_GET_SIZE(outlets));
     for (i = 0; self->names != NULL && i < PyList_GET_SIZE(outlets); i++) {
-        PyObject *name = PyObject_GetAttrString(OUTLET(outlets, i)->link, "name");
+        PyObject *name = PyObject_GetAttr(OUTLET(outlets, i)->link, vx_n.name);
         if (name == NULL) {
             Py_DECREF(self);
             return NULL;
@@ -251,7 +251,7 @@ static int tell(vx_seat_t *s, uint16_t key, const vstig_entry_t *old, PyObject *
 
 /* Seat._receive_telling: one message at a time, telling on_change of every entry that changed. */
 static int receive_telling(vx_seat_t *s, Py_ssize_t index, const vstig_msg_t *msgs, size_t n, PyObject *sender) {
-    PyObject *link = PyList_GET_ITEM(s->links, index), *name = PyObject_GetAttrString(link, "name");
+    PyObject *link = PyList_GET_ITEM(s->links, index), *name = PyObject_GetAttr(link, vx_n.name);
     int domain = one_domain(s, index), status = 0;
     size_t i;
     if (name == NULL) return -1;
@@ -305,7 +305,7 @@ int vx_seat_admit(vx_seat_t *s, Py_ssize_t index, PyObject *sub, size_t n, doubl
     }
     if ((double)n > left) {
         size_t room = (size_t)left; /* int(): left is never below 0 */
-        PyObject *counters = PyObject_GetAttrString(PyList_GET_ITEM(s->links, index), "counters");
+        PyObject *counters = PyObject_GetAttr(PyList_GET_ITEM(s->links, index), vx_n.counters);
         int status = counters == NULL ? -1 : vx_count(counters, vx_n.drop_intake, (Py_ssize_t)(n - room));
         Py_XDECREF(counters);
         if (status < 0) {
@@ -372,7 +372,7 @@ static int push_where_due(vx_seat_t *s, const vstig_msg_t *out, size_t n, int co
         vx_outlet_t *outlet = OUTLET(s->outlets, i);
         PyObject *name = NULL;
         Py_ssize_t echoes = 0;
-        if (confines && (name = PyObject_GetAttrString(outlet->link, "name")) == NULL) goto done;
+        if (confines && (name = PyObject_GetAttr(outlet->link, vx_n.name)) == NULL) goto done;
         for (k = 0, m = 0; k < n; k++) {
             if (origin[k] == i) { /* every robot on that link heard it already */
                 echoes++;
@@ -406,7 +406,7 @@ static int guard_confines(vx_seat_t *s) {
     PyObject *confines;
     int yes;
     if (!is_python_guard(s->guard)) return 0;
-    confines = PyObject_GetAttrString(s->guard, "confines");
+    confines = PyObject_GetAttr(s->guard, vx_n.confines);
     if (confines == NULL) return -1;
     yes = PyObject_IsTrue(confines);
     Py_DECREF(confines);
@@ -487,7 +487,7 @@ static PyObject *Seat_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     }
     for (i = 0; i < VSTIG_KEYS; i++) self->note_link[i] = NOT_NOTED;
     for (i = 0; i < self->nlinks; i++) {
-        PyObject *domain = PyObject_GetAttrString(PyList_GET_ITEM(links, i), "one_domain");
+        PyObject *domain = PyObject_GetAttr(PyList_GET_ITEM(links, i), vx_n.one_domain);
         int yes = domain == NULL ? -1 : PyObject_IsTrue(domain);
         Py_XDECREF(domain);
         if (yes < 0) {
@@ -544,7 +544,7 @@ static PyObject *Seat_put(vx_seat_t *self, PyObject *args) {
     if ((listen = vx_seat_listening(self)) < 0 || (key = vx_field("key", VSTIG_KEY_MAX, key_obj)) < 0) return NULL;
     had = vstig_engine_entry(&self->engine->engine, (uint16_t)key, &old);
     {
-        PyObject *done = PyObject_CallMethod((PyObject *)self->engine, "put", "OO", key_obj, value_obj);
+        PyObject *done = PyObject_CallMethodObjArgs((PyObject *)self->engine, vx_n.put, key_obj, value_obj, NULL);
         if (done == NULL) return NULL;
         Py_DECREF(done);
     }
@@ -562,7 +562,7 @@ static PyObject *Seat_put(vx_seat_t *self, PyObject *args) {
 static PyObject *Seat_get(vx_seat_t *self, PyObject *key_obj) {
     PyObject *value;
     if (caused_by(self, VX_LOCAL, Py_None) < 0) return NULL;
-    value = PyObject_CallMethod((PyObject *)self->engine, "get", "O", key_obj);
+    value = PyObject_CallMethodOneArg((PyObject *)self->engine, vx_n.get, key_obj);
     if (value != NULL) { /* the GET may have merged into the key's pending PUT: send it everywhere */
         long key = PyLong_AsLong(key_obj);
         if (self->note_link[key] >= 0) self->note_link[key] = UNNOTED;

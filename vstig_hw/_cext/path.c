@@ -11,10 +11,11 @@
  * Node's Python delivery, the reference, which does the same with the same objects (decoding with the same
  * Receiver, so a frame cut across two reads is whole either way).
  *
- * The Node's own state the delivery reads and writes is the Python delivery's: its lock, `_reader_thread`,
- * `_failure` and `_wake` (a listener or rule that raised ends `run` on the loop's thread), `_retry_at`,
- * `_sleep_until` and `_wake_on_arrival` (when the loop must look). While its readers stop (`stopping`), every
- * batch takes the Python delivery, which decides what a stop hands on and what it counts.
+ * What it shares with the Node is declared: its lock, and its DeliveryState (vstig_hw/gateway/delivery_state.py):
+ * `reader_thread`, `failure` and `wake` (a listener or rule that raised ends `run` on the loop's thread),
+ * `retry_at`, `sleep_until` and `wake_on_arrival` (when the loop must look); a device it reads, through the
+ * transport's CompiledHandle. While its readers stop (`stopping`), every batch takes the Python delivery, which
+ * decides what a stop hands on and what it counts.
  */
 #include "path.h"
 
@@ -32,8 +33,7 @@
 #define DRAIN_LIMIT 512 /* CAN frames one read takes after the first (CanTransport's _DRAIN_LIMIT) */
 #define POLL_COUNTS_S 1.0 /* how often a SocketCAN bus's own drop counts are polled (socketcan_drops) */
 
-static PyObject *A_READER, *A_FAILURE, *A_WAKE, *A_RETRY, *A_SLEEP, *A_WAKE_ON_ARRIVAL, *M_SET,
-    *M_ERROR_FRAME, *M_POLL_COUNTS, *M_CHECK, *CAN_MESSAGE;
+static PyObject *CAN_MESSAGE;
 
 static PyObject *TIME_TIME, *TIME_MONOTONIC; /* Python's own clocks: the Node compares what we set with them */
 
@@ -74,7 +74,7 @@ static int python_guard(vx_path_t *p, vx_link_t *link, PyObject *sender, double 
         else PyList_SET_ITEM(list, i, m);
     }
     if (list == NULL) return -1;
-    kept = PyObject_CallMethod(p->guard, "filter", "OOOdOO", link->name, sender, list, t, link->counters, Py_None);
+    kept = vx_call(p->guard, vx_n.filter, "(OOOdOO)", link->name, sender, list, t, link->counters, Py_None);
     Py_DECREF(list);
     if (kept == NULL) return -1;
     if (!PyList_Check(kept) || PyList_GET_SIZE(kept) > (Py_ssize_t)*n) {
@@ -136,7 +136,7 @@ static int judge_telling(vx_path_t *p, const vx_link_t *link, double t, PyObject
         if (m != NULL && jump) {
             reason = Py_NewRef(vx_guard_passes((vx_guard_t *)p->guard, &msgs[i], now) ? Py_None : vx_n.drop_jump);
         } else if (m != NULL) {
-            reason = PyObject_CallMethodObjArgs(p->guard, M_CHECK, link->name, sender, m, when, Py_None, NULL);
+            reason = PyObject_CallMethodObjArgs(p->guard, vx_n.check, link->name, sender, m, when, Py_None, NULL);
         }
         if (reason == NULL || (reason != Py_None && !PyUnicode_Check(reason))) {
             if (reason != NULL) PyErr_Format(PyExc_TypeError, "a guard's check returns None or a counter's name, "
@@ -272,7 +272,7 @@ static int spread(vx_path_t *p, Py_ssize_t heard_on, double now, int *held_back,
     *held_back = any;
     *when_back = retry;
     value = any ? PyFloat_FromDouble(retry) : Py_NewRef(Py_None);
-    if (value == NULL || PyObject_SetAttr(p->node, A_RETRY, value) < 0) status = -1;
+    if (value == NULL || PyObject_SetAttr(p->state, vx_n.retry_at, value) < 0) status = -1;
     Py_XDECREF(value);
     return status;
 }
@@ -328,11 +328,11 @@ static void fail(vx_path_t *p) {
     PyErr_Fetch(&type, &value, &tb);
     PyErr_NormalizeException(&type, &value, &tb);
     if (tb != NULL && value != NULL) PyException_SetTraceback(value, tb);
-    failure = PyObject_GetAttr(p->node, A_FAILURE);
-    if (failure == Py_None && value != NULL) (void)PyObject_SetAttr(p->node, A_FAILURE, value);
+    failure = PyObject_GetAttr(p->state, vx_n.failure);
+    if (failure == Py_None && value != NULL) (void)PyObject_SetAttr(p->state, vx_n.failure, value);
     Py_XDECREF(failure);
-    wake = PyObject_GetAttr(p->node, A_WAKE);
-    done = wake == NULL ? NULL : PyObject_CallMethodNoArgs(wake, M_SET);
+    wake = PyObject_GetAttr(p->state, vx_n.wake);
+    done = wake == NULL ? NULL : PyObject_CallMethodNoArgs(wake, vx_n.set);
     Py_XDECREF(wake);
     Py_XDECREF(done);
     PyErr_Clear();
@@ -402,25 +402,25 @@ static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
     int taking_now, status, held_back = 0, python;
     double sleep_until = 0.0, retry = 0.0;
     if (!p->fast || p->stopping || p->links[index].receiver == NULL || listened(p)) return 0;
-    got = PyObject_CallMethodOneArg(p->lock, vx_n.m_acquire, Py_False);
+    got = PyObject_CallMethodOneArg(p->lock, vx_n.acquire, Py_False);
     if (got == NULL) return -1;
     status = PyObject_IsTrue(got);
     Py_DECREF(got);
     if (status <= 0) return status;
     taking_now = !p->stopping; /* a stop under way: the Python delivery knows what to hand on and count */
     if (taking_now <= 0) {
-        got = PyObject_CallMethodNoArgs(p->lock, vx_n.m_release);
+        got = PyObject_CallMethodNoArgs(p->lock, vx_n.release);
         Py_XDECREF(got);
         return taking_now < 0 || got == NULL ? -1 : 0;
     }
     /* this batch's listeners told here; Python code of the user's may ask whether it runs on the Node's thread */
     python = told_now(p, &told) < 0 ? -1 : calls_python(p, &told);
     ident = python > 0 ? thread_ident() : NULL;
-    if (python < 0 || (python && (ident == NULL || PyObject_SetAttr(p->node, A_READER, ident) < 0))) {
+    if (python < 0 || (python && (ident == NULL || PyObject_SetAttr(p->state, vx_n.reader_thread, ident) < 0))) {
         Py_XDECREF(ident);
         Py_XDECREF(told.messages);
         Py_XDECREF(told.refused);
-        got = PyObject_CallMethodNoArgs(p->lock, vx_n.m_release);
+        got = PyObject_CallMethodNoArgs(p->lock, vx_n.release);
         Py_XDECREF(got);
         return -1;
     }
@@ -436,20 +436,20 @@ static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
     if (status < 0) fail(p);
     if (python) {
         ident = PyLong_FromLong(0);
-        if (ident != NULL) (void)PyObject_SetAttr(p->node, A_READER, ident);
+        if (ident != NULL) (void)PyObject_SetAttr(p->state, vx_n.reader_thread, ident);
         Py_XDECREF(ident);
     }
-    got = PyObject_CallMethodNoArgs(p->lock, vx_n.m_release);
+    got = PyObject_CallMethodNoArgs(p->lock, vx_n.release);
     if (got == NULL) return -1;
     Py_DECREF(got);
     if (status < 0) return 1; /* handled: the failure reaches `run` */
     /* the loop is woken only when it must look: `run` has an `until`, or a window holds messages back sooner than
-     * it would look by itself (read after spread set _retry_at; the loop sets _sleep_until before reading it) */
-    wake_on = PyObject_GetAttr(p->node, A_WAKE_ON_ARRIVAL);
+     * it would look by itself (read after spread set retry_at; the loop sets sleep_until before reading it) */
+    wake_on = PyObject_GetAttr(p->state, vx_n.wake_on_arrival);
     status = wake_on == NULL ? -1 : PyObject_IsTrue(wake_on);
     Py_XDECREF(wake_on);
     if (status == 0 && held_back) {
-        sleep = PyObject_GetAttr(p->node, A_SLEEP);
+        sleep = PyObject_GetAttr(p->state, vx_n.sleep_until);
         if (sleep == NULL) status = -1;
         else {
             sleep_until = PyFloat_AsDouble(sleep);
@@ -458,8 +458,8 @@ static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
         Py_XDECREF(sleep);
     }
     if (status > 0) {
-        PyObject *wake = PyObject_GetAttr(p->node, A_WAKE);
-        got = wake == NULL ? NULL : PyObject_CallMethodNoArgs(wake, M_SET);
+        PyObject *wake = PyObject_GetAttr(p->state, vx_n.wake);
+        got = wake == NULL ? NULL : PyObject_CallMethodNoArgs(wake, vx_n.set);
         Py_XDECREF(wake);
         if (got == NULL) return -1;
         Py_DECREF(got);
@@ -519,7 +519,7 @@ static int read_serial(vx_link_t *link, int fd, double timeout, ssize_t *got) {
  * own read takes this turn (no fd now, or the device failed: it knows how to tell and reopen). */
 static PyObject *pump_serial(vx_path_t *p, Py_ssize_t index, double timeout) {
     vx_link_t *link = &p->links[index];
-    PyObject *fd_obj = PyObject_GetAttr(link->transport, vx_n.a_fd);
+    PyObject *fd_obj = PyObject_GetAttr(link->handle, vx_n.fd);
     long fd;
     ssize_t got;
     int ready;
@@ -560,8 +560,8 @@ static int xbee_unit(vx_link_t *link, size_t *n, size_t *at) {
     const vstig_xbee_rx_t *rx = link->stream;
     const uint8_t *data = vstig_xbee_frame_data(rx);
     if (data[0] == VSTIG_XBEE_TX_STATUS || data[0] == VSTIG_XBEE_MODEM_STATUS || data[0] == VSTIG_XBEE_AT_RESPONSE) {
-        PyObject *done = PyObject_CallMethod(link->transport, "note_report", "y#", (const char *)data,
-                                             (Py_ssize_t)vstig_xbee_frame_len(rx));
+        PyObject *done = vx_call(link->transport, vx_n.note_report, "(y#)", (const char *)data,
+                                 (Py_ssize_t)vstig_xbee_frame_len(rx));
         Py_XDECREF(done);
         return done == NULL ? -1 : 0;
     }
@@ -607,12 +607,12 @@ static PyObject *pump_xbee(vx_path_t *p, Py_ssize_t index, double timeout) {
         if (link->stream == NULL || link->units == NULL || link->unit_len == NULL) return PyErr_NoMemory();
         vstig_xbee_rx_init(link->stream, link->escaped);
     }
-    if ((fd_obj = PyObject_GetAttr(link->transport, vx_n.a_fd)) == NULL) return NULL;
+    if ((fd_obj = PyObject_GetAttr(link->handle, vx_n.fd)) == NULL) return NULL;
     fd = fd_obj == Py_None ? -1 : PyLong_AsLong(fd_obj);
     Py_DECREF(fd_obj);
     if (fd < 0) return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
     if (fd != link->fd) { /* a port opened since: the reads are ours once the transport holds nothing */
-        PyObject *holds = PyObject_CallMethod(link->transport, "holds", NULL);
+        PyObject *holds = PyObject_CallMethodNoArgs(link->transport, vx_n.holds);
         int held = holds == NULL ? -1 : PyObject_IsTrue(holds);
         Py_XDECREF(holds);
         if (held != 0) return held < 0 ? NULL : Py_NewRef(Py_None);
@@ -675,7 +675,7 @@ static void unpack_frame(const uint8_t *raw, size_t size, vstig_can_frame_t *fra
 static PyObject *frame_message(const vx_link_t *link, const vstig_can_frame_t *f, uint8_t esi, double t) {
     PyObject *args = PyTuple_New(0), *kwargs, *channel, *unit = NULL;
     if (args == NULL) return NULL;
-    channel = PyObject_GetAttrString(link->transport, "channel");
+    channel = PyObject_GetAttr(link->transport, vx_n.channel);
     if (channel == NULL) {
         Py_DECREF(args);
         return NULL;
@@ -721,12 +721,12 @@ static PyObject *pump_socketcan(vx_path_t *p, Py_ssize_t index, double timeout) 
     double t, now;
     vx_batch_t batch;
     if (!p->fast) return Py_NewRef(Py_None); /* a listener wants python-can's own messages (their timestamps) */
-    fd = vx_socketcan_fd(link->transport, &link->device, &link->fd, 1);
+    fd = vx_socketcan_fd(link->handle, &link->device, &link->fd, 1);
     if (fd < -1) return NULL;
     if (fd < 0) return Py_NewRef(Py_None);
     if ((now = monotonic()) == -1.0 && PyErr_Occurred()) return NULL;
     if (now - link->polled >= POLL_COUNTS_S) { /* the bus's own counts, as its recv polls them */
-        PyObject *done = PyObject_CallMethodNoArgs(link->device, M_POLL_COUNTS);
+        PyObject *done = PyObject_CallMethodNoArgs(link->device, vx_n.poll_counts);
         if (done == NULL) return NULL;
         Py_DECREF(done);
         link->polled = now;
@@ -751,7 +751,7 @@ static PyObject *pump_socketcan(vx_path_t *p, Py_ssize_t index, double timeout) 
     failed = got < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR ? errno : 0;
     Py_END_ALLOW_THREADS
     if (failed) { /* the socket told its error (an interface gone down) to us alone: the transport must hear it */
-        PyObject *done = PyObject_CallMethod(link->transport, "failed", "s", strerror(failed));
+        PyObject *done = vx_call(link->transport, vx_n.failed, "(s)", strerror(failed));
         if (done == NULL) return NULL;
         Py_DECREF(done);
     }
@@ -759,14 +759,14 @@ static PyObject *pump_socketcan(vx_path_t *p, Py_ssize_t index, double timeout) 
     if ((t = wall_clock()) == -1.0 && PyErr_Occurred()) return NULL;
     if (vx_count(link->tcounters, vx_n.rx, (Py_ssize_t)n) < 0) return NULL;
     if (counted) {
-        PyObject *done = PyObject_CallMethod(link->device, "note_kernel_drops", "k", (unsigned long)drops);
+        PyObject *done = vx_call(link->device, vx_n.note_kernel_drops, "(k)", (unsigned long)drops);
         if (done == NULL) return NULL;
         Py_DECREF(done);
     }
     for (i = 0; i < n; i++) { /* error frames: counted by the transport, which may find the bus off */
         if (frames[i].error) {
             PyObject *unit = frame_message(link, &frames[i], esi[i], t), *done;
-            done = unit == NULL ? NULL : PyObject_CallMethodOneArg(link->transport, M_ERROR_FRAME, unit);
+            done = unit == NULL ? NULL : PyObject_CallMethodOneArg(link->transport, vx_n.note_error_frame, unit);
             Py_XDECREF(unit);
             if (done == NULL) return NULL;
             Py_DECREF(done);
@@ -795,35 +795,22 @@ static PyObject *pump_socketcan(vx_path_t *p, Py_ssize_t index, double timeout) 
 
 /* ---- the Python type ------------------------------------------------------------------------ */
 
+/* Python's own clocks, once (the Node compares what we set with them). */
 static int intern(void) {
-    static int done;
-    struct {
-        PyObject **slot;
-        const char *name;
-    } names[] = {{&A_READER, "_reader_thread"}, {&A_FAILURE, "_failure"},
-                 {&A_WAKE, "_wake"}, {&A_RETRY, "_retry_at"}, {&A_SLEEP, "_sleep_until"},
-                 {&A_WAKE_ON_ARRIVAL, "_wake_on_arrival"}, {&M_SET, "set"}, {&M_ERROR_FRAME, "_error_frame"},
-                 {&M_POLL_COUNTS, "poll_counts"}, {&M_CHECK, "check"}};
-    size_t i;
     PyObject *time_module;
-    if (done) return 0;
-    for (i = 0; i < sizeof names / sizeof names[0]; i++) {
-        if ((*names[i].slot = vx_name(names[i].name)) == NULL) return -1;
-    }
+    if (TIME_TIME != NULL) return 0;
     time_module = PyImport_ImportModule("time");
     if (time_module == NULL) return -1;
-    TIME_TIME = PyObject_GetAttrString(time_module, "time");
-    TIME_MONOTONIC = PyObject_GetAttrString(time_module, "monotonic");
+    TIME_TIME = PyObject_GetAttr(time_module, vx_n.time);
+    TIME_MONOTONIC = PyObject_GetAttr(time_module, vx_n.monotonic);
     Py_DECREF(time_module);
-    if (TIME_TIME == NULL || TIME_MONOTONIC == NULL) return -1;
-    done = 1;
-    return 0;
+    return TIME_TIME == NULL || TIME_MONOTONIC == NULL ? -1 : 0;
 }
 
 /* An XBee transport's API mode and quiet time (`api`, `quiet_after`); 0, or -1 with an exception. */
 static int xbee_settings(vx_link_t *link) {
-    PyObject *api = PyObject_GetAttrString(link->transport, "api"),
-             *quiet = api == NULL ? NULL : PyObject_GetAttrString(link->transport, "quiet_after");
+    PyObject *api = PyObject_GetAttr(link->transport, vx_n.api),
+             *quiet = api == NULL ? NULL : PyObject_GetAttr(link->transport, vx_n.quiet_after);
     long mode = api == NULL ? -1 : PyLong_AsLong(api);
     link->quiet = quiet == NULL ? -1.0 : PyFloat_AsDouble(quiet);
     Py_XDECREF(api);
@@ -834,14 +821,14 @@ static int xbee_settings(vx_link_t *link) {
 }
 
 static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
-    static char *kwlist[] = {"node", "lock", "deliver", "links", "receivers", "reads", "part", "guard", "outlets",
+    static char *kwlist[] = {"state", "lock", "deliver", "links", "receivers", "reads", "part", "guard", "outlets",
                              "listeners", "told", "heard", "delivered", "can_message", NULL};
-    PyObject *node, *lock, *deliver, *links, *receivers, *reads, *part, *guard, *outlets, *listeners = NULL,
+    PyObject *state, *lock, *deliver, *links, *receivers, *reads, *part, *guard, *outlets, *listeners = NULL,
         *told = NULL, *heard = Py_None, *delivered = NULL, *can_message = Py_None;
     vx_path_t *self;
     Py_ssize_t i;
     if (intern() < 0 ||
-        !PyArg_ParseTupleAndKeywords(args, kwds, "OOOO!O!O!OOO!|$O!O!OO!O", kwlist, &node, &lock, &deliver,
+        !PyArg_ParseTupleAndKeywords(args, kwds, "OOOO!O!O!OOO!|$O!O!OO!O", kwlist, &state, &lock, &deliver,
                                      &PyList_Type, &links, &PyList_Type, &receivers, &PyList_Type, &reads, &part,
                                      &guard, &PyList_Type, &outlets, &PyList_Type, &listeners, &PyList_Type,
                                      &told, &heard, &PyList_Type, &delivered, &can_message))
@@ -863,7 +850,7 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     if (can_message != Py_None) Py_XSETREF(CAN_MESSAGE, Py_NewRef(can_message));
     self = (vx_path_t *)type->tp_alloc(type, 0);
     if (self == NULL) return NULL;
-    self->node = Py_NewRef(node);
+    self->state = Py_NewRef(state);
     self->lock = Py_NewRef(lock);
     self->deliver = Py_NewRef(deliver);
     self->part = Py_NewRef(part);
@@ -897,10 +884,15 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
         link->reads = (uint8_t)(link->receiver == NULL ? VX_READ_PYTHON : reads_how);
         link->link = Py_NewRef(PyList_GET_ITEM(links, i));
         link->fd = -1;
-        link->name = PyObject_GetAttrString(link->link, "name");
-        link->counters = PyObject_GetAttrString(link->link, "counters");
-        link->transport = PyObject_GetAttrString(link->link, "transport");
-        link->tcounters = link->transport == NULL ? NULL : PyObject_GetAttrString(link->transport, "counters");
+        link->name = PyObject_GetAttr(link->link, vx_n.name);
+        link->counters = PyObject_GetAttr(link->link, vx_n.counters);
+        link->transport = PyObject_GetAttr(link->link, vx_n.transport);
+        link->tcounters = link->transport == NULL ? NULL : PyObject_GetAttr(link->transport, vx_n.counters);
+        /* a device this delivery reads itself: the transport's declared handle on it (its fd, its bus) */
+        link->handle = link->transport == NULL || link->reads == VX_READ_PYTHON ? Py_NewRef(Py_None)
+                       : PyObject_CallMethodNoArgs(link->transport, vx_n.compiled_handle);
+        if (link->handle == Py_None && link->reads != VX_READ_PYTHON && !PyErr_Occurred())
+            PyErr_Format(PyExc_TypeError, "link %R's transport gives no compiled handle to read it by", link->name);
         if (link->name == NULL || link->counters == NULL || link->tcounters == NULL || PyErr_Occurred()) {
             Py_DECREF(self);
             return NULL;
@@ -915,7 +907,7 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
 
 static int Path_traverse(vx_path_t *self, visitproc visit, void *arg) {
     Py_ssize_t i;
-    Py_VISIT(self->node);
+    Py_VISIT(self->state);
     Py_VISIT(self->lock);
     Py_VISIT(self->deliver);
     Py_VISIT(self->part);
@@ -929,13 +921,14 @@ static int Path_traverse(vx_path_t *self, visitproc visit, void *arg) {
         Py_VISIT(self->links[i].receiver);
         Py_VISIT(self->links[i].link);
         Py_VISIT(self->links[i].device);
+        Py_VISIT(self->links[i].handle);
     }
     return 0;
 }
 
 static int Path_clear(vx_path_t *self) {
     Py_ssize_t i;
-    Py_CLEAR(self->node);
+    Py_CLEAR(self->state);
     Py_CLEAR(self->lock);
     Py_CLEAR(self->deliver);
     Py_CLEAR(self->part);
@@ -954,6 +947,7 @@ static int Path_clear(vx_path_t *self) {
         Py_CLEAR(link->transport);
         Py_CLEAR(link->tcounters);
         Py_CLEAR(link->device);
+        Py_CLEAR(link->handle);
     }
     return 0;
 }
@@ -1066,7 +1060,7 @@ static PyMemberDef Path_members[] = {
 PyTypeObject vx_PathType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "vstig_hw._vstig.Path",
-    .tp_doc = "Path(node, lock, deliver, links, receivers, reads, part, guard, outlets, *, listeners, told, heard, "
+    .tp_doc = "Path(state, lock, deliver, links, receivers, reads, part, guard, outlets, *, listeners, told, heard, "
               "delivered, can_message=None): "
               "a Node's delivery in C.",
     .tp_basicsize = sizeof(vx_path_t),

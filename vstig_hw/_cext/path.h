@@ -13,6 +13,7 @@ typedef struct {
     uint8_t reads;           /* VX_READ_* */
     vx_receiver_t *receiver; /* its framing in C, or NULL: this link's units take the Python path */
     PyObject *link, *name, *counters, *transport, *tcounters;
+    PyObject *handle;        /* a device read here: transport.compiled_handle() (CompiledHandle), else None */
     PyObject *device;        /* SocketCAN: the bus `fd` belongs to */
     int fd;
     double polled;           /* SocketCAN: when the bus's own drop counts were last polled */
@@ -26,7 +27,7 @@ typedef struct {
 
 typedef struct {
     PyObject_HEAD
-    PyObject *node;     /* the Node whose delivery this is */
+    PyObject *state;    /* the Node's DeliveryState (vstig_hw/gateway/delivery_state.py): what it shares with us */
     PyObject *lock;     /* its lock */
     PyObject *deliver;  /* its Python delivery (Node._deliver): the slow path */
     PyObject *part;     /* Seat, Relay, or None */

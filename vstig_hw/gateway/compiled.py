@@ -41,6 +41,7 @@ from ..links.link import Heard, Link
 from ..native import native
 from ..transports.serial import SerialTransport
 from ..transports.xbee import XBeeTransport
+from .delivery_state import DeliveryState
 from .fairshare import FairFifo, FairQueue
 from .guard import Guard
 from .outlet import RAW_QUEUE_LIMIT, Outlet
@@ -196,18 +197,19 @@ class Compiled:
         relay: RawRelay = self.native.Relay(outlets, guard)
         return relay
 
-    def path(self, node: object, lock: object, deliver: Callable[[int, float, list[Any]], None],
+    def path(self, state: DeliveryState, lock: object, deliver: Callable[[int, float, list[Any]], None],
              links: list[Link[Any]], receivers: list[Receiver | None], part: Seat | RawRelay | None,
              guard: Guard | None, outlets: list[Outlet], listeners: list[Sequence[Any]],
              told: list[tuple[Callable[..., None], ...]], delivered: list[Callable[[float], None]]) -> Path:
-        """The delivery; `listeners`: the Node's listeners that want each unit or every `Heard`, one sequence per
-        kind (while any has one, batches take the Python delivery); `told`: the `messages` and `refused` listeners
-        it tells itself; `delivered`: those told of every batch handled (its read time). The lists are the Node's
-        own, kept up to date in place: the delivery looks at them per read."""
+        """The delivery; `state`: what it shares with the Node's loop; `listeners`: the Node's listeners that want
+        each unit or every `Heard`, one sequence per kind (while any has one, batches take the Python delivery);
+        `told`: the `messages` and `refused` listeners it tells itself; `delivered`: those told of every batch
+        handled (its read time). The lists are the Node's own, kept up to date in place: the delivery looks at them
+        per read."""
         reads = [reads_for(link) if receiver is not None else 0 for link, receiver in zip(links, receivers,
                                                                                          strict=True)]
         can = sys.modules.get("can")  # loaded if a link is CAN: the frames the delivery hands Python are its Messages
-        path: Path = self.native.Path(node, lock, deliver, links, receivers, reads, part, guard, outlets,
+        path: Path = self.native.Path(state, lock, deliver, links, receivers, reads, part, guard, outlets,
                                       listeners=listeners, told=told, heard=Heard, delivered=delivered,
                                       can_message=None if can is None else can.Message)
         return path

@@ -105,6 +105,9 @@ class _Turns(Generic[Line]):
     """
 
     _kind: type[Line]
+    # declared: the compiled outlets (vstig_hw/_cext/outlet.c) read these too
+    sparse: OrderedDict[int, OrderedDict[Hashable, Line]]
+    active: int
 
     def __init__(self) -> None:
         # link -> its ring of lines with messages waiting (sub -> line), the first of each next in turn. A link with

@@ -146,6 +146,8 @@ class Guard:
     source, `learn` in seconds and `flap` in conflicts per second (each None: off) apply to every link.
     """
 
+    confines: bool  # a link is read-only (declared: the compiled Seat reads it too)
+
     def __init__(
         self,
         *,

@@ -66,9 +66,9 @@ from ..counters import ENGINE_STATS, Counters
 from ..engine import ConflictResolver, Entry, Stigmergy
 from ..links.link import Heard, Link
 from ..timestamps import TS_NONE
-from ..wakeup import Wakeup
 from ..wire import Message, Op
 from .compiled import compiled_for, jump_guard, receiver_for
+from .delivery_state import DeliveryState
 from .guard import Guard
 from .outlet import Outlet
 from .parts import INTAKE_TICKS, ChangeListener, RawRelay, Seat
@@ -185,10 +185,12 @@ class Node:
         self.compiled = compiled is not None
         # what links hear passes it before the engine, a relay or a listener sees it
         self.guard = guard if compiled is None else jump_guard(guard)
-        self._wake = Wakeup()  # one token wakes the waiting loop (a call, a window or a slow device's room opening)
+        # what the deliveries (Python and compiled) and the loop tell each other; its `wake` is the loop's one
+        # token (a call, a window or a slow device's room opening)
+        self._state = DeliveryState()
         make_outlet = Outlet if compiled is None else compiled.outlet
         self.outlets = [] if mode is Mode.LISTEN else [
-            make_outlet(link, budget, period, keep_all=mode is Mode.RAW, on_room=self._wake.set)
+            make_outlet(link, budget, period, keep_all=mode is Mode.RAW, on_room=self._state.wake.set)
             for link in self.links
         ]
         # The listeners, one tuple per kind, replaced (never changed) by `listen` and `cancel`: the data path
@@ -233,20 +235,15 @@ class Node:
         self._path_told: list[tuple[Callable[..., None], ...]] = [(), ()]  # messages, refused
         self._path_delivered: list[DeliveredListener] = []
         self._path = None if compiled is None else compiled.path(
-            self, self._lock, self._deliver, self.links, receivers, self.part, self.guard, self.outlets,
+            self._state, self._lock, self._deliver, self.links, receivers, self.part, self.guard, self.outlets,
             self._path_wants, self._path_told, self._path_delivered)
         self._readers = LinkReaders(self.links, self._deliver if self._path is None else self._deliver_compiled,
                                     self._path)
-        self._sleep_until = 0.0  # when the waiting loop looks again by itself (0: it is not waiting)
-        self._wake_on_arrival = False  # the loop has an `until` to check after every batch
-        self._loop_thread = 0  # ident of the thread in `run`, of the reader handling a batch (0: none)
-        self._reader_thread = 0
-        self._failure: BaseException | None = None  # what a listener raised on a reader thread, for `run`
+        self._loop_thread = 0  # ident of the thread in `run` (0: none)
         self._leftover: list[tuple[int, float, list[Any]]] = []  # batches read while closing, for `close`
         self._taking = True  # batches are handled; False once a stop handed over what was read (later: counted)
         self._paused = False  # no ticks: draining before a stop
         self._next_tick = 0.0
-        self._retry_at: float | None = None
         self._opened: list[Link[Any]] = []
         self._flush_order: dict[int, list[Outlet]] = {}  # heard_on -> the outlets in `_spread`'s order
         self._closed_because: str | None = None  # why no call gets in any more (None: open for calls)
@@ -292,7 +289,7 @@ class Node:
         me = threading.get_ident()
         self._close_drain = drain
         serving = self._serving
-        on_reader = me == self._reader_thread
+        on_reader = me == self._state.reader_thread
         if serving is not None and serving.is_alive():
             self._request_stop()
             if serving.ident != me and not on_reader:
@@ -309,7 +306,7 @@ class Node:
 
     def _request_stop(self) -> None:
         self._stop_requested.set()
-        self._wake.set()
+        self._state.wake.set()
 
     @property
     def closed(self) -> bool:
@@ -452,7 +449,7 @@ class Node:
         """
         deadline = None if duration is None else time.monotonic() + duration
         stopping = self._stop_requested
-        self._wake_on_arrival = until is not None
+        self._state.wake_on_arrival = until is not None
         self._loop_thread = threading.get_ident()
         try:
             while not (stop is not None and stop.is_set()) and not stopping.is_set() \
@@ -465,7 +462,7 @@ class Node:
                     wait = min(wait, deadline - now)
                 self.poll(max(0.0, min(wait, 0.25)))
         finally:
-            self._wake_on_arrival = False
+            self._state.wake_on_arrival = False
             self._loop_thread = 0
 
     def _holds(self, until: Callable[[], bool]) -> bool:
@@ -478,15 +475,16 @@ class Node:
         The links' frames are handled on their reader threads as they arrive
         (`_deliver`), not here; a listener's exception from there is raised here.
         """
-        wake = self._wake
-        self._sleep_until = time.monotonic() + timeout  # set before reading _retry_at: see `_deliver`
-        retry = self._retry_at
+        state = self._state
+        wake = state.wake
+        state.sleep_until = time.monotonic() + timeout  # set before reading retry_at: see `_deliver`
+        retry = state.retry_at
         if retry is not None:
             timeout = min(timeout, retry - time.monotonic())
         wake.wait(timeout)  # wake-ups that came together are one
-        self._sleep_until = 0.0
+        state.sleep_until = 0.0
         with self._lock:  # held while working, never while waiting: other threads may call in between
-            failure, self._failure = self._failure, None
+            failure, state.failure = state.failure, None
             if failure is not None:
                 raise failure
             calls = self._calls
@@ -521,23 +519,24 @@ class Node:
             finally:
                 lock.release()
             return
-        self._reader_thread = threading.get_ident()
+        state = self._state
+        state.reader_thread = threading.get_ident()
         try:
             self._arrive(index, t, units)
             self._spread(time.monotonic(), 1 << index)
             for delivered in self._on_delivered:
                 delivered(t)
         except BaseException as failure:  # a listener broke: `run` raises it on the loop's thread, as before
-            if self._failure is None:
-                self._failure = failure
-            self._wake.set()
+            if state.failure is None:
+                state.failure = failure
+            state.wake.set()
             return
         finally:
-            self._reader_thread = 0
+            state.reader_thread = 0
             lock.release()
-        retry = self._retry_at  # read after _spread set it; the loop sets _sleep_until before reading it
-        if self._wake_on_arrival or (retry is not None and retry < self._sleep_until):
-            self._wake.set()
+        retry = state.retry_at  # read after _spread set it; the loop sets sleep_until before reading it
+        if state.wake_on_arrival or (retry is not None and retry < state.sleep_until):
+            state.wake.set()
 
     def _count_unhandled(self, batch: tuple[int, list[Any]] | None) -> None:
         """Count as `dropped_at_stop` the messages of `batch` and of any leftovers nobody will hand over now:
@@ -673,7 +672,7 @@ class Node:
         """Whether the calling thread is working for the Node: its loop, or a reader thread handling a batch
         (a listener or a conflict rule it calls). Such a thread must not wait for the loop."""
         me = threading.get_ident()
-        return me == self._loop_thread or me == self._reader_thread
+        return me == self._loop_thread or me == self._state.reader_thread
 
     def submit(self, call: Callable[[], T]) -> concurrent.futures.Future[T]:
         """Run `call()` on the loop's thread with the Node to itself; its result (or exception) as a Future.
@@ -687,7 +686,7 @@ class Node:
                 _settle(future, call)
             return future
         self._calls.append((future, call))  # deque.append is atomic: no lock shared with the loop
-        self._wake.set()
+        self._state.wake.set()
         if self._shut:  # closed meanwhile: nobody will run it
             self._fail_calls()
         return future
@@ -739,9 +738,10 @@ class Node:
     def _spread_and_wake(self) -> None:
         """`_spread` for a caller's put/get/ask: a waiting loop must look again if a budget held some back."""
         self._spread(time.monotonic())
-        retry = self._retry_at
-        if retry is not None and retry < self._sleep_until:
-            self._wake.set()
+        state = self._state
+        retry = state.retry_at
+        if retry is not None and retry < state.sleep_until:
+            state.wake.set()
 
     def _spread(self, now: float, heard_on: int = 0) -> None:
         """Queue the engine's outbox on the links (`Seat.queue_out`), then send what budgets allow.
@@ -760,7 +760,7 @@ class Node:
             again = outlet.flush(now)
             if again is not None and (retry is None or again < retry):
                 retry = again
-        self._retry_at = retry
+        self._state.retry_at = retry
 
     def _order_for(self, heard_on: int) -> list[Outlet]:
         """The outlets with those of links in `heard_on` last, the others in their order (a stable sort)."""

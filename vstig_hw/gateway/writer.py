@@ -45,6 +45,10 @@ CLOSE_WAIT = 1.0  # seconds close() gives the device to take what is queued
 
 
 class LinkWriter:
+    # declared: the compiled outlets (vstig_hw/_cext/outlet.c) read these too
+    hold: int  # messages held for a slow device before the outlet keeps the rest
+    idle: bool  # nothing queued or being written (see __init__)
+
     def __init__(self, link: Link[Any], limit: int = TX_QUEUE_LIMIT, *, hold: int = WRITER_HOLD,
                  on_room: Callable[[], None] | None = None) -> None:
         if limit < 1:

@@ -40,6 +40,12 @@ class Link(Generic[Unit]):
     another's range (radios): there the re-broadcast carries the entry a hop further.
     """
 
+    # declared: the compiled data path (vstig_hw/_cext) reads these too
+    name: str
+    transport: Transport[Unit]
+    one_domain: bool
+    counters: Counters
+
     def __init__(self, name: str, transport: Transport[Unit], framing: Framing[Unit], *,
                  one_domain: bool = False) -> None:
         self.name = name

@@ -18,7 +18,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import ClassVar, Generic, TypeVar
+from typing import Any, ClassVar, Generic, TypeVar
 
 from ..counters import Counters
 
@@ -65,7 +65,9 @@ class Transport(abc.ABC, Generic[Unit]):
     * `listening`: the endpoints others reach it by (a Zenoh link's listeners);
       default: none; `about`: one line on where it listens and connects, for a start line;
     * `unreached`: why nothing can be heard, where it was told to reach someone and reaches nobody
-      (a Zenoh link's connect=); default: None.
+      (a Zenoh link's connect=); default: None;
+    * `compiled_handle`: the `CompiledHandle` the compiled data path reads and writes the device by (a
+      serial port's fd, a SocketCAN bus); default: None, the device is the transport's own to call.
     """
 
     name: str  # how the user named the device, for messages and counters
@@ -109,6 +111,36 @@ class Transport(abc.ABC, Generic[Unit]):
     def unreached(self) -> str | None:
         """Where it was told to connect and reaches nobody now, in words that follow its name; None if not so."""
         return None
+
+    def compiled_handle(self) -> CompiledHandle[Any] | None:
+        """The live state the compiled data path reads the device by (vstig_hw/_cext), or None: it does not."""
+        return None
+
+
+class CompiledHandle(Generic[Device]):
+    """A device transport's live state that the compiled data path (vstig_hw/_cext: path.c, outlet.c) reads, and
+    the one field it writes (`fresh`): the transport keeps its state here, so both see the same values, and the C
+    reaches them by these declared names only (`vstig_hw._vstig.DECLARED`, checked by tests/native).
+
+    * `device`: the open device (None: none now); `outage`: from a loss until the device is back;
+    * `fd`: a serial port's non-blocking file descriptor, where it has one (None: pyserial's own calls);
+    * `fresh`: the port was (re)opened and nothing written since: `preamble` goes ahead of the next write.
+    """
+
+    __slots__ = ("device", "fd", "fresh", "outage", "preamble")
+
+    device: Device | None
+    outage: bool
+    fd: int | None
+    fresh: bool
+    preamble: bytes
+
+    def __init__(self, preamble: bytes = b"") -> None:
+        self.device = None
+        self.outage = False
+        self.fd = None
+        self.fresh = False
+        self.preamble = preamble
 
 
 class Backoff:
@@ -154,15 +186,22 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
         self.counters = Counters()
         self.last_error: str | None = None  # why the device is away, while it is
         self._log = logging.getLogger(type(self).__module__)
-        self._device: Device | None = None
+        self._live: CompiledHandle[Device] = CompiledHandle()  # the device and its outage, shared with the C
         self._wanted = False  # open() was called and close() was not
         self._was_opened = False
-        self._outage = False  # from a loss until the device is back
         self._lost_at = 0.0
         self._backoff = Backoff(*backoff)
         self._retrying = threading.Lock()  # one thread reopens at a time (the reader and a writer may both try)
         self._closed = threading.Event()  # set by close(): a device call still waiting (an open's wait) gives up
         self._slow_drops = 0  # units not taken in time since the device last took one: a slow episode, said once
+
+    @property
+    def _device(self) -> Device | None:
+        """The open device (None: none now), for a transport's own calls."""
+        return self._live.device
+
+    def compiled_handle(self) -> CompiledHandle[Device]:
+        return self._live
 
     # -- the device calls: all a transport implements ----------------------------
     def _open_device(self) -> Device:
@@ -184,13 +223,13 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
     # -- the contract ------------------------------------------------------------
     @property
     def connected(self) -> bool:
-        return self._device is not None
+        return self._live.device is not None
 
     def open(self) -> None:
         """Open the device now; TransportError (one line naming it) if it cannot be. Unreachable: retried later."""
         self._closed.clear()
         try:
-            self._device = self._open_device()
+            self._live.device = self._open_device()
         except DeviceUnreachable as exc:
             self._wanted = self._was_opened = True
             self._begin_outage(str(exc), "unreachable")
@@ -204,7 +243,7 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
         self._drop_device()
 
     def read(self, timeout: float) -> list[Unit]:
-        device = self._device
+        device = self._live.device
         if device is None:
             device = self._reconnect(timeout)
             if device is None:
@@ -216,12 +255,12 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
             return []
         if units:
             self.counters["rx"] += len(units)
-        if self._outage and self._device is device:  # the reopened device worked
+        if self._live.outage and self._live.device is device:  # the reopened device worked
             self._recovered()
         return units
 
     def write(self, unit: Unit) -> None:
-        device = self._device
+        device = self._live.device
         if device is None:
             device = self._device_for_write()
             if device is None:
@@ -247,7 +286,7 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
             self._log.warning("%s: %s takes what we send again (%d not taken in time meanwhile)", self.name,
                               self.device_word, self._slow_drops)
             self._slow_drops = 0
-        if self._outage and self._device is not None:
+        if self._live.outage and self._live.device is not None:
             self._recovered()
 
     def _not_taken(self, counter: str, units: int = 1) -> None:
@@ -270,7 +309,7 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
         self._drop_device()
         if not self._wanted:  # a call that failed because close() took the device away: no outage
             return
-        if self._outage:  # the reopened device failed at once: still the same outage
+        if self._live.outage:  # the reopened device failed at once: still the same outage
             self.last_error = reason
             self._retry_later(reason)
             return
@@ -278,7 +317,7 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
 
     def _device_for_write(self) -> Device | None:
         """The device, or None (the unit dropped and counted) while it stays away; a write never waits."""
-        device = self._device
+        device = self._live.device
         if device is None and (self.reopen_on_write or not self._was_opened):
             device = self._reconnect(0.0)
         if device is None:
@@ -287,7 +326,7 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
 
     # -- the state machine -------------------------------------------------------
     def _begin_outage(self, reason: str, counter: str) -> None:
-        self._outage = True
+        self._live.outage = True
         self.last_error = reason
         self._lost_at = now = time.monotonic()
         self._backoff.start(now)
@@ -302,13 +341,14 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
         self._log.debug("%s: still lost (%s); next try in %.1f s", self.name, reason, self._backoff.delay)
 
     def _recovered(self) -> None:
-        self._outage = False
+        self._live.outage = False
         self.last_error = None
         self.counters["reconnects"] += 1
         self._log.warning("%s: %s back after %.1f s", self.name, self.device_word, time.monotonic() - self._lost_at)
 
     def _drop_device(self) -> None:
-        device, self._device = self._device, None
+        live = self._live
+        device, live.device = live.device, None
         if device is not None:
             self._close_device(device)
 
@@ -329,7 +369,7 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
             if wait > 0:
                 time.sleep(wait)
             if self._try_reopen(deadline - time.monotonic()):
-                return self._device
+                return self._live.device
             if time.monotonic() >= deadline:
                 return None
 
@@ -338,10 +378,10 @@ class DeviceTransport(Transport[Unit], Generic[Unit, Device]):
         if not self._retrying.acquire(timeout=patience) if patience > 0 else not self._retrying.acquire(False):
             return False
         try:
-            if self._device is not None:  # the other thread got it back
+            if self._live.device is not None:  # the other thread got it back
                 return True
             try:
-                self._device = self._open_device()
+                self._live.device = self._open_device()
             except TransportError as exc:
                 self.last_error = str(exc)
                 self._retry_later(str(exc))

@@ -55,6 +55,7 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
     device_word = "CAN device"
     back_on_open = False  # SocketCAN binds to an interface that is down: back once a call on it works
     device_errors = (can.CanError, OSError)
+    channel: str  # declared: the compiled data path reads it too (the can.Messages it makes)
 
     def __init__(
         self,
@@ -85,7 +86,7 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
     @property
     def bus(self) -> can.BusABC | None:
         """The python-can bus while connected (for captures and diagnostics)."""
-        return self._device
+        return self._live.device
 
     # -- the device calls ------------------------------------------------------
     def _open_device(self) -> can.BusABC:
@@ -132,11 +133,11 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
             while frame is not None:
                 frames.append(frame)
                 if frame.is_error_frame:
-                    self._error_frame(frame)
-                if len(frames) > _DRAIN_LIMIT or self._device is None:
+                    self.note_error_frame(frame)
+                if len(frames) > _DRAIN_LIMIT or self._live.device is None:
                     break
                 frame = device.recv(0)
-            if self._device is not None:
+            if self._live.device is not None:
                 self._poll_state(device)
         except self.device_errors as exc:  # the frames before the failure are still passed up
             self._lose(one_line(exc))
@@ -150,7 +151,7 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
         """Send only if the TX queue has room now (interfaces whose send cannot block); else the frame, to wait."""
         if self.interface not in _NONBLOCKING_SEND:
             return unit
-        device = self._device
+        device = self._live.device
         if device is None:
             device = self._device_for_write()
             if device is None:
@@ -175,7 +176,9 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
         return True
 
     # -- the bus's own reports -----------------------------------------------
-    def _error_frame(self, frame: can.Message) -> None:
+    def note_error_frame(self, frame: can.Message) -> None:
+        """An error frame the bus delivered (here, or to the compiled data path, which reads a SocketCAN socket
+        itself): counted, and a bus-off ends the device as a loss would."""
         self.counters["bus_errors"] += 1
         if self.interface == "socketcan" and frame.arbitration_id & _CAN_ERR_BUSOFF:
             self.counters["bus_off"] += 1

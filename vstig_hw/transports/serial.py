@@ -100,10 +100,15 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
             "baudrate": baudrate, "bytesize": bytesize, "parity": parity, "stopbits": stopbits,
             "rtscts": rtscts, "xonxoff": xonxoff, "write_timeout": write_timeout,
         }
-        self.preamble = preamble
         self._timeout: float | None = None  # the read timeout the port is configured with
-        self._fresh = False  # the port was (re)opened and nothing written since: the preamble goes first
-        self._fd: int | None = None  # the open port's file descriptor, where it has one: written directly
+        # the port's fd (written directly where it has one) and whether the preamble goes first live in the
+        # handle the compiled data path shares (`compiled_handle`)
+        self._live.preamble = preamble
+
+    @property
+    def preamble(self) -> bytes:
+        """What goes ahead of the first write after the port (re)opened (the framing's: 0x00 for COBS)."""
+        return self._live.preamble
 
     # -- the device calls ------------------------------------------------------
     def _open_device(self) -> serial.Serial:
@@ -114,24 +119,26 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
         except (KeyError, TypeError) as exc:  # pyserial's URL handlers fail so on some bad URLs (specs check them)
             raise TransportError(f"serial port {self.port}: pyserial cannot read this URL ({exc!r}); "
                                  "`vstig links` shows the forms it takes") from None
-        self._fresh = bool(self.preamble)
+        live = self._live
+        live.fresh = bool(live.preamble)
         fd = getattr(port, "fd", None)  # a POSIX device: pyserial opened it O_NONBLOCK; make sure of it
         if isinstance(fd, int):
             os.set_blocking(fd, False)
-            self._fd = fd
+            live.fd = fd
         else:
-            self._fd = None
+            live.fd = None
         return port
 
     def _close_device(self, device: serial.Serial) -> None:
-        fd, self._fd = self._fd, None
+        live = self._live
+        fd, live.fd = live.fd, None
         if fd is not None:
             drain_briefly(fd)
         with contextlib.suppress(serial.SerialException, OSError):  # the device may be gone already
             device.close()
 
     def _read_device(self, device: serial.Serial, timeout: float) -> list[bytes]:
-        fd = self._fd
+        fd = self._live.fd
         if fd is not None:
             data = self._read_fd(fd, timeout)
         else:
@@ -164,13 +171,13 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
     def _write_device(self, device: serial.Serial, unit: bytes) -> None:
         """Send `unit`, waiting up to `write_timeout` for the device to take it; the rest is dropped and counted."""
         unit = self._with_preamble(unit)
-        fd = self._fd
+        fd = self._live.fd
         if fd is None:  # socket://, rfc2217://, loop://: pyserial's own write (a failure: the base loses it)
             try:
                 device.write(unit)
             except serial.SerialTimeoutException:
                 self._not_taken("tx_timeout")  # flow control held us off: drop, the line stays ours
-                self._fresh = bool(self.preamble)  # maybe half a frame went: the next one starts clean
+                self._live.fresh = bool(self._live.preamble)  # maybe half a frame went: the next one starts clean
                 return
             self._sent()
             self.counters["tx_bytes"] += len(unit)
@@ -179,13 +186,13 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
         deadline = None if limit is None else time.monotonic() + limit
         while unit:
             rest = self._write_fd(fd, unit)
-            if rest is None or self._fd != fd:  # sent, or the port was lost meanwhile (counted there)
+            if rest is None or self._live.fd != fd:  # sent, or the port was lost meanwhile (counted there)
                 return
             unit = rest
             left = None if deadline is None else deadline - time.monotonic()
             if (left is not None and left <= 0) or not select.select([], [fd], [], left)[1]:
                 self._not_taken("tx_timeout")  # flow control or a deaf device held us off: drop the rest
-                self._fresh = bool(self.preamble)  # half a frame went: the next one starts clean
+                self._live.fresh = bool(self._live.preamble)  # half a frame went: the next one starts clean
                 return
 
     # -- writing without waiting (the gateway's loop) ------------------------------
@@ -195,9 +202,9 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
         None also when the unit was dropped (the device is gone: counted as in `write`).
         Ports with no fd (socket://...) take nothing here: the whole unit is returned.
         """
-        if self._device is None and self._device_for_write() is None:
+        if self._live.device is None and self._device_for_write() is None:
             return None
-        fd = self._fd
+        fd = self._live.fd
         if fd is None:
             return unit
         return self._write_fd(fd, self._with_preamble(unit))
@@ -220,9 +227,10 @@ class SerialTransport(DeviceTransport[bytes, serial.Serial]):
         return None
 
     def _with_preamble(self, unit: bytes) -> bytes:
-        if self._fresh:
-            self._fresh = False
-            return self.preamble + unit
+        live = self._live
+        if live.fresh:
+            live.fresh = False
+            return live.preamble + unit
         return unit
 
     def __enter__(self) -> SerialTransport:

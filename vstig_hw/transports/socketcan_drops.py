@@ -124,6 +124,10 @@ class KernelDropCountingBus:
             self._interface_base = drops
 
     # -- for a reader that takes frames from the socket itself (the compiled data path, vstig_hw/_cext/path.c) --
+    def fileno(self) -> int:
+        """The raw socket's fd, for a reader or writer of it outside python-can."""
+        return int(self.bus.socket.fileno())
+
     def read_elsewhere(self) -> None:
         """Frames are read from this socket by another reader: what it leaves at close is a loss, as after `recv`."""
         self._reading = True

@@ -72,6 +72,7 @@ class XBeeTransport(SerialTransport):
 
     reopen_on_write = False  # opening asks the module and waits for its answers: the reader thread does it
     quiet_after = QUIET  # (the compiled data path, which may read the module's bytes itself, cuts short as we do)
+    api: int  # 1 or 2 (escaped); declared: the compiled data path reads it too
 
     def __init__(self, port: str, baudrate: int = 9600, *, api: int = 1, at_timeout: float = AT_TIMEOUT,
                  on_module: Callable[[ModuleInfo], None] | None = None, **options: Any) -> None:
