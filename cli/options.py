@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar
 
 import click
 
-from vstig_hw.capture.records import READABLE_EXTENSIONS, CaptureError, line_capture_at, sniff_suffix
+from vstig_hw.capture.records import READABLE_EXTENSIONS, CaptureError, Damage, line_capture_at, sniff_suffix
 from vstig_hw.outputs import LinkedOutput, SpecialOutput, drop_setid, refuse_special, refuse_symlink
 from vstig_hw.wire import KEY_MAX
 
@@ -41,6 +41,7 @@ __all__ = [
     "GuardChoice",
     "NegativeNumbersAreArguments",
     "WireKey",
+    "damage_option",
     "echo_skipped",
     "filter_options",
     "finite",
@@ -57,7 +58,6 @@ __all__ = [
     "refuse_links_in",
     "refuse_to_replace",
     "renamed",
-    "skip_bad_option",
     "take_warnings",
 ]
 
@@ -289,8 +289,8 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 SHOWN_SKIPPED = 5  # damage lines shown; the summary counts them all
 VALUE_TYPE_HELP = "How to show the 16-bit value field: unsigned, signed (two's complement) or half-precision float."
-skip_bad_option = click.option(
-    "--skip-bad", is_flag=True,
+damage_option = click.option(  # the command's `damage`: what reading does with damaged input
+    "--skip-bad", "damage", is_flag=True, callback=lambda ctx, param, skip: Damage(skip),
     help="Count malformed lines, and a file cut short (a killed recorder's), and go on instead of stopping there.")
 
 
@@ -315,7 +315,7 @@ def reading_options(fn: F) -> F:
     from vstig_hw.values import VALUE_TYPES
 
     options = [
-        skip_bad_option,
+        damage_option,
         click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True,
                      help=VALUE_TYPE_HELP),
         click.option("--id-base", help="CAN ID base of the stigmergy (default 0x600, or 0x18000000 for 29-bit IDs)."),

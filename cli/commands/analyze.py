@@ -14,7 +14,7 @@ import click
 from vstig_hw.analysis import CONFLICT_RULES, DEFAULT_WINDOW, Analyzer, Conflict, Report, Traffic, WriteReport
 from vstig_hw.capture.analyzefile import Fed, analyze_captures
 from vstig_hw.capture.filters import Filter
-from vstig_hw.capture.records import CaptureError
+from vstig_hw.capture.records import CaptureError, Damage
 from vstig_hw.counters import Counters
 from vstig_hw.extras import require
 from vstig_hw.values import ValueType, from_raw
@@ -59,7 +59,7 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @filter_options
 @reports_errors
 def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plot: Path | None, overwrite: bool,
-            window: float, conflict: Conflict, trust_clock_notes: bool, value_type: ValueType, skip_bad: bool,
+            window: float, conflict: Conflict, trust_clock_notes: bool, value_type: ValueType, damage: Damage,
             id_base: str | None, extended: bool, deployment: str | None, keep: Filter) -> None:
     """Measure convergence per write and bandwidth from captures.
 
@@ -92,11 +92,11 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
         readable = {spooled.enter_context(readable_capture(path, input_format)): input_name(path) for path in files}
         clocks = on_one_clock(readable, trust_clock_notes)
         try:
-            drops, bad, filtered_out = _read(readable, analyzer, skip_bad, base, width, keep, deployment,
-                                             [shift.seconds if shift else 0.0 for shift in clocks] if clocks else None)
+            drops, filtered_out = _read(readable, analyzer, damage, base, width, keep, deployment,
+                                        [shift.seconds if shift else 0.0 for shift in clocks] if clocks else None)
         except CaptureError as error:
             raise renamed(error, error.path, readable.get(error.path, error.path)) from None
-    echo_skipped(renamed(error, error.path, readable.get(error.path, error.path)) for error in bad)
+    echo_skipped(renamed(error, error.path, readable.get(error.path, error.path)) for error in damage.first)
     report = analyzer.report()
     if not report.messages:
         if filtered_out:
@@ -109,33 +109,34 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
 
         plot_report(report, plot, min(keep.keys) if keep.keys else None)
     if as_json:
-        result = _as_json(report, tuple(readable.values()), drops, len(bad), value_type)
+        result = _as_json(report, tuple(readable.values()), drops, damage.count, value_type)
         if clocks:
             result["capture"]["clocks"] = [None if shift is None else {"shift_s": shift.seconds, "error_s": shift.error}
                                            for shift in clocks]
         click.echo(json.dumps(result))
     else:
         _print_text(report, value_type)
-    summary = counted(report.messages, "message") + (f", {counted(len(bad), 'bad line')} skipped" if bad else "")
+    summary = counted(report.messages, "message") + (
+        f", {counted(damage.count, 'bad line')} skipped" if damage.count else "")
     if drops:
         summary += f", dropped {drops.summary()}"
     click.echo(summary + (f"; wrote {plot}" if plot else ""), err=True)
 
 
-def _read(names: dict[str, str], analyzer: Analyzer, skip_bad: bool, base: int | None, width: bool | None,
+def _read(names: dict[str, str], analyzer: Analyzer, damage: Damage, base: int | None, width: bool | None,
           keep: Filter, deployment: str | None, shifts: list[float] | None = None) -> Fed:
     """`names`: the files to read, each with the name the user gave it; `shifts`: seconds off each one's times."""
     files = tuple(names)
     size = sum(os.path.getsize(path) for path in files)
     if not (sys.stderr.isatty() and size > _PROGRESS_BYTES):
-        return analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep,
+        return analyze_captures(files, analyzer, damage=damage, id_base=base, extended=width, keep=keep,
                                 deployment=deployment, shifts=shifts)
     from rich.console import Console
     from rich.progress import Progress
 
     with Progress(console=Console(stderr=True), transient=True) as bar:
         task = bar.add_task(f"analyzing {os.path.basename(names[files[0]])}", total=size)
-        result = analyze_captures(files, analyzer, skip_bad=skip_bad, id_base=base, extended=width, keep=keep,
+        result = analyze_captures(files, analyzer, damage=damage, id_base=base, extended=width, keep=keep,
                                   deployment=deployment, progress=lambda n: bar.advance(task, n), shifts=shifts)
     return result
 

@@ -12,7 +12,7 @@ import click
 
 from vstig_hw.capture.decoded import FORMATS, decode_file
 from vstig_hw.capture.filters import Filter
-from vstig_hw.capture.records import CAN_EXTENSIONS, MCAP_EXTENSION, CaptureError, link_names_lost
+from vstig_hw.capture.records import CAN_EXTENSIONS, MCAP_EXTENSION, CaptureError, Damage, link_names_lost
 from vstig_hw.capture.time_columns import TIME_STYLES, TimeColumn
 from vstig_hw.extras import require
 from vstig_hw.values import ValueType
@@ -36,7 +36,7 @@ from ..running import reports_errors
 _BAR_FROM = 1 << 20  # bytes: a smaller file decodes before a bar would be worth drawing
 
 
-def _convert(files: dict[str, str], output: str, skip_bad: bool, base: int | None, extended: bool,
+def _convert(files: dict[str, str], output: str, damage: Damage, base: int | None, extended: bool,
              deployment: str | None, keep: Filter) -> None:
     """Convert `files` (the file read -> the name the user gave) into `output`; errors name the user's files."""
 
@@ -46,13 +46,13 @@ def _convert(files: dict[str, str], output: str, skip_bad: bool, base: int | Non
         return renamed(error, error.path, files.get(error.path, error.path))
 
     try:
-        count, drops, bad = convert(tuple(files), output, skip_bad=skip_bad, id_base=base, extended=extended,
-                                    keep=keep, deployment=deployment)
+        count, drops = convert(tuple(files), output, damage=damage, id_base=base, extended=extended, keep=keep,
+                               deployment=deployment)
     except CaptureError as error:
         raise named(error) from None
-    echo_skipped(map(named, bad))
+    echo_skipped(map(named, damage.first))
     summary = (f"{output}: {counted(count, 'record')} from {counted(len(files), 'file')}"
-               + (f", {counted(len(bad), 'bad line')} skipped" if bad else ""))
+               + (f", {counted(damage.count, 'bad line')} skipped" if damage.count else ""))
     click.echo(summary + (f", dropped {drops.summary()}" if drops else ""), err=True)
     if link_names_lost(output):
         click.echo(f"{output} names no link: decode reads its frames back as one unnamed link", err=True)
@@ -76,7 +76,7 @@ def _convert(files: dict[str, str], output: str, skip_bad: bool, base: int | Non
 @filter_options
 @reports_errors
 def command(files: tuple[str, ...], input_format: str | None, fmt: str, time_style: str | None, output: str | None,
-            overwrite: bool, skip_bad: bool, value_type: ValueType, id_base: str | None, extended: bool,
+            overwrite: bool, damage: Damage, value_type: ValueType, id_base: str | None, extended: bool,
             deployment: str | None, keep: Filter) -> None:
     """Print every message in FILES, or convert them (-o FILE) into any format record
     writes; - reads stdin, pipes and <(...) work too.
@@ -97,22 +97,24 @@ def command(files: tuple[str, ...], input_format: str | None, fmt: str, time_sty
         with contextlib.ExitStack() as spooled:  # stdin and pipes too
             inputs = {spooled.enter_context(readable_capture(path, input_format)): input_name(path)
                       for path in files}
-            _convert(inputs, output, skip_bad, base, extended, deployment, keep)
+            _convert(inputs, output, damage, base, extended, deployment, keep)
         return
     clock = TimeColumn(time_style) if time_style else None
     for number, path in enumerate(files):
         name = input_name(path)
+        skipped = damage.fresh()  # each file's summary counts its own
         with readable_capture(path, input_format) as readable, _progress_bar(readable) as progress:
             try:
-                count, drops, bad = decode_file(readable, sys.stdout, fmt, value_type=value_type,
-                                                skip_bad=skip_bad, id_base=base, extended=extended, keep=keep,
-                                                deployment=deployment, progress=progress, csv_header=number == 0,
-                                                file_column=len(files) > 1, clock=clock)
+                count, drops = decode_file(readable, sys.stdout, fmt, value_type=value_type, damage=skipped,
+                                           id_base=base, extended=extended, keep=keep, deployment=deployment,
+                                           progress=progress, csv_header=number == 0, file_column=len(files) > 1,
+                                           clock=clock)
             except CaptureError as error:
                 raise renamed(error, readable, name) from None
         sys.stdout.flush()
-        echo_skipped(renamed(error, readable, name) for error in bad)
-        summary = f"{name}: {counted(count, 'message')}" + (f", {counted(len(bad), 'bad line')} skipped" if bad else "")
+        echo_skipped(renamed(error, readable, name) for error in skipped.first)
+        summary = f"{name}: {counted(count, 'message')}" + (
+            f", {counted(skipped.count, 'bad line')} skipped" if skipped.count else "")
         if drops:
             summary += f", dropped {drops.summary()}"
         click.echo(summary, err=True)

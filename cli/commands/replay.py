@@ -12,7 +12,7 @@ import click
 
 from vstig_hw.capture.decoded import Decoder, default_framings, filter_records
 from vstig_hw.capture.filters import Filter
-from vstig_hw.capture.records import CAN_FRAMING, CaptureError, Record, read_capture
+from vstig_hw.capture.records import CAN_FRAMING, Damage, Record, read_capture
 from vstig_hw.capture.replay import replay
 from vstig_hw.engine import Stigmergy
 from vstig_hw.gateway import stop_on_signals
@@ -21,7 +21,7 @@ from vstig_hw.links.can import CanSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 from vstig_hw.wording import counted
 
-from ..options import VALUE_TYPE_HELP, Finite, echo_skipped, filter_options, skip_bad_option
+from ..options import VALUE_TYPE_HELP, Finite, damage_option, echo_skipped, filter_options
 from ..running import LINK, StatusLine, build_links, lossless, open_unless_stopped, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
@@ -112,12 +112,11 @@ def _targets(onto: tuple[tuple[str | None, LinkSpec], ...], robot_id: int) -> di
 
 
 def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, deployment: str | None,
-           skip_bad: bool) -> None:
+           damage: Damage) -> None:
     engine = Stigmergy(_OBSERVER_ID)
     decoder, reader = (Decoder(default_framings(deployment=deployment)) for _ in range(2))  # framings keep state
     t0 = None
-    bad: list[CaptureError] = []
-    for decoded in decoder.decode_all(filter_records(read_capture(path, skip_bad, bad), keep, reader)):
+    for decoded in decoder.decode_all(filter_records(read_capture(path, damage), keep, reader)):
         t0 = decoded.t if t0 is None else t0
         if at is not None and decoded.t - t0 > at:
             break
@@ -127,7 +126,7 @@ def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, dep
     click.echo(f"{'key':>6} {'value':>8} {'ts':>6} {'robot':>6}")
     for key, entry in sorted(engine.entries()):
         click.echo(f"{key:>6} {from_raw(entry.value, value_type)!s:>8} {entry.timestamp:>6} {entry.robot:>6}")
-    echo_skipped(bad)
+    echo_skipped(damage.first)
 
 
 @click.command()
@@ -151,12 +150,12 @@ def _table(path: str, at: float | None, value_type: ValueType, keep: Filter, dep
               help="For Buzz/BittyBuzz captures replayed onto another medium or shown with --table: their TOML map.")
 @click.option("--verbose", "-v", is_flag=True,
               help="Say how the replay ran: under SCHED_FIFO (where permitted) or normal scheduling, and why.")
-@skip_bad_option
+@damage_option
 @filter_options
 @reports_errors
 def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: float, loop: bool,
             skip_gaps: float | None, ignore_timestamps: bool, robot_id: int, table: bool, at: float | None,
-            value_type: ValueType, deployment: str | None, verbose: bool, skip_bad: bool, keep: Filter) -> None:
+            value_type: ValueType, deployment: str | None, verbose: bool, damage: Damage, keep: Filter) -> None:
     """Replay FILE onto live links, or show what the swarm believed (--table).
 
     Ctrl-C, SIGTERM or SIGHUP stops at once, even in a long gap: nothing is sent after it.
@@ -178,7 +177,7 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
                                             ("--ignore-timestamps", ignore_timestamps)) if given]
         if ignored:
             raise click.UsageError(f"{', '.join(ignored)} go with --onto, not --table")
-        _table(file, at, value_type, keep, deployment, skip_bad)
+        _table(file, at, value_type, keep, deployment, damage)
         return
     if at is not None:
         raise click.UsageError("--at goes with --table")
@@ -199,7 +198,6 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     send = _CountingSender(dispatch, list(targets.values()))
     opened: list[Link[Any]] = []
     passes_done = 0
-    bad: list[CaptureError] = []  # what the last pass skipped
     try:
         with stop_on_signals() as stop:  # before the links open: a signal while they do is a clean stop too
             def open_links() -> None:
@@ -210,8 +208,8 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
             open_unless_stopped(open_links, stop)  # a stop while they open: nothing is sent, none waited for
             passes: Iterator[int] = itertools.count() if loop else iter([0])
             for _ in passes:
-                bad = []
-                done = replay(filter_records(read_capture(file, skip_bad, bad), keep, reader), send, speed=speed,
+                damage = damage.fresh()  # what the last pass skipped
+                done = replay(filter_records(read_capture(file, damage), keep, reader), send, speed=speed,
                               stop=stop, skip_gaps=skip_gaps, ignore_timestamps=ignore_timestamps)
                 passes_done += 1
                 if stop.is_set() or done.frames == 0:
@@ -234,4 +232,4 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     if unmapped:
         skipped = ", ".join(f"{name} ({counted(count, 'unit')})" for name, count in sorted(unmapped.items()))
         click.echo(f"skipped links with no --onto: {skipped}", err=True)
-    echo_skipped(bad)
+    echo_skipped(damage.first)

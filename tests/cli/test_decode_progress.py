@@ -13,7 +13,7 @@ from peers import VSTIG, run_vstig_on_a_terminal_stderr
 
 from vstig_hw.capture.decoded import decode_file
 from vstig_hw.capture.files import RotatingCapture
-from vstig_hw.capture.records import Record
+from vstig_hw.capture.records import Damage, Record
 
 FRAMES = 10_000
 
@@ -37,7 +37,7 @@ def test_progress_advances_to_the_end_for_every_format(tmp_path: Path, name: str
     path = tmp_path / name
     _capture(path, "serial" if name.endswith(".cap") else "can")
     seen: list[int] = []
-    decode_file(str(path), io.StringIO(), fmt, progress=seen.append, skip_bad=True)
+    decode_file(str(path), io.StringIO(), fmt, progress=seen.append, damage=Damage(skip=True))
     assert seen and seen == sorted(seen) and seen[-1] == os.path.getsize(path)
 
 

@@ -22,7 +22,7 @@ import pytest
 from peers import PtyPeer, SlcanAdapter, run_vstig, start_vstig, wait_for
 
 from vstig_hw import Message, Op, encode
-from vstig_hw.capture.records import CaptureError, read_capture
+from vstig_hw.capture.records import CaptureError, Damage, read_capture
 from vstig_hw.framing import make_serial_framing
 
 MESSAGES = [Message(Op.PUT, 9, 100 + i, i + 1, 3) for i in range(20)]
@@ -31,7 +31,7 @@ MESSAGES = [Message(Op.PUT, 9, 100 + i, i + 1, 3) for i in range(20)]
 def _recorded(capture: Path) -> int:
     """How many messages the (perhaps unfinished) capture holds now."""
     try:
-        return sum(1 for _ in read_capture(str(capture), skip_bad=True, bad=[]))
+        return sum(1 for _ in read_capture(str(capture), Damage(skip=True)))
     except (CaptureError, OSError):
         return 0
 

@@ -21,7 +21,7 @@ from vstig_hw.capture import candump
 from vstig_hw.capture.decoded import decode_file
 from vstig_hw.capture.fastlog import chunk_to_jsonl
 from vstig_hw.capture.files import RotatingCapture, rotated_name
-from vstig_hw.capture.records import CaptureError, Record, read_capture
+from vstig_hw.capture.records import CaptureError, Damage, Record, read_capture
 from vstig_hw.capture.replay import replay
 from vstig_hw.capture.serial_log import HEADER, parse_line
 
@@ -46,9 +46,21 @@ def test_serial_capture_bad_line_names_file_and_line(tmp_path: Path) -> None:
     path.write_text(f"{HEADER}\n(1.000000) r cobs8 rx 00\n(2.0) r cobs8 sideways 00\n(3.000000) r cobs8 rx 0\n")
     with pytest.raises(CaptureError, match=r"bad.cap:3: not a serial capture line"):
         list(read_capture(str(path)))
-    bad: list[CaptureError] = []
-    assert len(list(read_capture(str(path), skip_bad=True, bad=bad))) == 1
-    assert [e.line for e in bad] == [3, 4]
+    damage = Damage(skip=True)
+    assert len(list(read_capture(str(path), damage))) == 1
+    assert [e.line for e in damage.first] == [3, 4] and damage.count == 2
+
+
+def test_damage_counts_every_bad_line_keeps_the_first_few_and_a_fresh_one_starts_at_zero(tmp_path: Path) -> None:
+    path = tmp_path / "many.cap"
+    path.write_text(f"{HEADER}\n" + "junk\n" * 250 + "(1.000000) r cobs8 rx 00\n")
+    damage = Damage(skip=True, keep=100)
+    assert len(list(read_capture(str(path), damage))) == 1
+    assert damage.count == 250 and [e.line for e in damage.first] == list(range(2, 102))
+    again = damage.fresh()
+    assert (again.skip, again.keep, again.count, again.first) == (True, 100, 0, [])
+    with pytest.raises(CaptureError, match=r"many.cap:2: "):
+        list(read_capture(str(path)))  # the default raises at the first
 
 
 @given(st.text(max_size=80))
@@ -217,8 +229,9 @@ def test_line_by_line_fallback_numbers_lines_as_the_file_does(tmp_path: Path) ->
     path.write_text(good + "junk\x0cwith a form feed\n" + good + "bad line\n")
     errors: dict[str, list[int | None]] = {}
     for fmt in ("jsonl", "text"):  # jsonl takes the chunked fast path, text the per-record reader
-        _, _, bad = decode_file(str(path), io.StringIO(), fmt, skip_bad=True)
-        errors[fmt] = [error.line for error in bad]
+        damage = Damage(skip=True)
+        decode_file(str(path), io.StringIO(), fmt, damage=damage)
+        errors[fmt] = [error.line for error in damage.first]
     assert errors["jsonl"] == errors["text"] == [2, 4]
 
 

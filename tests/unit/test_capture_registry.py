@@ -28,7 +28,7 @@ from vstig_hw.capture.records import (
 def test_every_reader_and_writer_in_the_registry_exists() -> None:
     for fmt in READERS:
         reader = reader_for(fmt)
-        assert list(inspect.signature(reader).parameters) == ["path", "skip_bad", "bad", "opened"], fmt
+        assert list(inspect.signature(reader).parameters) == ["path", "damage", "opened"], fmt
     for medium in WRITERS:
         assert inspect.isclass(writer_class(medium)), medium
 

@@ -22,7 +22,7 @@ from . import candump
 from .decoded import Decoder, RecordFilter, default_framings
 from .fastlog import parse_chunk, seconds
 from .filters import Filter
-from .records import CaptureError, Record, read_capture, sniff
+from .records import STRICT, Damage, Record, read_capture, sniff
 
 __all__ = ["Fed", "analyze_captures"]
 
@@ -33,11 +33,10 @@ class Fed(NamedTuple):
     """What reading the captures came to, beside the messages the analyzer was given."""
 
     drops: Counters  # units that held no stigmergy message, by reason
-    bad: list[CaptureError]  # bad lines skipped (--skip-bad)
     filtered_out: int  # stigmergy messages the filter did not keep
 
 
-def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, skip_bad: bool = False,
+def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, damage: Damage = STRICT,
                      id_base: int | None = None, extended: bool | None = None, keep: Filter | None = None,
                      progress: Callable[[int], None] | None = None,
                      deployment: str | None = None, shifts: Sequence[float] | None = None) -> Fed:
@@ -45,21 +44,21 @@ def analyze_captures(paths: Sequence[str], analyzer: Analyzer, *, skip_bad: bool
 
     `extended=None` reads each CAN link's ID width from its frames. `progress(n)`
     hears of each n bytes read, on the bulk path. `shifts`: seconds to take from each
-    file's times, putting captures from several PCs on one clock (clock_notes.shifts).
+    file's times, putting captures from several PCs on one clock (clock_notes.shifts). Damage in a file
+    goes to `damage` (raised, or counted and skipped).
     """
     decoder = Decoder(default_framings(id_base, extended, deployment))
     sink = _Sink(analyzer, decoder, keep or Filter())
-    bad: list[CaptureError] = []
     formats = [sniff(path) for path in paths]
     if formats == [".log"] and not extended:
-        drops = _candump_chunks(paths[0], sink, skip_bad, bad, id_base, progress)
+        drops = _candump_chunks(paths[0], sink, damage, id_base, progress)
         drops.update(decoder.drops())
-        return Fed(drops, bad, sink.filtered_out)
-    readers = [read_capture(path, skip_bad, bad, fmt=fmt) for path, fmt in zip(paths, formats, strict=True)]
+        return Fed(drops, sink.filtered_out)
+    readers = [read_capture(path, damage, fmt=fmt) for path, fmt in zip(paths, formats, strict=True)]
     if shifts is not None:
         readers = [_shifted(reader, shift) if shift else reader for reader, shift in zip(readers, shifts, strict=True)]
     sink.add_records(heapq.merge(*readers, key=lambda r: r.t))
-    return Fed(decoder.drops(), bad, sink.filtered_out)
+    return Fed(decoder.drops(), sink.filtered_out)
 
 
 def _shifted(records: Iterable[Record], seconds: float) -> Iterator[Record]:
@@ -108,7 +107,7 @@ class _Sink:
         self.analyzer.add(batch)
 
 
-def _candump_chunks(path: str, sink: _Sink, skip_bad: bool, bad: list[CaptureError], id_base: int | None,
+def _candump_chunks(path: str, sink: _Sink, damage: Damage, id_base: int | None,
                     progress: Callable[[int], None] | None) -> Counters:
     from ..framing.can import can_framing
 
@@ -122,7 +121,7 @@ def _candump_chunks(path: str, sink: _Sink, skip_bad: bool, bad: list[CaptureErr
     for line_no, chunk in candump.chunks(path, CHUNK):
         columns = parse_chunk(chunk, classify, fast_drops)
         if columns is None:
-            sink.add_records(candump.chunk_records(path, chunk, line_no, skip_bad, bad))
+            sink.add_records(candump.chunk_records(path, chunk, line_no, damage))
         elif len(columns.op):
             link = sink.analyzer.link(columns.link.decode())
             sink.add_batch(Batch(seconds(columns.stamp), np.full(len(columns.op), link),

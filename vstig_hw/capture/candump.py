@@ -15,7 +15,7 @@ from typing import IO, Any
 
 import can
 
-from .records import CAN_FRAMING, CaptureError, Record, cut_short, parse_lines
+from .records import CAN_FRAMING, STRICT, CaptureError, Damage, Record, cut_short, parse_lines
 
 __all__ = ["GZIP_CUT", "candump_records", "chunk_records", "chunks", "parse_line", "read_candump"]
 
@@ -70,9 +70,9 @@ def parse_line(path: str, number: int, line: str) -> can.Message | None:
     )
 
 
-def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+def read_candump(path: str, damage: Damage = STRICT,
                  opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
-    """Records in file order (.log or .log.gz); bad lines raise CaptureError, or with `skip_bad` go to `bad`.
+    """Records in file order (.log or .log.gz); bad lines go to `damage` (raised as CaptureError, or counted).
 
     `opened` is handed the file once it is open (decode's progress bar asks it how far it got).
     """
@@ -81,28 +81,26 @@ def read_candump(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
             opened(file)
         kept = 0
         try:
-            for record in candump_records(path, file, skip_bad, bad):
+            for record in candump_records(path, file, damage):
                 kept += 1
                 yield record
         except EOFError:  # a .gz whose writer was killed: every line it flushed was read
-            cut_short(path, kept, "frames", GZIP_CUT, skip_bad, bad)
+            cut_short(path, kept, "frames", GZIP_CUT, damage)
         except (OSError, zlib.error) as error:  # gzip reports a corrupt .gz this way
             raise CaptureError(path, None, f"cannot read: {error}") from None
 
 
-def candump_records(path: str, lines: Iterable[str], skip_bad: bool, bad: list[CaptureError] | None,
-                    first_line: int = 1) -> Iterator[Record]:
+def candump_records(path: str, lines: Iterable[str], damage: Damage, first_line: int = 1) -> Iterator[Record]:
     """The records on candump lines numbered from `first_line` (a whole file, or one chunk of it)."""
-    for frame in parse_lines(path, lines, parse_line, skip_bad, bad, first_line):
+    for frame in parse_lines(path, lines, parse_line, damage, first_line):
         yield Record(frame.timestamp, str(frame.channel), CAN_FRAMING, frame)
 
 
-def chunk_records(path: str, chunk: bytes, first_line: int, skip_bad: bool,
-                  bad: list[CaptureError] | None) -> Iterator[Record]:
+def chunk_records(path: str, chunk: bytes, first_line: int, damage: Damage) -> Iterator[Record]:
     """The records of one chunk from `chunks`, numbered as the file numbers its lines."""
     # Split on "\n" only, as `chunks` counts lines: splitlines() also cuts at \r, \f, \x1c... and
     # would misnumber every later line in the file:line of an error.
-    return candump_records(path, chunk.decode("utf-8", "replace").split("\n"), skip_bad, bad, first_line)
+    return candump_records(path, chunk.decode("utf-8", "replace").split("\n"), damage, first_line)
 
 
 def chunks(path: str, size: int) -> Iterator[tuple[int, bytes]]:

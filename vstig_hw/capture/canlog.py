@@ -21,7 +21,9 @@ from .records import (
     CAN_EXTENSIONS,
     CAN_FRAMING,
     NAMELESS_EXTENSIONS,
+    STRICT,
     CaptureError,
+    Damage,
     Record,
     capture_suffix,
     cut_short,
@@ -108,7 +110,7 @@ _ASC_KEYWORDS = ("date ", "base ", "internal events", "no internal events", "beg
                  "end triggerblock", "//")
 
 
-def _check_asc_lines(path: str, skip_bad: bool, bad: list[CaptureError] | None) -> None:
+def _check_asc_lines(path: str, damage: Damage) -> None:
     """Lines python-can's ASC reader would pass over in silence: neither a header keyword nor a timestamped event."""
     with open(path, encoding="utf-8", errors="replace") as file:
         for number, line in enumerate(file, 1):
@@ -116,11 +118,7 @@ def _check_asc_lines(path: str, skip_bad: bool, bad: list[CaptureError] | None) 
             first = text.split(maxsplit=1)[0] if text else ""
             if not text or text.lower().startswith(_ASC_KEYWORDS) or first.replace(".", "", 1).isdigit():
                 continue
-            error = CaptureError(path, number, f"not an ASC line: {text[:60]!r}")
-            if not skip_bad:
-                raise error
-            if bad is not None:
-                bad.append(error)
+            damage.record(CaptureError(path, number, f"not an ASC line: {text[:60]!r}"))
 
 
 def _check_complete(path: str, reader: Any, frames: int) -> None:
@@ -131,14 +129,14 @@ def _check_complete(path: str, reader: Any, frames: int) -> None:
         raise ValueError(f"cut short: {actual} of the {expected} bytes its header announces ({frames} records read)")
 
 
-def read_can_log(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+def read_can_log(path: str, damage: Damage = STRICT,
                  opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
     """The frames of a capture in one of python-can's formats, as records named by link where the file names them."""
     suffix = capture_suffix(path)
     if os.path.getsize(path) == 0:
         raise CaptureError(path, None, f"empty file: not a {suffix} capture")
     if suffix == ".asc":
-        _check_asc_lines(path, skip_bad, bad)
+        _check_asc_lines(path, damage)
     frames = 0
     try:
         names: dict[int, str] = {}
@@ -160,10 +158,7 @@ def read_can_log(path: str, skip_bad: bool = False, bad: list[CaptureError] | No
             yield Record(frame.timestamp, link or str(frame.channel or "can"), CAN_FRAMING, frame)
         _check_complete(path, reader, frames)
     except EOFError:  # an .asc.gz whose writer was killed: every line it flushed was read
-        cut_short(path, frames, "frames", GZIP_CUT, skip_bad, bad)
+        cut_short(path, frames, "frames", GZIP_CUT, damage)
     except Exception as error:  # python-can's readers raise many kinds; all mean the file is bad
-        damage = CaptureError(path, None, f"record {frames + 1}: cannot read as {suffix}: {error}")
-        if not skip_bad:
-            raise damage from None
-        if bad is not None:  # python-can cannot resume past damage: the rest of this file is lost, and said so
-            bad.append(damage)
+        # python-can cannot resume past damage: skipped, the rest of this file is lost, and said so
+        damage.record(CaptureError(path, None, f"record {frames + 1}: cannot read as {suffix}: {error}"))

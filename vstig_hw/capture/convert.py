@@ -30,7 +30,9 @@ from .records import (
     CAN_FRAMING,
     MCAP_EXTENSION,
     MESSAGE_FRAMING,
+    STRICT,
     CaptureError,
+    Damage,
     Record,
     capture_suffix,
     read_capture,
@@ -58,18 +60,18 @@ def _medium_of(record: Record) -> str:
     return "zenoh" if record.framing == ZenohFraming.name else "serial"
 
 
-def convert(paths: Sequence[str], output: str, *, skip_bad: bool = False, id_base: int | None = None,
+def convert(paths: Sequence[str], output: str, *, damage: Damage = STRICT, id_base: int | None = None,
             extended: bool = False, keep: Filter | None = None,
-            deployment: str | None = None) -> tuple[int, Counters, list[CaptureError]]:
+            deployment: str | None = None) -> tuple[int, Counters]:
     """Write the records of `paths` (merged by time) that `keep` passes into `output`.
 
-    Returns (units written, messages dropped while decoding, bad lines skipped). A record the output's
+    Returns (units written, messages dropped while decoding); damage in a file goes to `damage`
+    (raised, or counted and skipped). A record the output's
     format cannot hold (a serial chunk into a CAN log) is a CaptureError naming both files.
     """
     decoder = Decoder(default_framings(id_base, extended, deployment))
     passing = RecordFilter(keep or Filter(), decoder)
-    bad: list[CaptureError] = []
-    sources = [((record, path) for record in read_capture(path, skip_bad, bad)) for path in paths]
+    sources = [((record, path) for record in read_capture(path, damage)) for path in paths]
     merged = heapq.merge(*sources, key=lambda pair: pair[0].t)
     first = next(merged, None)
     wanted = output_medium(output)
@@ -93,7 +95,7 @@ def convert(paths: Sequence[str], output: str, *, skip_bad: bool = False, id_bas
             raise (CaptureError(output, error.line, error.problem) if error.path == partial else error) from None
         finally:
             capture.close()
-    return capture.records, (writing if medium == "mcap" else decoder).drops(), bad
+    return capture.records, (writing if medium == "mcap" else decoder).drops()
 
 
 @contextlib.contextmanager

@@ -30,7 +30,7 @@ from ..extras import missing
 from ..values import ValueType, from_raw
 from ..wire import Message, encode
 from ..wording import shown_sender
-from .records import CAN_FRAMING, MESSAGE_FRAMING, CaptureError, Record, file_position, read_capture, sniff
+from .records import CAN_FRAMING, MESSAGE_FRAMING, STRICT, Damage, Record, file_position, read_capture, sniff
 
 if TYPE_CHECKING:
     from ..framing.base import Framing
@@ -253,11 +253,12 @@ FAST_PATH_BYTES = 1 << 20
 
 
 def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: ValueType = "uint16",
-                skip_bad: bool = False, id_base: int | None = None, extended: bool = False,
+                damage: Damage = STRICT, id_base: int | None = None, extended: bool = False,
                 progress: Callable[[int], None] | None = None, keep: Filter | None = None,
                 csv_header: bool = True, file_column: bool = False, deployment: str | None = None,
-                clock: TimeColumn | None = None) -> tuple[int, Counters, list[CaptureError]]:
-    """Write every message in `path` that `keep` passes to `out`; returns (messages, drops, bad lines skipped).
+                clock: TimeColumn | None = None) -> tuple[int, Counters]:
+    """Write every message in `path` that `keep` passes to `out`; returns (messages, drops). Damage in the
+    file goes to `damage` (raised, or counted and skipped).
 
     `progress` is told, now and then, how many bytes of the file were read so far (every format).
     CSV: `csv_header=False` leaves the header out (a later file of several); `file_column` adds a
@@ -267,18 +268,17 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
     if fmt == "text" and clock is not None:
         formatter = _with_clock(clock)
     decoder = Decoder(default_framings(id_base, extended, deployment))
-    bad: list[CaptureError] = []
     if fmt == "csv" and csv_header:
         out.write(("file," if file_column else "") + CSV_HEADER)
     capture_format = sniff(path)
     if capture_format == ".log" and fmt == "jsonl" and value_type == "uint16" and not extended and not keep:
-        count, drops = _candump_chunks(path, out, decoder, value_type, skip_bad, bad, id_base, progress)
+        count, drops = _candump_chunks(path, out, decoder, value_type, damage, id_base, progress)
         drops.update(decoder.drops())
-        return count, drops, bad
+        return count, drops
     count = 0
     reading: list[IO[Any]] = []
     messages = _passing(keep, decoder)
-    for number, record in enumerate(read_capture(path, skip_bad, bad, reading.append, capture_format)):
+    for number, record in enumerate(read_capture(path, damage, reading.append, capture_format)):
         for decoded in messages(record):
             out.write(formatter(decoded, value_type) + "\n")
             count += 1
@@ -286,7 +286,7 @@ def decode_file(path: str, out: IO[str], fmt: str = "jsonl", *, value_type: Valu
             progress(file_position(reading[0]) or 0)
     if progress:  # the end, also for a reader that does not show its file (MCAP)
         progress(os.path.getsize(path))
-    return count, decoder.drops(), bad
+    return count, decoder.drops()
 
 
 def _passing(keep: Filter | None, decoder: Decoder) -> Callable[[Record], list[Decoded]]:
@@ -313,9 +313,8 @@ def _with_file(path: str) -> Callable[[Decoded, ValueType], str]:
     return row
 
 
-def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: ValueType, skip_bad: bool,
-                    bad: list[CaptureError], id_base: int | None,
-                    progress: Callable[[int], None] | None) -> tuple[int, Counters]:
+def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: ValueType, damage: Damage,
+                    id_base: int | None, progress: Callable[[int], None] | None) -> tuple[int, Counters]:
     from ..framing.can import can_framing
 
     scheme = can_framing(id_base, False).scheme
@@ -343,7 +342,7 @@ def _candump_chunks(path: str, out: IO[str], decoder: Decoder, value_type: Value
             else:
                 out.write(fast.decode())
         else:
-            count += _slow(path, chunk, line_no, out, decoder, value_type, skip_bad, bad)
+            count += _slow(path, chunk, line_no, out, decoder, value_type, damage)
         done += len(chunk)
         if progress:
             progress(done)
@@ -360,11 +359,11 @@ def _fast_path(path: str) -> Callable[[bytes, Classify, dict[str, int]], bytes |
 
 
 def _slow(path: str, chunk: bytes, first_line: int, out: IO[str], decoder: Decoder, value_type: ValueType,
-          skip_bad: bool, bad: list[CaptureError]) -> int:
+          damage: Damage) -> int:
     count = 0
     from .candump import chunk_records
 
-    for decoded in decoder.decode_all(chunk_records(path, chunk, first_line, skip_bad, bad)):
+    for decoded in decoder.decode_all(chunk_records(path, chunk, first_line, damage)):
         out.write(as_json(decoded, value_type) + "\n")
         count += 1
     return count

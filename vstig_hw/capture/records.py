@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import IO, Any, TypeVar, cast
 
 __all__ = ["APPENDABLE", "CAN_EXTENSIONS", "CAN_FRAMING", "LINE_CAPTURE_HEADERS", "MCAP_EXTENSION",
-           "MESSAGE_FRAMING", "NAMELESS_EXTENSIONS", "READABLE_EXTENSIONS", "READERS", "WRITERS", "CaptureError",
-           "Record", "capture_suffix", "cut_short", "file_position", "line_capture_at", "line_capture_format",
-           "link_names_lost", "parse_lines", "read_capture", "reader_for", "skip_or_raise", "sniff", "sniff_suffix",
-           "writer_class"]
+           "MESSAGE_FRAMING", "NAMELESS_EXTENSIONS", "READABLE_EXTENSIONS", "READERS", "STRICT", "WRITERS",
+           "CaptureError", "Damage", "Record", "capture_suffix", "cut_short", "file_position", "line_capture_at",
+           "line_capture_format", "link_names_lost", "parse_lines", "read_capture", "reader_for", "sniff",
+           "sniff_suffix", "writer_class"]
 
 T = TypeVar("T")
 
@@ -48,32 +48,54 @@ class Record:
     direction: str = "rx"
 
 
-def skip_or_raise(error: CaptureError, skip_bad: bool, bad: list[CaptureError] | None) -> None:
-    """Raise `error`, or with `skip_bad` collect it in `bad` so reading goes on."""
-    if not skip_bad:
-        raise error
-    if bad is not None:
-        bad.append(error)
+class Damage:
+    """What reading does with damaged input (a malformed line, a file cut short): raise it, or with `skip`
+    count it and go on (`--skip-bad`), keeping the first `keep` to name. One travels through every reader.
+
+    `STRICT`, the readers' default, raises at the first damage and so never changes.
+    """
+
+    __slots__ = ("count", "first", "keep", "skip")
+
+    def __init__(self, skip: bool = False, keep: int = 100) -> None:
+        self.skip, self.keep = skip, keep
+        self.count = 0  # every damage skipped
+        self.first: list[CaptureError] = []  # the first `keep` of them, in the order met
+
+    def fresh(self) -> Damage:
+        """The same policy, nothing counted yet (for each file, or each pass, reported apart)."""
+        return Damage(self.skip, self.keep)
+
+    def record(self, error: CaptureError) -> None:
+        """Raise `error`, or with `skip` count it (and keep it, among the first few) so reading goes on."""
+        if not self.skip:
+            raise error from None
+        self.count += 1
+        if len(self.first) < self.keep:
+            self.first.append(error)
 
 
-def cut_short(path: str, kept: int, unit: str, lost: str, skip_bad: bool, bad: list[CaptureError] | None) -> None:
+STRICT = Damage()
+
+
+def cut_short(path: str, kept: int, unit: str, lost: str, damage: Damage) -> None:
     """Report a capture that ends mid-record (a recorder killed, a disk full) after its `kept` complete `unit`s.
 
     Every reader says it the same one way, after handing on all it could read, so decode, analyze and
-    replay show one line naming what was kept and what was lost; `skip_bad` makes it a skipped line.
+    replay show one line naming what was kept and what was lost; a skipping `damage` counts it.
     """
-    skip_or_raise(CaptureError(path, None, f"cut short (its recorder did not close it): read all {kept} {unit} "
-                               f"before the cut; {lost}"), skip_bad, bad)
+    damage.record(CaptureError(path, None, f"cut short (its recorder did not close it): read all {kept} {unit} "
+                               f"before the cut; {lost}"))
 
 
-def parse_lines(path: str, lines: Iterable[str], parse: Callable[[str, int, str], T | None], skip_bad: bool,
-                bad: list[CaptureError] | None, first_line: int = 1) -> Iterator[T]:
-    """Parse numbered lines (from `first_line`); a bad line raises, or with `skip_bad` is collected in `bad`."""
+def parse_lines(path: str, lines: Iterable[str], parse: Callable[[str, int, str], T | None], damage: Damage,
+                first_line: int = 1) -> Iterator[T]:
+    """Parse numbered lines (from `first_line`); a bad line goes to `damage` (raised, or counted and skipped)."""
     for number, line in enumerate(lines, first_line):
         try:
             item = parse(path, number, line)
         except CaptureError as error:
-            skip_or_raise(error, skip_bad, bad)
+            damage.record(error)
             continue
         if item is not None:
             yield item
@@ -105,8 +127,8 @@ WRITERS: dict[str, tuple[str, str]] = {  # by medium; a CAN writer picks python-
 _HEAD_BYTES = max(map(len, LINE_CAPTURE_HEADERS))
 _PCAP_MAGICS = tuple(m.to_bytes(4, order) for m in (0xA1B2C3D4, 0xA1B23C4D) for order in ("big", "little"))
 
-# Every reader: (path, skip_bad, bad, opened) -> records in file order; see `read_capture`.
-Reader = Callable[[str, bool, list[CaptureError] | None, Callable[[IO[Any]], None] | None], Iterator[Record]]
+# Every reader: (path, damage, opened) -> records in file order; see `read_capture`.
+Reader = Callable[[str, Damage, Callable[[IO[Any]], None] | None], Iterator[Record]]
 
 
 def capture_suffix(path: str) -> str:
@@ -174,14 +196,15 @@ def _member(module: str, name: str) -> Any:
     return getattr(import_module(f".{module}", __package__), name)
 
 
-def read_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
-                 opened: Callable[[IO[Any]], None] | None = None, fmt: str | None = None) -> Iterator[Record]:
-    """Every record of a capture, by the reader of its format (`fmt`, or what `sniff` finds).
+def read_capture(path: str, damage: Damage = STRICT, opened: Callable[[IO[Any]], None] | None = None,
+                 fmt: str | None = None) -> Iterator[Record]:
+    """Every record of a capture, by the reader of its format (`fmt`, or what `sniff` finds); damage goes to
+    `damage` (by default raised).
 
     `opened` is handed the file being read once it is open, so a caller can tell how far reading got
     (`file_position`); the MCAP reader does not show its file.
     """
-    yield from reader_for(fmt or sniff(path))(path, skip_bad, bad, opened)
+    yield from reader_for(fmt or sniff(path))(path, damage, opened)
 
 
 def reader_for(fmt: str) -> Reader:

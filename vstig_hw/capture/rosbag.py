@@ -21,7 +21,7 @@ from ..extras import install_hint
 from ..framing.ros2 import cdr_message, ros_name, sender_of_wire  # MSGDEF in CDR, packed by struct (no rosbags)
 from ..wire import Message, Op
 from .decoded import Decoder
-from .records import MESSAGE_FRAMING, CaptureError, Record, cut_short
+from .records import MESSAGE_FRAMING, STRICT, CaptureError, Damage, Record, cut_short
 
 __all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "McapCaptureWriter", "cdr_message", "read_mcap",
            "topic_for"]
@@ -130,7 +130,7 @@ class McapCaptureWriter:
         self._file.close()
 
 
-def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+def read_mcap(path: str, damage: Damage = STRICT,
               opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
     """The messages of an MCAP capture in log-time order, as `MESSAGE_FRAMING` records named by link.
 
@@ -146,7 +146,7 @@ def read_mcap(path: str, skip_bad: bool = False, bad: list[CaptureError] | None 
     try:
         with open(path, "rb") as file:
             if not _has_footer(file):
-                yield from _recover(path, file, store, skip_bad, bad)
+                yield from _recover(path, file, store, damage)
                 return
             for schema, channel, raw in make_reader(file).iter_messages(log_time_order=True):
                 if schema is None or schema.name != TYPE_NAME:
@@ -175,8 +175,7 @@ def _has_footer(file: IO[bytes]) -> bool:
     return ends_well
 
 
-def _recover(path: str, file: IO[bytes], store: Any, skip_bad: bool,
-             bad: list[CaptureError] | None) -> Iterator[Record]:
+def _recover(path: str, file: IO[bytes], store: Any, damage: Damage) -> Iterator[Record]:
     """Every message of the file's complete records (chunks), in file order; then the cut, in one line."""
     from mcap.exceptions import EndOfFile
     from mcap.records import Channel, Chunk, Schema
@@ -207,4 +206,4 @@ def _recover(path: str, file: IO[bytes], store: Any, skip_bad: bool,
                     yield _record(_store_for(schema, store), channel, item)
     lost = file.seek(0, 2) - end
     cut_short(path, kept, f"messages in {chunks} chunks",
-              f"the {lost} bytes after them are incomplete" if lost else "it has no summary or footer", skip_bad, bad)
+              f"the {lost} bytes after them are incomplete" if lost else "it has no summary or footer", damage)

@@ -17,7 +17,7 @@ from typing import IO, Any
 
 from ..dialects.framing import DIALECT_FRAMINGS
 from ..framing import SERIAL_FRAMINGS
-from .records import CaptureError, Record, parse_lines
+from .records import STRICT, CaptureError, Damage, Record, parse_lines
 
 __all__ = ["HEADER", "SerialCaptureWriter", "format_line", "read_serial_capture"]
 
@@ -86,10 +86,9 @@ def parse_line(path: str, number: int, line: str) -> Record | None:
     return Record(float(stamp), link, framing, bytes.fromhex(data), direction)
 
 
-def read_line_capture(path: str, parse: Callable[[str, int, str], Record | None], skip_bad: bool = False,
-                      bad: list[CaptureError] | None = None, opened: Callable[[IO[Any]], None] | None = None,
-                      header: str = HEADER) -> Iterator[Record]:
-    """Records in file order; a malformed line raises CaptureError, or with `skip_bad` is collected in `bad`.
+def read_line_capture(path: str, parse: Callable[[str, int, str], Record | None], damage: Damage = STRICT,
+                      opened: Callable[[IO[Any]], None] | None = None, header: str = HEADER) -> Iterator[Record]:
+    """Records in file order; a malformed line goes to `damage` (raised as CaptureError, or counted).
 
     `opened` is handed the file once it is open, so a caller can tell how far reading got.
     A first line other than `header` (another version) is refused, naming the version.
@@ -102,12 +101,12 @@ def read_line_capture(path: str, parse: Callable[[str, int, str], Record | None]
             stem = _stem(header)
             raise CaptureError(path, 1, f"{_kind(header)} {first.strip()[len(stem):].strip()!r} is not a version "
                                f"this vstig-hw reads (it reads {header.rsplit(' ', 1)[1]})")
-        yield from parse_lines(path, file, parse, skip_bad, bad, first_line=2)
+        yield from parse_lines(path, file, parse, damage, first_line=2)
 
 
-def read_serial_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+def read_serial_capture(path: str, damage: Damage = STRICT,
                         opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
-    return read_line_capture(path, parse_line, skip_bad, bad, opened, HEADER)
+    return read_line_capture(path, parse_line, damage, opened, HEADER)
 
 
 def _stem(header: str) -> str:

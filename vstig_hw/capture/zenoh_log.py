@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterator
 from typing import IO, Any
 
 from ..framing.zenoh import ZenohSample
-from .records import CaptureError, Record
+from .records import STRICT, Damage, Record
 from .serial_log import SerialCaptureWriter, match_line, read_line_capture
 
 __all__ = ["HEADER", "ZenohCaptureWriter", "read_zenoh_capture"]
@@ -46,6 +46,6 @@ def parse_line(path: str, number: int, line: str) -> Record | None:
     return Record(float(stamp), link, framing, ZenohSample(key, bytes.fromhex(data)), direction)
 
 
-def read_zenoh_capture(path: str, skip_bad: bool = False, bad: list[CaptureError] | None = None,
+def read_zenoh_capture(path: str, damage: Damage = STRICT,
                        opened: Callable[[IO[Any]], None] | None = None) -> Iterator[Record]:
-    return read_line_capture(path, parse_line, skip_bad, bad, opened, HEADER)
+    return read_line_capture(path, parse_line, damage, opened, HEADER)
