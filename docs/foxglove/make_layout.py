@@ -17,6 +17,8 @@ HERE = Path(__file__).parent
 
 def layout() -> str:
     table = fl.TablePanel(title="keys (what sniff shows)", config=fl.TableConfig(topic_path="/vstig/table.rows"))
+    robots = fl.TablePanel(title="robots: alive, quiet, gone, behind (what sniff --robots shows)",
+                           config=fl.TableConfig(topic_path="/vstig/robots.rows"))
     spread = fl.PlotPanel(title="each write: seconds until every active sender had it", config=fl.PlotConfig(
         paths=[fl.PlotSeries(value="/vstig/writes.converged_after", label="converged after (s)", show_line=False),
                fl.PlotSeries(value="/vstig/writes.time_so_far", label="time so far (s)", show_line=False)]))
@@ -33,7 +35,9 @@ def layout() -> str:
     right = fl.SplitContainer(direction="column", items=[
         fl.SplitItem(content=spread), fl.SplitItem(content=writes), fl.SplitItem(content=counters),
         fl.SplitItem(content=stats)])
-    content = fl.SplitContainer(direction="row", items=[fl.SplitItem(proportion=3, content=table),
+    left = fl.SplitContainer(direction="column", items=[fl.SplitItem(proportion=3, content=table),
+                                                        fl.SplitItem(proportion=2, content=robots)])
+    content = fl.SplitContainer(direction="row", items=[fl.SplitItem(proportion=3, content=left),
                                                          fl.SplitItem(proportion=2, content=right)])
     return json.dumps(json.loads(fl.Layout(content=content).to_json()), indent=2) + "\n"  # readable diffs
 

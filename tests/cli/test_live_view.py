@@ -173,12 +173,13 @@ def test_foxglove_client_decodes_every_channel_of_a_sniffer(
         assert opened["protocol"] == "foxglove.sdk.v1"
         (advertised,) = [e["channels"] for e in viewer.seen if e["event"] == "advertise"]
         by_topic = {c["topic"]: c for c in advertised}
-        links = sorted(t for t in by_topic if t not in ("/vstig/table", "/vstig/writes", "/vstig/stats"))
+        ours = ("/vstig/table", "/vstig/writes", "/vstig/stats", "/vstig/robots")
+        links = sorted(t for t in by_topic if t not in ours)
         assert len(links) == 2
         for topic in links:
             assert (by_topic[topic]["schemaName"], by_topic[topic]["encoding"], by_topic[topic]["schemaEncoding"],
                     by_topic[topic]["schema"]) == (TYPE_NAME, "cdr", "ros2msg", MSGDEF)
-        for topic in ("/vstig/table", "/vstig/writes", "/vstig/stats"):
+        for topic in ours:
             assert (by_topic[topic]["encoding"], by_topic[topic]["schemaEncoding"]) == ("json", "jsonschema")
 
         def step() -> None:
@@ -235,6 +236,13 @@ def test_foxglove_client_decodes_every_channel_of_a_sniffer(
         assert stats["links"][can_link]["in"] > 0 and stats["links"][radio_link]["in"] > 0
         assert stats["engine"]["stored"] >= 2  # the listening engine's outcomes
 
+        # The roster: the CAN robots named by their sender field, the radio's by the writer id of its PUTs.
+        viewer.until(lambda: {(r["robot"], r["named_by"]) for r in _robots(viewer)} >= {
+            (3, "sender"), (4, "sender"), (9, "writer")}, step=step)
+        robots = {r["robot"]: r for r in _robots(viewer)}
+        assert robots[3]["links"] == [can_link] and robots[9]["links"] == [radio_link]
+        assert robots[3]["state"] == "alive" and robots[3]["writes"] >= 1 and robots[4]["gets"] >= 1
+
         # A viewer leaving touches no link: what the robots send next is still heard.
         assert viewer.leave() == 0
         radio_robot.put(3, 333)
@@ -247,7 +255,13 @@ def test_foxglove_client_decodes_every_channel_of_a_sniffer(
         err.join()
     assert sniffer.returncode == 0, "".join(err.lines)
     (live,) = [line for line in err.lines if line.startswith("live: ")]
-    assert "subscribed=5" in live and "drop_behind" not in live, live
+    assert "subscribed=6" in live and "drop_behind" not in live, live
+
+
+def _robots(viewer: Viewer) -> list[dict[str, Any]]:
+    """The rows of the latest /vstig/robots message."""
+    sent = viewer.messages("/vstig/robots")
+    return sent[-1]["data"]["rows"] if sent else []
 
 
 def _table_row(viewer: Viewer, key: int) -> dict[str, Any] | None:

@@ -23,15 +23,15 @@ def test_the_layout_file_is_what_the_script_builds() -> None:
     assert (DOCS / "vstig-layout.json").read_text(encoding="utf-8") == built
 
 
-def test_the_layout_shows_table_writes_and_stats() -> None:
+def test_the_layout_shows_table_robots_writes_and_stats() -> None:
     paths = _paths(json.loads((DOCS / "vstig-layout.json").read_text(encoding="utf-8")))
     topics = {path.split(".")[0] for path in paths}
-    assert topics == {"/vstig/table", "/vstig/writes", "/vstig/stats"}
+    assert topics == {"/vstig/table", "/vstig/robots", "/vstig/writes", "/vstig/stats"}
     fields = {path.split(".", 1)[1] for path in paths if "." in path}
-    from vstig_hw.live.server import STATS_SCHEMA, TABLE_SCHEMA, WRITE_SCHEMA
+    from vstig_hw.live.server import ROBOTS_SCHEMA, STATS_SCHEMA, TABLE_SCHEMA, WRITE_SCHEMA
 
     known = {"rows"} | set(WRITE_SCHEMA["properties"]) | {f"{part}.{name}" for part in STATS_SCHEMA["properties"]
                                                           for name in ("stored", "conflict", "sent", "throttled",
                                                                        "drop_behind")}
     assert fields <= known, fields - known
-    assert set(TABLE_SCHEMA["properties"]) >= {"rows"}
+    assert set(TABLE_SCHEMA["properties"]) >= {"rows"} and set(ROBOTS_SCHEMA["properties"]) >= {"rows"}

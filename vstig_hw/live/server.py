@@ -10,7 +10,8 @@ Channels (docs/how-to/live-view.md lists their fields):
   encoding of our MCAP captures (`capture.rosbag`), stamped with the time it was heard;
 * `/vstig/table`: per key what `sniff`'s table shows (JSON);
 * `/vstig/writes`: each write's spread as `analyze` measures it, live (JSON, `spread.LiveSpread`);
-* `/vstig/stats`: the link and engine counters, and the live view's own (JSON).
+* `/vstig/stats`: the link and engine counters, and the live view's own (JSON);
+* `/vstig/robots`: the gateway's roster, every robot's row, once a second (JSON; only while it keeps one).
 
 Table and stats are sent at most `rate` times a second, and only while a viewer subscribes. JSON is strict: a
 number that is not finite (a float16 key holding NaN) is sent as null, which every JSON parser reads.
@@ -46,7 +47,7 @@ from ..wire import Message
 from .sdklog import SdkLog
 from .spread import LiveSpread
 
-__all__ = ["LIVE_STATS", "VIEWERS", "LiveServer", "main"]
+__all__ = ["LIVE_STATS", "VIEWERS", "LiveServer", "main", "strict_json"]
 
 LIVE_STATS = "live"  # the live view's counters, beside the links' in /vstig/stats and on the gateway's exit
 
@@ -80,6 +81,12 @@ WRITE_SCHEMA = _object(
     superseded={"type": "boolean"})
 STATS_SCHEMA = _object(links={"type": "object", "additionalProperties": {"type": "object"}},
                        engine={"type": "object"}, live={"type": "object"})
+ROBOTS_SCHEMA = _object(  # the rows are RobotView.as_json, as sniff --robots --jsonl prints them
+    t=_NUM, robots_total=_INT, alive=_INT, quiet=_INT, gone=_INT, untracked=_INT,
+    rows={"type": "array", "items": _object(
+        robot=_INT, sender={"type": ["integer", "null"]}, named_by=_STR, links={"type": "array", "items": _STR},
+        state={"type": "string", "enum": ["alive", "quiet", "gone"]}, last_heard_s=_NUM, rate=_NUM, messages=_INT,
+        writes=_INT, gets=_INT, behind=_INTS, refused=_INT, quality={"type": ["integer", "null"]})})
 
 
 class LiveServer:
@@ -88,8 +95,10 @@ class LiveServer:
 
     def __init__(self, links: list[str], host: str = "127.0.0.1", port: int = 8765, *,
                  value_type: ValueType = "uint16", larger_value_wins: bool = False, rate: float = 10.0,
-                 backlog: int = BACKLOG, link_rate: float = LINK_RATE, viewers: int = VIEWERS) -> None:
+                 backlog: int = BACKLOG, link_rate: float = LINK_RATE, viewers: int = VIEWERS,
+                 robots: bool = False) -> None:
         self.link_names = links
+        self.has_roster = robots  # the gateway keeps a roster: /vstig/robots is advertised
         self.host, self.port = host, port
         self.value_type = value_type
         self.interval = 1.0 / rate
@@ -111,6 +120,7 @@ class LiveServer:
             self._view = SwarmView(rule)
         self._spread = LiveSpread(larger_value_wins=larger_value_wins)
         self._stats: dict[str, Any] | None = None
+        self._robots: bytes | None = None  # the latest /vstig/robots message, as JSON, not yet sent
         self._next_table = 0.0
         self._table_at = -1  # view.messages when the table was last sent
         self._table_again = 0.0
@@ -153,6 +163,8 @@ class LiveServer:
         self._table = json_channel("/vstig/table", "vstig_hw.Table", TABLE_SCHEMA)
         self._writes = json_channel("/vstig/writes", "vstig_hw.WriteSpread", WRITE_SCHEMA)
         self._stats_channel = json_channel("/vstig/stats", "vstig_hw.Stats", STATS_SCHEMA)
+        self._robots_channel = json_channel("/vstig/robots", "vstig_hw.Robots", ROBOTS_SCHEMA) \
+            if self.has_roster else None
         self._thread = threading.Thread(target=self._run, name="vstig-live-view", daemon=True)
         self._thread.start()
 
@@ -183,6 +195,10 @@ class LiveServer:
     def set_stats(self, stats: dict[str, Any]) -> None:
         """The gateway's counters (`Node.stats()` as plain dicts) and its side of the live view's."""
         self._stats = stats
+
+    def set_robots(self, message: bytes) -> None:
+        """The gateway's roster as one /vstig/robots message (JSON, `view.robots_message`)."""
+        self._robots = message
 
     # -- our thread ------------------------------------------------------------------
     def _run(self) -> None:
@@ -231,8 +247,11 @@ class LiveServer:
         if stats is not None and self._stats_channel.has_sinks():
             live = dict(self.counters)
             live["drop_behind"] += stats.get(LIVE_STATS, {}).get("drop_behind", 0)
-            self._stats_channel.log(_json({"links": {k: v for k, v in stats.items() if k not in ("engine", LIVE_STATS)},
-                                           "engine": stats.get("engine", {}), "live": live}))
+            links = {k: v for k, v in stats.items() if k not in ("engine", LIVE_STATS)}
+            self._stats_channel.log(strict_json({"links": links, "engine": stats.get("engine", {}), "live": live}))
+        robots, self._robots = self._robots, None
+        if robots is not None and self._robots_channel is not None and self._robots_channel.has_sinks():
+            self._robots_channel.log(robots)
         now = time.monotonic()
         if now >= self._next_table:
             self._next_table = now + self.interval
@@ -242,12 +261,12 @@ class LiveServer:
         wall = time.time()
         if self._writes.has_sinks():
             for row in self._spread.updates(wall, WRITE_ROWS):
-                self._writes.log(_json(row))
+                self._writes.log(strict_json(row))
             self._spread.forget_before(wall)
         now = time.monotonic()  # unchanged, it is sent again each second: for a viewer who just came
         if self._table.has_sinks() and (self._view.messages != self._table_at or now >= self._table_again):
             self._table_at, self._table_again = self._view.messages, now + 1.0
-            self._table.log(_json(self.table()))
+            self._table.log(strict_json(self.table()))
 
     def table(self) -> dict[str, Any]:
         """What sniff's table shows, for the TABLE_ROWS keys heard most recently, in key order."""
@@ -266,7 +285,7 @@ class LiveServer:
         return {"messages": self._view.messages, "keys_total": len(keys), "rows": rows}
 
 
-def _json(row: dict[str, Any]) -> bytes:
+def strict_json(row: dict[str, Any]) -> bytes:
     """`row` as strict JSON: NaN and infinities (a float key's value) as null, not the `NaN` JSON.parse refuses."""
     try:
         return json.dumps(row, separators=(",", ":"), allow_nan=False).encode()
@@ -300,7 +319,8 @@ def _descriptors_to_the_hard_limit() -> None:
 
 # -- the process: `python -m vstig_hw.live.server CONFIG` (CONFIG: JSON, see view.LiveView.open) --
 RECORD = struct.Struct("<Hdi4H")  # link index, time heard, sender (-1: none), the message's four wire words
-FRAME = struct.Struct("<cI")  # kind (M: records, R: refused messages as JSON, S: counters as JSON), length
+FRAME = struct.Struct("<cI")  # kind (M: records, R: refused messages as JSON, S: counters as JSON,
+# B: the roster as the /vstig/robots message), length
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -310,7 +330,7 @@ def main(argv: list[str] | None = None) -> int:
     names: list[str] = config["links"]
     server = LiveServer(names, config["host"], config["port"], value_type=config["value_type"],
                         larger_value_wins=config["larger_value_wins"], backlog=config["backlog"],
-                        link_rate=config["link_rate"], viewers=config["viewers"])
+                        link_rate=config["link_rate"], viewers=config["viewers"], robots=config["robots"])
     server.sdk_log.install(everything=True)  # this process's every log line, safe and rate-limited
     _descriptors_to_the_hard_limit()
     out = sys.stdout
@@ -335,6 +355,8 @@ def main(argv: list[str] | None = None) -> int:
                     server.feed(names[index], t, sender, [new(Message, words)], reason)
             elif kind == b"S":
                 server.set_stats(json.loads(payload))
+            elif kind == b"B":
+                server.set_robots(payload)
     finally:
         server.close()
         out.write(f"counters {json.dumps({**server.counters, 'cpu_seconds': time.process_time()})}\n")

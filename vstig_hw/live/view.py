@@ -5,7 +5,8 @@ SDK, CDR, the table, each write's spread, JSON) runs in a process of its own, so
 takes the GIL from the gateway's loop. The loop pays one call per unit heard (a `messages` listener) and
 a bounded `deque` append (full: counted `drop_behind`, never a wait); a thread ships what piled up to
 the server through a pipe every PUMP seconds (a slow server blocks that thread only, and the inbox
-then fills and drops). Counters reach the server at most `rate` times a second.
+then fills and drops). Counters reach the server at most `rate` times a second; the roster kept for the
+node (`KeptRoster.of`), as the /vstig/robots message, once a second, snapshot in that thread, not the loop.
 """
 
 from __future__ import annotations
@@ -23,11 +24,13 @@ import time
 from typing import IO, Any
 
 from ..counters import Counters
+from ..gateway.kept_roster import KeptRoster
 from ..gateway.node import Listening, Node
+from ..gateway.roster import RobotState
 from ..links.link import Heard
 from ..values import ValueType
 from ..wire import Message
-from .server import BACKLOG, FRAME, LINK_RATE, LIVE_STATS, RECORD, VIEWERS
+from .server import BACKLOG, FRAME, LINK_RATE, LIVE_STATS, RECORD, VIEWERS, strict_json
 
 __all__ = ["DEFAULT_PORT", "LIVE_STATS", "VIEWERS", "LiveView"]
 
@@ -38,6 +41,7 @@ INBOX = 65_536  # units heard and not yet shipped: ~1 s of a saturated gateway
 PUMP = 0.05  # seconds between two shipments: a message reaches Foxglove within ~50 ms
 START = 30.0  # seconds the server may take to start (import the SDK, bind)
 CLOSE_WAIT = 1.0  # seconds a stop gives the server to take what is left and say its counters
+ROBOTS_EVERY = 1.0  # seconds between two /vstig/robots messages
 
 Unit = tuple[str, float, "int | None", list[Message], "str | None"]  # link, heard at, sender, messages, refused
 
@@ -51,7 +55,10 @@ class LiveView:
                  viewers: int = VIEWERS) -> None:
         self.node = node
         self.host, self.port = host, port
-        self._config = {"links": [link.name for link in node.links], "host": host, "value_type": value_type,
+        self._kept = KeptRoster.of(node)  # None: the gateway keeps no roster (--no-roster), no /vstig/robots
+        self._next_robots = 0.0
+        self._config = {"robots": self._kept is not None,
+                        "links": [link.name for link in node.links], "host": host, "value_type": value_type,
                         "larger_value_wins": larger_value_wins, "backlog": backlog or BACKLOG,
                         "link_rate": link_rate or LINK_RATE, "viewers": viewers}
         self.interval = 1.0 / rate
@@ -182,6 +189,7 @@ class LiveView:
                 else:
                     refused.extend([at, t, sender, list(msg), reason] for msg in messages)
             stats, self._stats = self._stats, None
+            robots = self._robots_due()
             if pipe is None:  # the server is gone
                 self.counters["drop_behind"] += len(records) + len(refused)
                 return
@@ -193,6 +201,8 @@ class LiveView:
                 if item is not None:
                     data = json.dumps(item).encode()
                     frames.append(FRAME.pack(kind, len(data)) + data)
+            if robots is not None:
+                frames.append(FRAME.pack(b"B", len(robots)) + robots)
             try:
                 pipe.write(b"".join(frames))
                 pipe.flush()
@@ -203,6 +213,23 @@ class LiveView:
                     return
                 log.warning("live view: its server process ended; the gateway goes on without it (what it "
                             "hears from now on is counted under live: drop_behind)")
+
+    def _robots_due(self) -> bytes | None:
+        """The /vstig/robots message, once every ROBOTS_EVERY seconds while the gateway keeps a roster."""
+        now = time.monotonic()
+        if self._kept is None or now < self._next_robots:
+            return None
+        self._next_robots = now + ROBOTS_EVERY
+        return strict_json(robots_message(self._kept))
+
+
+def robots_message(kept: KeptRoster) -> dict[str, Any]:
+    """Every robot's row (as `sniff --robots --jsonl` prints it), how many are in each state, and how many
+    more were heard than the roster may track."""
+    views = kept.snapshot()
+    states = {state.value: sum(view.state is state for view in views) for state in RobotState}
+    return {"t": round(time.time(), 3), "robots_total": len(views), **states, "untracked": kept.roster.untracked,
+            "rows": [view.as_json() for view in views]}
 
 
 def _read_until(server: subprocess.Popen[bytes], deadline: float) -> bytes:
