@@ -87,7 +87,7 @@ from dataclasses import dataclass
 
 from ..engine import Entry
 from ..timestamps import TS_NONE, next_timestamp
-from ..wire import Message, Op
+from ..wire import KEY_MAX, Message, Op
 
 __all__ = ["TRANSITIONS", "ConfirmedWrite", "Event", "PutResult", "Send", "State", "Transition", "UnexpectedEvent",
            "Verdict", "diagram"]
@@ -321,8 +321,10 @@ class ConfirmedWrite:
         return _sends(step)
 
     def heard_on(self, link: str, sender: int | None, messages: list[Message], now: float) -> list[Send]:
-        """What a link heard, as the Node tells it: `heard` for each message in turn."""
-        return [send for message in messages for send in self.heard(message, link, sender, now)]
+        """What a link heard, as the Node tells it: `heard` for each message for our key, in turn."""
+        key = self.key
+        ours = [message for message in messages if message[0] & KEY_MAX == key]  # the head: op bit and key
+        return [send for message in ours for send in self.heard(message, link, sender, now)] if ours else []
 
     def changed(self, holds: Entry | None, now: float) -> list[Send]:
         """What a message heard did to our table's entry for the key (not our own writes)."""
