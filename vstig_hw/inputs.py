@@ -22,11 +22,12 @@ class InputFileError(ValueError):
     """A named input that cannot be read as one: not a regular file, too large, unreadable. Names the file."""
 
 
-def read_regular(path: str | os.PathLike[str], limit: int, what: str) -> bytes:
+def read_regular(path: str | os.PathLike[str], limit: int, what: str, *, private: bool = False) -> bytes:
     """The bytes of `path`, a regular file of at most `limit` bytes; anything else an InputFileError naming it.
 
     Opened without blocking (a FIFO would wait for a writer) and checked on the open descriptor, so a
-    device (/dev/zero), a pipe or a folder is refused before a byte is read.
+    device (/dev/zero), a pipe or a folder is refused before a byte is read. `private`: a secret, refused
+    while group or others may read or write it (checked on the descriptor, so a swap after the check fails).
     """
     name = os.fspath(path)
     try:
@@ -34,9 +35,14 @@ def read_regular(path: str | os.PathLike[str], limit: int, what: str) -> bytes:
     except (OSError, ValueError) as error:  # ValueError: a NUL in the name
         reason = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
         raise InputFileError(f"{name}: cannot read {what}: {reason}") from None
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
+    mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(mode):
         os.close(fd)
         raise InputFileError(f"{name}: {what} must be a regular file, not a device, pipe or folder")
+    mode = stat.S_IMODE(mode)
+    if private and mode & 0o077:
+        os.close(fd)
+        raise InputFileError(f"{name}: {what} is readable or writable by others (mode {mode:o}): chmod 600 {name}")
     with os.fdopen(fd, "rb") as file:
         data = file.read(limit + 1)  # not st_size alone: a file may grow while read
     if len(data) > limit:

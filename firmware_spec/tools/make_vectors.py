@@ -1005,6 +1005,185 @@ def can_vectors() -> dict[str, object]:
     }
 
 
+# --------------------------------------------------------------------------
+# auth.json (SPEC.md section 10): BLAKE2s written out from RFC 7693 (not hashlib's), checked against the
+# RFC's own example and the BLAKE2 team's keyed test vector, and against hashlib (a second implementation)
+# --------------------------------------------------------------------------
+
+_B2S_IV = (0x6A09E667, 0xBB67AE85, 0x3C6EF372, 0xA54FF53A, 0x510E527F, 0x9B05688C, 0x1F83D9AB, 0x5BE0CD19)
+_B2S_SIGMA = (
+    (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15), (14, 10, 4, 8, 9, 15, 13, 6, 1, 12, 0, 2, 11, 7, 5, 3),
+    (11, 8, 12, 0, 5, 2, 15, 13, 10, 14, 3, 6, 7, 1, 9, 4), (7, 9, 3, 1, 13, 12, 11, 14, 2, 6, 5, 10, 4, 0, 15, 8),
+    (9, 0, 5, 7, 2, 4, 10, 15, 14, 1, 11, 12, 6, 8, 3, 13), (2, 12, 6, 10, 0, 11, 8, 3, 4, 13, 7, 5, 15, 14, 1, 9),
+    (12, 5, 1, 15, 14, 13, 4, 10, 0, 7, 6, 3, 9, 2, 8, 11), (13, 11, 7, 14, 12, 1, 3, 9, 5, 0, 15, 4, 8, 6, 2, 10),
+    (6, 15, 14, 9, 11, 3, 0, 8, 12, 2, 13, 7, 1, 4, 10, 5), (10, 2, 8, 4, 7, 6, 1, 5, 15, 11, 9, 14, 3, 12, 13, 0),
+)
+
+
+def _rotr32(x: int, n: int) -> int:
+    return ((x >> n) | (x << (32 - n))) & 0xFFFFFFFF
+
+
+def _b2s_compress(h: list[int], block: bytes, count: int, last: bool) -> None:
+    m = [int.from_bytes(block[4 * i : 4 * i + 4], "little") for i in range(16)]
+    v = h + list(_B2S_IV)
+    v[12] ^= count & 0xFFFFFFFF
+    v[13] ^= count >> 32
+    if last:
+        v[14] ^= 0xFFFFFFFF
+    for s in _B2S_SIGMA:
+        for i, (a, b, c, d) in enumerate(((0, 4, 8, 12), (1, 5, 9, 13), (2, 6, 10, 14), (3, 7, 11, 15),
+                                          (0, 5, 10, 15), (1, 6, 11, 12), (2, 7, 8, 13), (3, 4, 9, 14))):
+            x, y = m[s[2 * i]], m[s[2 * i + 1]]
+            v[a] = (v[a] + v[b] + x) & 0xFFFFFFFF
+            v[d] = _rotr32(v[d] ^ v[a], 16)
+            v[c] = (v[c] + v[d]) & 0xFFFFFFFF
+            v[b] = _rotr32(v[b] ^ v[c], 12)
+            v[a] = (v[a] + v[b] + y) & 0xFFFFFFFF
+            v[d] = _rotr32(v[d] ^ v[a], 8)
+            v[c] = (v[c] + v[d]) & 0xFFFFFFFF
+            v[b] = _rotr32(v[b] ^ v[c], 7)
+    for i in range(8):
+        h[i] ^= v[i] ^ v[i + 8]
+
+
+def blake2s(data: bytes, key: bytes = b"", outlen: int = 32) -> bytes:
+    """BLAKE2s as RFC 7693 section 3.3 writes it (keyed: the key padded to one block comes first)."""
+    h = list(_B2S_IV)
+    h[0] ^= 0x01010000 ^ (len(key) << 8) ^ outlen
+    stream = (key + bytes(64 - len(key)) if key else b"") + data
+    blocks = [stream[i : i + 64] for i in range(0, len(stream), 64)] or [b""]
+    for n, block in enumerate(blocks):
+        last = n == len(blocks) - 1
+        count = len(stream) if last else 64 * (n + 1)
+        _b2s_compress(h, block + bytes(64 - len(block)), count, last)
+    return b"".join(word.to_bytes(4, "little") for word in h)[:outlen]
+
+
+# RFC 7693 Appendix B, and the first keyed entry of the BLAKE2 reference's blake2s-kat.txt (key 00..1f, no data).
+assert blake2s(b"abc").hex() == "508c5e8c327c14e2e1a72ba34eeb452f37458b209ed63a294d999b4c86675982"
+assert blake2s(b"", bytes(range(32))).hex() == "48a8997da407876b3d79c0d92325ad3b89cbb754d86ab71aee047ad345fd2c49"
+
+AUTH_MASTER = bytes(range(0xA0, 0xC0))  # the vectors' swarm master secret (a real one is 32 random bytes)
+AUTH_MARKER = 0xA1  # first byte of a tagged batch (XBee RF data, zenoh payload)
+MAVLINK_TAGGED_TYPE = 0xB572  # TUNNEL payload_type of tagged records (the untagged one is 0xB571)
+
+
+def robot_key(master: bytes, robot: int) -> bytes:
+    return blake2s(b"vstig robot key" + robot.to_bytes(2, "big"), master, 32)
+
+
+def mac_input(stigmergy: int, msg: bytes, epoch: int) -> bytes:
+    entry = bytes([msg[0] & 0x7F]) + msg[1:]  # the op bit is not covered: a GET shows the PUT's entry
+    return epoch.to_bytes(4, "big") + stigmergy.to_bytes(2, "big") + entry
+
+
+def entry_tag(key: bytes, stigmergy: int, msg: bytes, epoch: int) -> bytes:
+    return blake2s(mac_input(stigmergy, msg, epoch), key, 8)
+
+
+def _hashlib_agrees(data: bytes, key: bytes, outlen: int) -> bool:
+    import hashlib
+
+    return hashlib.blake2s(data, key=key, digest_size=outlen).digest() == blake2s(data, key, outlen)
+
+
+def _tagged_newer(a: tuple[int, int], b: tuple[int, int]) -> bool:
+    """(epoch, timestamp) against (epoch, timestamp), SPEC.md 10.4: plain order, epoch first."""
+    return a > b
+
+
+def auth_vectors() -> dict[str, object]:
+    robots = [0, 1, 7, 9, 42, 0xFFFF]
+    keys = {r: robot_key(AUTH_MASTER, r) for r in robots}
+    for r in robots:
+        assert _hashlib_agrees(b"vstig robot key" + r.to_bytes(2, "big"), AUTH_MASTER, 32)
+    put = pack("PUT", 0x0102, 0xABCD, 0x8000, 42)
+    get = pack("GET", 0x0102, 0xABCD, 0x8000, 42)
+    tags = []
+
+    def tag_case(name: str, stigmergy: int, msg: bytes, epoch: int, signer: int) -> bytes:
+        data = mac_input(stigmergy, msg, epoch)
+        tag = entry_tag(keys[signer], stigmergy, msg, epoch)
+        assert _hashlib_agrees(data, keys[signer], 8)
+        tags.append({"name": name, "stigmergy": stigmergy, "message": msg.hex(), "fields": fields(msg),
+                     "epoch": epoch, "signer": signer, "mac_input": data.hex(), "tag": tag.hex(),
+                     "record": (msg + epoch.to_bytes(4, "big") + tag).hex()})
+        return tag
+
+    one = tag_case("PUT written by robot 42", 0, put, 0, 42)
+    assert tag_case("GET showing the same entry: the same tag", 0, get, 0, 42) == one
+    tag_case("stigmergy 3", 3, put, 0, 42)
+    tag_case("epoch 1", 0, put, 1, 42)
+    tag_case("epoch 0xFFFFFFFF, every field at its maximum", 0xFFFF, pack("PUT", 0x7FFF, 0xFFFF, 0xFFFF, 0xFFFF),
+             0xFFFFFFFF, 0xFFFF)
+    tag_case("robot 0, smallest entry", 0, pack("PUT", 0, 0, 1, 0), 0, 0)
+
+    good = put + (0).to_bytes(4, "big") + one
+    verify = [{"name": "as written", "record": good.hex(), "stigmergy": 0, "verdict": "good"}]
+
+    def forged(name: str, record: bytes, stigmergy: int = 0) -> None:
+        msg, epoch, tag = record[:8], int.from_bytes(record[8:12], "big"), record[12:]
+        writer = int.from_bytes(msg[6:8], "big")
+        ok = writer in keys and entry_tag(keys[writer], stigmergy, msg, epoch) == tag
+        assert not ok, name
+        verify.append({"name": name, "record": record.hex(), "stigmergy": stigmergy, "verdict": "bad_tag"})
+
+    forged("value changed on the way", pack("PUT", 0x0102, 0xABCE, 0x8000, 42) + good[8:])
+    forged("timestamp changed", pack("PUT", 0x0102, 0xABCD, 0x8001, 42) + good[8:])
+    forged("key changed", pack("PUT", 0x0103, 0xABCD, 0x8000, 42) + good[8:])
+    forged("epoch changed", good[:8] + (1).to_bytes(4, "big") + one)
+    forged("another stigmergy", good, stigmergy=1)
+    forged("one tag bit flipped", good[:12] + bytes([one[0] ^ 1]) + one[1:])
+    claim9 = pack("PUT", 0x0102, 0xABCD, 0x8000, 9)
+    forged("robot 7 writes as robot 9 with its own key", claim9 + bytes(4) + entry_tag(keys[7], 0, claim9, 0))
+    forged("an outsider's all-zero tag", good[:12] + bytes(8))
+
+    order = []
+    for a, b, why in (((0, 2), (0, 1), "same epoch, later timestamp"),
+                      ((1, 1), (0, 65535), "across the wrap: the epoch moved on"),
+                      ((0, 100), (0, 40000), "a replay within an epoch: 16-bit serial order says newer, it is not"),
+                      ((0, 65535), (1, 1), "a write from before the wrap replayed after it"),
+                      ((0, 40000), (1, 3), "RFC 1982 half-way trap: an older epoch always loses"),
+                      ((2, 1), (1, 60000), "a robot that missed a whole wrap catches up")):
+        order.append({"a": list(a), "b": list(b), "a_is_newer": _tagged_newer(a, b), "why": why})
+    assert [o["a_is_newer"] for o in order] == [True, True, False, False, False, True]
+
+    epochs = []
+    for epoch, old_ts, new_ts, after, why in ((0, 1, 2, 0, "one step"), (0, 0, 1, 0, "a new key starts at epoch 0"),
+                                              (4, 65535, 1, 5, "the counter wrapped: 65535 -> 1"),
+                                              (4, 65000, 65001, 4, "near the wrap, not across it"),
+                                              (0xFFFFFFFE, 65535, 1, 0xFFFFFFFF, "the last epoch")):
+        assert after == epoch + (1 if old_ts and new_ts < old_ts else 0)
+        epochs.append({"epoch": epoch, "timestamp": old_ts, "next_timestamp": new_ts, "next_epoch": after,
+                       "why": why})
+
+    get_empty = pack("GET", 0x0102, 0, 0, 42)
+    framed = {
+        "cobs8": {"record": good.hex(), "frame": serial_frame(good).hex()},
+        "cobs8_get_empty": {"record": (get_empty + bytes(12)).hex(),
+                            "frame": serial_frame(get_empty + bytes(12)).hex()},
+        "can_fd": {"id_11bit": f"{0x600 | 42:x}", "data": good.hex(), "length": 20},
+        "batch": {"marker": f"{AUTH_MARKER:02x}", "data": (bytes([AUTH_MARKER]) + good + good).hex(), "records": 2},
+        "mavlink": {"payload_type": f"{MAVLINK_TAGGED_TYPE:04x}", "payload": good.hex()},
+    }
+    assert len(cobs_decode(bytes.fromhex(str(framed["cobs8"]["frame"]))[:-1]) or b"") == 22
+    return {
+        "description": "Authenticated messages (SPEC.md section 10). robot key = BLAKE2s-256(key = master, data = "
+                       "'vstig robot key' || robot u16); tag = BLAKE2s with an 8-byte digest (key = the writer's robot "
+                       "key, data = epoch u32 || stigmergy u16 || the 8 message bytes with the op bit cleared); record "
+                       "= message || epoch u32 || tag. BLAKE2s from RFC 7693, written out here and checked against the "
+                       "RFC's example, the BLAKE2 keyed test vector and hashlib.",
+        "master": AUTH_MASTER.hex(),
+        "robot_keys": [{"robot": r, "key": keys[r].hex()} for r in robots],
+        "tags": tags,
+        "verify": verify,
+        "order": order,
+        "epochs": epochs,
+        "framed": framed,
+    }
+
+
 def main(argv: list[str]) -> int:
     outdir = Path(argv[1]) if len(argv) > 1 else Path(__file__).resolve().parent.parent / "vectors"
     outdir.mkdir(parents=True, exist_ok=True)
@@ -1018,6 +1197,7 @@ def main(argv: list[str]) -> int:
         "ohc.json": ohc_vectors(),
         "can_frames.json": can_vectors(),
         "xbee.json": xbee_vectors(),
+        "auth.json": auth_vectors(),
     }
     # The dialects' vectors live beside this script; -I leaves its folder off sys.path.
     sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -22,7 +22,11 @@ unconditionally and mypy checks a new medium against them:
   unit (`reports_link_quality` says it does; no framing does today: an XBee Receive
   Packet, 0x90, carries no RSSI); default None, and the roster shows none;
 * `transmit_only`: nothing ever comes back (an overhead controller): `feed`
-  raises TransmitOnlyError, and a link built on it never decodes.
+  raises TransmitOnlyError, and a link built on it never decodes;
+* `carries_tags`: the medium has room for authenticated messages, a message with its
+  writer's epoch and tag (SPEC.md 10.5: cobs8, CAN FD, XBee, zenoh, MAVLink, ROS 2); a
+  framing without room (classic CAN, e-puck words, Kilobot IR) says False, and a link
+  on it cannot require tags.
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ class Framing(abc.ABC, Generic[Unit]):
     names_senders: ClassVar[bool] = False  # True: `sender_of` reads who transmitted a unit from the unit itself
     names_sources: ClassVar[bool] = False  # True: `source_of` says more than the sender a unit claims
     reports_link_quality: ClassVar[bool] = False  # True: `link_quality_of` reads RSSI/quality from a unit
+    carries_tags: ClassVar[bool] = False  # True: room for a message's epoch and tag (SPEC.md 10.5)
 
     @abc.abstractmethod
     def encode(self, msg: Message) -> list[Unit]:
