@@ -20,6 +20,7 @@
 #include "vstig_serial.h"
 #include "vstig_can.h"
 #include "vstig_xbee.h"
+#include "vstig_mavlink.h"
 #include "vstig_outqueue.h"
 #include "vstig_engine.h"
 #include "vstig_guard.h"
