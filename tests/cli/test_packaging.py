@@ -66,4 +66,5 @@ def test_building_the_package_prints_no_setuptools_warning(tmp_path: Path) -> No
     data = {name for name in names if not name.endswith(".py") and ".dist-info/" not in name}
     assert data == {"vstig_hw/py.typed", "vstig_hw/_vstig.pyi", "vstig_hw/transports/fastdds_loopback.xml",
                     *(f"vstig_hw/ros2msgs/{part}.idl" for part in ("msg/Change", "msg/Entry", "msg/Message",
-                                                                      "srv/Get", "srv/Put", "srv/Table"))}
+                                                                      "msg/Robot", "msg/Robots", "srv/Get", "srv/Put",
+                                                                      "srv/Table"))}

@@ -7,6 +7,9 @@ owns what they carry, in the Node's terms:
   topic (`messages` listener: one call per unit, no `Heard` built);
 * every change of the table goes to `changes` (`change` listener);
 * the counters go to /diagnostics, once a second (`tick` listener);
+* the roster kept for the Node (`KeptRoster.of`) goes to `robots` (latched) when it changes (who is there,
+  their states, links and the keys they are behind on), at most once a ROBOTS_EVERY: made on the
+  transport's request thread, never the loop's;
 * `put` is a confirmed write (`oneshot.confirm_write`, as `vstig put` makes it): the
   service answers the entry a neighbour took, or why not and what the swarm holds;
   `get` reads the table (sending nothing), `table` all of it, from a snapshot that every call asked
@@ -24,6 +27,7 @@ live view and recordings are composed; everything the part does to the Node is i
 from __future__ import annotations
 
 import concurrent.futures
+import json
 import threading
 import time
 from collections.abc import Callable
@@ -40,18 +44,21 @@ from ..transports.ros2 import (  # no rclpy at import: it loads when the node op
     TableSnapshot,
 )
 from ..wire import KEY_MAX, Message
+from .kept_roster import KeptRoster
 from .node import SwarmClosed
 from .oneshot import HearsItself, confirm_write, not_taken
+from .roster_message import robots_message, standing
 
 if TYPE_CHECKING:
     from .node import Node
 
-__all__ = ["PUT_TRIES", "PUT_WAIT", "TABLE_SPACING", "Ros2Part", "TableSnapshots", "serve_ros2"]
+__all__ = ["PUT_TRIES", "PUT_WAIT", "ROBOTS_EVERY", "TABLE_SPACING", "Ros2Part", "TableSnapshots", "serve_ros2"]
 
 PUT_WAIT = 2.0  # seconds a confirmed write waits for a neighbour, as `vstig put --wait`
 PUT_TRIES = 3
 _GRACE = 5.0  # seconds beyond its writes' waits a put may take before the service gives up on the loop
 TABLE_SPACING = 0.2  # seconds at least between two snapshots of a changing table (each holds the Node's lock)
+ROBOTS_EVERY = 1.0  # seconds at least between two roster messages on `robots`
 
 
 def serve_ros2(node: Node) -> list[Ros2Part]:
@@ -102,6 +109,8 @@ class Ros2Part:
         self.transport = transport
         self._where = ", ".join(other.name for other in node.links)
         self.snapshots = TableSnapshots(node.entries)
+        self._next_robots = 0.0
+        self._standing: list[tuple[Any, ...]] | None = None  # what the last roster message published showed
         transport.serve(self if node.engine is not None else None, [other.name for other in node.links])
         if node.engine is not None and isinstance(link.framing, Ros2Framing):
             link.framing.stamp = self._stamp
@@ -118,6 +127,21 @@ class Ros2Part:
 
     def _tick(self, node: Node) -> None:
         self.transport.publish_stats(node.stats())  # for /diagnostics (the transport sends one a second)
+        now = time.monotonic()
+        if now >= self._next_robots:
+            self._next_robots = now + ROBOTS_EVERY
+            kept = KeptRoster.of(node)
+            if kept is not None:
+                self.transport.publish_robots(lambda: self._roster_if_changed(kept))
+
+    def _roster_if_changed(self, kept: KeptRoster) -> bytes | None:
+        """On the transport's request thread: the roster message, or None if it shows what the last one did."""
+        message = robots_message(kept)
+        now_standing = standing(message)
+        if now_standing == self._standing:
+            return None
+        self._standing = now_standing
+        return json.dumps(message).encode()
 
     def _stamp(self, key: int) -> int:
         engine = self.node.engine

@@ -2,7 +2,7 @@
 
 `ros2:<swarm>` gives the gateway an rclpy node under /vstig/<swarm> (stigmergy 0;
 /vstig/<swarm>/stigmergy<N> for another): every message heard on every link, the
-table's changes, put/get/table services, the counters on /diagnostics, and a
+table's changes, the roster (`robots`), put/get/table services, the counters on /diagnostics, and a
 `write` topic whose samples come in as this link's heard messages (the guard, the
 engine and a per-source share see them as any link's). What the gateway
 broadcasts goes out on `broadcast`. Topics, types and QoS: docs/how-to/ros2.md.
@@ -37,7 +37,8 @@ NOTES = {
     "ros2": "ros2: a ROS 2 node of the gateway's (the ros2 extra) under /vstig/<swarm> (stigmergy N>0: "
             "/vstig/<swarm>/stigmergy<N>; namespace= overrides): heard/<link> and broadcast topics "
             "(vstig_msgs/Message), changes (vstig_msgs/Change, keyed, transient-local: a late subscriber gets the "
-            "table), put/get/table services, the counters on /diagnostics; what ROS 2 nodes publish on write comes "
+            "table), robots (vstig_msgs/Robots, transient-local: the roster, on change, at most once a second), "
+            "put/get/table services, the counters on /diagnostics; what ROS 2 nodes publish on write comes "
             "in as this link's messages (a PUT with timestamp 0 is stamped after the gateway's entry), at most "
             "write_rate= a second (default 500). domain= is the ROS domain id (default $ROS_DOMAIN_ID, else 0). "
             "Closed by default: Fast DDS on this PC only (loopback and shared memory); discovery=subnet opens it "

@@ -26,7 +26,7 @@ from typing import IO, Any
 from ..counters import Counters
 from ..gateway.kept_roster import KeptRoster
 from ..gateway.node import Listening, Node
-from ..gateway.roster import RobotState
+from ..gateway.roster_message import robots_message
 from ..links.link import Heard
 from ..values import ValueType
 from ..wire import Message
@@ -221,15 +221,6 @@ class LiveView:
             return None
         self._next_robots = now + ROBOTS_EVERY
         return strict_json(robots_message(self._kept))
-
-
-def robots_message(kept: KeptRoster) -> dict[str, Any]:
-    """Every robot's row (as `sniff --robots --jsonl` prints it), how many are in each state, and how many
-    more were heard than the roster may track."""
-    views = kept.snapshot()
-    states = {state.value: sum(view.state is state for view in views) for state in RobotState}
-    return {"t": round(time.time(), 3), "robots_total": len(views), **states, "untracked": kept.roster.untracked,
-            "rows": [view.as_json() for view in views]}
 
 
 def _read_until(server: subprocess.Popen[bytes], deadline: float) -> bytes:

@@ -14,7 +14,8 @@ A child that dies is an outage: logged once, counted (`lost`), and started again
 with backoff. Closing the link closes its stdin, and the child ends.
 
 A table answer is a snapshot (gateway.ros2.TableSnapshots) sent in pages, each a pipe write of
-its own, once per snapshot: the child keeps the last one.
+its own, once per snapshot: the child keeps the last one. The roster (`robots`) goes the same way, in
+parts, made and sent on a request thread: the data path only asks for it.
 
 Counters: `rx` (writes taken), `tx` (broadcasts), `drop_behind`, and the child's: `rx_lost` (writes Fast
 DDS dropped: a writer above `write_rate`), `drop_bad_cdr` (writes refused), `published` (heard and change
@@ -35,6 +36,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import IO, Any, Protocol
 
@@ -45,8 +47,8 @@ from ..ros2msgs import ros_environment
 from ..wire import Message
 from .base import DeviceTransport, TransportError
 
-__all__ = ["CHANGE", "FRAME", "HEARD", "PUTS_AT_ONCE", "TABLE_PAGE", "TABLE_RECORD", "PutAnswer", "Ros2Options",
-           "Ros2Transport", "Served", "TableSnapshot"]
+__all__ = ["CHANGE", "FRAME", "HEARD", "PUTS_AT_ONCE", "ROBOTS_PART", "TABLE_PAGE", "TABLE_RECORD", "PutAnswer",
+           "Ros2Options", "Ros2Transport", "Served", "TableSnapshot"]
 
 log = logging.getLogger(__name__)
 
@@ -58,11 +60,12 @@ CHANGE = struct.Struct("<HBHHHHHHHq")
 NO_LINK = 0xFFFF
 TABLE_RECORD = struct.Struct("<HHHH")  # a table snapshot's records: key, value, timestamp, robot; by key
 TABLE_PAGE = struct.Struct("<II")  # T frames: the snapshot's serial and its first record's index, then records
+ROBOTS_PART = struct.Struct("<B")  # O frames: 1 on the last part of a roster message (JSON), then the part
 PIPE_BUF = 4096  # POSIX: a pipe write of at most this many bytes is never split nor interleaved
 START_TIMEOUT = 360.0  # seconds the child may take to start: the first on a machine builds the interfaces
 STATS_PERIOD = 1.0  # seconds between two counter snapshots sent for /diagnostics
 PUTS_AT_ONCE = 2  # confirmed puts in flight in the node process; one more is answered busy at once (put_busy)
-REQUEST_THREADS = PUTS_AT_ONCE + 2  # the puts in flight, a get and a table at once (the node asks no more)
+REQUEST_THREADS = PUTS_AT_ONCE + 3  # the puts in flight, a get and a table at once (the node asks no more), the roster
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,6 +131,8 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
         self._writing = threading.Lock()  # one frame at a time; the data path never waits for it
         self._requests: concurrent.futures.ThreadPoolExecutor | None = None
         self._next_stats = 0.0
+        self._robots_queued = False  # a roster message is being made or sent: another waits for the next tick
+        self._robots_sent: tuple[_Child | None, bytes | None] = (None, None)  # the last one, and to which child
 
     @property
     def about(self) -> str:
@@ -168,6 +173,15 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
             self._next_stats = now + STATS_PERIOD
             self._send_frame(b"S", json.dumps(stats).encode())
 
+    def publish_robots(self, make: Callable[[], bytes | None]) -> None:
+        """The roster for `robots`: `make` (its JSON; None: unchanged since the last) runs on a request thread, not
+        the caller's; one at a time (asked while one is under way: skipped). A child started again gets the last."""
+        requests, child = self._requests, self._device
+        if requests is None or child is None or self._robots_queued:
+            return
+        self._robots_queued = True
+        requests.submit(self._send_robots, child, make)
+
     # -- the pipe down ----------------------------------------------------------------------
     def _send_records(self, kind: bytes, data: bytes, size: int) -> None:
         """Fixed-size records, in frames that fit a pipe write whole."""
@@ -197,11 +211,38 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
         records = snapshot.records
         for start in range(0, max(len(records), 1), step):
             page = TABLE_PAGE.pack(snapshot.serial, start // TABLE_RECORD.size) + records[start:start + step]
-            while not self._send_frame(b"T", page):
-                if child.process.poll() is not None:
-                    return
-                select.select([], [child.fd], [], 0.1)
+            if not self._send_waiting(child, b"T", page):
+                return
         child.table = snapshot.serial
+
+    def _send_robots(self, child: _Child, make: Callable[[], bytes | None]) -> None:
+        """On a request thread: the roster message in O frames that each fit a pipe write whole."""
+        try:
+            data = make()
+            last_child, last = self._robots_sent
+            if data is None and child is not last_child:
+                data = last
+            if data is None:
+                return
+            step = PIPE_BUF - FRAME.size - ROBOTS_PART.size
+            for start in range(0, len(data), step):
+                if not self._send_waiting(child, b"O", ROBOTS_PART.pack(start + step >= len(data)) +
+                                          data[start:start + step]):
+                    return
+            self._robots_sent = (child, data)
+        except Exception:  # the roster's topic may lag; it never ends the link
+            log.exception("%s: publishing the roster failed", self.name)
+        finally:
+            self._robots_queued = False
+
+    def _send_waiting(self, child: _Child, kind: bytes, payload: bytes) -> bool:
+        """One frame (at most PIPE_BUF bytes), waiting for room: on a request thread, so the data path's frames
+        go between a long message's parts; False if the child ended."""
+        while not self._send_frame(kind, payload):
+            if child.process.poll() is not None:
+                return False
+            select.select([], [child.fd], [], 0.1)
+        return True
 
     def _send_whole(self, child: _Child, kind: bytes, payload: bytes) -> None:
         """A frame of any size (an answer, a table), waiting for room: on a request thread, never the data path."""

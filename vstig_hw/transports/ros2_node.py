@@ -9,6 +9,7 @@ stdin and reads frames from our stdout (the protocol: `ros2.py`):
          B  what the gateway broadcasts -> <ns>/broadcast          (CDR, as the framing encoded it)
          A  the answer to a request we asked;  S  the gateway's counters -> /diagnostics
          T  a page of a table snapshot (before the answer that names it; we keep the last one)
+         O  a part of the roster (JSON, its last part flagged) -> <ns>/robots (vstig_msgs/Robots, transient local)
     out  W  what ROS 2 nodes wrote on <ns>/write (at most write_rate a second)
          Q  a service request (put, get, table) for the gateway to answer
          K  what we counted since the last K (once a second and when we end), with the writes refused here
@@ -34,7 +35,7 @@ from typing import IO, Any
 from ..counters import Counters
 from ..framing.ros2 import CDR_SIZE, cdr_message, message_of_cdr, ros_name
 from ..wire import Message
-from .ros2 import CHANGE, FRAME, HEARD, PUTS_AT_ONCE, TABLE_PAGE, TABLE_RECORD, Ros2Options
+from .ros2 import CHANGE, FRAME, HEARD, PUTS_AT_ONCE, ROBOTS_PART, TABLE_PAGE, TABLE_RECORD, Ros2Options
 
 WRITE_POLL = 0.05  # seconds between two takes from the write topic: what a ROS 2 write may wait
 DIAGNOSTICS_PERIOD = 1.0
@@ -100,6 +101,7 @@ class Ros2Node:
         self._stats: dict[str, dict[str, int]] = {}
         self._pages: tuple[int, list[bytes]] = (0, [])  # the table snapshot coming in: serial, its pages so far
         self._table_entries: tuple[int, list[Any]] = (0, [])  # the last snapshot answered, as Entry messages
+        self._roster_parts: list[bytes] = []  # the roster message coming in
         self._declare(config["served"])
         self.executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS, context=self.context)
         self.executor.add_node(self.node)
@@ -122,6 +124,7 @@ class Ros2Node:
         # Each callback in a group of its own, so none waits for another (a default group runs one callback at a
         # time): puts are reentrant, `_put` bounds those in flight and answers the rest busy at once.
         node.create_timer(WRITE_POLL, self._take_writes, MutuallyExclusiveCallbackGroup())
+        self.robots = node.create_publisher(msg.Robots, "robots", table)  # latched: a late subscriber gets it
         self.changes = None
         if served:
             self.changes = node.create_publisher(msg.Change, "changes", table)
@@ -218,6 +221,23 @@ class Ros2Node:
             self._pages = (serial, pages)
         elif kind == b"S":
             self._stats = json.loads(payload)
+        elif kind == b"O":
+            self._roster_parts.append(payload[ROBOTS_PART.size:])
+            if ROBOTS_PART.unpack_from(payload)[0]:
+                roster, self._roster_parts = json.loads(b"".join(self._roster_parts)), []
+                self.robots.publish(self._robots(roster, msg))
+                self._count("published", 1)
+
+    @staticmethod
+    def _robots(roster: dict[str, Any], msg: Any) -> Any:
+        """The roster message (gateway.roster_message) as a vstig_msgs/Robots."""
+        robots = [msg.Robot(robot=row["robot"], named_by=row["named_by"], links=row["links"], state=row["state"],
+                            last_heard_s=float(row["last_heard_s"]), rate=float(row["rate"]),
+                            messages=row["messages"], writes=row["writes"], gets=row["gets"], behind=row["behind"],
+                            refused=row["refused"], quality=-1 if row["quality"] is None else row["quality"])
+                  for row in roster["rows"]]
+        return msg.Robots(t=float(roster["t"]), robots_total=roster["robots_total"], alive=roster["alive"],
+                          quiet=roster["quiet"], gone=roster["gone"], untracked=roster["untracked"], robots=robots)
 
     def _spin(self) -> None:
         with contextlib.suppress(Exception):  # the context shuts down as we end
