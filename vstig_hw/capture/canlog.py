@@ -28,6 +28,7 @@ from .records import (
     capture_suffix,
     cut_short,
 )
+from .writer import CaptureWriter
 
 __all__ = ["CanCaptureWriter", "read_can_log"]
 
@@ -35,7 +36,7 @@ _NUMBERED_EXTENSIONS = (".asc", ".asc.gz", ".blf")  # channel numbers, named by 
 _BLF_CONTAINER_EVERY = 2.0  # seconds between BLF blocks written while recording
 
 
-class CanCaptureWriter:
+class CanCaptureWriter(CaptureWriter):
     """python-can's writer for the extension; frames keep their own timestamps, channel = link name.
 
     ASC and BLF number their channels: each link gets a number and a note naming it. CSV, pcap and TRC

@@ -10,18 +10,12 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any, Protocol, cast
+from typing import Any, cast
 
 from .records import WRITERS, CaptureError, Record, capture_suffix, writer_class
+from .writer import CaptureWriter
 
 __all__ = ["CaptureWriter", "RotatingCapture", "rotated_name"]
-
-
-class CaptureWriter(Protocol):
-    def write(self, record: Record) -> None: ...
-    def size(self) -> int: ...
-    def flush(self) -> None: ...
-    def close(self) -> None: ...
 
 
 def rotated_name(path: str, index: int) -> str:
@@ -99,22 +93,20 @@ class RotatingCapture:
         self._writer = self._open(path)
         self._in_file, self._next_check = 0, 1
         for text in self._preamble:
-            getattr(self._writer, "note", lambda _text: None)(text)
+            self._writer.note(text)
 
     @property
     def takes_notes(self) -> bool:
         """Whether this format keeps comment lines (our line captures do; CAN logs and MCAP here do not)."""
-        return hasattr(self._writer, "note")
+        return self._writer.takes_notes
 
     def note(self, text: str, every_file: bool = False) -> None:
         """A comment line in the capture, if its format keeps them; `every_file`: again at the top of each
         rotated file (a capture's clock)."""
         if every_file:
             self._preamble.append(text)
-        note = getattr(self._writer, "note", None)
-        if note is not None:
-            with self._naming():
-                note(text)
+        with self._naming():
+            self._writer.note(text)
 
     def flush(self) -> None:
         """Push what is written to the file (the recorder does this every tick, so `tail -f` works)."""

@@ -22,6 +22,7 @@ from ..framing.ros2 import cdr_message, ros_name, sender_of_wire  # MSGDEF in CD
 from ..wire import Message, Op
 from .decoded import Decoder
 from .records import MESSAGE_FRAMING, STRICT, CaptureError, Damage, Record, cut_short
+from .writer import CaptureWriter
 
 __all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "McapCaptureWriter", "cdr_message", "read_mcap",
            "topic_for"]
@@ -75,7 +76,7 @@ def topic_for(link: str) -> str:
     return TOPIC_PREFIX + ros_name(link)
 
 
-class McapCaptureWriter:
+class McapCaptureWriter(CaptureWriter):
     """Writes every message in the records it is given, on its link's topic; `CaptureWriter` for .mcap files."""
 
     def __init__(self, path: str, decoder: Decoder | None = None) -> None:

@@ -18,6 +18,7 @@ from typing import IO, Any
 from ..dialects.framing import DIALECT_FRAMINGS
 from ..framing import SERIAL_FRAMINGS
 from .records import STRICT, CaptureError, Damage, Record, parse_lines
+from .writer import CaptureWriter
 
 __all__ = ["HEADER", "SerialCaptureWriter", "format_line", "read_serial_capture"]
 
@@ -30,9 +31,10 @@ def format_line(record: Record) -> str:
     return f"({record.t:.6f}) {record.link} {record.framing} {record.direction} {data.hex()}\n"
 
 
-class SerialCaptureWriter:
+class SerialCaptureWriter(CaptureWriter):
     """A line capture: a header line, then one line per record (the zenoh capture shares it)."""
 
+    takes_notes = True
     header = HEADER
     format_line = staticmethod(format_line)
 
