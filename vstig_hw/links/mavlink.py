@@ -1,7 +1,7 @@
 """MAVLink links (`mavlink:` specs): a drone swarm's telemetry radios, or its MAVLink router, as one link.
 
     mavlink:serial:/dev/ttyUSB0?baud=57600&air_rate=64000   a SiK / RFD900 radio on a UART
-    mavlink:udpin:127.0.0.1:14560                           listen; answer whoever spoke last
+    mavlink:udpin:127.0.0.1:14560                           listen; send to whoever spoke lately
     mavlink:udpout:127.0.0.1:14550                          send to a router (MAVProxy, mavlink-router)
 
 Our messages travel in MAVLink 2 TUNNEL messages (framing/mavlink.py, SPEC.md 6.10) from the gateway's own
@@ -15,8 +15,6 @@ radio or network can write the swarm.
 from __future__ import annotations
 
 import logging
-import os
-import stat
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,7 +42,8 @@ NOTES = {
     "mavlink": "mavlink: our messages in MAVLink 2 TUNNEL messages (payload_type 46449), 16 to a TUNNEL, broadcast "
                "(or to target=), from sysid= (default --robot-id, 1..255) and compid= (default 191); HEARTBEATs "
                "once a second as an onboard controller. serial: defaults baud=57600, air_rate=64000 (a SiK radio's "
-               "AIR_SPEED): the link sends at most half the air rate. udpin listens and answers the last sender; "
+               "AIR_SPEED): the link sends at most half the air rate. udpin listens and sends to every address heard "
+               "in the last 10 s (at most 8); "
                "udpout sends to a router (MAVProxy, mavlink-router). key=FILE signs and checks every frame "
                "(docs/how-to/mavlink.md).",
 }
@@ -118,11 +117,7 @@ def read_key(path: str) -> bytes:
     import hashlib
 
     what = "the MAVLink signing key file"
-    data = read_regular(path, _KEY_MAX_BYTES, what)
-    mode = os.stat(path).st_mode
-    if stat.S_IMODE(mode) & 0o077:
-        raise InputFileError(f"{path}: {what} is readable or writable by others (mode {stat.S_IMODE(mode):o}): "
-                             f"chmod 600 {path}")
+    data = read_regular(path, _KEY_MAX_BYTES, what, private=True)  # a secret: refused if others may read it
     text = data.decode("utf-8", "replace").strip()
     if not text:
         raise InputFileError(f"{path}: {what} is empty (64 hex digits, or a passphrase)")
