@@ -1,6 +1,27 @@
-# Types of the compiled data path (vstig_hw/_cext, built by setup.py). Each type has the interface of the Python
-# class it stands in for, and tests/native holds the two equal; the stub says so by naming that class as its base
-# (the compiled types do not really subclass it: nothing checks them with isinstance).
+"""Types of the compiled data path (vstig_hw/_cext, built by setup.py), and the one index of the twins.
+
+firmware_spec/SPEC.md is normative. The Python is the reference implementation of it that the gateway runs; each
+C file here is a twin held equal to its Python reference by tests/native (the same counters, frames and answers on
+random traffic), and names it at its top ("Reference:"), as each reference names its twin ("C twin:"). The stub
+says which class a type stands in for by naming it as its base (the compiled types do not really subclass it:
+nothing checks them with isinstance). tests/native/test_native_twins_named.py checks this table both ways.
+
+Twins (C file, its types, its Python references):
+
+    engine.c   Engine             vstig_hw/engine.py
+    guard.c    JumpGuard          vstig_hw/gateway/guard.py
+    framing.c  Receiver Encoder   vstig_hw/framing/cobs8.py vstig_hw/framing/epuck4.py vstig_hw/framing/kilobot.py
+                                  vstig_hw/framing/can.py vstig_hw/framing/xbee.py
+    window.c   Window             vstig_hw/gateway/outlet.py
+    outlet.c   Outlet             vstig_hw/gateway/outlet.py vstig_hw/transports/serial.py vstig_hw/transports/can.py
+    parts.c    Seat Relay         vstig_hw/gateway/parts.py
+    path.c     Path               vstig_hw/gateway/node.py vstig_hw/gateway/delivery_state.py
+                                  vstig_hw/transports/serial.py vstig_hw/transports/can.py vstig_hw/transports/xbee.py
+    module.c   -                  vstig_hw/native.py
+
+Constants both sides use are defined once on each side and compared by tests/native/test_native_twins_named.py
+(it parses the C #defines); a C #define it does not know fails it until it is classified.
+"""
 from collections.abc import Callable, Sequence
 from typing import Any
 

@@ -1,5 +1,7 @@
 """The virtual-stigmergy protocol engine: sans-I/O, deterministic.
 
+C twin: vstig_hw/_cext/engine.c (Engine); held equal by tests/native (index: vstig_hw/_vstig.pyi).
+
 Feed it what the radios heard (`receive`), call `put`/`get` as the robot's
 program does, and broadcast whatever `drain` hands back. It owns no socket,
 thread or clock, so the simulator, the gateway and the tests drive the same code.

@@ -1,13 +1,17 @@
 """The compiled data path, when this install has it and it is not turned off.
 
+C twin: vstig_hw/_cext/module.c (the module: `setup`, `DECLARED`); held equal by tests/native (index:
+vstig_hw/_vstig.pyi).
+
 `vstig_hw._vstig` is built from libvstig (firmware_spec/libvstig) when the package is
 installed where a C compiler and Python's headers are; elsewhere the install is pure Python
 and everything works the same, slower. `VSTIG_PURE=1` in the environment turns the compiled
 path off (for comparing the two, or if it ever misbehaves): nothing compiled is loaded.
 
 `native` is the extension module, or None; `why_pure` says why not ("" when it is loaded).
-The Python classes stay the reference: each compiled type has the interface of one of them,
-and tests/native holds the two equal (DECISIONS.md, "The gateway's compiled data path").
+firmware_spec/SPEC.md is normative; the Python is the reference implementation of it, and each
+compiled type is its twin, with the interface of one Python class and held equal to it by
+tests/native (the twins: vstig_hw/_vstig.pyi; DECISIONS.md, "The gateway's compiled data path").
 """
 
 from __future__ import annotations

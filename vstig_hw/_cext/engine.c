@@ -2,6 +2,8 @@
  * Engine: libvstig's engine with vstig_hw.engine.Stigmergy's interface (put, get, has, size,
  * entry, entries, counts, receive, drain, pending; onconflict and onconflictlost settable).
  *
+ * Reference: vstig_hw/engine.py (held equal by tests/native; the index of the twins: vstig_hw/_vstig.pyi).
+ *
  * The conflict rule: Stigmergy's ready-made rules run as their libvstig twins; any other
  * callable is called back from C with Entry objects, and what it raises (or a winner the
  * Python engine refuses) is raised from `receive` as the Python engine raises it.

@@ -2,13 +2,20 @@
  * vstig_hw._vstig: the gateway's compiled data path, a CPython extension over libvstig
  * (firmware_spec/libvstig, built into it with every table at 32,768 places).
  *
- * Each type here is the twin of one Python class and has its interface; the Python is the
- * reference, and tests/native holds the two equal on random traffic:
+ * Each type here is the twin of one Python class and has its interface. firmware_spec/SPEC.md is normative; the
+ * Python is the reference implementation the C is held equal to (tests/native, on random traffic). Every type:
  *
- *   Engine     vstig_hw.engine.Stigmergy            (libvstig's engine)
- *   JumpGuard  vstig_hw.gateway.guard.Guard         (max_jump and learn only; libvstig's guard)
- *   Receiver   a link's framing, receiving side     (libvstig's serial and CAN receivers)
- *   Encoder    a link's framing, sending side       (libvstig's serial and CAN encoders)
+ *   Engine     engine.c   vstig_hw.engine.Stigmergy              (libvstig's engine)
+ *   JumpGuard  guard.c    vstig_hw.gateway.guard.Guard           (max_jump and learn only; libvstig's guard)
+ *   Receiver   framing.c  a link's framing, receiving side       (libvstig's serial, CAN and XBee receivers)
+ *   Encoder    framing.c  a link's framing, sending side         (libvstig's serial, CAN and XBee encoders)
+ *   Window     window.c   vstig_hw.gateway.outlet.SendWindow
+ *   Outlet     outlet.c   vstig_hw.gateway.outlet.Outlet         (and the transports' write_nowait)
+ *   Seat       parts.c    vstig_hw.gateway.parts.Seat
+ *   Relay      parts.c    vstig_hw.gateway.parts.RawRelay
+ *   Path       path.c     vstig_hw.gateway.node.Node's delivery  (and the transports' reads)
+ *
+ * The index of the twins, by file, is vstig_hw/_vstig.pyi's docstring.
  *
  * Python objects the types hand out (Message, Entry, Outcome...) come from vstig_hw itself,
  * given once by vstig_hw/native.py through `setup`: nothing here imports vstig_hw.

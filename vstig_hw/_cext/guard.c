@@ -2,6 +2,8 @@
  * JumpGuard: libvstig's jump bound with vstig_hw.gateway.guard.Guard's interface, for a guard whose
  * only policies are max_jump and learn (Guard.jump_only()): the gateway's default.
  *
+ * Reference: vstig_hw/gateway/guard.py (held equal by tests/native; the index of the twins: vstig_hw/_vstig.pyi).
+ *
  * Time: the Python guard keeps float seconds, libvstig whole units. Here a unit is 1/1024 s
  * (GUARD_UNITS): a time that is a whole number of units (the differential test feeds such
  * times) gives exactly the Python guard's answers; any other is floored to its unit, which

@@ -1,4 +1,8 @@
-/* vstig_hw._vstig: the module, `setup`, and the conversions every type shares. See ext.h. */
+/*
+ * vstig_hw._vstig: the module, `setup`, and the conversions every type shares. See ext.h.
+ *
+ * Reference: vstig_hw/native.py (held equal by tests/native; the index of the twins: vstig_hw/_vstig.pyi).
+ */
 #include "ext.h"
 
 #include <stdarg.h>

@@ -1,6 +1,9 @@
 /*
  * Outlet: vstig_hw.gateway.outlet.Outlet in C, one link's way out (its window, its share of sources, its writer).
  *
+ * Reference: vstig_hw/gateway/outlet.py vstig_hw/transports/serial.py vstig_hw/transports/can.py (held equal by
+ *   tests/native; the index of the twins: vstig_hw/_vstig.pyi).
+ *
  * What Outlet does, done the same way: a push while nothing waits is held as it came and goes out at the next
  * flush if the window and the writer take it all; otherwise it waits in the fair share's lines, which stay the
  * Python ones (`queue`: FairQueue or FairFifo, the one implementation of the share) and are only touched while

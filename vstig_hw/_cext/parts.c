@@ -3,6 +3,8 @@
  * heard: judge them with the engine and put its outbox on every outlet, or queue each on every other outlet.
  * The same rules, in the same order; the outlets are Outlets (outlet.c), the engine an Engine (engine.c).
  *
+ * Reference: vstig_hw/gateway/parts.py (held equal by tests/native; the index of the twins: vstig_hw/_vstig.pyi).
+ *
  * The guard is a JumpGuard (no read-only links: nothing confined) or a Python Guard, asked through its own
  * methods (read_only, confines, confined_to) as the Python parts ask it.
  */

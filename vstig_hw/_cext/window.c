@@ -1,6 +1,8 @@
 /*
  * Window: vstig_hw.gateway.outlet.SendWindow in C (at most `budget` sends in any `period` seconds, evenly
  * spaced while a backlog lasts). The same float operations in the same order: the same answers.
+ *
+ * Reference: vstig_hw/gateway/outlet.py (held equal by tests/native; the index of the twins: vstig_hw/_vstig.pyi).
  */
 #include "window.h"
 

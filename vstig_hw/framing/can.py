@@ -1,5 +1,7 @@
 """CAN framing: the arbitration-ID scheme and payloads (normative text: firmware_spec/SPEC.md section 6.5).
 
+C twin: vstig_hw/_cext/framing.c (Receiver, Encoder); held equal by tests/native (index: vstig_hw/_vstig.pyi).
+
 This module is the one owner of the CAN ID scheme::
 
     11-bit:  id = base | op << 8  | sender            base in {0x000, 0x200, 0x400, 0x600}

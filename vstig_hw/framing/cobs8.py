@@ -1,5 +1,7 @@
 """`cobs8`: one 8-byte wire message per serial frame (12 bytes on the wire).
 
+C twin: vstig_hw/_cext/framing.c (Receiver, Encoder); held equal by tests/native (index: vstig_hw/_vstig.pyi).
+
 The default for UART radios that carry whole messages (Kilobot/marXbot style
 bridges, generic serial radios).
 """

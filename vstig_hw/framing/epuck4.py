@@ -1,5 +1,7 @@
 """`epuck4`: one 8-byte message as three 4-byte e-puck range-and-bearing words.
 
+C twin: vstig_hw/_cext/framing.c (Receiver, Encoder); held equal by tests/native (index: vstig_hw/_vstig.pyi).
+
 Word (32 bits, big-endian on the air and on the UART)::
 
      31 30 29    26 25                                   0

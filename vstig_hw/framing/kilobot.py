@@ -1,5 +1,7 @@
 """`kilobot`: the Kilobot `message_t` over a serial bridge radio.
 
+C twin: vstig_hw/_cext/framing.c (Receiver, Encoder); held equal by tests/native (index: vstig_hw/_vstig.pyi).
+
 A Kilobot message is `{uint8 data[9]; uint8 type; uint16 crc}` (kilolib message.h)
 with the CRC-16/MCRF4XX of the first 10 bytes stored little-endian. The serial
 frame's payload is those 10 bytes, so the frame's CRC *is* kilolib's message CRC

@@ -1,5 +1,7 @@
 """`xbee`: Digi XBee modules in API mode, our 8-byte messages in the RF data of their frames.
 
+C twin: vstig_hw/_cext/framing.c (Receiver, Encoder); held equal by tests/native (index: vstig_hw/_vstig.pyi).
+
 An API frame on the module's UART (Digi's "API frame format"; firmware_spec/SPEC.md 6.9)::
 
     0x7E | length (u16 big-endian) | frame data (frame type, its fields) | checksum

@@ -58,6 +58,8 @@ __all__ = ["Compiled", "compiled_for"]
 
 MAX_EXPIRY_TICKS = 254  # epuck4 partials the compiled receiver can age (libvstig counts ticks in a byte)
 MAX_LEARN = 2_097_151.0  # seconds of `learn` the compiled guard can count (2^31 of its 1/1024 s units)
+# How the compiled delivery reads a link (path.h's VX_READ_*; tests/native compares them)
+READS_PYTHON, READS_SERIAL, READS_SOCKETCAN, READS_XBEE = 0, 1, 2, 3
 
 
 def _is(obj: object, module: str, name: str) -> bool:
@@ -129,16 +131,17 @@ def encoder_for(link: Link[Any]) -> Encoder | None:
 
 
 def reads_for(link: Link[Any]) -> int:
-    """How the compiled delivery reads the link: 1 a serial port's fd, 2 a SocketCAN socket, 3 an XBee module's
-    serial fd (cut into frames as its transport cuts them), 0 through its transport's own read."""
+    """How the compiled delivery reads the link: READS_SERIAL a serial port's fd, READS_SOCKETCAN a SocketCAN
+    socket, READS_XBEE an XBee module's serial fd (cut into frames as its transport cuts them), READS_PYTHON
+    through its transport's own read."""
     transport = link.transport
     if type(transport) is SerialTransport:
-        return 1  # while the port has an fd (a device or a pty); pump hands socket:// and outages back
+        return READS_SERIAL  # while the port has an fd (a device or a pty); pump hands socket:// and outages back
     if type(transport) is XBeeTransport:
-        return 3  # likewise, and while the transport holds nothing it read at open
+        return READS_XBEE  # likewise, and while the transport holds nothing it read at open
     if _is(transport, "vstig_hw.transports.can", "CanTransport") and getattr(transport, "interface", "") == "socketcan":
-        return 2
-    return 0
+        return READS_SOCKETCAN
+    return READS_PYTHON
 
 
 def port_for(link: Link[Any]) -> str:
@@ -206,8 +209,8 @@ class Compiled:
         `told`: the `messages` and `refused` listeners it tells itself; `delivered`: those told of every batch
         handled (its read time). The lists are the Node's own, kept up to date in place: the delivery looks at them
         per read."""
-        reads = [reads_for(link) if receiver is not None else 0 for link, receiver in zip(links, receivers,
-                                                                                         strict=True)]
+        reads = [reads_for(link) if receiver is not None else READS_PYTHON
+                 for link, receiver in zip(links, receivers, strict=True)]
         can = sys.modules.get("can")  # loaded if a link is CAN: the frames the delivery hands Python are its Messages
         path: Path = self.native.Path(state, lock, deliver, links, receivers, reads, part, guard, outlets,
                                       listeners=listeners, told=told, heard=Heard, delivered=delivered,

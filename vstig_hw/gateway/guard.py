@@ -1,5 +1,8 @@
 """The guard: what a link hears passes it before the engine (or a relay, or a sniffer) sees it.
 
+C twin: vstig_hw/_cext/guard.c (JumpGuard: a guard of max_jump and learn only); held equal by tests/native (index:
+vstig_hw/_vstig.pyi).
+
 Virtual stigmergy trusts every message, so one robot with a corrupted counter, a
 firmware bug or a flood could take a key over for the whole swarm, and a gateway
 would spread the damage to every medium it joins. The guard refuses such traffic

@@ -1,5 +1,8 @@
 """The PC's seat in the swarm: one engine attached to any number of links, owning its threads.
 
+C twin: vstig_hw/_cext/path.c (Path: `_deliver`, `_arrive`, `_spread`); held equal by tests/native (index:
+vstig_hw/_vstig.pyi).
+
 Modes (each picks the part that handles what links heard, see `parts`):
 
 * ENGINE: the Node is a robot (a `Seat`). What any link hears goes into its

@@ -1,5 +1,8 @@
 """One link's way out: a send queue drained under a per-tick budget.
 
+C twin: vstig_hw/_cext/window.c (Window: SendWindow), vstig_hw/_cext/outlet.c (Outlet); held equal by tests/native
+(index: vstig_hw/_vstig.pyi).
+
 The engine has one outbox; links differ in bandwidth (a CAN bus moves thousands
 of frames a second, an e-puck radio a few dozen). So every engine message is
 copied into each link's own queue, and each queue keeps the engine's rule: one

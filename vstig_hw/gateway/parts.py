@@ -1,5 +1,7 @@
 """What a Node does with the messages its links heard: one part per job, chosen by the Node's `Mode`.
 
+C twin: vstig_hw/_cext/parts.c (Seat, Relay); held equal by tests/native (index: vstig_hw/_vstig.pyi).
+
 The Node (node.py) reads the links, frames, guards and tells the listeners; then
 it hands each batch of messages to its part (python-can's `Notifier` hands
 messages to a `Listener` the same way):

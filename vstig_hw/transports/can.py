@@ -1,5 +1,8 @@
 """CanTransport: a python-can bus that survives its adapter vanishing, and waits on no adapter.
 
+C twin: vstig_hw/_cext/path.c (a SocketCAN read), vstig_hw/_cext/outlet.c (its write_nowait); held equal by
+tests/native (index: vstig_hw/_vstig.pyi).
+
 Any python-can interface works unchanged (socketcan, pcan, kvaser, virtual,
 udp_multicast, socketcand...): interface, channel, bitrate and any other
 option go to `can.Bus` as given. slcan adapters get our own driver of python-can's

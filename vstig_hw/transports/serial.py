@@ -1,5 +1,8 @@
 """SerialTransport: a pyserial port that survives its device vanishing.
 
+C twin: vstig_hw/_cext/path.c (its read), vstig_hw/_cext/outlet.c (its write_nowait); held equal by tests/native
+(index: vstig_hw/_vstig.pyi).
+
 Anything `serial.serial_for_url` opens works unchanged: a device path
 (/dev/ttyUSB0, a pty), socket://host:port, rfc2217://host:port, loop://.
 It moves raw byte chunks and never interprets them.

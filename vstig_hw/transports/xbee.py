@@ -1,5 +1,8 @@
 """XBeeTransport: a serial port with a Digi XBee module in API mode behind it.
 
+C twin: vstig_hw/_cext/path.c (its read and cutting into frames); held equal by tests/native (index:
+vstig_hw/_vstig.pyi).
+
 The module is the device, as an slcan adapter is for python-can: it speaks frames (API
 mode 1, or 2 with escaping), answers AT commands and reports on what it sent. So this
 transport, over the serial port's bytes:
