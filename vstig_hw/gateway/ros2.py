@@ -75,7 +75,6 @@ class TableSnapshots:
         self._take = take
         self._taking = threading.Lock()  # one snapshot at a time; the calls behind it share it
         self.changes = 0  # changes of the table seen (`changed`, on the data path under the Node's lock)
-        self.taken = 0  # snapshots taken
         self._last = TableSnapshot(0, b"")
         self._last_changes = -1
         self._taken_at = -TABLE_SPACING
@@ -92,7 +91,6 @@ class TableSnapshots:
             changes, self._taken_at = self.changes, time.monotonic()
             pack = TABLE_RECORD.pack
             records = b"".join([pack(key, *entry) for key, entry in sorted(self._take())])
-            self.taken += 1
             self._last, self._last_changes = TableSnapshot(self._last.serial + 1, records), changes
             return self._last
 

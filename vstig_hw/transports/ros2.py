@@ -237,15 +237,15 @@ class Ros2Transport(DeviceTransport[Ros2Sample, _Child]):
 
     def _send_waiting(self, child: _Child, kind: bytes, payload: bytes) -> bool:
         """One frame (at most PIPE_BUF bytes), waiting for room: on a request thread, so the data path's frames
-        go between a long message's parts; False if the child ended."""
+        go between a long message's parts; False if the child ended or the link closed it."""
         while not self._send_frame(kind, payload):
-            if child.process.poll() is not None:
+            if self._device is not child or child.process.poll() is not None:  # its fd may be closed: no select
                 return False
             select.select([], [child.fd], [], 0.1)
         return True
 
     def _send_whole(self, child: _Child, kind: bytes, payload: bytes) -> None:
-        """A frame of any size (an answer, a table), waiting for room: on a request thread, never the data path."""
+        """A frame of any size (an answer), waiting for room: on a request thread, never the data path."""
         data = FRAME.pack(kind, len(payload)) + payload
         with self._writing:
             while data:
