@@ -1,5 +1,5 @@
--- Wireshark dissector for vstig-hw virtual stigmergy messages on CAN (firmware_spec/SPEC.md 6.5) and in XBee API
--- frames (6.9, at the end of this file).
+-- Wireshark dissector for vstig-hw virtual stigmergy messages on CAN (firmware_spec/SPEC.md 6.5), in XBee API
+-- frames (6.9) and in MAVLink 2 TUNNEL messages (6.10), the last two at the end of this file.
 --
 --   wireshark -X lua_script:firmware_spec/wireshark/vstig.lua capture.pcap
 --   tshark -X lua_script:firmware_spec/wireshark/vstig.lua -r candump.log -T fields -e vstig.key
@@ -154,7 +154,7 @@ local function unescaped(tvb)
 end
 
 -- The messages in the RF data from `offset` of a frame's data; a summary for the Info column.
-local function messages(data, offset, root, sender)
+local function messages(data, offset, root, sender, sender_field)
     local size = data:len() - offset
     if size == 0 or size % 8 ~= 0 then
         root:add_proto_expert_info(e_xlen)
@@ -167,7 +167,7 @@ local function messages(data, offset, root, sender)
         local op, key = bit.rshift(head, 15), bit.band(head, 0x7FFF)
         local value, ts, robot = m(2, 2):uint(), m(4, 2):uint(), m(6, 2):uint()
         local sub = root:add(vstig, m, string.format("%s key=%d value=%d ts=%d robot=%d", ops[op], key, value, ts, robot))
-        if sender then sub:add(f.xbee_sender, sender):set_generated() end
+        if sender then sub:add(sender_field or f.xbee_sender, sender):set_generated() end
         sub:add(f.op, m(0, 1), op)
         sub:add(f.key, m(0, 2), key)
         sub:add(f.value, m(2, 2))
@@ -220,3 +220,111 @@ function xbee.dissector(tvb, pinfo, tree)
 end
 
 DissectorTable.get("wtap_encap"):add(wtap.USER0, xbee)
+
+-- MAVLink 2 TUNNEL messages carrying our messages (SPEC.md 6.10): one or more frames per packet, from a pcap of
+-- link type USER1 (148) made of a mavlink link's capture (text2pcap -l 148, docs/how-to/mavlink.md), or any UDP
+-- datagram that starts with one (a heuristic: 0xFD, msgid 385). Our TUNNELs (payload_type 46449) show their
+-- messages, the sender as sysid << 8 | compid (vstig.mavlink_sender); crc (with TUNNEL's CRC_EXTRA 147) checked,
+-- a signature shown, not checked (the key is not Wireshark's).
+
+local mav = Proto("vstig_mavlink", "MAVLink TUNNEL (vstig-hw)")
+local PAYLOAD_TYPE, TUNNEL = 46449, 385
+
+local mf = mav.fields
+mf.length = ProtoField.uint8("vstig_mavlink.length", "Payload length", base.DEC)
+mf.signed = ProtoField.bool("vstig_mavlink.signed", "Signed")
+mf.seq = ProtoField.uint8("vstig_mavlink.seq", "Sequence", base.DEC)
+mf.sysid = ProtoField.uint8("vstig_mavlink.sysid", "System id", base.DEC)
+mf.compid = ProtoField.uint8("vstig_mavlink.compid", "Component id", base.DEC)
+mf.msgid = ProtoField.uint32("vstig_mavlink.msgid", "Message id", base.DEC)
+mf.payload_type = ProtoField.uint16("vstig_mavlink.payload_type", "TUNNEL payload_type", base.DEC)
+mf.target = ProtoField.uint8("vstig_mavlink.target_system", "Target system", base.DEC)
+mf.crc = ProtoField.uint16("vstig_mavlink.crc", "crc", base.HEX)
+mf.link_id = ProtoField.uint8("vstig_mavlink.link_id", "Signing link id", base.DEC)
+f.mavlink_sender = ProtoField.uint16("vstig.mavlink_sender", "Sender (sysid << 8 | compid)", base.DEC)
+
+local e_crc = ProtoExpert.new("vstig_mavlink.crc_bad", "crc does not match (dropped)", expert.group.CHECKSUM,
+    expert.severity.WARN)
+local e_mlen = ProtoExpert.new("vstig_mavlink.bad_length", "payload_length is not 1 to 16 whole messages (dropped)",
+    expert.group.MALFORMED, expert.severity.WARN)
+local e_cut = ProtoExpert.new("vstig_mavlink.truncated", "not a whole MAVLink 2 frame (dropped)",
+    expert.group.MALFORMED, expert.severity.WARN)
+mav.experts = { e_crc, e_mlen, e_cut }
+
+-- CRC-16/MCRF4XX (MAVLink's X.25) of tvb bytes [from, from + n), then the CRC_EXTRA byte.
+local function x25(tvb, from, n, extra)
+    local crc = 0xFFFF
+    local function add(b)
+        local t = bit.band(bit.bxor(b, crc), 0xFF)
+        t = bit.band(bit.bxor(t, bit.lshift(t, 4)), 0xFF)
+        crc = bit.band(bit.bxor(bit.rshift(crc, 8), bit.lshift(t, 8), bit.lshift(t, 3), bit.rshift(t, 4)), 0xFFFF)
+    end
+    for i = from, from + n - 1 do add(tvb(i, 1):uint()) end
+    add(extra)
+    return crc
+end
+
+-- One frame at `at`; the bytes it takes (0: no MAVLink 2 frame starts there) and a summary for the Info column.
+local function mavlink_frame(tvb, at, tree)
+    local left = tvb:len() - at
+    if left < 12 or tvb(at, 1):uint() ~= 0xFD then return 0 end
+    local len, flags = tvb(at + 1, 1):uint(), tvb(at + 2, 1):uint()
+    local size = 12 + len + (bit.band(flags, 1) == 1 and 13 or 0)
+    local root = tree:add(mav, tvb(at, math.min(size, left)))
+    if size > left then
+        root:add_proto_expert_info(e_cut)
+        return left, "MAVLink: cut short"
+    end
+    local msgid = tvb(at + 7, 3):le_uint()
+    local sysid, compid = tvb(at + 5, 1):uint(), tvb(at + 6, 1):uint()
+    root:add(mf.length, tvb(at + 1, 1))
+    root:add(mf.signed, bit.band(flags, 1) == 1):set_generated()
+    root:add(mf.seq, tvb(at + 4, 1))
+    root:add(mf.sysid, tvb(at + 5, 1))
+    root:add(mf.compid, tvb(at + 6, 1))
+    root:add_le(mf.msgid, tvb(at + 7, 3))
+    root:add_le(mf.crc, tvb(at + 10 + len, 2))
+    if bit.band(flags, 1) == 1 then root:add(mf.link_id, tvb(at + 12 + len, 1)) end
+    if msgid ~= TUNNEL then return size, string.format("MAVLink %d/%d message %d", sysid, compid, msgid) end
+    if x25(tvb, at + 1, 9 + len, 147) ~= tvb(at + 10 + len, 2):le_uint() then
+        root:add_proto_expert_info(e_crc)
+        return size, "MAVLink TUNNEL: bad crc"
+    end
+    local payload = ByteArray.new()  -- the payload with its cut trailing zeros put back
+    if len > 0 then payload:append(tvb(at + 10, len):bytes()) end
+    if payload:len() < 133 then payload:append(ByteArray.new(string.rep("00", 133 - payload:len()))) end
+    local p = payload:tvb("TUNNEL payload")
+    local ptype, carried = p(0, 2):le_uint(), p(4, 1):uint()
+    root:add_le(mf.payload_type, p(0, 2))
+    root:add(mf.target, p(2, 1))
+    if ptype ~= PAYLOAD_TYPE then return size, string.format("MAVLink TUNNEL payload_type %d", ptype) end
+    if carried == 0 or carried > 128 or carried % 8 ~= 0 then
+        root:add_proto_expert_info(e_mlen)
+        return size, "MAVLink TUNNEL: bad length " .. carried
+    end
+    local sender = sysid * 256 + compid
+    return size, string.format("MAVLink from %d/%d: %s", sysid, compid,
+        messages(p(0, 5 + carried):tvb(), 5, root, sender, f.mavlink_sender))
+end
+
+function mav.dissector(tvb, pinfo, tree)
+    local at, info = 0, {}
+    while at < tvb:len() do
+        local took, text = mavlink_frame(tvb, at, tree)
+        if took == 0 then break end
+        info[#info + 1] = text
+        at = at + took
+    end
+    if at == 0 then return 0 end
+    pinfo.cols.protocol = "VSTIG-MAVLINK"
+    pinfo.cols.info = table.concat(info, " | ")
+    return at
+end
+
+local function mavlink_heuristic(tvb, pinfo, tree)
+    if tvb:len() < 12 or tvb(0, 1):uint() ~= 0xFD or tvb(7, 3):le_uint() ~= TUNNEL then return false end
+    return mav.dissector(tvb, pinfo, tree) > 0
+end
+
+DissectorTable.get("wtap_encap"):add(wtap.USER1, mav)
+mav:register_heuristic("udp", mavlink_heuristic)

@@ -1,0 +1,73 @@
+"""The Wireshark dissector on MAVLink TUNNELs (SPEC.md 6.10), run by real tshark over a pcap that text2pcap makes
+from frames pymavlink and our framing wrote: every field it shows equals what the framing reads."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+from conftest import SPEC, require_tool
+from pymavlink.dialects.v20 import common as mav2
+
+from vstig_hw.framing.mavlink import PAYLOAD_TYPE, MavlinkFraming, Signing
+from vstig_hw.wire import Message, Op
+
+LUA = SPEC / "wireshark" / "vstig.lua"
+FIELDS = ["vstig_mavlink.sysid", "vstig_mavlink.signed", "vstig.mavlink_sender", "vstig.op", "vstig.key",
+          "vstig.value", "vstig.timestamp", "vstig.robot", "_ws.expert.message"]
+
+
+class _Sink:
+    def write(self, data: bytes) -> None:
+        pass
+
+
+def _frames() -> list[bytes]:
+    msgs = [Message(Op(k % 2), k, k * 7, k, 3) for k in range(1, 21)]
+    ours = MavlinkFraming(12).encode_batch(msgs) + MavlinkFraming(13, signing=Signing(bytes(32))).encode_batch(msgs[:3])
+    theirs = mav2.MAVLink(_Sink(), srcSystem=9, srcComponent=1)
+    data = b"".join(bytes.fromhex(f"{m[0]:04x}{m[1]:04x}{m[2]:04x}{m[3]:04x}") for m in msgs[:2])
+    tunnel = bytes(mav2.MAVLink_tunnel_message(0, 0, PAYLOAD_TYPE, len(data), list(data) + [0] * 112).pack(theirs))
+    other = bytes(mav2.MAVLink_tunnel_message(0, 0, PAYLOAD_TYPE + 1, 2, [1, 2] + [0] * 126).pack(theirs))
+    beat = bytes(mav2.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(theirs))
+    bad_crc = bytearray(tunnel)
+    bad_crc[15] ^= 1
+    odd = bytes(mav2.MAVLink_tunnel_message(0, 0, PAYLOAD_TYPE, 7, list(range(7)) + [0] * 121).pack(theirs))
+    return [*ours, tunnel, other, beat, bytes(bad_crc), odd]
+
+
+def _expected(frame: bytes) -> list[str]:
+    framing = MavlinkFraming(255)
+    msgs = framing.feed(frame)
+    sender = framing.sender_of(frame)
+    col = lambda values: ",".join(str(v) for v in values)  # noqa: E731
+    expert = ""
+    if framing.drops["bad_length"]:
+        expert = "payload_length is not 1 to 16 whole messages (dropped)"
+    elif frame[7:10] == (385).to_bytes(3, "little") and not msgs and not framing.drops["other_payload_type"]:
+        expert = "crc does not match (dropped)"
+    return [str(frame[5]), str(frame[2] & 1), col(sender for _ in msgs), col(int(m.op) for m in msgs),
+            col(m.key for m in msgs), col(m.value for m in msgs), col(m.timestamp for m in msgs),
+            col(m.robot for m in msgs), expert]
+
+
+def test_mavlink_frames_from_a_capture(tmp_path: Path) -> None:
+    text2pcap = require_tool("text2pcap", "wireshark-common")
+    tshark = require_tool("tshark")
+    frames = _frames()
+    dump = tmp_path / "drones.txt"
+    dump.write_text("".join("".join(f"{i:06x} {frame[i:i + 16].hex(' ')}\n" for i in range(0, len(frame), 16)) + "\n"
+                            for frame in frames))
+    pcap = tmp_path / "drones.pcap"
+    subprocess.run([text2pcap, "-q", "-l", "148", str(dump), str(pcap)], check=True, capture_output=True, timeout=60)
+    command = [tshark, "-X", f"lua_script:{LUA}", "-r", str(pcap), "-T", "fields",
+               "-E", "separator=/t", "-E", "occurrence=a", "-E", "aggregator=,"]
+    for name in FIELDS:
+        command += ["-e", name]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0 and "Lua" not in done.stderr and "rror" not in done.stderr, done.stderr
+    rows = [line.split("\t") for line in done.stdout.splitlines()]
+    assert len(rows) == len(frames)
+    for frame, row in zip(frames, rows, strict=True):
+        row[1] = {"True": "1", "False": "0"}.get(row[1], row[1])
+        assert row == _expected(frame), frame.hex()
