@@ -8,14 +8,14 @@ from typing import Any
 
 import click
 
-from vstig_hw.capture.records import CaptureError
+from vstig_hw.capture.records import Damage
 from vstig_hw.capture.trace import Shown, Trace, read_trace
 from vstig_hw.capture.why import Answer, explain
 from vstig_hw.extras import require
 from vstig_hw.wire import KEY_MAX
 
 from ..clock_merge import on_one_clock
-from ..options import Finite, echo_skipped, overwrite_option, refuse_to_replace, skip_bad_option
+from ..options import Finite, damage_option, echo_skipped, overwrite_option, refuse_to_replace
 from ..running import reports_errors
 
 
@@ -32,12 +32,12 @@ from ..running import reports_errors
 @overwrite_option("the --plot FILE")
 @click.option("--trust-clock-notes", is_flag=True, help="Merge several captures on one clock through every clock "
                                                         "offset they noted, also unproved ones (as analyze).")
-@skip_bad_option
+@damage_option
 @click.option("--deployment", type=click.Path(exists=True, dir_okay=False),
               help="For Buzz/BittyBuzz captures: the TOML file mapping their keys.")
 @reports_errors
 def command(files: tuple[str, ...], key: int, robot: str | None, at: float | None, as_json: bool,
-            plot: Path | None, overwrite: bool, trust_clock_notes: bool, skip_bad: bool,
+            plot: Path | None, overwrite: bool, trust_clock_notes: bool, damage: Damage,
             deployment: str | None) -> None:
     """Explain why a robot holds the value it holds for a key: trace every write through captures.
 
@@ -54,20 +54,19 @@ def command(files: tuple[str, ...], key: int, robot: str | None, at: float | Non
     if plot is not None:
         refuse_to_replace(plot, overwrite)
         require("analyze", "vstig why --plot", ("matplotlib",))
-    bad: list[CaptureError] = []
     names = {path: path for path in files}
     clocks = on_one_clock(names, trust_clock_notes)
     trace = read_trace(files, shifts=[s.seconds if s else 0.0 for s in clocks] if clocks else None,
-                       skip_bad=skip_bad, bad=bad, deployment=deployment)
-    echo_skipped(bad)
+                       damage=damage, deployment=deployment)
+    echo_skipped(damage.first)
     if not trace.messages:
         raise click.ClickException(f"{', '.join(files)}: no stigmergy messages in the capture")
     if at is not None and at > trace.end:
         click.echo(f"--at {at:g} is past the capture's end ({trace.end:.2f} s): answering for its end", err=True)
     answer = explain(trace, key, robot, at)
-    if robot is not None and robot not in trace.heard:
+    if robot is not None and robot not in trace.senders:
         click.echo(f"--robot {robot}: no such sender in the capture (senders: "
-                   f"{', '.join(sorted(trace.heard)) or 'none'})", err=True)
+                   f"{', '.join(sorted(trace.senders)) or 'none'})", err=True)
     if plot is not None:
         from vstig_hw.why_plot import plot_key
 

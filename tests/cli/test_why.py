@@ -77,9 +77,14 @@ def _why(capture: Path, *args: str) -> dict:
     return json.loads(result.stdout)
 
 
-def _verdict(capture: Path, key: int, robot: Robot) -> dict:
-    (only,) = _why(capture, "--key", str(key), "--robot", robot.name)["senders"]
+def _verdict(capture: Path, key: int, robot: Robot, *at: str) -> dict:
+    (only,) = _why(capture, "--key", str(key), "--robot", robot.name, *at)["senders"]
     return only
+
+
+def _while_the_robots_ran(capture: Path, robots: dict[str, Robot]) -> tuple[str, str]:
+    """--at the last time W was heard: before the bridge's stop, whose drain may still reach a full port."""
+    return "--at", str(_verdict(capture, DEAF, robots["W"])["last_heard"])
 
 
 @pytest.fixture(scope="module")
@@ -138,17 +143,18 @@ def test_the_bridge_records_what_it_heard_sent_and_decided(capture: tuple[Path, 
 
 def test_why_names_each_planted_cause(capture: tuple[Path, dict[str, Robot]]) -> None:
     path, robots = capture
-    deaf = _verdict(path, DEAF, robots["D"])
+    at = _while_the_robots_ran(path, robots)
+    deaf = _verdict(path, DEAF, robots["D"], *at)
     assert deaf["cause"] == "deaf", deaf
     assert "never shown back" in deaf["verdict"]
-    full = _verdict(path, FULL, robots["F"])
+    full = _verdict(path, FULL, robots["F"], *at)
     assert full["cause"] == "never_sent", full
     assert "queue for it was full" in full["verdict"]
-    refused = _verdict(path, GUARDED, robots["G"])
+    refused = _verdict(path, GUARDED, robots["G"], *at)
     assert refused["cause"] == "refused" and "drop_jump" in refused["verdict"], refused
-    lost = _verdict(path, CONFLICT, robots["C"])
+    lost = _verdict(path, CONFLICT, robots["C"], *at)
     assert lost["cause"] == "conflict_lost" and "robot 9" in lost["verdict"], lost
-    never = _verdict(path, NEVER, robots["N"])
+    never = _verdict(path, NEVER, robots["N"], *at)
     assert never["cause"] == "never_asked", never
 
 

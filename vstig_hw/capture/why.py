@@ -8,6 +8,7 @@ newest, as a `cause` a program can test and a line a person reads (docs/how-to/w
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -54,16 +55,42 @@ def explain(trace: Trace, key: int, robot: str | None = None, at: float | None =
     """The answer for `key` at `at` seconds after the capture's start (None: its end); `robot` limits the
     verdicts to one sender (a sender id, or a serial link's name), else every sender that showed the key."""
     at = trace.end if at is None else at
-    shown = [s for s in trace.of(key) if s.t <= at]
+    everything = trace.of(key)
+    shown = everything[:bisect.bisect_right(everything, at, key=lambda s: s.t)]
     refused = {entry for d in trace.decisions if (entry := d.entry) is not None and d.t <= at + _NEAR}
     newest = _newest(shown, key, refused)
     answer = Answer(key, at, newest)
     if newest is not None:
         answer.path = _path(shown, newest)
         answer.did = _did(trace, shown, newest, key, refused)
-    senders = [robot] if robot is not None else sorted({s.sender for s in shown if not s.sent})
-    answer.verdicts = [_verdict(trace, shown, newest, key, sender, at, refused) for sender in senders]
+    asked = _Asked(trace, key, at, shown, newest, refused)
+    senders = [robot] if robot is not None else sorted(asked.by_sender)
+    answer.verdicts = [_verdict(asked, sender) for sender in senders]
     return answer
+
+
+class _Asked:
+    """One question's key, time and newest write, with its messages grouped once: each sender's, and the
+    gateway's sends of the newest write (or a newer entry) per link."""
+
+    def __init__(self, trace: Trace, key: int, at: float, shown: list[Shown], newest: Shown | None,
+                 refused: set[tuple[int, int, int]]) -> None:
+        self.trace, self.key, self.at, self.shown, self.newest, self.refused = trace, key, at, shown, newest, refused
+        self.by_sender: dict[str, list[Shown]] = {}
+        self.sends: dict[str, list[Shown]] = {}
+        for s in shown:
+            if not s.sent:
+                self.by_sender.setdefault(s.sender, []).append(s)
+            elif newest is not None and s.t >= newest.t and (s.entry == newest.entry
+                                                             or newer_entry(s.entry, newest.entry)):
+                self.sends.setdefault(s.link, []).append(s)
+        self.last_heard = trace.last_heard(at)
+
+    def sends_to(self, sender: str) -> list[Shown]:
+        """The gateway's sends of the newest write (or newer) on the links `sender` is heard on, in time order."""
+        lists = [self.sends.get(link, []) for link in sorted(self.trace.links_of(sender))]
+        return sorted((s for sends in lists for s in sends), key=lambda s: s.t) if len(lists) > 1 else \
+            (lists[0] if lists else [])
 
 
 def _newest(shown: list[Shown], key: int, refused: set[tuple[int, int, int]]) -> Shown | None:
@@ -123,20 +150,20 @@ def _note_near(trace: Trace, t: float, wanted: Callable[[Decision], bool]) -> De
     return next((d for d in trace.decisions if abs(d.t - t) <= _NEAR and wanted(d)), None)
 
 
-def _verdict(trace: Trace, shown: list[Shown], newest: Shown | None, key: int, sender: str, at: float,
-             refused: set[tuple[int, int, int]]) -> Verdict:
-    times = [t for t in trace.heard.get(sender, []) if t <= at]
-    last_heard = times[-1] if times else None
-    mine = [s for s in shown if s.sender == sender and not s.sent]
+def _verdict(asked: _Asked, sender: str) -> Verdict:
+    trace, key, at, newest = asked.trace, asked.key, asked.at, asked.newest
+    last_heard = asked.last_heard.get(sender)
+    mine = asked.by_sender.get(sender, [])
     last = mine[-1] if mine else None
     if last_heard is None:
         return Verdict(sender, "unheard", f"{sender} was never heard before {at:.2f} s", None, None)
     if last is None:
         line = f"{sender} never asked for key {key}: it showed no entry for it (last heard at {last_heard:.2f} s)"
-        return Verdict(sender, "never_asked", line + _sent_to(shown, newest, trace, sender), last_heard, None)
-    if last.holds and (key, last.ts, last.robot) in refused:
-        reasons = sorted({d.reason for d in trace.decisions if d.names_a_message and d.key == key
-                          and d.ts == last.ts and d.robot == last.robot})
+        sends = asked.sends_to(sender)
+        told = f"; ts {sends[0].ts} was sent to it at {sends[0].t:.2f} s" if sends else ""
+        return Verdict(sender, "never_asked", line + told, last_heard, None)
+    if last.holds and (key, last.ts, last.robot) in asked.refused:
+        reasons = sorted({d.reason for d in trace.decisions if d.entry == (key, last.ts, last.robot)})
         return Verdict(sender, "refused", f"{sender} was refused by the guard ({', '.join(reasons)}): it shows ts "
                        f"{last.ts}, which the gateway never took", last_heard, last)
     if newest is None or (last.holds and last.entry == newest.entry):
@@ -145,37 +172,23 @@ def _verdict(trace: Trace, shown: list[Shown], newest: Shown | None, key: int, s
     if last.holds and last.ts == newest.ts:
         return Verdict(sender, "conflict_lost", f"{sender} lost the conflict to robot {newest.robot}'s write (same "
                        f"timestamp {newest.ts}, higher id)", last_heard, last)
-    return _not_reached(trace, shown, newest, sender, last, last_heard, at)
+    return _not_reached(asked, newest, sender, mine, last_heard)
 
 
-def _sends_to(shown: list[Shown], newest: Shown | None, trace: Trace, sender: str) -> list[Shown]:
-    """The gateway's sends of the newest write (or a newer entry) on the links `sender` is heard on."""
-    if newest is None:
-        return []
-    links = trace.links_of.get(sender, set())
-    return [s for s in shown if s.sent and s.link in links and s.t >= newest.t
-            and (s.entry == newest.entry or newer_entry(s.entry, newest.entry))]
-
-
-def _sent_to(shown: list[Shown], newest: Shown | None, trace: Trace, sender: str) -> str:
-    sends = _sends_to(shown, newest, trace, sender)
-    return f"; ts {sends[0].ts} was sent to it at {sends[0].t:.2f} s" if sends and newest else ""
-
-
-def _not_reached(trace: Trace, shown: list[Shown], newest: Shown, sender: str, last: Shown, last_heard: float,
-                 at: float) -> Verdict:
+def _not_reached(asked: _Asked, newest: Shown, sender: str, mine: list[Shown], last_heard: float) -> Verdict:
+    trace, last = asked.trace, mine[-1]
     held = f"ts {last.ts}" if last.holds else "no entry"
-    sends = _sends_to(shown, newest, trace, sender)
-    links = sorted(trace.links_of.get(sender, set()))
+    sends = asked.sends_to(sender)
+    links = sorted(trace.links_of(sender))
     if not sends:
         where = ", ".join(links)
         full = [d for d in trace.decisions if d.link in links and d.reason in _FULL_OUTLET and d.count
-                and newest.t - _NEAR <= d.t <= at]
+                and newest.t - _NEAR <= d.t <= asked.at]
         if full:
             why = "tx_overflow" if any(d.reason == "tx_overflow" for d in full) else \
                 f"up to {max(d.count for d in full)} messages waiting, the device taking none"
             line = f"never sent on {where} (the gateway's queue for it was full: {why})"
-        elif not any(s.sent for s in shown) and not any(d.link in links for d in trace.decisions):
+        elif not any(s.sent for s in asked.shown) and not any(d.link in links for d in trace.decisions):
             line = f"never sent on {where} (the capture holds nothing the gateway sent there: bridge --record)"
         else:
             line = f"never sent on {where}"
@@ -184,9 +197,9 @@ def _not_reached(trace: Trace, shown: list[Shown], newest: Shown, sender: str, l
     if last_heard < first.t:
         return Verdict(sender, "not_heard_since", f"sent {len(sends)} times from {first.t:.2f} s; {sender} not heard "
                        f"since {last_heard:.2f} s", last_heard, last)
-    before = [s for s in shown if s.sender == sender and not s.sent and s.t < first.t]
+    before = [s for s in mine if s.t < first.t]
     moved = before and any(s.holds and (not before[-1].holds or newer_entry(s.entry, before[-1].entry))
-                           for s in shown if s.sender == sender and not s.sent and s.t >= first.t)
+                           for s in mine if s.t >= first.t)
     if moved:
         return Verdict(sender, "behind", f"{sender} is behind: it shows {held} while ts {newest.ts} was sent to it "
                        f"at {first.t:.2f} s", last_heard, last)
