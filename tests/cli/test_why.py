@@ -136,7 +136,7 @@ def test_the_bridge_records_what_it_heard_sent_and_decided(capture: tuple[Path, 
     text = path.read_text()
     assert f") {robots['D'].name} cobs8 tx " in text  # what it sent the deaf robot
     assert f") {robots['W'].name} cobs8 rx " in text
-    assert f"# vstig decision (" in text and f" {robots['G'].name} drop_jump 1 sender=- key={GUARDED} ts=1000" in text
+    assert "# vstig decision (" in text and f" {robots['G'].name} drop_jump 1 sender=- key={GUARDED} ts=1000" in text
     assert f" {robots['F'].name} queued " in text
     assert " engine conflict 1" in text
 
@@ -191,7 +191,7 @@ DOCS_PLOT = Path(__file__).parents[2] / "docs" / "how-to" / "img" / "why-key1.pn
 def test_the_plot_is_written_and_a_second_one_is_not_replaced(capture: tuple[Path, dict[str, Robot]],
                                                              tmp_path: Path) -> None:
     """The PNG of docs/how-to/why.md comes from here: VSTIG_WRITE_DOCS_PLOT=1 writes it there too."""
-    path, robots = capture
+    path, _robots = capture
     png = tmp_path / "key1.png"
     result = run_vstig("why", str(path), "--key", str(DEAF), "--plot", str(png))
     assert result.returncode == 0, result.stderr

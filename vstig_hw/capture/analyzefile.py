@@ -20,11 +20,11 @@ from ..counters import Counters
 from ..wire import Message
 from . import candump
 from .decoded import Decoder, RecordFilter, default_framings
-from .fastlog import parse_chunk, seconds
+from .fastlog import Chunk, parse_chunk, seconds
 from .filters import Filter
 from .records import STRICT, Damage, Record, read_capture, sniff
 
-__all__ = ["Fed", "analyze_captures"]
+__all__ = ["Fed", "analyze_captures", "candump_parts"]
 
 CHUNK = 1 << 22  # bytes per candump chunk, as decode reads them
 
@@ -107,8 +107,10 @@ class _Sink:
         self.analyzer.add(batch)
 
 
-def _candump_chunks(path: str, sink: _Sink, damage: Damage, id_base: int | None,
-                    progress: Callable[[int], None] | None) -> Counters:
+def candump_parts(path: str, id_base: int | None, damage: Damage,
+                  drops: dict[str, int]) -> Iterator[tuple[int, Chunk | Iterator[Record], int]]:
+    """A candump log chunk by chunk, as analyze and why read it: (bytes read, the chunk's columns where it is
+    uniform else its records line by line, the mask of the sender in a CAN ID)."""
     from ..framing.can import can_framing
 
     scheme = can_framing(id_base, False).scheme
@@ -117,16 +119,22 @@ def _candump_chunks(path: str, sink: _Sink, damage: Damage, id_base: int | None,
         parsed = scheme.parse(can_id, False)
         return None if parsed is None else int(parsed[0])
 
-    fast_drops: dict[str, int] = {}
     for line_no, chunk in candump.chunks(path, CHUNK):
-        columns = parse_chunk(chunk, classify, fast_drops)
-        if columns is None:
-            sink.add_records(candump.chunk_records(path, chunk, line_no, damage))
-        elif len(columns.op):
-            link = sink.analyzer.link(columns.link.decode())
-            sink.add_batch(Batch(seconds(columns.stamp), np.full(len(columns.op), link),
-                                 columns.can_id & scheme.max_sender, columns.op, columns.key, columns.value,
-                                 columns.timestamp, columns.robot))
+        columns = parse_chunk(chunk, classify, drops)
+        yield len(chunk), candump.chunk_records(path, chunk, line_no, damage) if columns is None else columns, \
+            scheme.max_sender
+
+
+def _candump_chunks(path: str, sink: _Sink, damage: Damage, id_base: int | None,
+                    progress: Callable[[int], None] | None) -> Counters:
+    fast_drops: dict[str, int] = {}
+    for size, part, max_sender in candump_parts(path, id_base, damage, fast_drops):
+        if not isinstance(part, Chunk):
+            sink.add_records(part)
+        elif len(part.op):
+            link = sink.analyzer.link(part.link.decode())
+            sink.add_batch(Batch(seconds(part.stamp), np.full(len(part.op), link), part.can_id & max_sender,
+                                 part.op, part.key, part.value, part.timestamp, part.robot))
         if progress:
-            progress(len(chunk))
+            progress(size)
     return Counters(fast_drops)

@@ -26,16 +26,15 @@ import numpy as np
 import numpy.typing as npt
 
 from ..timestamps import TS_NONE, is_newer
-from . import candump
+from .analyzefile import candump_parts
 from .decision_notes import Decision, decisions_in
 from .decoded import Decoder, default_framings
-from .fastlog import parse_chunk, seconds
+from .fastlog import Chunk, seconds
 from .records import STRICT, Damage, Record, line_capture_at, read_capture, sniff
 
 __all__ = ["Shown", "Trace", "newer_entry", "read_trace", "sender_label"]
 
 Column = npt.NDArray[Any]  # one field of every message: float64 times, int64 the rest
-CHUNK = 1 << 22  # bytes per candump chunk, as analyze reads them
 _COLUMNS = ("t", "link", "sent", "sender", "put", "key", "value", "ts", "robot")
 
 
@@ -235,30 +234,19 @@ def _file(columns: _Columns, records: Iterable[Record], decoder: Decoder) -> Non
 
 def _candump_chunks(path: str, columns: _Columns, decoder: Decoder, damage: Damage) -> None:
     """A candump log as analyze reads it: uniform chunks in bulk, the others line by line."""
-    from ..framing.can import can_framing
-
-    scheme = can_framing(None, False).scheme
-
-    def classify(can_id: int) -> int | None:
-        parsed = scheme.parse(can_id, False)
-        return None if parsed is None else int(parsed[0])
-
-    drops: dict[str, int] = {}
-    for line_no, chunk in candump.chunks(path, CHUNK):
-        parsed = parse_chunk(chunk, classify, drops)
-        if parsed is None:
-            _file(columns, candump.chunk_records(path, chunk, line_no, damage), decoder)
+    for _size, part, max_sender in candump_parts(path, None, damage, {}):
+        if not isinstance(part, Chunk):
+            _file(columns, part, decoder)
             continue
-        if not len(parsed.op):
+        if not len(part.op):
             continue
         columns.flush()
-        link = columns.link(parsed.link.decode())
-        ids = parsed.can_id & scheme.max_sender
+        link = columns.link(part.link.decode())
+        ids = part.can_id & max_sender
         names = np.zeros(int(ids.max()) + 1, np.int64)
         for sender in np.unique(ids).tolist():
             names[sender] = columns.sender(str(sender))
-        count = len(parsed.op)
-        columns.blocks.append({"t": seconds(parsed.stamp), "link": np.full(count, link, np.int64),
-                               "sent": np.zeros(count, np.int64), "sender": names[ids], "put": 1 - parsed.op,
-                               "key": parsed.key, "value": parsed.value, "ts": parsed.timestamp,
-                               "robot": parsed.robot})
+        count = len(part.op)
+        columns.blocks.append({"t": seconds(part.stamp), "link": np.full(count, link, np.int64),
+                               "sent": np.zeros(count, np.int64), "sender": names[ids], "put": 1 - part.op,
+                               "key": part.key, "value": part.value, "ts": part.timestamp, "robot": part.robot})

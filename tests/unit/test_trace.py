@@ -1,0 +1,39 @@
+"""The index `vstig why` reads captures into: a candump log read in bulk (fastlog) files every message as the
+record-by-record path does, and decision notes read back as written."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from vstig_hw.capture.decision_notes import counted_note, decisions_in, refusal_note
+from vstig_hw.capture.trace import read_trace
+from vstig_hw.capture.why import explain
+
+sys.path.insert(0, str(Path(__file__).parents[2]))
+from benchmarks.bench_analyze import _write_swarm_log
+
+
+def test_the_bulk_candump_path_files_what_the_record_path_files(tmp_path: Path) -> None:
+    log = tmp_path / "swarm.log"
+    _write_swarm_log(str(log), 20_000)
+    bulk = read_trace([str(log)])
+    lined = read_trace([str(log)], shifts=[0.0])  # shifts take the record-by-record path
+    assert bulk.messages == lined.messages > 19_000
+    assert sorted(bulk.senders) == sorted(lined.senders) and len(bulk.senders) == 64
+    assert bulk.keys == lined.keys and len(bulk.keys) == 25
+    for key in bulk.keys[::4]:
+        assert bulk.of(key) == lined.of(key) and bulk.of(key)
+        assert explain(bulk, key, at=1.0) == explain(lined, key, at=1.0)
+    assert bulk.last_heard(1.0) == lined.last_heard(1.0)
+
+
+def test_decision_notes_read_back_as_written() -> None:
+    lines = ["# " + counted_note(12.5, "ttyUSB1", "tx_overflow", 3) + "\n",
+             "# " + refusal_note(12.6, "can0", "drop_jump", 7, 3, 40001, 7) + "\n",
+             "# " + refusal_note(12.7, "radio", "drop_key", None, 500, 2, 9) + "\n",
+             "# vstig clock 3f2a9c1e5b7d4a60\n", "# vstig decision (garbage\n"]
+    first, second, third = decisions_in(lines)
+    assert (first.t, first.link, first.reason, first.count, first.entry) == (12.5, "ttyUSB1", "tx_overflow", 3, None)
+    assert (second.sender, second.entry) == (7, (3, 40001, 7))
+    assert third.sender is None and third.entry == (500, 2, 9)
