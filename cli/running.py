@@ -13,7 +13,6 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import replace
 from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
 import click
@@ -207,7 +206,6 @@ def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool 
     A robot id that a CAN link's ID scheme has no room for is a usage error naming --robot-id.
     """
     from vstig_hw.links.assemble import LinkBuildError, assemble_links
-    from vstig_hw.links.can import CanSpec
 
     try:
         links = assemble_links(specs, robot_id, listen_only)
@@ -216,9 +214,8 @@ def build_links(specs: Sequence[LinkSpec], robot_id: int = 0, listen_only: bool 
             raise click.BadParameter(str(error), param_hint="'--robot-id'") from None
         raise click.UsageError(str(error)) from None
     for spec in specs:  # once every link could be built: a link that cannot (a missing extra) is the one line said
-        if isinstance(spec, CanSpec) and spec.interface == "virtual":
-            click.echo(f"note: can:virtual:{spec.channel} is a bus inside this process only: no other program "
-                       "hears it (vcan or can:udp_multicast: reach other processes)", err=True)
+        if spec.reach_note:
+            click.echo(f"note: {spec.reach_note}", err=True)
     return links
 
 
@@ -228,19 +225,6 @@ def describe_links(node: Node) -> None:
         about = link.about
         if about:
             click.echo(f"{link.name}: {about}", err=True)
-
-
-def lossless(spec: LinkSpec, opening: float | None = None) -> LinkSpec:
-    """The spec for a command that must not lose what it sends (put, get, replay): Zenoh BLOCKs, not DROPs.
-
-    `opening`: the seconds a one-shot command (get, put) lets the link take to open, so its --wait bounds the
-    whole command (a Zenoh link otherwise waits 3 s for a peer it was told to connect to).
-    """
-    from vstig_hw.links.zenoh import ZenohSpec
-
-    if not isinstance(spec, ZenohSpec):
-        return spec
-    return replace(spec, block=True, peer_wait=spec.peer_wait if opening is None else opening)
 
 
 OPEN_POLL = 0.05  # seconds between two looks at the stop while links open

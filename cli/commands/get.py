@@ -12,7 +12,7 @@ from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType
 
 from ..options import KEY, Finite
-from ..running import LINK, build_links, lossless, reports_errors
+from ..running import LINK, build_links, reports_errors
 from .put import shown
 
 
@@ -33,7 +33,7 @@ def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: Va
     Example: vstig get 3 --on serial:/dev/ttyUSB0?framing=epuck4 --wait 5
     """
     started = time.monotonic()  # --wait bounds the whole command: opening the link is part of it
-    node = Node(build_links([lossless(link, opening=wait)], robot_id), robot_id)
+    node = Node(build_links([link.lossless(opening=wait)], robot_id), robot_id)
     name = node.links[0].name
     if node.links[0].transmit_only:
         raise click.BadParameter(f"{name} only transmits: no neighbour can answer", param_hint="'--on'")

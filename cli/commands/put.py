@@ -13,7 +13,7 @@ from vstig_hw.links import LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
 from ..options import KEY, Finite, NegativeNumbersAreArguments
-from ..running import LINK, build_links, lossless, reports_errors
+from ..running import LINK, build_links, reports_errors
 
 
 def shown(entry: Entry, value_type: ValueType) -> str:
@@ -55,7 +55,7 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="VALUE") from None
     started = time.monotonic()  # --learn and --wait bound the whole command: opening the link is part of them
-    node = Node(build_links([lossless(link, opening=learn + wait)], robot_id), robot_id)
+    node = Node(build_links([link.lossless(opening=learn + wait)], robot_id), robot_id)
     name = node.links[0].name
     transmit_only = node.links[0].transmit_only
     if transmit_only and not no_confirm:

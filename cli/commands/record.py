@@ -26,8 +26,6 @@ from vstig_hw.extras import require
 from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node, stop_on_signals
 from vstig_hw.links import Link, LinkSpec
-from vstig_hw.links.can import CanSpec
-from vstig_hw.links.zenoh import ZenohSpec
 from vstig_hw.wording import counted
 
 from ..config import ConfiguredCommand, config_options
@@ -48,11 +46,6 @@ from ..running import (
 )
 
 EARLY_UNITS = 1 << 16  # units heard before the file opened (a file opens in milliseconds: ~7 s of a full CAN bus)
-
-def _medium(spec: LinkSpec) -> str:
-    """The capture format a link's units go into without .mcap."""
-    return "can" if isinstance(spec, CanSpec) else "zenoh" if isinstance(spec, ZenohSpec) else "serial"
-
 
 def _target(output: str | None, link: LinkSpec, extension: str) -> str:
     """The file to write: OUTPUT itself, or a new timestamped name (named after the first link) in OUTPUT
@@ -106,11 +99,11 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
     """
     for link in links:
         must_hear(link, "record")
-    media = {_medium(link) for link in links}
-    first = _medium(links[0])
+    media = {link.capture_medium for link in links}
+    first = links[0].capture_medium
     path = _target(output, links[0], MCAP_EXTENSION if len(media) > 1 else ".log" if first == "can" else ".cap")
     try:
-        medium = capture_medium(path, [_medium(link) for link in links])
+        medium = capture_medium(path, [link.capture_medium for link in links])
     except ValueError as error:
         raise click.UsageError(str(error)) from None
     _refuse_to_destroy(path, overwrite, append)
@@ -120,7 +113,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
     start_roster(node, no_roster, quiet_after, gone_after, max_robots)  # who is heard: --metrics
     # Units become messages again for an .mcap file and for filters that look into messages: robot dialects'
     # links name the deployment file that maps their keys.
-    deployment = next((d for spec in links if (d := getattr(spec, "deployment", None))), None)
+    deployment = next((spec.deployment for spec in links if spec.deployment), None)
     passing = RecordFilter(keep, Decoder(default_framings(deployment=deployment)))
     captures: list[RotatingCapture] = []  # opened once the links are: a dead link leaves the file alone
     # What the links hear between opening and the file opening (their readers deliver at once) waits here.
@@ -139,7 +132,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
             captures[0].write(kept)
 
     # Zenoh links measure their peers' clocks: the capture keeps whose clock it is and the offsets (clock_notes).
-    clocks = [clock for link in node.links if (clock := getattr(link.transport, "clock", None)) is not None]
+    clocks = [clock for link in node.links if (clock := link.transport.clock) is not None]
 
     def flush(_: Node) -> None:  # every tick: what a kill leaves behind is at most one tick's frames
         if captures:

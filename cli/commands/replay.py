@@ -22,7 +22,7 @@ from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 from vstig_hw.wording import counted
 
 from ..options import VALUE_TYPE_HELP, Finite, damage_option, echo_skipped, filter_options
-from ..running import LINK, StatusLine, build_links, lossless, open_unless_stopped, reports_errors
+from ..running import LINK, StatusLine, build_links, open_unless_stopped, reports_errors
 
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 
@@ -107,7 +107,7 @@ def _targets(onto: tuple[tuple[str | None, LinkSpec], ...], robot_id: int) -> di
         raise click.UsageError("give one --onto LINK for every link, or --onto NAME=LINK per link, not both")
     if len(set(names)) < len(names):
         raise click.UsageError("each capture link goes onto one target: a NAME appears in two --onto")
-    links = build_links([lossless(spec) for _, spec in onto], robot_id)
+    links = build_links([spec.lossless() for _, spec in onto], robot_id)
     return dict(zip(names, links, strict=True))
 
 

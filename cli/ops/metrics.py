@@ -211,7 +211,7 @@ def _clock_estimates(node: Node) -> dict[tuple[str, str], ClockOffset]:
     """Per peer clock and proof (empty: unproved), the tightest estimate any of the node's Zenoh links has."""
     best: dict[tuple[str, str], ClockOffset] = {}
     for link in node.links:
-        clock = getattr(link.transport, "clock", None)
+        clock = link.transport.clock
         for trip in clock.estimates() if clock is not None else ():
             key = (trip.peer, trip.proof or "")
             if key not in best or trip.error < best[key].error:

@@ -60,8 +60,7 @@ def needs_of(params: dict[str, Any], reads: Iterable[str]) -> Needs:
 
 def _add_link(needs: Needs, spec: Any) -> None:
     kind = spec.kind
-    needs.reads.extend(os.path.abspath(path) for path in (getattr(spec, name, None)
-                                                         for name in ("deployment", "config", "profile")) if path)
+    needs.reads.extend(os.path.abspath(path) for path in spec.files_read)
     if kind in ("zenoh", "ros2"):
         needs.families.update((*_NETWORK, "AF_NETLINK"))  # NETLINK: their interface lists
     elif kind == "blabbermouth":

@@ -8,17 +8,14 @@ connects where the first connects and to the first's own endpoints, so it meets
 every session the first one meets (checked on loopback with two programs). Everything
 else is refused in one line naming the link: 11-bit CAN tells tables apart only
 by `id_base`, which a lab assigns, and a serial radio or a Buzz dialect link
-carries one table.
+carries one table. Each medium's spec says which (`LinkSpec.for_table`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
 
-from ..links.can import CanSpec
 from ..links.link import LinkSpec
-from ..links.zenoh import ZenohSpec
 
 __all__ = ["MAX_TABLE", "specs_for_table", "table_of"]
 
@@ -27,7 +24,7 @@ MAX_TABLE = 255  # the CAN stigmergy field is 8 bits; zenoh allows as many
 
 def table_of(specs: Sequence[LinkSpec]) -> int | None:
     """The table these specs carry, when they all name one (a spec with no stigmergy field carries table 0)."""
-    tables = {getattr(spec, "stigmergy", 0) for spec in specs}
+    tables = {spec.stigmergy for spec in specs}
     return tables.pop() if len(tables) == 1 else None
 
 
@@ -37,18 +34,5 @@ def specs_for_table(specs: Sequence[LinkSpec], table: int,
 
     `listening` has, per spec, the endpoints its open link listens on (zenoh).
     """
-    derived: list[LinkSpec] = []
-    for number, spec in enumerate(specs):
-        if isinstance(spec, CanSpec) and spec.extended:
-            derived.append(replace(spec, stigmergy=table))
-        elif isinstance(spec, CanSpec):
-            raise ValueError(f"stigmergy: can:{spec.interface}:{spec.channel} has 11-bit IDs, which tell tables "
-                             "apart only by id_base: add extended=1 to carry several, or join once per id_base")
-        elif isinstance(spec, ZenohSpec):
-            ours = listening[number] if number < len(listening) else ()
-            derived.append(replace(spec, stigmergy=table, listen=(),
-                                   connect=tuple(dict.fromkeys((*spec.connect, *ours)))))
-        else:
-            raise ValueError(f"stigmergy: {spec.kind}:{spec.name} carries one table (a {spec.kind} link has no "
-                             "stigmergy field); a second table needs CAN with extended=1 or zenoh")
-    return derived
+    return [spec.for_table(table, listening[number] if number < len(listening) else ())
+            for number, spec in enumerate(specs)]

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .grammar import bad, integer, split_query
-from .link import Link
+from .link import Link, LinkSpec
 
 __all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "BlabbermouthSpec", "blabbermouth_link_from_spec", "parse_blabbermouth"]
 
@@ -28,7 +28,7 @@ _EXAMPLE = EXAMPLES["blabbermouth"][0]
 
 
 @dataclass(frozen=True, slots=True)
-class BlabbermouthSpec:
+class BlabbermouthSpec(LinkSpec):
     robots: tuple[tuple[str, int], ...]
     size: int
     deployment: str

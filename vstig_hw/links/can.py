@@ -7,11 +7,11 @@ grammar without it).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 from .grammar import bad, flag, integer, safe_name, split_query
-from .link import Link
+from .link import Link, LinkSpec
 
 if TYPE_CHECKING:
     import can
@@ -46,7 +46,7 @@ _IFACE = re.compile(r"[A-Za-z0-9_]+\Z")
 
 
 @dataclass(frozen=True, slots=True)
-class CanSpec:
+class CanSpec(LinkSpec):
     interface: str
     channel: str
     bitrate: int | None = None
@@ -57,6 +57,7 @@ class CanSpec:
     kernel_filter: bool = True  # False: every frame reaches us, and foreign IDs count as drop_unknown_id
     echo: bool = False  # True: a PUT heard on this bus is re-broadcast back onto it too (Link.one_domain off)
     bus_options: tuple[tuple[str, Any], ...] = ()  # bus.KEY=VALUE: more keywords for can.Bus (host, port...)
+    capture_medium = "can"  # python-can's log formats
 
     @property
     def kind(self) -> str:
@@ -72,6 +73,20 @@ class CanSpec:
         from ..framing.can import CanIdScheme
 
         return CanIdScheme(extended=self.extended, base=self.id_base, stigmergy=self.stigmergy)
+
+    def for_table(self, table: int, listening: tuple[str, ...] = ()) -> LinkSpec:
+        """The same bus with `table` in the 29-bit IDs' stigmergy field; 11-bit IDs have none (ValueError)."""
+        if not self.extended:
+            raise ValueError(f"stigmergy: can:{self.interface}:{self.channel} has 11-bit IDs, which tell tables "
+                             "apart only by id_base: add extended=1 to carry several, or join once per id_base")
+        return replace(self, stigmergy=table)
+
+    @property
+    def reach_note(self) -> str | None:
+        if self.interface != "virtual":
+            return None
+        return (f"can:virtual:{self.channel} is a bus inside this process only: no other program hears it "
+                "(vcan or can:udp_multicast: reach other processes)")
 
     def check_sender(self, robot_id: int) -> None:
         """ValueError when this link's ID scheme has no room for `robot_id` as a sender."""

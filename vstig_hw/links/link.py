@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import abc
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Generic, Protocol, TypeVar, runtime_checkable
+from typing import Any, ClassVar, Generic, Protocol, TypeVar, runtime_checkable
 
 from ..counters import Counters
 from ..framing.base import Framing
@@ -147,23 +148,68 @@ class Link(Generic[Unit]):
         return []
 
 
-@runtime_checkable
-class LinkSpec(Protocol):
-    """A parsed link spec (`links.parse`): every medium's spec dataclass has these."""
+class LinkSpec(abc.ABC):
+    """A parsed link spec (`links.parse`): every medium's spec dataclass subclasses it.
+
+    `kind`, `name` and `build` are each medium's own; what only some media know is declared here with the
+    answer a medium without it gives, so a command asks every spec the same question (python-can's `BusABC`
+    is the model):
+
+    * `capture_medium`: the capture format its units go into without .mcap (can, zenoh; default serial);
+    * `stigmergy`, `for_table`: the table it carries (default 0) and the spec that carries another table on
+      the same medium (29-bit CAN IDs, a zenoh key space); default, a ValueError naming the link;
+    * `lossless`: the spec for a command that must not lose what it sends (Zenoh BLOCKs); default, itself;
+    * `deployment`, `files_read`: a dialect link's deployment file, and every file building it reads;
+    * `reach_note`: one line to tell the user about where it reaches (a bus only this process hears).
+    """
+
+    __slots__ = ()
+    capture_medium: ClassVar[str] = "serial"  # a key of capture.records.WRITERS: bytes in our line capture
 
     @property
+    @abc.abstractmethod
     def kind(self) -> str:
         """The scheme it was written with (can, serial, kilobot-ohc...)."""
-        ...
 
     @property
+    @abc.abstractmethod
     def name(self) -> str:
         """A short, space-free name for status lines and captures."""
-        ...
 
+    @abc.abstractmethod
     def build(self, name: str | None = None, *, robot_id: int = 0, listen_only: bool = False) -> Link[Any]:
         """The Link (not yet open); `robot_id` is the sender a link transmits under where the medium names one."""
-        ...
+
+    @property
+    def stigmergy(self) -> int:
+        """The table (Buzz's stigmergy id) its link carries: 0 where the medium has no field for it."""
+        return 0
+
+    def for_table(self, table: int, listening: tuple[str, ...] = ()) -> LinkSpec:
+        """The spec that carries `table` beside this one's (`listening`: where this one's open link listens);
+        ValueError, one line naming the link, where the medium carries one table."""
+        raise ValueError(f"stigmergy: {self.kind}:{self.name} carries one table (a {self.kind} link has no "
+                         "stigmergy field); a second table needs CAN with extended=1 or zenoh")
+
+    def lossless(self, opening: float | None = None) -> LinkSpec:
+        """The spec for a command that must not lose what it sends (put, get, replay); `opening`: the seconds a
+        one-shot command lets the link take to open. Default: itself (the medium loses nothing it took)."""
+        return self
+
+    @property
+    def deployment(self) -> str | None:
+        """The deployment TOML file that maps a robot dialect's keys to ours, for links that speak one."""
+        return None
+
+    @property
+    def files_read(self) -> tuple[str, ...]:
+        """The files building its link reads (a deployment, a Zenoh config, a DDS profile)."""
+        return (self.deployment,) if self.deployment else ()
+
+    @property
+    def reach_note(self) -> str | None:
+        """A line for the user once its link is built, where it reaches less than they may think; else None."""
+        return None
 
 
 @runtime_checkable

@@ -20,7 +20,7 @@ from typing import Any
 
 from ..inputs import InputFileError, read_regular
 from .grammar import bad, check_port, integer, split_query
-from .link import Link
+from .link import Link, LinkSpec
 
 __all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "MavlinkSpec", "mavlink_link_from_spec", "parse_mavlink", "read_key"]
 
@@ -52,7 +52,7 @@ _KEY_MAX_BYTES = 4096
 
 
 @dataclass(frozen=True, slots=True)
-class MavlinkSpec:
+class MavlinkSpec(LinkSpec):
     medium: str  # serial | udpin | udpout
     where: str  # the port, or host:port
     baud: int = 57600

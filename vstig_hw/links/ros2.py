@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from .grammar import bad, integer, safe_name, split_query
-from .link import Link
+from .link import Link, LinkSpec
 
 __all__ = ["EXAMPLES", "GRAMMAR", "NOTES", "Ros2Spec", "parse_ros2", "ros2_link_from_spec"]
 
@@ -57,7 +57,7 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, slots=True)
-class Ros2Spec:
+class Ros2Spec(LinkSpec):
     swarm: str
     namespace: str | None = None  # None: /vstig/<swarm>[/stigmergy<N>]
     domain: int | None = None
@@ -75,6 +75,10 @@ class Ros2Spec:
     @property
     def name(self) -> str:
         return safe_name(f"ros2-{self.swarm}")
+
+    @property
+    def files_read(self) -> tuple[str, ...]:
+        return (self.profile,) if self.profile else ()
 
     @property
     def full_namespace(self) -> str:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
 
 from .grammar import bad, check_port, integer, safe_name, split_query, unknown_key
-from .link import Link
+from .link import Link, LinkSpec
 
 if TYPE_CHECKING:
     from ..framing import SerialFraming
@@ -67,7 +67,7 @@ _OHC_EXAMPLE = EXAMPLES["kilobot-ohc"][0]
 
 
 @dataclass(frozen=True, slots=True)
-class SerialSpec:
+class SerialSpec(LinkSpec):
     port: str
     baud: int = DEFAULT_BAUD
     framing: str = "cobs8"  # cobs8 | epuck4 | kilobot | kilobot-ohc | xbee

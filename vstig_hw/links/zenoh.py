@@ -26,7 +26,7 @@ import json
 import logging
 import re
 import socket
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 from ..framing.zenoh import MAX_SAMPLE, MAX_STIGMERGY, ZenohFraming, ZenohKeySpace, check_swarm
@@ -34,7 +34,7 @@ from ..inputs import InputFileError
 from ..transports.base import TransportError, one_line
 from ..wire import MESSAGE_SIZE
 from .grammar import bad, flag, integer, safe_name, split_query
-from .link import Link
+from .link import Link, LinkSpec
 from .zenoh_files import NAMED_FILES, ConfigFile, check_listen_path, read_config, read_named, users_in
 
 if TYPE_CHECKING:
@@ -68,7 +68,7 @@ _MAX_SAMPLE_CEILING = 64 * 1024 * 1024  # max_sample= above this would let one p
 
 
 @dataclass(frozen=True, slots=True)
-class ZenohSpec:
+class ZenohSpec(LinkSpec):
     swarm: str
     mode: str | None = None  # None: the config file's, else peer
     connect: tuple[str, ...] = ()
@@ -80,6 +80,7 @@ class ZenohSpec:
     peer_wait: float | None = None  # seconds opening may wait for a peer it connects to (None: 3); one-shot commands
     max_sample: int = MAX_SAMPLE  # payload bytes: a bigger sample is refused before it is decoded
     echo: bool = False  # True: a PUT heard on zenoh is published back onto it (Link.one_domain off)
+    capture_medium = "zenoh"  # our zenoh line capture: samples keep their keys
 
     @property
     def kind(self) -> str:
@@ -95,6 +96,19 @@ class ZenohSpec:
 
         require("zenoh", "a zenoh: link")  # before any link of the command opens
         return zenoh_link_from_spec(self, name or self.name, robot_id=robot_id, listen_only=listen_only)
+
+    def for_table(self, table: int, listening: tuple[str, ...] = ()) -> LinkSpec:
+        """The same swarm in `table`'s key space, in a session that cannot bind this one's endpoints again: it
+        listens on none and connects where this one connects and to this one's own endpoints (`listening`)."""
+        return replace(self, stigmergy=table, listen=(), connect=tuple(dict.fromkeys((*self.connect, *listening))))
+
+    def lossless(self, opening: float | None = None) -> LinkSpec:
+        """Congestion control BLOCK, not DROP; `opening` bounds the wait for a peer it connects to (else 3 s)."""
+        return replace(self, block=True, peer_wait=self.peer_wait if opening is None else opening)
+
+    @property
+    def files_read(self) -> tuple[str, ...]:
+        return (self.config,) if self.config else ()
 
 
 _ZENOH_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream", "unixpipe", "vsock", "serial")

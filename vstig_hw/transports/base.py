@@ -18,9 +18,12 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Protocol, TypeVar
 
 from ..counters import Counters
+
+if TYPE_CHECKING:
+    from ..clocks import ClockOffset
 
 Unit = TypeVar("Unit")
 Device = TypeVar("Device")
@@ -67,12 +70,15 @@ class Transport(abc.ABC, Generic[Unit]):
     * `unreached`: why nothing can be heard, where it was told to reach someone and reaches nobody
       (a Zenoh link's connect=); default: None;
     * `compiled_handle`: the `CompiledHandle` the compiled data path reads and writes the device by (a
-      serial port's fd, a SocketCAN bus); default: None, the device is the transport's own to call.
+      serial port's fd, a SocketCAN bus); default: None, the device is the transport's own to call;
+    * `clock`: the `PeerClock` measuring the peers' clocks over the device (a Zenoh session's round trips);
+      default: None, nothing measured.
     """
 
     name: str  # how the user named the device, for messages and counters
     counters: Counters  # rx/tx units, reconnects, bus errors...
     listening: tuple[str, ...] = ()  # the endpoints it listens on, where others reach it
+    clock: PeerClock | None = None  # measures the peers' clocks over the device, where it can
 
     @abc.abstractmethod
     def open(self) -> None:
@@ -115,6 +121,18 @@ class Transport(abc.ABC, Generic[Unit]):
     def compiled_handle(self) -> CompiledHandle[Any] | None:
         """The live state the compiled data path reads the device by (vstig_hw/_cext), or None: it does not."""
         return None
+
+
+class PeerClock(Protocol):
+    """The peers' clocks as a transport measures them (round trips over its device: transports.zenoh_clock)."""
+
+    def estimates(self) -> list[ClockOffset]:
+        """The tightest offset now known per peer clock (the metrics page)."""
+        ...
+
+    def take(self) -> list[ClockOffset]:
+        """The round trips measured since the last take (a recorder notes them in its capture)."""
+        ...
 
 
 class CompiledHandle(Generic[Device]):

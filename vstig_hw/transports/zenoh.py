@@ -108,6 +108,7 @@ class ZenohTransport(DeviceTransport[ZenohSample, zenoh.Session]):
 
     device_word = "Zenoh session"
     reopen_on_write = False  # opening a session may take seconds: only `read` retries it
+    clock: ZenohClock | None  # answers clock queries and measures the peers' clocks over this session (or None)
 
     def __init__(
         self,
