@@ -37,3 +37,20 @@ def test_decision_notes_read_back_as_written() -> None:
     assert (first.t, first.link, first.reason, first.count, first.entry) == (12.5, "ttyUSB1", "tx_overflow", 3, None)
     assert (second.sender, second.entry) == (7, (3, 40001, 7))
     assert third.sender is None and third.entry == (500, 2, 9)
+
+
+def test_an_mcap_capture_keeps_what_the_gateway_sent_apart(tmp_path: Path) -> None:
+    from vstig_hw import Message, Op
+    from vstig_hw.capture.files import RotatingCapture
+    from vstig_hw.capture.records import Record, read_capture
+    from vstig_hw.framing import make_serial_framing
+
+    cobs8 = make_serial_framing("cobs8")
+    path = tmp_path / "bridge.mcap"
+    capture = RotatingCapture(str(path), "mcap")
+    capture.write(Record(100.0, "radio", "cobs8", cobs8.encode(Message(Op.PUT, 3, 9, 4, 7))[0]))
+    capture.write(Record(100.5, "radio", "cobs8", cobs8.encode(Message(Op.PUT, 3, 9, 4, 7))[0], "tx"))
+    capture.close()
+    assert [r.direction for r in read_capture(str(path))] == ["rx", "tx"]
+    shown = read_trace([str(path)]).of(3)
+    assert [(s.sent, s.link, s.t) for s in shown] == [(False, "radio", 0.0), (True, "radio", 0.5)]

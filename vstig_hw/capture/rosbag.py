@@ -4,7 +4,8 @@ Written with the `mcap` library (the container) and `rosbags` (the message
 definition and its CDR encoding), so the file opens in Foxglove and `ros2 bag`.
 An MCAP capture holds decoded messages, not link units: each keeps its op, key,
 value, timestamp, robot and sender (-1 where the medium names none), stamped
-with the time it was heard. Reading one back yields records of the
+with the time it was heard; what a recording gateway sent is on the link's topic
+plus `/sent` (channel metadata `direction: tx`), read back as `tx` records. Reading one back yields records of the
 `MESSAGE_FRAMING` "framing", which hands the message on as it is.
 
 Both libraries come with the `mcap` extra (`pip install 'vstig-hw[mcap]'`).
@@ -42,6 +43,7 @@ int64 sender
 # Files written before XBee links (whose senders are 64-bit addresses) carry `int32 sender`: still read.
 _MSGDEF_INT32 = MSGDEF.replace("int64 sender", "int32 sender")
 TOPIC_PREFIX = "/vstig/"
+SENT_TOPIC = "/sent"  # after a link's topic: what a recording gateway sent on the link (`bridge --record`)
 _MAGIC = b"\x89MCAP0\r\n"  # an MCAP file starts and, once closed, ends with it
 
 
@@ -102,11 +104,13 @@ class McapCaptureWriter(CaptureWriter):
         if not decoded:
             return
         sender = self._decoder.sender_of(record)
-        channel = self._channels.get(record.link)
-        if channel is None:
-            channel = self._channels[record.link] = self._writer.register_channel(
-                topic=topic_for(record.link), message_encoding="cdr", schema_id=self._schema,
-                metadata={"link": record.link})
+        where = record.link if record.direction == "rx" else f"{record.link} {record.direction}"
+        channel = self._channels.get(where)
+        if channel is None:  # what a recording gateway sent goes on a topic of its own, `<link>/sent`
+            sent = record.direction != "rx"
+            channel = self._channels[where] = self._writer.register_channel(
+                topic=topic_for(record.link) + (SENT_TOPIC if sent else ""), message_encoding="cdr",
+                schema_id=self._schema, metadata={"link": record.link, **({"direction": "tx"} if sent else {})})
         stamp = round(record.t * 1e9)
         for d in decoded:
             self._writer.add_message(channel, log_time=stamp, data=cdr_message(d.message, sender),
@@ -164,7 +168,7 @@ def _record(store: Any, channel: Any, raw: Any) -> Record:
     link = channel.metadata.get("link") or channel.topic.removeprefix(TOPIC_PREFIX)
     message = Message(Op(m.op), m.key, m.value, m.timestamp, m.robot)
     sender = sender_of_wire(m.sender)
-    return Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, sender))
+    return Record(raw.log_time / 1e9, link, MESSAGE_FRAMING, (message, sender), channel.metadata.get("direction", "rx"))
 
 
 def _has_footer(file: IO[bytes]) -> bool:
