@@ -74,6 +74,12 @@ class AirBudget:
         return max(0.0, (min(size, self.burst) - self._refill()) / self.rate)
 
 
+def _one_frame(data: bytes) -> bool:
+    """Whether `data` is exactly one MAVLink 2 frame by its header (its crc not checked)."""
+    return len(data) > 12 and data[0] == 0xFD and not data[2] & 0xFE and \
+        len(data) == 12 + data[1] + (13 if data[2] else 0)
+
+
 class _Mavlink:
     """What both MAVLink transports add to their device: cutting, heartbeats, pacing."""
 
@@ -214,7 +220,10 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
             self.counters["rx_datagrams"] += 1
             if self.mode == "udpin":
                 self._heard_from(source)
-            frames += self._reader.feed(data) + self._reader.flush()  # a datagram is whole
+            if _one_frame(data):
+                frames.append(data)  # the common datagram: one whole frame (its crc is the framing's to check)
+            else:
+                frames += self._reader.feed(data) + self._reader.flush()  # a datagram is whole
         return frames
 
     def _write_device(self, device: socket.socket, unit: bytes) -> None:
