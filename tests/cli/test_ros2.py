@@ -338,7 +338,8 @@ def test_fifty_table_calls_at_once_on_an_18k_key_table_leave_radio_to_radio_traf
         lab: Callable[..., Lab]) -> None:
     """The table service's answers come from one snapshot shared by the calls asked before it was taken, sent to
     the node process once: 50 calls at once on an 18k-key table cost the gateway one or two snapshots, not 50 walks
-    of the table under its lock, and radio -> radio keeps the fair-share goal against the same run without them."""
+    of the table under its lock, and radio -> radio keeps the fair-share goal against the same run without them (in
+    turns with them)."""
     a, b = PtyRobot(1), PtyRobot(2)
     run = lab([a, b])
     peer = run.peer()
@@ -349,18 +350,22 @@ def test_fifty_table_calls_at_once_on_an_18k_key_table_leave_radio_to_radio_traf
         asked = len(peer.records("table"))
         peer.send("table")
         wait_for(lambda asked=asked: len(peer.records("table")) > asked, 20)
-    quiet = _radio_to_radio(a.radio, b.radio, 30_000, 100)
-    peer.send("tables 50")
-    time.sleep(0.1)
-    loaded = _radio_to_radio(a.radio, b.radio, 30_001, 100)
-    wait_for(lambda: bool(peer.records("tables")) or peer.process.poll() is not None, 60)
-    assert peer.records("tables"), "".join(peer.errors)[-2000:]
-    answers = peer.records("tables")[-1]
+    quiet: list[float] = []
+    loaded: list[float] = []
+    for turn in range(6):  # in turns, as the flood's test: other work on the machine comes and goes
+        if turn % 2:
+            peer.send("tables 50")
+            time.sleep(0.1)
+        (loaded if turn % 2 else quiet).extend(_radio_to_radio(a.radio, b.radio, 30_000 + turn, 50))
+        if turn % 2:
+            wait_for(lambda turn=turn: len(peer.records("tables")) > turn // 2 or peer.process.poll() is not None, 60)
+            assert len(peer.records("tables")) > turn // 2, "".join(peer.errors)[-2000:]
+    answers = [answer for tables in peer.records("tables") for answer in tables]
     seen = counters(run.close(), "ros2-lab")
     shown = (f"p50/p99 {_quantile(quiet, 0.5) * 1e3:.2f}/{_quantile(quiet, 0.99) * 1e3:.1f} ms quiet, "
              f"{_quantile(loaded, 0.5) * 1e3:.2f}/{_quantile(loaded, 0.99) * 1e3:.1f} ms under 50 table calls; "
              f"answered in {min(t for t, _ in answers):.2f}..{max(t for t, _ in answers):.2f} s; {seen}")
-    assert all(count >= 18_000 for _, count in answers), shown
+    assert len(answers) == 150 and all(count >= 18_000 for _, count in answers), shown
     assert _quantile(loaded, 0.99) <= 0.25, shown
     assert _quantile(loaded, 0.5) <= max(2 * _quantile(quiet, 0.5), _quantile(quiet, 0.5) + 0.001), shown
 
