@@ -25,29 +25,25 @@ import socket
 import statistics
 import struct
 import subprocess
-import threading
 import time
 from collections.abc import Iterator
 
 from vstig_hw import Message, Op
 from vstig_hw.framing.mavlink import MavlinkFraming
 
-from .bench_datapath import VSTIG, _paced, _usage
+from .bench_datapath import VSTIG, _Arrivals, _paced, _usage
 from .bench_xbee import _ENGINE, COUNT, RATE_HZ, ROUNDS, _cobs8_run, _median
 from .registry import Result, benchmark
 
 PROBE = 32767
 
 
-class _UdpArrivals:
-    """Reads the relay's udpout TUNNELs in a thread: the perf_counter time each key first arrived."""
+class _UdpArrivals(_Arrivals):
+    """bench_datapath's arrivals, read from the relay's udpout socket: TUNNELs instead of cobs8 frames."""
 
     def __init__(self, sock: socket.socket) -> None:
         self.sock = sock
-        self.arrived: dict[int, float] = {}
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._read, daemon=True)
-        self._thread.start()
+        super().__init__(None)  # type: ignore[arg-type]  # no pty: `_read` reads the socket
 
     def _read(self) -> None:
         framing = MavlinkFraming(255)
@@ -58,15 +54,6 @@ class _UdpArrivals:
             stamp = time.perf_counter()
             for msg in framing.feed(data):
                 self.arrived.setdefault(msg.key, stamp)
-
-    def wait(self, count: int, seconds: float = 10.0) -> None:
-        end = time.monotonic() + seconds
-        while len(self.arrived) < count and time.monotonic() < end:
-            time.sleep(0.05)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join()
 
 
 def _free_port() -> int:

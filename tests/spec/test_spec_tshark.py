@@ -167,22 +167,30 @@ def _xbee_expected(frame: bytes) -> list[str]:
             ",".join(text for reason, text in expert.items() if framing.drops[reason])]
 
 
-def test_xbee_frames_from_a_capture(tmp_path: Path) -> None:
+def frames_through_tshark(tmp_path: Path, frames: list[bytes], link_type: int, fields: list[str]) -> list[list[str]]:
+    """Each frame one packet of `link_type` (text2pcap makes the pcap, as a user would), and the `fields` tshark
+    shows for each, with every occurrence joined by commas."""
     text2pcap = require_tool("text2pcap", "wireshark-common")
     tshark = require_tool("tshark")
-    frames = _xbee_frames()
-    dump = tmp_path / "radio.txt"
+    dump = tmp_path / "frames.txt"
     dump.write_text("".join("".join(f"{i:06x} {frame[i:i + 16].hex(' ')}\n" for i in range(0, len(frame), 16)) + "\n"
                             for frame in frames))
-    pcap = tmp_path / "radio.pcap"
-    subprocess.run([text2pcap, "-q", "-l", "147", str(dump), str(pcap)], check=True, capture_output=True, timeout=60)
+    pcap = tmp_path / "frames.pcap"
+    subprocess.run([text2pcap, "-q", "-l", str(link_type), str(dump), str(pcap)], check=True, capture_output=True,
+                   timeout=60)
     command = [tshark, "-X", f"lua_script:{LUA}", "-r", str(pcap), "-T", "fields",
                "-E", "separator=/t", "-E", "occurrence=a", "-E", "aggregator=,"]
-    for name in XBEE_FIELDS:
+    for name in fields:
         command += ["-e", name]
     done = subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
     assert done.returncode == 0 and "Lua" not in done.stderr and "rror" not in done.stderr, done.stderr
     rows = [line.split("\t") for line in done.stdout.splitlines()]
     assert len(rows) == len(frames)
+    return rows
+
+
+def test_xbee_frames_from_a_capture(tmp_path: Path) -> None:
+    frames = _xbee_frames()
+    rows = frames_through_tshark(tmp_path, frames, 147, XBEE_FIELDS)
     for frame, row in zip(frames, rows, strict=True):
         assert row == _xbee_expected(frame), frame.hex()

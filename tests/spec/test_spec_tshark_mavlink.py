@@ -3,16 +3,14 @@ from frames pymavlink and our framing wrote: every field it shows equals what th
 
 from __future__ import annotations
 
-import subprocess
 from pathlib import Path
 
-from conftest import SPEC, require_tool
 from pymavlink.dialects.v20 import common as mav2
+from test_spec_tshark import frames_through_tshark
 
 from vstig_hw.framing.mavlink import PAYLOAD_TYPE, MavlinkFraming, Signing
 from vstig_hw.wire import Message, Op
 
-LUA = SPEC / "wireshark" / "vstig.lua"
 FIELDS = ["vstig_mavlink.sysid", "vstig_mavlink.signed", "vstig.mavlink_sender", "vstig.op", "vstig.key",
           "vstig.value", "vstig.timestamp", "vstig.robot", "_ws.expert.message"]
 
@@ -52,22 +50,8 @@ def _expected(frame: bytes) -> list[str]:
 
 
 def test_mavlink_frames_from_a_capture(tmp_path: Path) -> None:
-    text2pcap = require_tool("text2pcap", "wireshark-common")
-    tshark = require_tool("tshark")
     frames = _frames()
-    dump = tmp_path / "drones.txt"
-    dump.write_text("".join("".join(f"{i:06x} {frame[i:i + 16].hex(' ')}\n" for i in range(0, len(frame), 16)) + "\n"
-                            for frame in frames))
-    pcap = tmp_path / "drones.pcap"
-    subprocess.run([text2pcap, "-q", "-l", "148", str(dump), str(pcap)], check=True, capture_output=True, timeout=60)
-    command = [tshark, "-X", f"lua_script:{LUA}", "-r", str(pcap), "-T", "fields",
-               "-E", "separator=/t", "-E", "occurrence=a", "-E", "aggregator=,"]
-    for name in FIELDS:
-        command += ["-e", name]
-    done = subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
-    assert done.returncode == 0 and "Lua" not in done.stderr and "rror" not in done.stderr, done.stderr
-    rows = [line.split("\t") for line in done.stdout.splitlines()]
-    assert len(rows) == len(frames)
+    rows = frames_through_tshark(tmp_path, frames, 148, FIELDS)
     for frame, row in zip(frames, rows, strict=True):
         row[1] = {"True": "1", "False": "0"}.get(row[1], row[1])
         assert row == _expected(frame), frame.hex()
