@@ -321,6 +321,7 @@ def test_a_ros2_flood_of_valid_and_garbage_writes_leaves_radio_to_radio_traffic_
     assert p50["write"] <= max(2 * p50["elsewhere"], p50["elsewhere"] + 0.001), shown
     assert seen["rx"] + seen["drop_bad_cdr"] <= 500 * seconds, shown  # taken at write_rate=500 a second
     assert seen["drop_bad_cdr"] > 0, shown  # the garbage taken was refused in the node process, and counted
+    assert seen["rx"] == seen["in"], shown  # so every write shipped to the gateway was a message
     assert sum(sent.values()) / 2 < seen["rx_lost"], shown  # the rest dropped inside Fast DDS, and counted
     assert seen["rx"] + seen["drop_bad_cdr"] + seen["rx_lost"] <= sum(sent.values()), shown
 
