@@ -23,7 +23,8 @@ from vstig_hw.wording import counted, shown_sender
 
 from .options import Finite
 
-__all__ = ["ROBOTS_KEY", "RobotRows", "ViewKeys", "fit_few", "robots_table", "roster_options", "start_roster"]
+__all__ = ["ROBOTS_KEY", "RobotRows", "ViewKeys", "fit_few", "robots_table", "roster_options", "roster_thresholds",
+           "start_roster", "thresholds_error"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -36,16 +37,25 @@ _BEHIND_WIDTH = 9
 _STYLE = {RobotState.ALIVE: "green", RobotState.QUIET: "yellow", RobotState.GONE: "red"}
 
 
-def roster_options(fn: F) -> F:
-    """--quiet-after, --gone-after, --max-robots: the roster's thresholds (every gateway keeps one); --no-roster."""
+def roster_thresholds(fn: F) -> F:
+    """--quiet-after, --gone-after: when a robot not heard is quiet, and gone (`vstig analyze --robots` too)."""
     for option in reversed([
-        click.option("--no-roster", is_flag=True,
-                     help="Keep no roster of robots (docs/how-to/robots.md): a little less CPU per message."),
         click.option("--quiet-after", type=Finite(0.0, min_open=True), metavar="SECONDS",
                      help=f"A robot not heard for this long (and for {QUIET_PERIODS} of its usual gaps) is quiet "
                           f"[default: {QUIET_PERIODS} control periods]."),
         click.option("--gone-after", type=Finite(0.0, min_open=True), metavar="SECONDS",
                      help=f"A robot not heard for this long is gone [default: {GONE_PERIODS} control periods]."),
+    ]):
+        fn = option(fn)
+    return fn
+
+
+def roster_options(fn: F) -> F:
+    """--quiet-after, --gone-after, --max-robots: the roster's thresholds (every gateway keeps one); --no-roster."""
+    for option in reversed([
+        click.option("--no-roster", is_flag=True,
+                     help="Keep no roster of robots (docs/how-to/robots.md): a little less CPU per message."),
+        roster_thresholds,
         click.option("--max-robots", type=click.IntRange(1), default=DEFAULT_MAX_ROBOTS, show_default=True,
                      help="Robots the roster tracks; more are counted, never stored."),
     ]):
@@ -61,10 +71,16 @@ def start_roster(node: Node, no_roster: bool, quiet_after: float | None, gone_af
         return None
     try:
         roster = Roster(node.period, quiet_after=quiet_after, gone_after=gone_after, max_robots=max_robots)
-    except ValueError as error:  # the options' ranges leave only this: gone not after quiet
-        raise click.UsageError(str(error).replace("_after", "-after").replace("gone-", "--gone-")
-                               .replace("quiet-", "--quiet-")) from None
+    except ValueError as error:
+        raise thresholds_error(error) from None
     return keep_roster(node, roster)
+
+
+def thresholds_error(error: ValueError) -> click.UsageError:
+    """The roster's refusal of its thresholds, in the options' words (their ranges leave only gone not after
+    quiet)."""
+    return click.UsageError(str(error).replace("_after", "-after").replace("gone-", "--gone-")
+                            .replace("quiet-", "--quiet-"))
 
 
 def fit_few(items: list[str], width: int) -> str:

@@ -17,6 +17,7 @@ from vstig_hw.capture.filters import Filter
 from vstig_hw.capture.records import CaptureError, Damage
 from vstig_hw.counters import Counters
 from vstig_hw.extras import require
+from vstig_hw.roster_history import RosterAnalyzer, RosterHistory
 from vstig_hw.values import ValueType, from_raw
 from vstig_hw.wording import counted, shown_sender
 
@@ -34,6 +35,8 @@ from ..options import (
     refuse_to_replace,
     renamed,
 )
+from ..robots import roster_thresholds, thresholds_error
+from ..roster_text import print_roster, roster_json
 from ..running import reports_errors
 
 _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a terminal)
@@ -55,12 +58,17 @@ _PROGRESS_BYTES = 1 << 20  # captures larger than this get a progress bar (on a 
 @click.option("--trust-clock-notes", is_flag=True,
               help="Merge captures on one clock through every clock offset they noted, also those no certificate "
                    "proved (open links: any Zenoh peer can answer for any gateway's clock there).")
+@click.option("--robots", is_flag=True,
+              help="Add the roster over the capture's time: each robot, when it was heard, its silences longer than "
+                   "--quiet-after and its state changes (docs/how-to/robots.md).")
+@roster_thresholds
 @reading_options
 @filter_options
 @reports_errors
 def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plot: Path | None, overwrite: bool,
-            window: float, conflict: Conflict, trust_clock_notes: bool, value_type: ValueType, damage: Damage,
-            id_base: str | None, extended: bool, deployment: str | None, keep: Filter) -> None:
+            window: float, conflict: Conflict, trust_clock_notes: bool, robots: bool, quiet_after: float | None,
+            gone_after: float | None, value_type: ValueType, damage: Damage, id_base: str | None, extended: bool,
+            deployment: str | None, keep: Filter) -> None:
     """Measure convergence per write and bandwidth from captures.
 
     Convergence is how long each write took to reach every robot, the paper's measure.
@@ -84,7 +92,15 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
     if plot is not None:
         refuse_to_replace(plot, overwrite)  # before reading: a capture typed as --plot is refused at once
         require("analyze", "vstig analyze --plot", ("matplotlib",))  # numpy alone was checked as the command loaded
-    analyzer = Analyzer(window, conflict)
+    history = None
+    if robots:
+        try:
+            history = RosterHistory(quiet_after=quiet_after, gone_after=gone_after)
+        except ValueError as error:
+            raise thresholds_error(error) from None
+    elif quiet_after is not None or gone_after is not None:
+        raise click.UsageError("--quiet-after and --gone-after are the roster's: give --robots too")
+    analyzer = Analyzer(window, conflict) if history is None else RosterAnalyzer(history, window, conflict)
     # 11-bit unless told (--extended) or implied (--id-base names one width's base); else read from frames.
     width = True if extended else (False if base is not None else None)
     names = ", ".join(map(input_name, files))
@@ -108,14 +124,19 @@ def command(files: tuple[str, ...], input_format: str | None, as_json: bool, plo
         from vstig_hw.analysis_plot import plot_report
 
         plot_report(report, plot, min(keep.keys) if keep.keys else None)
+    roster = None if history is None else history.report()
     if as_json:
         result = _as_json(report, tuple(readable.values()), drops, damage.count, value_type)
         if clocks:
             result["capture"]["clocks"] = [None if shift is None else {"shift_s": shift.seconds, "error_s": shift.error}
                                            for shift in clocks]
+        if roster is not None:
+            result["robots"] = roster_json(roster)
         click.echo(json.dumps(result))
     else:
         _print_text(report, value_type)
+        if roster is not None:
+            print_roster(roster, report.start or 0.0)
     summary = counted(report.messages, "message") + (
         f", {counted(damage.count, 'bad line')} skipped" if damage.count else "")
     if drops:
