@@ -77,9 +77,9 @@ def test_every_scheme_names_a_medium_with_a_parser_and_help(scheme: str) -> None
 
 def test_help_text_lists_every_kind_once_in_the_order_of_the_registry() -> None:
     assert list(examples()) == ["can", "serial", "kilobot-ohc", "bittybuzz", "xbee", "rosbuzz", "blabbermouth", "zenoh",
-                                "ros2"]
+                                "ros2", "mavlink"]
     assert list(notes()) == list(examples())
-    assert grammar()[0].startswith("can:") and grammar()[-1].startswith("ros2:")
+    assert grammar()[0].startswith("can:") and grammar()[-1].startswith("mavlink:")
 
 
 def test_a_link_spec_type_accepts_parsed_specs_only() -> None:

@@ -31,7 +31,7 @@ def messages(n: int, seed: int, senders: int = 50) -> list[Message]:
 # --- registry -------------------------------------------------------------------------------------------
 
 def test_registry_builds_each_framing_by_name_with_its_line_defaults() -> None:
-    assert set(SERIAL_FRAMINGS) == {"cobs8", "epuck4", "kilobot", "kilobot-ohc", "xbee", "xbee-api2"}
+    assert set(SERIAL_FRAMINGS) == {"cobs8", "epuck4", "kilobot", "kilobot-ohc", "xbee", "xbee-api2", "mavlink"}
     for name, cls in SERIAL_FRAMINGS.items():
         framing = make_serial_framing(name)
         assert isinstance(framing, cls) and framing.name == name
