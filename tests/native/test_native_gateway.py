@@ -42,7 +42,10 @@ from vstig_hw.transports.base import Transport
 
 
 @EXAMPLES
-@given(budget=st.none() | st.integers(1, 40), period=st.sampled_from([0.1, 1.0, 0.3]),
+# the budgets where the reserve starts and grows are drawn as often as all others: a twin that is off by one
+# there is caught every run (a C window keeping no reserve at a budget of 4 once went unseen)
+@given(budget=st.none() | st.sampled_from([3, 4, 5, 31, 32, 33]) | st.integers(1, 40),
+       period=st.sampled_from([0.1, 1.0, 0.3]),
        calls=st.lists(st.tuples(st.integers(0, 40), st.integers(0, 9), st.booleans(), st.booleans()), max_size=60))
 def test_window_equals_send_window(compiled: ModuleType, budget: int | None, period: float,
                                    calls: list[tuple[int, int, bool, bool]]) -> None:
