@@ -17,13 +17,11 @@ from vstig_hw.capture.plan import capture_medium
 from vstig_hw.capture.records import (
     APPENDABLE,
     CAN_EXTENSIONS,
-    CAN_FRAMING,
     MCAP_EXTENSION,
     Record,
     link_names_lost,
 )
 from vstig_hw.extras import require
-from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node, stop_on_signals
 from vstig_hw.links import Link, LinkSpec
 from vstig_hw.wording import counted
@@ -126,8 +124,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
             else:
                 source.counters["drop_before_file"] += 1
             return
-        framing = CAN_FRAMING if isinstance(source.framing, CanFraming) else source.framing.name
-        record = Record(t, source.name, framing, unit)
+        record = Record(t, source.name, source.framing.capture_name, unit)
         for kept in passing.units(record) if keep else (record,):
             captures[0].write(kept)
 

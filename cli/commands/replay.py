@@ -12,12 +12,11 @@ import click
 
 from vstig_hw.capture.decoded import Decoder, default_framings, filter_records
 from vstig_hw.capture.filters import Filter
-from vstig_hw.capture.records import CAN_FRAMING, Damage, Record, read_capture
+from vstig_hw.capture.records import Damage, Record, read_capture
 from vstig_hw.capture.replay import replay
 from vstig_hw.engine import Stigmergy
 from vstig_hw.gateway import stop_on_signals
 from vstig_hw.links import Link, LinkSpec
-from vstig_hw.links.can import CanSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
 from vstig_hw.wording import counted
 
@@ -27,25 +26,17 @@ from ..running import LINK, StatusLine, build_links, open_unless_stopped, report
 _OBSERVER_ID = 0xFFFF  # the offline engine's id: it never writes, so it never wins a conflict it causes
 
 
-def _sender(link: Link[Any], onto: LinkSpec, deployment: str | None) -> Any:
-    """Write a record as is when the medium and framing match (for XBee, frames we sent); otherwise re-encode its
-    messages.
-
-    A CAN capture is read with the default ID scheme (11-bit, base 0x600); a target that asks for
-    another (id_base, extended, stigmergy) gets the messages re-encoded in its own IDs.
+def _sender(link: Link[Any], deployment: str | None) -> Any:
+    """Write a record as is when the link's framing takes it so (`Framing.replay_unit`: the same framing, for XBee
+    frames we sent, for CAN the default ID scheme a CAN capture is read with); otherwise re-encode its messages.
     """
     decoder = Decoder(default_framings(deployment=deployment))
-    is_can = isinstance(onto, CanSpec)
-    default_ids = (isinstance(onto, CanSpec) and onto.id_base in (None, 0x600) and not onto.extended
-                   and onto.stigmergy == 0)
+    framing = link.framing
 
     def send(record: Record) -> None:
-        same = (record.framing == CAN_FRAMING and default_ids) if is_can else (
-            record.framing == link.framing.name
-            # a module takes Transmit Requests: the Receive Packets it handed over are re-encoded
-            and (record.direction == "tx" or getattr(link.framing, "replays_received", True)))
-        if same:
-            link.transport.write(_fresh(record.unit) if is_can else record.unit)
+        unit = framing.replay_unit(record.unit, record.framing, record.direction)
+        if unit is not None:
+            link.transport.write(unit)
             link.counters["out_units"] += 1
             return
         for decoded in decoder.decode(record):
@@ -70,14 +61,6 @@ class _CountingSender:
             self.next_draw = time.monotonic() + 0.5
             self.line.show(f"sent {counted(self.sent, 'unit')}  " + "  ".join(f"{link.name}: {link.stats().summary()}"
                                                                      for link in self.links))
-
-
-def _fresh(frame: Any) -> Any:
-    import can
-
-    return can.Message(arbitration_id=frame.arbitration_id, is_extended_id=frame.is_extended_id, data=frame.data,
-                       is_fd=frame.is_fd, bitrate_switch=frame.bitrate_switch, is_remote_frame=frame.is_remote_frame,
-                       dlc=frame.dlc, check=False)
 
 
 class OntoType(click.ParamType):  # type: ignore[type-arg]  # generic only from click 8.3; we take 8.1 up
@@ -182,8 +165,7 @@ def command(file: str, onto: tuple[tuple[str | None, LinkSpec], ...], speed: flo
     if at is not None:
         raise click.UsageError("--at goes with --table")
     targets = _targets(onto, robot_id)
-    senders = {name: _sender(link, spec, deployment)
-               for (name, link), (_, spec) in zip(targets.items(), onto, strict=True)}
+    senders = {name: _sender(link, deployment) for name, link in targets.items()}
     every_link = senders.get(None)
     reader = Decoder(default_framings(deployment=deployment))  # for filters that look into the messages
     unmapped: Counter[str] = Counter()

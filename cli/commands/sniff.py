@@ -11,7 +11,6 @@ import click
 
 from vstig_hw.capture.filters import Filter
 from vstig_hw.engine import larger_value_wins
-from vstig_hw.framing.can import CanFraming
 from vstig_hw.gateway import Mode, Node, stop_on_signals
 from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.ros2 import serve_ros2
@@ -152,14 +151,15 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
 
         # The same row as `decode --format jsonl` (can_id on CAN links only, sender where the medium names one),
         # and `refused`: the drop counter a guarded bridge would count it under, or null.
-        can_schemes = {link.name: link.framing.scheme for link in node.links if isinstance(link.framing, CanFraming)}
+        framings = {link.name: link.framing for link in node.links}
 
         def emit(heard: Heard, reason: str | None) -> None:
             m = heard.message
             row: dict[str, Any] = {"t": round(heard.t, 6), "link": heard.link}
-            scheme = can_schemes.get(heard.link)
-            if scheme is not None and heard.sender is not None:
-                row["can_id"] = scheme.can_id(m.op, heard.sender)
+            framing = framings.get(heard.link)
+            can_id = None if framing is None or heard.sender is None else framing.can_id(m.op, heard.sender)
+            if can_id is not None:
+                row["can_id"] = can_id
             row.update(op=m.op.name, key=m.key, value=from_raw(m.value, value_type), timestamp=m.timestamp,
                        robot=m.robot, sender=heard.sender, refused=reason)
             out.write(json.dumps(row) + "\n")

@@ -26,9 +26,8 @@ from ..capture.decision_notes import ENGINE_NOTES, QUEUED, REFUSALS_PER_TICK, co
 from ..capture.decoded import Decoder, default_framings
 from ..capture.files import RotatingCapture
 from ..capture.plan import capture_medium
-from ..capture.records import CAN_FRAMING, Record
+from ..capture.records import Record
 from ..engine import Outcome
-from ..framing.can import CanFraming
 from ..gateway.node import Node
 from ..links.link import Heard, Link
 from ..outputs import drop_setid, refuse_symlink
@@ -38,9 +37,7 @@ __all__ = ["Recording", "link_medium"]
 
 def link_medium(link: Link[Any]) -> str:
     """The capture medium of a link's units: can, zenoh or serial (bytes)."""
-    if isinstance(link.framing, CanFraming):
-        return "can"
-    return "zenoh" if type(link.framing).__name__ == "ZenohFraming" else "serial"
+    return link.framing.capture_medium
 
 
 class Recording:
@@ -107,7 +104,7 @@ class Recording:
         self.stop()
 
     def _write(self, source: Link[Any], t: float, unit: Any, direction: str = "rx") -> None:
-        framing = CAN_FRAMING if isinstance(source.framing, CanFraming) else source.framing.name
+        framing = source.framing.capture_name
         with self._writing:
             if not self.stopped:  # stopped from a listener in the middle of a batch
                 self._capture.write(Record(t, source.name, framing, unit, direction))

@@ -28,7 +28,7 @@ from typing import IO, TYPE_CHECKING, Any
 from ..counters import Counters
 from ..extras import missing
 from ..values import ValueType, from_raw
-from ..wire import Message, encode
+from ..wire import Message
 from ..wording import shown_sender
 from .records import CAN_FRAMING, MESSAGE_FRAMING, STRICT, Damage, Record, file_position, read_capture, sniff
 
@@ -184,15 +184,9 @@ class RecordFilter:
         _, passed = self.messages(record)
         if record.framing in (CAN_FRAMING, MESSAGE_FRAMING):  # one message per unit (classic CAN, MCAP)
             return [record] if passed else []
-        if record.framing == "zenoh":  # a sample keeps its key (its sender) and carries what passed
-            from ..framing.zenoh import ZenohSample
-
-            payload = b"".join(encode(d.message) for d in passed)
-            sample = ZenohSample(record.unit.key, payload)
-            return [Record(record.t, record.link, record.framing, sample, record.direction)] if payload else []
-        narrow = getattr(self.decoder.framing_of(record), "narrow", None)
-        if narrow is not None:  # a unit that names its sender (an XBee frame) keeps it, with what passed
-            unit = narrow(record.unit, [d.message for d in passed]) if passed else None
+        framing = self.decoder.framing_of(record)
+        if framing.narrows:  # a unit that names its sender (an XBee frame, a zenoh sample) keeps it, with what passed
+            unit = framing.narrow(record.unit, [d.message for d in passed]) if passed else None
             return [Record(record.t, record.link, record.framing, unit, record.direction)] if unit else []
         encoder = self._encoder(record.framing)
         chunk = b"".join(unit for d in passed for unit in encoder.encode(d.message))

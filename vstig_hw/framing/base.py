@@ -26,7 +26,16 @@ unconditionally and mypy checks a new medium against them:
 * `carries_tags`: the medium has room for authenticated messages, a message with its
   writer's epoch and tag (SPEC.md 10.5: cobs8, CAN FD, XBee, zenoh, MAVLink, ROS 2); a
   framing without room (classic CAN, e-puck words, Kilobot IR) says False, and a link
-  on it cannot require tags.
+  on it cannot require tags;
+* `capture_medium`, `capture_name`: the capture format its units go into without .mcap (can, zenoh;
+  default serial, bytes in our line capture) and the framing name its records carry there (CAN logs have
+  no framing field: "can" whatever the frames; default `name`);
+* `replay_unit`: a recorded unit as replay writes it again (`replays_received`: a unit it received may be
+  written back as is; XBee and MAVLink frames name their receiver or sender: re-encoded); default, the unit
+  itself where the record is in this framing;
+* `narrow`: a unit cut down to carry only some of its messages, where the unit says more than its messages
+  (an XBee frame its sender, a zenoh sample its key; `narrows` says it does); default None;
+* `can_id`: the arbitration ID a message goes in, on a medium with IDs (CAN); default None.
 """
 
 from __future__ import annotations
@@ -35,7 +44,7 @@ import abc
 from typing import ClassVar, Generic, TypeVar
 
 from ..counters import Counters
-from ..wire import Message
+from ..wire import Message, Op
 
 __all__ = ["Framing", "SerialFraming"]
 
@@ -50,6 +59,9 @@ class Framing(abc.ABC, Generic[Unit]):
     names_sources: ClassVar[bool] = False  # True: `source_of` says more than the sender a unit claims
     reports_link_quality: ClassVar[bool] = False  # True: `link_quality_of` reads RSSI/quality from a unit
     carries_tags: ClassVar[bool] = False  # True: room for a message's epoch and tag (SPEC.md 10.5)
+    capture_medium: ClassVar[str] = "serial"  # a key of capture.records.WRITERS
+    replays_received: ClassVar[bool] = True  # False: a unit it received is re-encoded by replay, not written back
+    narrows: ClassVar[bool] = False  # True: `narrow` keeps what a unit says beyond its messages
 
     @abc.abstractmethod
     def encode(self, msg: Message) -> list[Unit]:
@@ -77,6 +89,27 @@ class Framing(abc.ABC, Generic[Unit]):
 
     def link_quality_of(self, unit: Unit) -> int | None:
         """The RSSI or link quality the medium reports with `unit` (`reports_link_quality`); None otherwise."""
+        return None
+
+    @property
+    def capture_name(self) -> str:
+        """The framing name its units' records carry in a capture."""
+        return self.name
+
+    def replay_unit(self, unit: Unit, recorded_as: str, direction: str) -> Unit | None:
+        """`unit`, recorded in framing `recorded_as` going `direction` (rx, tx), as replay writes it as is onto a
+        link of this framing; None: replay re-encodes its messages instead."""
+        if recorded_as != self.capture_name or not (direction == "tx" or self.replays_received):
+            return None
+        return unit
+
+    def narrow(self, unit: Unit, messages: list[Message]) -> Unit | None:
+        """`unit` carrying only `messages` (some of its own), keeping what else it says (`narrows`); None for
+        none, and where the medium's units say nothing beyond their messages (re-encode those instead)."""
+        return None
+
+    def can_id(self, op: Op, sender: int) -> int | None:
+        """The arbitration ID a message of `op` from `sender` goes in, on a medium with IDs; None otherwise."""
         return None
 
 

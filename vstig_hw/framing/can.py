@@ -34,6 +34,7 @@ from .base import Framing
 
 __all__ = [
     "BASES_11BIT",
+    "CAPTURE_NAME",
     "DEFAULT_BASE_11BIT",
     "DEFAULT_BASE_29BIT",
     "FD_BATCH_SIZES",
@@ -44,6 +45,7 @@ __all__ = [
     "can_framing_for",
 ]
 
+CAPTURE_NAME = "can"  # the framing name CAN records carry, classic or FD (capture.records.CAN_FRAMING)
 BASES_11BIT = (0x000, 0x200, 0x400, 0x600)
 DEFAULT_BASE_11BIT = 0x600
 DEFAULT_BASE_29BIT = 0x18000000
@@ -133,6 +135,7 @@ class CanFraming(Framing[can.Message]):
     """
 
     names_senders = True  # the frame ID carries the sender's id
+    capture_medium = "can"  # python-can's log formats
 
     def __init__(self, scheme: CanIdScheme, sender: int, *, fd: bool = False, bitrate_switch: bool = True) -> None:
         self.scheme = scheme
@@ -195,6 +198,24 @@ class CanFraming(Framing[can.Message]):
         if len(kept) != len(messages):
             self.drops["op_mismatch"] += len(messages) - len(kept)
         return kept
+
+    @property
+    def capture_name(self) -> str:
+        return CAPTURE_NAME
+
+    def replay_unit(self, unit: can.Message, recorded_as: str, direction: str) -> can.Message | None:
+        """A copy of the recorded frame (no recorded timestamp or channel), where this link's IDs are those a CAN
+        capture is read with (11-bit, base 0x600, stigmergy 0); else None: its messages go in this link's IDs."""
+        scheme = self.scheme
+        if recorded_as != CAPTURE_NAME or scheme.extended or scheme.base not in (None, DEFAULT_BASE_11BIT) \
+                or scheme.stigmergy:
+            return None
+        return can.Message(arbitration_id=unit.arbitration_id, is_extended_id=unit.is_extended_id, data=unit.data,
+                           is_fd=unit.is_fd, bitrate_switch=unit.bitrate_switch, is_remote_frame=unit.is_remote_frame,
+                           dlc=unit.dlc, check=False)
+
+    def can_id(self, op: Op, sender: int) -> int | None:
+        return self.scheme.can_id(op, sender)
 
     def sender_of(self, frame: can.Message) -> int | None:
         """The transmitting node's id (from the frame's ID), or None if the ID is not ours."""

@@ -275,6 +275,7 @@ class MavlinkFraming(SerialFraming):
     default_baud = 57600  # SiK radios' factory UART rate
     preamble = b""  # a 0xFD starts every frame
     replays_received: ClassVar[bool] = False  # a received frame carries another's sysid (and signature): re-encode
+    narrows: ClassVar[bool] = True  # a cut TUNNEL keeps its sender, sequence and target
 
     def __init__(self, sysid: int = 1, compid: int = COMP_ID, *, target: int = BROADCAST,
                  signing: Signing | None = None) -> None:

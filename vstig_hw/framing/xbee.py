@@ -353,6 +353,7 @@ class XBeeFraming(SerialFraming):
     transmit_only = False
     preamble = b""  # a 0x7E starts every frame: nothing to cut off
     replays_received = False  # a 0x90 a module handed us cannot be written back: replay re-encodes it
+    narrows = True  # a cut frame keeps its header (a 0x90 its sender's address)
 
     default_max_payload = DEFAULT_MAX_PAYLOAD  # the RF payload assumed until the module says its NP
 

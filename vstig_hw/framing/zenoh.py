@@ -113,6 +113,8 @@ class ZenohFraming(Framing[ZenohSample]):
 
     names_senders = True  # the key a sample is published under ends with the gateway's id
     names_sources = True  # each sample says which session published it
+    capture_medium = "zenoh"  # our zenoh line capture: samples keep their keys
+    narrows = True  # a cut sample keeps its key (its sender)
 
     name = "zenoh"
 
@@ -146,6 +148,11 @@ class ZenohFraming(Framing[ZenohSample]):
         """The publishing session, if connected to ours: a peer may claim any gateway id in its keys, and any id in
         its stamps, but it cannot make up a session connected to ours per sample (transports/zenoh.py)."""
         return unit.source
+
+    def narrow(self, unit: ZenohSample, messages: list[Message]) -> ZenohSample | None:
+        """The sample under its own key carrying only `messages`; None for none."""
+        payload = b"".join(map(encode, messages))
+        return ZenohSample(unit.key, payload) if payload else None
 
     def tick(self) -> None:
         """Samples arrive whole: nothing to expire."""
