@@ -100,6 +100,22 @@ def xbee(data: bytes) -> None:
     assert not _STREAM_REASONS & {name for name, n in framing.drops.items() if n}, framing.drops
 
 
+def mavlink(data: bytes) -> None:
+    """A telemetry radio's byte stream cut into reads, read by a link with a key or without (the first byte's low
+    bit): the transport's reader cuts whole frames, so the framing finds nothing wrong with their framing."""
+    from vstig_hw.counters import Counters
+    from vstig_hw.framing.mavlink import MavlinkFraming, MavlinkStreamReader, Signing
+
+    framing = MavlinkFraming(4, signing=Signing(bytes(range(32))) if data and data[0] & 1 else None)
+    reader = MavlinkStreamReader(Counters())
+    for unit in [unit for chunk in _reads(data) for unit in reader.feed(chunk)] + reader.flush():
+        messages = framing.feed(unit)
+        assert all(type(m) is Message for m in messages) and len(messages) <= 16
+        sender = framing.sender_of(unit)
+        assert sender is None or 0 <= sender <= 0xFFFF
+    assert not {"noise", "incompat_flags", "crc", "truncated"} & {n for n, c in framing.drops.items() if c}
+
+
 def xbeemav(data: bytes) -> None:
     """XbeeMav packets from a few modules (the first byte of each 40-byte piece picks the module), each in a
     good Receive Packet, with a tick now and then: reassembly stays bounded, nothing raises."""
@@ -385,7 +401,19 @@ def seeds() -> dict[str, list[bytes]]:
         "xbee": [bytes([n]) + b"".join(api_frame(receive_packet(0x0013A20040A1B2C3, encode(m)), n % 2 == 1)
                                        for m in msgs) for n in (0, 3, 14)],
         "xbeemav": _xbeemav_seeds(),
+        "mavlink": _mavlink_seeds(msgs),
     }
+
+
+def _mavlink_seeds(msgs: list[Message]) -> list[bytes]:
+    """A drone's TUNNELs and a HEARTBEAT, unsigned (first byte even) and signed with the target's key (odd)."""
+    from vstig_hw.framing.mavlink import MavlinkFraming, Signing
+
+    seeds = []
+    for first in (0, 1, 6, 9):
+        drone = MavlinkFraming(9, 1, signing=Signing(bytes(range(32))) if first & 1 else None)
+        seeds.append(bytes([first]) + b"".join(drone.encode_batch(msgs)) + drone.heartbeat())
+    return seeds
 
 
 def _xbeemav_seeds() -> list[bytes]:
@@ -419,4 +447,5 @@ TARGETS: dict[str, Target] = {
     "deployment": deployment,
     "xbee": xbee,
     "xbeemav": xbeemav,
+    "mavlink": mavlink,
 }
