@@ -76,3 +76,19 @@ def test_errors_name_what_to_fix(tmp_path: Path) -> None:
     assert elsewhere.returncode == 1 and "udpin:192.0.2.1:14550" in elsewhere.stderr, elsewhere.stderr
     assert "Traceback" not in shared.stderr + nobody.stderr + elsewhere.stderr
     assert "not signed (no key=)" in elsewhere.stderr  # the exposure warning
+
+
+def test_the_roster_names_each_drone_by_its_sysid_and_compid() -> None:
+    port = free_udp_port()
+    sniff = start_vstig("sniff", f"mavlink:udpin:127.0.0.1:{port}", "--robots", "--jsonl", "--for", "6")
+    drones = [MavlinkFraming(9, 1), MavlinkFraming(12, 191)]
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as radio:
+        def step() -> None:
+            for number, drone in enumerate(drones):
+                radio.sendto(drone.encode(Message(Op.PUT, number, 1, 1, 20 + number))[0], ("127.0.0.1", port))
+            time.sleep(0.2)
+        wait_for(lambda: sniff.poll() is not None, 30, step=step)
+    out, err = stop(sniff)
+    assert sniff.returncode == 0, err
+    for sender in (9 << 8 | 1, 12 << 8 | 191):
+        assert f'"robot": {sender}, "sender": {sender}, "named_by": "sender"' in out, out
