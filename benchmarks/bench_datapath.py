@@ -298,11 +298,13 @@ def relay_cost() -> Iterator[Result]:
                  bare[0] * 1e6)
 
 
-def _instructions(name: str, count: int, workdir: Path) -> int:
-    """User-space instructions (callgrind's Ir) relay `name` executed in all, having relayed `count` messages."""
+def _instructions(name: str, count: int, workdir: Path,
+                  relay: tuple[Callable[[str, str], list[str]], bool, dict[str, str]] | None = None) -> int:
+    """User-space instructions (callgrind's Ir) relay `name` (of _RELAYS, unless `relay` gives its argv, echo and
+    environment) executed in all, having relayed `count` messages."""
     out_file = workdir / f"{name}.{count}.callgrind"
     callgrind = ("valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}")
-    with _relaying(*_RELAYS[name], prefix=callgrind) as (_pid, a, out):  # (valgrind passes the environment on)
+    with _relaying(*(relay or _RELAYS[name]), prefix=callgrind) as (_pid, a, out):  # (valgrind passes the env on)
         _paced(lambda f: os.write(a.master, f), _frames(count), rate_hz=INSTRUCTIONS_RATE_HZ)
         out.wait(count + 1, seconds=60)
     if len(out.arrived) < count + 1:

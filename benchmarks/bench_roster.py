@@ -10,7 +10,6 @@
 from __future__ import annotations
 
 import io
-import os
 import shutil
 import sys
 import tempfile
@@ -22,7 +21,7 @@ from vstig_hw.gateway.node import DEFAULT_PERIOD
 from vstig_hw.gateway.roster import Roster
 from vstig_hw.wire import Message, Op
 
-from .bench_datapath import INSTRUCTIONS_RATE_HZ, _engine, _frames, _paced, _raw, _relay_run, _relaying, _totals
+from .bench_datapath import _engine, _instructions, _raw, _relay_run
 from .registry import Result, benchmark
 
 ROUNDS = 3
@@ -53,18 +52,6 @@ def relay_cpu_roster_on_vs_off() -> Iterator[Result]:
                      runs[f"{name}_no_roster"] * 1e6)
 
 
-def _instructions(name: str, count: int, workdir: Path) -> int:
-    out_file = workdir / f"{name}.{count}.callgrind"
-    callgrind = ("valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}")
-    argv, echo = _RELAYS[name]
-    with _relaying(argv, echo, prefix=callgrind) as (_pid, a, out):
-        _paced(lambda f: os.write(a.master, f), _frames(count), rate_hz=INSTRUCTIONS_RATE_HZ)
-        out.wait(count + 1, seconds=60)
-    if len(out.arrived) < count + 1:
-        raise RuntimeError(f"{name} under callgrind relayed {len(out.arrived) - 1} of {count} messages")
-    return _totals(out_file)
-
-
 @benchmark("roster")
 def relay_instructions_roster_on_vs_off() -> Iterator[Result]:
     """Instructions per message: a run of 2,500 messages less one of 500 (start-up cancels out)."""
@@ -75,7 +62,8 @@ def relay_instructions_roster_on_vs_off() -> Iterator[Result]:
     with tempfile.TemporaryDirectory(prefix="vstig-bench-") as tmp:
         for name in _RELAYS:
             try:
-                few, many = (_instructions(name, count, Path(tmp)) for count in (500, 2500))
+                relay = (*_RELAYS[name], {})
+                few, many = (_instructions(name, count, Path(tmp), relay) for count in (500, 2500))
             except RuntimeError as error:  # a bridge under callgrind on a busy VM may not come up in 30 s
                 print(f"roster.relay_instructions: {name}: {error}", file=sys.stderr)
                 return

@@ -15,19 +15,18 @@ import subprocess
 import termios
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 from peers import VSTIG, start_vstig, stop, wait_for
 from rich.console import Console
-from robots import PtyRobot
+from robots import LaggingSwarm, PtyRobot
 
 from vstig_cli.robots import ROBOTS_KEY, robots_table
 from vstig_hw.gateway.roster import Roster
 from vstig_hw.wire import Message, Op
 
-SILENT = (9, 10, 11)
-LAGGING = 12
-KEY = 50  # robot 1 writes it every step; robot 12 keeps sending its own write of it, timestamp 1
+SILENT, LAGGING, KEY = LaggingSwarm.SILENT, LaggingSwarm.LAGGING, LaggingSwarm.KEY
 STEP = 0.1  # the robots' control step, as the gateway's period
 QUIET_AFTER, GONE_AFTER = 0.3, 2.0
 
@@ -50,49 +49,32 @@ class Rows:
 
 
 def test_quiet_gone_and_behind_show_within_the_documented_time() -> None:
-    robots = [PtyRobot(n) for n in range(1, 13)]
-    sniff = start_vstig("sniff", *(robot.spec for robot in robots), "--robots", "--jsonl",
+    swarm = LaggingSwarm(period=STEP)
+    sniff = start_vstig("sniff", *swarm.specs, "--robots", "--jsonl",
                         "--quiet-after", str(QUIET_AFTER), "--gone-after", str(GONE_AFTER))
     rows = Rows(sniff.stdout)
-    step = 0
-    silent_since = None
-
-    def run_step() -> None:
-        nonlocal step
-        step += 1
-        for robot in robots:
-            if robot.id in SILENT and silent_since is not None:
-                continue
-            if robot.id == LAGGING:
-                robot.radio.write(robot.framing.encode(Message(Op.PUT, KEY, 7, 1, LAGGING))[0])
-            else:
-                robot.put(100 + robot.id, step)  # its heartbeat: a write of its own each step
-            if robot.id == 1:
-                robot.put(KEY, step)
-        time.sleep(STEP)
-
     try:
-        wait_for(lambda: {row["robot"] for _, row in rows.rows} >= set(range(1, 13)), 30, run_step)
+        wait_for(lambda: {row["robot"] for _, row in rows.rows} >= set(range(1, 13)), 30, swarm.step)
         assert all(row["state"] == "alive" and row["named_by"] == "writer" and row["sender"] is None
                    for _, row in rows.rows[-12:]), rows.rows[-12:]
-        silent_since = time.monotonic()
-        wait_for(lambda: all(rows.first(n, silent_since, lambda r: r["state"] == "gone") for n in SILENT), 20,
-                 run_step)
+        swarm.silence()
+        since = swarm.silent_since
+        assert since is not None
+        wait_for(lambda: all(rows.first(n, since, lambda r: r["state"] == "gone") for n in SILENT), 20, swarm.step)
         for n in SILENT:  # their last write was a step before: quiet within quiet-after and a period, printed
             # within the second after (and half a second of a busy machine)
-            quiet = rows.first(n, silent_since, lambda r: r["state"] == "quiet")
-            gone = rows.first(n, silent_since, lambda r: r["state"] == "gone")
-            assert quiet is not None and quiet - silent_since <= QUIET_AFTER + STEP + 1.0 + 0.5, quiet - silent_since
-            assert gone is not None and GONE_AFTER - STEP <= gone - silent_since <= GONE_AFTER + STEP + 1.0 + 0.5
+            quiet = rows.first(n, since, lambda r: r["state"] == "quiet")
+            gone = rows.first(n, since, lambda r: r["state"] == "gone")
+            assert quiet is not None and quiet - since <= QUIET_AFTER + STEP + 1.0 + 0.5, quiet - since
+            assert gone is not None and GONE_AFTER - STEP <= gone - since <= GONE_AFTER + STEP + 1.0 + 0.5
         latest = {row["robot"]: row for _, row in rows.rows[-12:]}
         assert {n for n, row in latest.items() if row["state"] == "alive"} == set(range(1, 13)) - set(SILENT)
         assert latest[LAGGING]["behind"] == [KEY] and latest[1]["behind"] == []
-        assert all(latest[n]["links"] == [robots[n - 1].radio.path.rsplit("/", 1)[-1]] for n in range(1, 9)), latest
+        assert all(latest[n]["links"] == [Path(swarm.robots[n - 1].radio.path).name] for n in range(1, 9)), latest
         assert latest[1]["writes"] >= 2 * latest[2]["writes"] - 2 and latest[2]["rate"] > 3, latest
     finally:
         _, stderr = stop(sniff)
-        for robot in robots:
-            robot.close()
+        swarm.close()
     assert "Traceback" not in stderr, stderr
 
 
