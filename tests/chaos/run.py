@@ -101,9 +101,10 @@ class Life:
 
 
 class Gateway:
-    def __init__(self, index: int, argv: list[str], folder: str, watchdog: float) -> None:
+    def __init__(self, index: int, argv: list[str], folder: str, watchdog: float, record: str | None = None) -> None:
         self.index = index
         self.argv = argv
+        self.record = record  # a folder: each life records into gw<index>-<life>.mcap there (`vstig why` reads them)
         self.folder = Path(folder)
         self.watchdog = watchdog
         self.process: subprocess.Popen[str] | None = None
@@ -114,7 +115,9 @@ class Gateway:
     def start(self, now: float, wait: float = 60.0) -> None:
         self.log = []
         manager = PlayedSystemd(self.folder / f"notify-{self.index}-{len(self.lives)}", self.watchdog)
-        process = subprocess.Popen(self.argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        argv = self.argv if self.record is None else \
+            [*self.argv, "--record", str(Path(self.record) / f"gw{self.index}-{len(self.lives)}.mcap")]
+        process = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                    env={**os.environ, **manager.env()})
         manager.watch(process)
         self.process = process
@@ -206,7 +209,7 @@ class Chaos:
             if dials:
                 zenoh += "&connect=" + ",".join(f"tcp/127.0.0.1:{port}" for port in dials)
             self.gateways.append(Gateway(g, [VSTIG, "bridge", *specs, zenoh, "--robot-id", str(200 + g)], folder,
-                                         args.watchdog))
+                                         args.watchdog, args.record))
         self.faults: list[Fault] = []
         # (which, seconds, status, counters printed and STOPPING=1 said)
         self.stops: list[tuple[str, float, int, bool]] = []
@@ -446,6 +449,8 @@ def main() -> int:
     parser.add_argument("--watchdog", type=float, default=5.0, help="WatchdogSec of the systemd played for each "
                         "gateway (a notify socket; a gateway whose pings stop this long is ended with SIGABRT)")
     parser.add_argument("--summary", help="write the figures as JSON here")
+    parser.add_argument("--record", metavar="FOLDER", help="each gateway's life records its links into FOLDER "
+                        "(bridge --record, .mcap), for `vstig why`")
     args = parser.parse_args()
     if args.active is None:
         args.active = min(10.0, args.fault_every / 3)

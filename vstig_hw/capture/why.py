@@ -18,7 +18,8 @@ from .trace import Shown, Trace, newer_entry
 __all__ = ["CAUSES", "Answer", "Hop", "Verdict", "explain"]
 
 # What a verdict's `cause` may be (None: the sender holds the newest write, no cause).
-CAUSES = ("unheard", "never_asked", "refused", "conflict_lost", "never_sent", "deaf", "behind", "not_heard_since")
+CAUSES = ("unheard", "never_asked", "refused", "conflict_lost", "never_sent", "deaf", "behind", "not_heard_since",
+          "not_shown_since")
 _NEAR = 1.0  # seconds around an event within which a decision note is taken as about it (a note is per tick)
 _FULL_OUTLET = ("tx_overflow", QUEUED)
 
@@ -198,8 +199,12 @@ def _not_reached(asked: _Asked, newest: Shown, sender: str, mine: list[Shown], l
         return Verdict(sender, "not_heard_since", f"sent {len(sends)} times from {first.t:.2f} s; {sender} not heard "
                        f"since {last_heard:.2f} s", last_heard, last)
     before = [s for s in mine if s.t < first.t]
+    after = [s for s in mine if s.t >= first.t]
+    if not after:  # heard since, but not about this key: nothing says whether it took the write yet
+        return Verdict(sender, "not_shown_since", f"sent {len(sends)} times from {first.t:.2f} s; {sender} has not "
+                       f"shown key {asked.key} since (it showed {held} at {last.t:.2f} s)", last_heard, last)
     moved = before and any(s.holds and (not before[-1].holds or newer_entry(s.entry, before[-1].entry))
-                           for s in mine if s.t >= first.t)
+                           for s in after)
     if moved:
         return Verdict(sender, "behind", f"{sender} is behind: it shows {held} while ts {newest.ts} was sent to it "
                        f"at {first.t:.2f} s", last_heard, last)
