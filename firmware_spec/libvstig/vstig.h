@@ -9,6 +9,7 @@
  *   vstig_outqueue  the outgoing queue: one message per key, newest wins, PUTs first
  *   vstig_engine    put, get, receive, the conflict rule as a callback, drain
  *   vstig_guard     a gateway's jump bound
+ *   vstig_auth      tags that prove who wrote an entry: BLAKE2s, robot keys (SPEC.md section 10)
  *
  * No malloc, no I/O, no clock, no global state: every structure is the caller's, passed
  * explicitly, with capacities fixed at compile time (vstig_config.h).
@@ -24,6 +25,7 @@
 #include "vstig_outqueue.h"
 #include "vstig_engine.h"
 #include "vstig_guard.h"
+#include "vstig_auth.h"
 
 #define VSTIG_FORMAT_VERSION 1u /* SPEC.md section 8 */
 
