@@ -11,13 +11,11 @@ from typing import Any
 
 from peers import run_vstig, start_vstig, stop, wait_for
 from robots import PtyRobot
-
-from vstig_hw.wire import Message, Op
+from roster_steps import KEY, RosterSteps
 
 STEP = 0.1
 BACK, LEAVES, LAGGING = 3, 4, 5  # silent for PAUSE seconds mid-run; silent from then to the end; an old write
 PAUSE = 1.0  # quiet, not gone
-KEY = 50
 QUIET_AFTER, GONE_AFTER = 0.3, 2.0
 
 
@@ -27,37 +25,22 @@ def _record(tmp_path: Path) -> tuple[Path, dict[str, float]]:
     capture = tmp_path / "swarm.txt"
     record = start_vstig("record", *(robot.spec for robot in robots), "-o", str(capture))
     marks: dict[str, float] = {}
-    silent: set[int] = set()
-    step = 0
-
-    def run_step() -> None:
-        nonlocal step
-        step += 1
-        for robot in robots:
-            if robot.id in silent:
-                continue
-            if robot.id == LAGGING:
-                robot.radio.write(robot.framing.encode(Message(Op.PUT, KEY, 7, 1, LAGGING))[0])
-            else:
-                robot.put(100 + robot.id, step)
-            if robot.id == 1:
-                robot.put(KEY, step)
-        time.sleep(STEP)
+    run_step = RosterSteps(robots, LAGGING, STEP)
 
     try:
         wait_for(lambda: capture.exists() and capture.stat().st_size > 2000, 30, run_step)
         for _ in range(10):
             run_step()
         marks["pause"] = time.time()
-        silent.add(BACK)
+        run_step.silent.add(BACK)
         for _ in range(int(PAUSE / STEP)):
             run_step()
         marks["back"] = time.time()
-        silent.discard(BACK)
+        run_step.silent.discard(BACK)
         for _ in range(10):
             run_step()
         marks["leaves"] = time.time()
-        silent.add(LEAVES)
+        run_step.silent.add(LEAVES)
         for _ in range(int((GONE_AFTER + 1.0) / STEP)):
             run_step()
     finally:

@@ -11,14 +11,14 @@ from typing import Any
 
 from peers import SlcanAdapter, start_vstig, stop
 from robots import PtyRobot
+from roster_steps import KEY, RosterSteps
 from test_live_view import _URL, Lines, SharedBusRobot, Viewer
 
-from vstig_hw.wire import Message, Op
+from vstig_hw.wire import Message
 
 SILENT = (9, 10, 11)
 LAGGING = 12
 CAN_IDS = (20, 21)  # named by the CAN ID's sender field
-KEY = 50  # robot 1 writes it every step; robot 12 keeps sending its own write of it, timestamp 1
 STEP = 0.1  # the robots' control step, as the gateway's period
 QUIET_AFTER, GONE_AFTER = 0.3, 2.0
 SLACK = 1.0  # a loaded machine (two CPUs, several suites), the two pumps between roster and viewer
@@ -52,24 +52,12 @@ def test_quiet_gone_and_behind_reach_foxglove_within_the_documented_time() -> No
     assert sniff.stderr is not None and sniff.stdout is not None
     err, _out = Lines(sniff.stderr), Lines(sniff.stdout)
     viewer: TimedViewer | None = None
-    step = 0
-    silent_since: float | None = None
 
-    def run_step() -> None:
-        nonlocal step
-        step += 1
-        for robot in robots:
-            if robot.id in SILENT and silent_since is not None:
-                continue
-            if robot.id == LAGGING:
-                robot.radio.write(robot.framing.encode(Message(Op.PUT, KEY, 7, 1, LAGGING))[0])
-            else:
-                robot.put(100 + robot.id, step)  # its heartbeat: a write of its own each step
-            if robot.id == 1:
-                robot.put(KEY, step)
+    def can_steps() -> None:
         for can_robot in can_robots:
             can_robot.step()
-        time.sleep(STEP)
+
+    run_step = RosterSteps(robots, LAGGING, STEP, also=can_steps)
 
     try:
         viewer = TimedViewer(err.first(_URL).group(1))
@@ -83,7 +71,8 @@ def test_quiet_gone_and_behind_reach_foxglove_within_the_documented_time() -> No
         assert all(rows[n]["state"] == "alive" for n in everyone) and latest["untracked"] == 0, rows
         assert rows[CAN_IDS[0]]["sender"] == CAN_IDS[0] and rows[1]["sender"] is None
 
-        since = silent_since = time.monotonic()
+        since = time.monotonic()
+        run_step.silent.update(SILENT)
         viewer.until(lambda: all(viewer.first(n, since, "gone") for n in SILENT), 20, run_step)
         for n in SILENT:  # their last write was a step before
             quiet, gone = viewer.first(n, since, "quiet"), viewer.first(n, since, "gone")

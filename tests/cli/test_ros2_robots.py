@@ -18,9 +18,8 @@ import pytest
 from dds import Host
 from peers import VSTIG, wait_for
 from robots import PtyRobot
+from roster_steps import KEY, RosterSteps
 from test_ros2 import NAMESPACE, Process, host, ros2_env
-
-from vstig_hw.wire import Message, Op
 
 pytestmark = pytest.mark.slow
 __all__ = ["host", "ros2_env"]  # fixtures, used by name
@@ -28,7 +27,6 @@ __all__ = ["host", "ros2_env"]  # fixtures, used by name
 PEER = str(Path(__file__).with_name("ros2_robots_peer.py"))
 SILENT = (5, 6)
 LAGGING = 4
-KEY = 50
 STEP = 0.1
 QUIET_AFTER, GONE_AFTER = 0.3, 2.0
 SLACK = 1.0  # a loaded machine; and the node process between the roster and the peer
@@ -62,23 +60,7 @@ def test_the_robots_topic_shows_quiet_gone_and_behind_on_change_latched(host: Ho
     sniff = Process([*host.command(), VSTIG, "sniff", *(r.spec for r in robots), "ros2:lab", "--jsonl",
                      "--quiet-after", str(QUIET_AFTER), "--gone-after", str(GONE_AFTER)], dds.vstig_environment())
     watchers: list[Watcher] = []
-    silent_since: float | None = None
-    step = 0
-
-    def run_step() -> None:
-        nonlocal step
-        step += 1
-        for robot in robots:
-            if robot.id in SILENT and silent_since is not None:
-                continue
-            if robot.id == LAGGING:
-                robot.radio.write(robot.framing.encode(Message(Op.PUT, KEY, 7, 1, LAGGING))[0])
-            else:
-                robot.put(100 + robot.id, step)
-            if robot.id == 1:
-                robot.put(KEY, step)
-        time.sleep(STEP)
-        assert sniff.process.poll() is None, "".join(sniff.errors)[-2000:]
+    run_step = RosterSteps(robots, LAGGING, STEP)
 
     def watcher() -> Watcher:
         made = Watcher([*host.command(), sys.executable, PEER, NAMESPACE], ros2_env, stdin=True)
@@ -100,7 +82,8 @@ def test_the_robots_topic_shows_quiet_gone_and_behind_on_change_latched(host: Ho
             run_step()
         assert len(peer.messages()) <= steady + 1, peer.messages()[steady:]  # (the lag noticed, if it was not)
 
-        since = silent_since = time.time()
+        since = time.time()
+        run_step.silent.update(SILENT)
         wait_for(lambda: all(peer.first(n, "gone", since) for n in SILENT), 20, run_step)
         for n in SILENT:
             quiet, gone = peer.first(n, "quiet", since), peer.first(n, "gone", since)
