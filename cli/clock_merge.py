@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from vstig_hw.capture.clock_notes import CaptureClock, Shift, disputed, read_clock_notes, shifts
+from vstig_hw.capture.notes import keeps_notes
 
 __all__ = ["on_one_clock"]
 
@@ -15,7 +16,7 @@ def on_one_clock(names: dict[str, str], trust: bool) -> list[Shift | None]:
     unproved offsets too."""
     if len(names) < 2:
         return []
-    clocks = [read_clock_notes(path) if _line_capture(path) else CaptureClock(None, []) for path in names]
+    clocks = [read_clock_notes(path) if keeps_notes(path) else CaptureClock(None, []) for path in names]
     if not any(clock.clock for clock in clocks):
         return []
     found = shifts(clocks, trust_unproved=trust)
@@ -34,8 +35,3 @@ def on_one_clock(names: dict[str, str], trust: bool) -> list[Shift | None]:
             click.echo(f"{name}: on {first}'s clock: {-shift.seconds * 1e3:+.3f} ms "
                        f"(± {shift.error * 1e3:.3f} ms)", err=True)
     return found
-
-
-def _line_capture(path: str) -> bool:
-    with open(path, "rb") as file:
-        return file.read(8) == b"# vstig "

@@ -39,9 +39,11 @@ def test_decision_notes_read_back_as_written() -> None:
     assert third.sender is None and third.entry == (500, 2, 9)
 
 
-def test_an_mcap_capture_keeps_what_the_gateway_sent_apart(tmp_path: Path) -> None:
+def test_an_mcap_capture_keeps_what_the_gateway_sent_apart_and_its_notes(tmp_path: Path) -> None:
     from vstig_hw import Message, Op
+    from vstig_hw.capture.clock_notes import clock_note, read_clock_notes
     from vstig_hw.capture.files import RotatingCapture
+    from vstig_hw.clocks import CLOCK_ID
     from vstig_hw.capture.records import Record, read_capture
     from vstig_hw.framing import make_serial_framing
 
@@ -50,7 +52,13 @@ def test_an_mcap_capture_keeps_what_the_gateway_sent_apart(tmp_path: Path) -> No
     capture = RotatingCapture(str(path), "mcap")
     capture.write(Record(100.0, "radio", "cobs8", cobs8.encode(Message(Op.PUT, 3, 9, 4, 7))[0]))
     capture.write(Record(100.5, "radio", "cobs8", cobs8.encode(Message(Op.PUT, 3, 9, 4, 7))[0], "tx"))
+    capture.note(clock_note())
+    capture.note(refusal_note(100.6, "radio", "drop_jump", None, 3, 999, 7))
     capture.close()
+    assert capture.takes_notes
+    assert read_clock_notes(str(path)).clock == CLOCK_ID
     assert [r.direction for r in read_capture(str(path))] == ["rx", "tx"]
-    shown = read_trace([str(path)]).of(3)
-    assert [(s.sent, s.link, s.t) for s in shown] == [(False, "radio", 0.0), (True, "radio", 0.5)]
+    trace = read_trace([str(path)])
+    assert [(s.sent, s.link, s.t) for s in trace.of(3)] == [(False, "radio", 0.0), (True, "radio", 0.5)]
+    (refused,) = trace.decisions
+    assert refused.entry == (3, 999, 7) and abs(refused.t - 0.6) < 1e-6

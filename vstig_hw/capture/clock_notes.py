@@ -1,5 +1,5 @@
-"""Clock notes in line captures (serial, zenoh): whose clock a capture's times are, and that clock's offsets to
-the other gateways' clocks, so captures made on several PCs merge on one time base.
+"""Clock notes in captures that keep notes (serial, zenoh, MCAP: capture.notes): whose clock a capture's times are, and
+that clock's offsets to the other gateways' clocks, so captures made on several PCs merge on one time base.
 
     # vstig clock 3f2a9c1e5b7d4a60
     # vstig clock-offset (1700000000.250000) 9b1c0d2e3f4a5b6c +0.250012345 0.000412000 cert=gw-b
@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ..clocks import CLOCK_ID, MAX_PROOF_CHARS, ClockOffset
+from .notes import capture_notes
 
 __all__ = ["UNPROVED", "CaptureClock", "Shift", "clock_note", "disputed", "offset_note", "read_clock_notes",
            "shifts"]
@@ -49,15 +50,14 @@ class CaptureClock:
 
 def read_clock_notes(path: str) -> CaptureClock:
     clock, offsets = None, []
-    with open(path, encoding="utf-8", errors="replace") as file:
-        for line in file:
-            if not line.startswith("# vstig clock"):
-                continue
-            if (named := _CLOCK.match(line)) is not None:
-                clock = clock or named.group(1)
-            elif (trip := _OFFSET.match(line)) is not None:
-                at, peer, offset, error, proof = trip.groups()
-                offsets.append(ClockOffset(peer, float(offset), float(error), float(at), proof))
+    for line in capture_notes(path):
+        if not line.startswith("# vstig clock"):
+            continue
+        if (named := _CLOCK.match(line)) is not None:
+            clock = clock or named.group(1)
+        elif (trip := _OFFSET.match(line)) is not None:
+            at, peer, offset, error, proof = trip.groups()
+            offsets.append(ClockOffset(peer, float(offset), float(error), float(at), proof))
     return CaptureClock(clock, offsets)
 
 

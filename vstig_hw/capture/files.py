@@ -97,7 +97,7 @@ class RotatingCapture:
 
     @property
     def takes_notes(self) -> bool:
-        """Whether this format keeps comment lines (our line captures do; CAN logs and MCAP here do not)."""
+        """Whether this format keeps notes (our line captures and MCAP do; CAN logs do not)."""
         return self._writer.takes_notes
 
     def note(self, text: str, every_file: bool = False) -> None:

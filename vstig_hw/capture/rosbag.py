@@ -25,8 +25,8 @@ from .decoded import Decoder
 from .records import MESSAGE_FRAMING, STRICT, CaptureError, Damage, Record, cut_short
 from .writer import CaptureWriter
 
-__all__ = ["MESSAGE_FRAMING", "MSGDEF", "TOPIC_PREFIX", "TYPE_NAME", "McapCaptureWriter", "cdr_message", "read_mcap",
-           "topic_for"]
+__all__ = ["MESSAGE_FRAMING", "MSGDEF", "NOTE_METADATA", "TOPIC_PREFIX", "TYPE_NAME", "McapCaptureWriter",
+           "cdr_message", "read_mcap", "read_mcap_notes", "topic_for"]
 
 TYPE_NAME = "vstig_msgs/msg/Message"
 MSGDEF = """\
@@ -78,6 +78,9 @@ def topic_for(link: str) -> str:
     return TOPIC_PREFIX + ros_name(link)
 
 
+NOTE_METADATA = "vstig note"  # a metadata record holding one note (`capture.notes`), its text under "text"
+
+
 class McapCaptureWriter(CaptureWriter):
     """Writes every message in the records it is given, on its link's topic; `CaptureWriter` for .mcap files."""
 
@@ -116,6 +119,12 @@ class McapCaptureWriter(CaptureWriter):
             self._writer.add_message(channel, log_time=stamp, data=cdr_message(d.message, sender),
                                      publish_time=stamp, sequence=self.messages)
             self.messages += 1
+
+    takes_notes = True
+
+    def note(self, text: str) -> None:
+        """A note (a clock's, a bridge's decision) as a metadata record: what `read_mcap_notes` reads back."""
+        self._writer.add_metadata(NOTE_METADATA, {"text": text})
 
     def write_message(self, t: float, link: str, sender: int | None, message: Message) -> None:
         self.write(Record(t, link, MESSAGE_FRAMING, (message, sender)))
@@ -161,6 +170,24 @@ def read_mcap(path: str, damage: Damage = STRICT,
         raise
     except Exception as error:  # a damaged file surfaces as any of McapError, zstd, lz4, CDR, struct errors...
         raise CaptureError(path, None, f"cannot read as rosbag2 MCAP: {type(error).__name__}: {error}") from None
+
+
+def read_mcap_notes(path: str) -> Iterator[str]:
+    """The notes of an MCAP capture as comment lines (`# text`), in file order; none from a file cut short."""
+    try:
+        from mcap.reader import make_reader
+    except ImportError:
+        raise _needs_extra(path) from None
+
+    with open(path, "rb") as file:
+        if not _has_footer(file):
+            return
+        try:
+            for metadata in make_reader(file).iter_metadata():
+                if metadata.name == NOTE_METADATA and "text" in metadata.metadata:
+                    yield f"# {metadata.metadata['text']}\n"
+        except Exception as error:  # as read_mcap: any of the container's errors is a capture error
+            raise CaptureError(path, None, f"cannot read as rosbag2 MCAP: {type(error).__name__}: {error}") from None
 
 
 def _record(store: Any, channel: Any, raw: Any) -> Record:

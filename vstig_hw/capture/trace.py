@@ -30,7 +30,8 @@ from .analyzefile import candump_parts
 from .decision_notes import Decision, decisions_in
 from .decoded import Decoder, default_framings
 from .fastlog import Chunk, seconds
-from .records import STRICT, Damage, Record, line_capture_at, read_capture, sniff
+from .notes import capture_notes
+from .records import STRICT, Damage, Record, read_capture, sniff
 
 __all__ = ["Shown", "Trace", "newer_entry", "read_trace", "sender_label"]
 
@@ -179,8 +180,7 @@ def read_trace(paths: Sequence[str], *, shifts: Sequence[float] | None = None, d
                        for reader, shift in zip(readers, shifts, strict=True)]
         _file(columns, heapq.merge(*readers, key=lambda r: r.t), decoder)
     trace = _finished(columns)
-    notes = [_notes(path, shift) for path, shift in zip(paths, shifts or [0.0] * len(paths), strict=True)
-             if line_capture_at(path) is not None]
+    notes = [_notes(path, shift) for path, shift in zip(paths, shifts or [0.0] * len(paths), strict=True)]
     trace.decisions = [dataclasses.replace(d, t=d.t - trace.start) for d in heapq.merge(*notes, key=lambda d: d.t)]
     return trace
 
@@ -205,8 +205,7 @@ def _shifted(records: Iterable[Record], seconds: float) -> Iterator[Record]:
 
 
 def _notes(path: str, shift: float) -> list[Decision]:
-    with open(path, encoding="utf-8", errors="replace") as file:
-        return [dataclasses.replace(d, t=d.t - shift) if shift else d for d in decisions_in(file)]
+    return [dataclasses.replace(d, t=d.t - shift) if shift else d for d in decisions_in(capture_notes(path))]
 
 
 def _file(columns: _Columns, records: Iterable[Record], decoder: Decoder) -> None:
