@@ -43,8 +43,8 @@ def test_an_mcap_capture_keeps_what_the_gateway_sent_apart_and_its_notes(tmp_pat
     from vstig_hw import Message, Op
     from vstig_hw.capture.clock_notes import clock_note, read_clock_notes
     from vstig_hw.capture.files import RotatingCapture
-    from vstig_hw.clocks import CLOCK_ID
     from vstig_hw.capture.records import Record, read_capture
+    from vstig_hw.clocks import CLOCK_ID
     from vstig_hw.framing import make_serial_framing
 
     cobs8 = make_serial_framing("cobs8")
