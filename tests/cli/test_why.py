@@ -218,3 +218,28 @@ def test_bad_input_is_one_line(capture: tuple[Path, dict[str, Robot]], tmp_path:
     recorded_twice = run_vstig("bridge", "serial:/dev/null", "--robot-id", "1", "--record", str(path))
     assert recorded_twice.returncode == 2 and "--overwrite" in recorded_twice.stderr
     assert path.stat().st_size > 0
+
+
+def test_a_recording_to_a_symlink_is_refused_and_mcap_keeps_the_sends_apart(tmp_path: Path) -> None:
+    """A bridge of a pty radio and a python-can virtual bus (two media: .mcap) records what it sent apart from what
+    it heard; a symbolic link is never written through, even with --overwrite."""
+    link = tmp_path / "link.mcap"
+    link.symlink_to(tmp_path / "elsewhere.mcap")
+    refused = run_vstig("bridge", "serial:/dev/null", "--robot-id", "1", "--record", str(link), "--overwrite")
+    assert refused.returncode == 2 and "symbolic link" in refused.stderr
+    assert not (tmp_path / "elsewhere.mcap").exists()
+    robot = Robot()
+    path = tmp_path / "mixed.mcap"
+    bridge = start_vstig("bridge", robot.spec, "can:virtual:why", "--robot-id", "200", "--record", str(path))
+    try:
+        wait_for(lambda: has_open(bridge.pid, robot.peer.path), 30)
+        time.sleep(0.3)
+        robot.send(Op.PUT, 9, 5, 3, 4)
+        wait_for(lambda: any(m.key == 9 for m in robot.read()), 10, step=lambda: time.sleep(0.05))
+    finally:
+        _, err = stop(bridge)
+        robot.peer.close()
+    assert "units in" in err, err
+    answer = _why(path, "--key", "9")
+    assert answer["newest"]["ts"] == 3 and answer["newest"]["link"] == robot.name
+    assert {(hop["link"], hop["sent"]) for hop in answer["path"]} >= {(robot.name, False), ("why", True)}, answer
