@@ -4,8 +4,9 @@ Every writer in `records.WRITERS` subclasses `CaptureWriter` (python-can's `Base
 `write`, `size`, `flush` and `close` are its own; the optional call a format may offer is declared here with
 the default a format without it gets, so the recorder calls it unconditionally:
 
-* `note`: a comment line readers skip (a bridge's decisions, a capture's clock: capture.clock_notes);
-  `takes_notes` says the format keeps them (our line captures do); default: the note is not written.
+* `note`: what the capture says about itself beside its records (a bridge's decisions, a capture's clock:
+  capture.notes), which record readers pass over; `takes_notes` says the format keeps them (our line
+  captures as comment lines, MCAP as metadata records); default: the note is not written.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ __all__ = ["CaptureWriter"]
 
 
 class CaptureWriter(abc.ABC):
-    takes_notes: ClassVar[bool] = False  # True: `note` writes a comment line that readers skip
+    takes_notes: ClassVar[bool] = False  # True: `note` keeps a note that record readers pass over
 
     @abc.abstractmethod
     def write(self, record: Record) -> None:
@@ -38,5 +39,5 @@ class CaptureWriter(abc.ABC):
         """Finish the file."""
 
     def note(self, text: str) -> None:
-        """A comment line in the capture, where the format keeps them (`takes_notes`); default: not written."""
+        """A note in the capture, where the format keeps them (`takes_notes`); default: not written."""
         return None
