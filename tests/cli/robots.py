@@ -7,7 +7,6 @@ handles what its radio hears in between.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterable
 
 from peers import PtyPeer, SlcanAdapter
@@ -16,7 +15,7 @@ from vstig_hw import Stigmergy
 from vstig_hw.engine import larger_value_wins
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
-from vstig_hw.wire import Message, Op
+from vstig_hw.wire import Message
 
 
 class Robot:
@@ -96,43 +95,3 @@ class CanRobot(Robot):
     def close(self) -> None:
         self.adapter.close()
 
-
-class LaggingSwarm:
-    """The roster's scenario (issue 47): pty robots 1..count, each writing a key of its own (100 + id) every step;
-    robot 1 also writes KEY; robot LAGGING keeps sending its own old write of KEY (timestamp 1) instead of a
-    heartbeat; robots SILENT stop sending once `silence()` is called (`silent_since` then says when)."""
-
-    SILENT = (9, 10, 11)
-    LAGGING = 12
-    KEY = 50
-
-    def __init__(self, count: int = 12, period: float = 0.1) -> None:
-        self.robots = [PtyRobot(n) for n in range(1, count + 1)]
-        self.period = period
-        self.steps = 0
-        self.silent_since: float | None = None
-
-    @property
-    def specs(self) -> list[str]:
-        return [robot.spec for robot in self.robots]
-
-    def step(self) -> None:
-        """One control step for every robot still talking, then a period's sleep."""
-        self.steps += 1
-        for robot in self.robots:
-            if robot.id in self.SILENT and self.silent_since is not None:
-                continue
-            if robot.id == self.LAGGING:
-                robot.radio.write(robot.framing.encode(Message(Op.PUT, self.KEY, 7, 1, self.LAGGING))[0])
-            else:
-                robot.put(100 + robot.id, self.steps)  # its heartbeat: a write of its own each step
-            if robot.id == 1:
-                robot.put(self.KEY, self.steps)
-        time.sleep(self.period)
-
-    def silence(self) -> None:
-        self.silent_since = time.monotonic()
-
-    def close(self) -> None:
-        for robot in self.robots:
-            robot.close()

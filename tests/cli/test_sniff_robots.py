@@ -20,13 +20,15 @@ from typing import Any
 
 from peers import VSTIG, start_vstig, stop, wait_for
 from rich.console import Console
-from robots import LaggingSwarm, PtyRobot
+from robots import PtyRobot
+from roster_steps import KEY, RosterSteps
 
 from vstig_cli.robots import ROBOTS_KEY, robots_table
 from vstig_hw.gateway.roster import Roster
 from vstig_hw.wire import Message, Op
 
-SILENT, LAGGING, KEY = LaggingSwarm.SILENT, LaggingSwarm.LAGGING, LaggingSwarm.KEY
+SILENT = (9, 10, 11)
+LAGGING = 12
 STEP = 0.1  # the robots' control step, as the gateway's period
 QUIET_AFTER, GONE_AFTER = 0.3, 2.0
 
@@ -49,18 +51,18 @@ class Rows:
 
 
 def test_quiet_gone_and_behind_show_within_the_documented_time() -> None:
-    swarm = LaggingSwarm(period=STEP)
-    sniff = start_vstig("sniff", *swarm.specs, "--robots", "--jsonl",
+    robots = [PtyRobot(n) for n in range(1, 13)]
+    step = RosterSteps(robots, LAGGING, STEP)
+    sniff = start_vstig("sniff", *(robot.spec for robot in robots), "--robots", "--jsonl",
                         "--quiet-after", str(QUIET_AFTER), "--gone-after", str(GONE_AFTER))
     rows = Rows(sniff.stdout)
     try:
-        wait_for(lambda: {row["robot"] for _, row in rows.rows} >= set(range(1, 13)), 30, swarm.step)
+        wait_for(lambda: {row["robot"] for _, row in rows.rows} >= set(range(1, 13)), 30, step)
         assert all(row["state"] == "alive" and row["named_by"] == "writer" and row["sender"] is None
                    for _, row in rows.rows[-12:]), rows.rows[-12:]
-        swarm.silence()
-        since = swarm.silent_since
-        assert since is not None
-        wait_for(lambda: all(rows.first(n, since, lambda r: r["state"] == "gone") for n in SILENT), 20, swarm.step)
+        step.silent.update(SILENT)
+        since = time.monotonic()
+        wait_for(lambda: all(rows.first(n, since, lambda r: r["state"] == "gone") for n in SILENT), 20, step)
         for n in SILENT:  # their last write was a step before: quiet within quiet-after and a period, printed
             # within the second after (and half a second of a busy machine)
             quiet = rows.first(n, since, lambda r: r["state"] == "quiet")
@@ -70,11 +72,12 @@ def test_quiet_gone_and_behind_show_within_the_documented_time() -> None:
         latest = {row["robot"]: row for _, row in rows.rows[-12:]}
         assert {n for n, row in latest.items() if row["state"] == "alive"} == set(range(1, 13)) - set(SILENT)
         assert latest[LAGGING]["behind"] == [KEY] and latest[1]["behind"] == []
-        assert all(latest[n]["links"] == [Path(swarm.robots[n - 1].radio.path).name] for n in range(1, 9)), latest
+        assert all(latest[n]["links"] == [Path(robots[n - 1].radio.path).name] for n in range(1, 9)), latest
         assert latest[1]["writes"] >= 2 * latest[2]["writes"] - 2 and latest[2]["rate"] > 3, latest
     finally:
         _, stderr = stop(sniff)
-        swarm.close()
+        for robot in robots:
+            robot.close()
     assert "Traceback" not in stderr, stderr
 
 
@@ -118,10 +121,10 @@ def test_the_robots_table_at_1000_robots_redraws_within_one_control_period() -> 
     roster = _roster_of(1000)
     console = Console(width=80, height=50, file=io.StringIO(), force_terminal=True)
     times = []
-    for _ in range(5):
-        start = time.perf_counter()
+    for _ in range(5):  # the CPU this thread spends: what other work on a shared machine cannot inflate
+        start = time.thread_time()
         console.print(robots_table(roster, height=50))
-        times.append(time.perf_counter() - start)
+        times.append(time.thread_time() - start)
     assert min(times) < 0.1, times
 
 
