@@ -1,0 +1,114 @@
+"""Tags (issue 50, SPEC.md section 10): what checking and keeping them costs a gateway, and a tag on an AVR.
+
+* A gateway's engine with tags beside it (`TaggedStigmergy`, a link that requires tags: every message's tag
+  checked, each drained message given its record) against the plain engine on the same traffic (auth off).
+  Both are the Python path: the compiled path has no tags yet, so this is not the relay's whole cost.
+* libvstig on a simulated ATmega328P (simavr, avr-gcc -Os): cycles per tag and per tag check, against one
+  cobs8 frame of one message; flash and static RAM of vstig_auth, against the chip's.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from vstig_hw import Stigmergy
+from vstig_hw.auth import SwarmKeys
+from vstig_hw.tagged import AuthPolicy, TaggedStigmergy
+
+from .bench_wire import realistic_mix
+from .registry import Result, benchmark, rate
+
+_N = 20_000
+_MASTER = bytes(range(32))
+HERE = Path(__file__).resolve().parent
+LIBVSTIG = HERE.parent / "firmware_spec" / "libvstig"
+RUNS = 40
+FLASH, SRAM = 32768, 2048  # ATmega328P
+
+
+@benchmark("auth")
+def gateway_with_tags_vs_without() -> Iterator[Result]:
+    """Messages/s through the engine alone, and through TaggedStigmergy with every tag checked (require)."""
+    keys = SwarmKeys(_MASTER)
+    messages = realistic_mix(_N)
+    records = [(m, *keys.tag(m, 0)[1:]) for m in messages]
+
+    def off() -> int:
+        engine = Stigmergy(200)
+        for msg in messages:
+            engine.receive(msg)
+        engine.drain()
+        return _N
+
+    def require() -> int:
+        node = TaggedStigmergy(Stigmergy(200), keys)
+        for msg, epoch, tag in records:
+            node.receive(msg, AuthPolicy.REQUIRE, epoch, tag)
+        for msg in node.engine.drain():
+            node.record_of(msg)
+        return _N
+
+    plain, tagged = rate(off), rate(require)
+    yield Result("auth.us_per_message_require", 1e6 / tagged, "us", "engine alone (auth off)", 1e6 / plain)
+
+
+def _avr_tools() -> tuple[str, str] | None:
+    avr_gcc, gcc = shutil.which("avr-gcc"), shutil.which("gcc")
+    if avr_gcc is None or gcc is None or not Path("/usr/include/simavr/sim_avr.h").exists():
+        return None
+    return avr_gcc, gcc
+
+
+def _cycles(board: Path, avr_gcc: str, folder: Path, what: int, runs: int) -> int:
+    elf = folder / f"tag_{what}_{runs}.elf"
+    sources = [str(HERE / "auth_tag_cycles.c"), *map(str, sorted(LIBVSTIG.glob("vstig_*.c")))]
+    subprocess.run([avr_gcc, "-mmcu=atmega328p", "-std=c99", "-Os", "-ffunction-sections", "-fdata-sections",
+                    f"-DWHAT={what}", f"-DRUNS={runs}", "-I", str(LIBVSTIG), "-o", str(elf), *sources,
+                    "-Wl,--gc-sections"], check=True, capture_output=True, timeout=300)
+    done = subprocess.run([str(board), str(elf)], check=True, capture_output=True, text=True, timeout=300)
+    return int(done.stdout.split()[-1])
+
+
+def _per_run(board: Path, avr_gcc: str, folder: Path, what: int) -> float:
+    return (_cycles(board, avr_gcc, folder, what, RUNS + 1) - _cycles(board, avr_gcc, folder, what, 1)) / RUNS
+
+
+def _auth_sizes(avr_gcc: str, folder: Path) -> tuple[int, int]:
+    """(flash, static RAM) of vstig_auth.o for the ATmega328P: text + progmem + rodata, data + bss + rodata."""
+    obj = folder / "vstig_auth.o"
+    subprocess.run([avr_gcc, "-mmcu=atmega328p", "-std=c99", "-Os", "-c", str(LIBVSTIG / "vstig_auth.c"), "-o",
+                    str(obj)], check=True, capture_output=True, timeout=300)
+    sizes = {name: int(size) for name, size in
+             re.findall(r"^(\.\S+)\s+(\d+)", subprocess.run(["avr-size", "-A", str(obj)], check=True,
+                                                            capture_output=True, text=True).stdout, re.M)}
+    ram = sizes.get(".data", 0) + sizes.get(".bss", 0) + sizes.get(".rodata", 0)  # AVR copies .rodata to RAM
+    return sizes.get(".text", 0) + sizes.get(".progmem.data", 0) + sizes.get(".rodata", 0), ram
+
+
+@benchmark("auth")
+def avr_cycles_per_tag() -> Iterator[Result]:
+    """Cycles per tag and per check on the ATmega328P beside one cobs8 frame; vstig_auth's flash and RAM."""
+    tools = _avr_tools()
+    if tools is None:
+        print("  auth.avr: skipped (needs avr-gcc, gcc and libsimavr-dev)", file=sys.stderr)
+        return
+    avr_gcc, gcc = tools
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        board = folder / "simavr_cycles"
+        subprocess.run([gcc, "-O2", "-o", str(board), str(HERE / "simavr_cycles.c"), "-lsimavr"], check=True,
+                       capture_output=True, timeout=300)
+        frame = _per_run(board, avr_gcc, folder, 0)
+        yield Result("auth.avr_cycles_per_tag", _per_run(board, avr_gcc, folder, 1), "cycles",
+                     "one cobs8 frame", frame)
+        yield Result("auth.avr_cycles_per_check", _per_run(board, avr_gcc, folder, 2), "cycles",
+                     "one cobs8 frame", frame)
+        flash, ram = _auth_sizes(avr_gcc, folder)
+    yield Result("auth.avr_flash", flash, "bytes", "ATmega328P flash", FLASH)
+    yield Result("auth.avr_static_ram", ram, "bytes", "ATmega328P SRAM", SRAM)
