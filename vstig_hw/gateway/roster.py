@@ -321,11 +321,6 @@ class Roster:
         tracked = self._robots.get(robot)
         return None if tracked is None else tracked.last
 
-    def last_heard(self, robot: int) -> float | None:
-        """When `robot` was last heard (`take`'s clock); None if it is not tracked."""
-        tracked = self._robots.get(robot)
-        return None if tracked is None else tracked.last
-
     def counts(self) -> dict[tuple[str, RobotState], int]:
         """(link, state) -> robots in that state heard on that link (the metrics' series: not one per robot)."""
         out: Counter[tuple[str, RobotState]] = Counter()
