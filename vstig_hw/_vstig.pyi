@@ -11,7 +11,8 @@ Twins (C file, its types, its Python references):
     engine.c   Engine             vstig_hw/engine.py
     guard.c    JumpGuard          vstig_hw/gateway/guard.py
     framing.c  Receiver Encoder   vstig_hw/framing/cobs8.py vstig_hw/framing/epuck4.py vstig_hw/framing/kilobot.py
-                                  vstig_hw/framing/can.py vstig_hw/framing/xbee.py
+                                  vstig_hw/framing/can.py vstig_hw/framing/xbee.py vstig_hw/framing/mavlink.py
+    mavlink.c  -                  vstig_hw/framing/mavlink.py
     window.c   Window             vstig_hw/gateway/outlet.py
     outlet.c   Outlet             vstig_hw/gateway/outlet.py vstig_hw/transports/serial.py vstig_hw/transports/can.py
     parts.c    Seat Relay         vstig_hw/gateway/parts.py
@@ -52,10 +53,11 @@ class JumpGuard(Guard):
     def view(self, key: int) -> tuple[int, int, int] | None: ...
 
 class Receiver:
-    sender: int | None  # XBee: the 64-bit source of the last unit's messages
+    sender: int | None  # the last unit's sender: XBee's 64-bit source, MAVLink's sysid << 8 | compid
     def __init__(self, framing: str, drops: Counters, *, expiry_ticks: int = 3, kilobot_type: int = 0x56,
                  extended: bool = False, base: int | None = None, stigmergy: int = 0, escaped: bool = False,
-                 on_tick: Callable[[], None] | None = None) -> None: ...
+                 on_tick: Callable[[], None] | None = None, sysid: int = 1, compid: int = 191,
+                 key: bytes | None = None) -> None: ...
     def feed(self, unit: Any) -> list[Message]: ...
     def tick(self) -> None: ...
     def reset(self) -> None: ...
@@ -64,10 +66,14 @@ class Encoder:
     frame_id: int  # XBee: the fields an XBeeFraming sends with once it shares them (framing.xbee.Sending)
     report: int
     per_frame: int
+    seq: int  # MAVLink: the next frame's sequence, and the last signing timestamp sent (the framing shares them)
+    timestamp: int
     def __init__(self, framing: str, *, kilobot_type: int = 0x56, extended: bool = False, base: int | None = None,
                  stigmergy: int = 0, sender: int = 0, fd: bool = False, brs: bool = True,
-                 frame_type: Any = None, escaped: bool = False, dest: int = 0xFFFF) -> None: ...
+                 frame_type: Any = None, escaped: bool = False, dest: int = 0xFFFF, sysid: int = 1,
+                 compid: int = 191, target: int = 0, key: bytes | None = None, link_id: int = 0) -> None: ...
     def encode_batch(self, messages: Sequence[Message]) -> list[Any]: ...
+    def heartbeat(self) -> bytes: ...
 
 class Window(SendWindow): ...
 

@@ -1,10 +1,10 @@
 /*
  * Receiver and Encoder: a link's framing in C, libvstig's receivers and encoders with the Python
- * framings' interface (feed, tick, reset; encode_batch), for cobs8, epuck4, kilobot, CAN and XBee (API frames
- * in mode 1 or 2, whole frames a unit as the XBee transport cuts them).
+ * framings' interface (feed, tick, reset; encode_batch), for cobs8, epuck4, kilobot, CAN, XBee (API frames
+ * in mode 1 or 2, whole frames a unit as the XBee transport cuts them) and MAVLink (TUNNELs, signed or not: mavlink.c).
  *
  * Reference: vstig_hw/framing/cobs8.py vstig_hw/framing/epuck4.py vstig_hw/framing/kilobot.py
- *   vstig_hw/framing/can.py vstig_hw/framing/xbee.py (held equal by tests/native; the index of the twins:
+ *   vstig_hw/framing/can.py vstig_hw/framing/xbee.py vstig_hw/framing/mavlink.py (held equal by tests/native; the index of the twins:
  *   vstig_hw/_vstig.pyi).
  *
  * A Receiver counts its drops in the Python framing's own `drops` Counters (given when built), so
@@ -15,7 +15,7 @@
 #include <string.h>
 #include <structmember.h>
 
-static const char *const FRAMINGS[VX_FRAMINGS] = {"cobs8", "epuck4", "kilobot", "can", "xbee"};
+static const char *const FRAMINGS[VX_FRAMINGS] = {"cobs8", "epuck4", "kilobot", "can", "xbee", "mavlink"};
 
 static int framing_kind(PyObject *name) {
     int kind;
@@ -23,7 +23,7 @@ static int framing_kind(PyObject *name) {
     for (kind = 0; text != NULL && kind < (int)VX_FRAMINGS; kind++) {
         if (strcmp(text, FRAMINGS[kind]) == 0) return kind;
     }
-    if (!PyErr_Occurred()) PyErr_Format(PyExc_ValueError, "no compiled framing %R (cobs8, epuck4, kilobot, can, xbee)", name);
+    if (!PyErr_Occurred()) PyErr_Format(PyExc_ValueError, "no compiled framing %R (cobs8, epuck4, kilobot, can, xbee, mavlink)", name);
     return -1;
 }
 
@@ -76,6 +76,11 @@ size_t vx_rx_xbee(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *out
     return n;
 }
 
+size_t vx_rx_whole(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *out) {
+    if (rx->kind == VX_MAVLINK) return vx_mav_feed(&rx->mav, data, len, out, &rx->has_sender, &rx->sender);
+    return vx_rx_xbee(rx, data, len, out);
+}
+
 size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8]) {
     uint16_t sender;
     return vstig_can_receive(&rx->can, frame, out, &sender);
@@ -84,6 +89,7 @@ size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[
 int vx_rx_harvest(vx_rx_t *rx) {
     if (rx->kind == VX_CAN) return vx_harvest_drops(&rx->can.drops, rx->drops);
     if (rx->kind == VX_XBEE) return vx_harvest_drops(&rx->xbee.drops, rx->drops);
+    if (rx->kind == VX_MAVLINK) return vx_mav_harvest(&rx->mav, rx->drops);
     if (vx_harvest_drops(&rx->serial.deframer.drops, rx->drops) < 0) return -1;
     return rx->kind == VX_EPUCK4 ? vx_harvest_drops(&rx->epuck4.drops, rx->drops) : 0;
 }
@@ -120,12 +126,14 @@ done:
 
 static PyObject *Receiver_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     static char *kwlist[] = {"framing", "drops", "expiry_ticks", "kilobot_type", "extended", "base", "stigmergy",
-                             "escaped", "on_tick", NULL};
-    PyObject *name, *drops, *base = Py_None, *on_tick = Py_None;
+                             "escaped", "on_tick", "sysid", "compid", "key", NULL};
+    PyObject *name, *drops, *base = Py_None, *on_tick = Py_None, *key = Py_None;
     int expiry_ticks = 3, kilobot_type = VSTIG_KILOBOT_TYPE, extended = 0, stigmergy = 0, escaped = 0, kind;
+    int sysid = 1, compid = VSTIG_MAVLINK_COMP_ID;
     vx_receiver_t *self;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO!|$iipOipO", kwlist, &name, &PyDict_Type, &drops, &expiry_ticks,
-                                     &kilobot_type, &extended, &base, &stigmergy, &escaped, &on_tick))
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO!|$iipOipOiiO", kwlist, &name, &PyDict_Type, &drops,
+                                     &expiry_ticks, &kilobot_type, &extended, &base, &stigmergy, &escaped, &on_tick,
+                                     &sysid, &compid, &key))
         return NULL;
     if (on_tick != Py_None && !PyCallable_Check(on_tick)) {
         PyErr_SetString(PyExc_TypeError, "on_tick must be callable or None");
@@ -145,6 +153,8 @@ static PyObject *Receiver_new(PyTypeObject *type, PyObject *args, PyObject *kwds
     vstig_xbee_rx_init(&self->rx.xbee, (uint8_t)escaped);
     if (kind == VX_XBEE) {
         /* nothing more: the XBee receiver needs only its API mode */
+    } else if (kind == VX_MAVLINK) {
+        if (vx_mav_rx_init(&self->rx.mav, sysid, compid, key) < 0) goto fail;
     } else if (kind == VX_CAN) {
         if (can_scheme(&self->rx.can, extended, base, stigmergy, 0, 0, 0) < 0) goto fail;
     } else if (kilobot_type < 0 || kilobot_type >= 0x80 ||
@@ -173,6 +183,7 @@ static int Receiver_clear(vx_receiver_t *self) {
 static void Receiver_dealloc(vx_receiver_t *self) {
     PyObject_GC_UnTrack(self);
     Receiver_clear(self);
+    vx_mav_rx_free(&self->rx.mav);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -196,7 +207,7 @@ static PyObject *Receiver_feed(vx_receiver_t *self, PyObject *unit) {
             }
             Py_DECREF(m);
         }
-    } else if (self->rx.kind == VX_XBEE) {
+    } else if (self->rx.kind == VX_XBEE || self->rx.kind == VX_MAVLINK) {
         Py_buffer data;
         vstig_msg_t *got;
         if (PyObject_GetBuffer(unit, &data, PyBUF_SIMPLE) < 0) goto fail;
@@ -206,7 +217,7 @@ static PyObject *Receiver_feed(vx_receiver_t *self, PyObject *unit) {
             PyErr_NoMemory();
             goto fail;
         }
-        n = vx_rx_xbee(&self->rx, (const uint8_t *)data.buf, (size_t)data.len, got);
+        n = vx_rx_whole(&self->rx, (const uint8_t *)data.buf, (size_t)data.len, got);
         PyBuffer_Release(&data);
         for (i = 0; i < n; i++) {
             PyObject *m = vx_message(&got[i]);
@@ -267,7 +278,8 @@ static PyObject *Receiver_reset(vx_receiver_t *self, PyObject *unused) {
     Py_RETURN_NONE;
 }
 
-/* XBee: the 64-bit source of the last unit's messages (what Node._arrive's sender_of says), or None. */
+/* XBee: the 64-bit source of the last unit's messages (what Node._arrive's sender_of says); MAVLink: its sysid << 8
+ * | compid; or None. */
 static PyObject *Receiver_get_sender(vx_receiver_t *self, void *closure) {
     (void)closure;
     if (!self->rx.has_sender) Py_RETURN_NONE;
@@ -275,7 +287,7 @@ static PyObject *Receiver_get_sender(vx_receiver_t *self, void *closure) {
 }
 
 static PyGetSetDef Receiver_getset[] = {
-    {"sender", (getter)Receiver_get_sender, NULL, "XBee: the sender of the last unit fed (its 64-bit source), or None.",
+    {"sender", (getter)Receiver_get_sender, NULL, "XBee, MAVLink: the sender of the last unit fed, or None.",
      NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
@@ -291,7 +303,7 @@ PyTypeObject vx_ReceiverType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "vstig_hw._vstig.Receiver",
     .tp_doc = "Receiver(framing, drops, *, expiry_ticks=3, kilobot_type=0x56, extended=False, base=None, "
-              "stigmergy=0, escaped=False, on_tick=None): a link's receiving framing in C.",
+              "stigmergy=0, escaped=False, on_tick=None, sysid=1, compid=191, key=None): a link's receiving framing in C.",
     .tp_basicsize = sizeof(vx_receiver_t),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
     .tp_new = Receiver_new,
@@ -305,7 +317,24 @@ PyTypeObject vx_ReceiverType = {
 /* ---- encoding -------------------------------------------------------------------------- */
 
 size_t vx_tx_room(const vx_tx_t *tx, size_t n) {
+    if (tx->kind == VX_MAVLINK) return VX_MAV_TX_ROOM(n);
     return tx->kind == VX_XBEE ? VSTIG_XBEE_TX_BYTES(n) : n * VX_SERIAL_MAX_BYTES;
+}
+
+/* MAVLink: the TUNNELs of n messages back to back, 16 to a TUNNEL (MavlinkFraming.encode_batch); each one's
+ * length at lens[k] when lens is given (room for n / 16 + 1). */
+static size_t mavlink_tunnels(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out, uint16_t *lens) {
+    size_t at = 0, w = 0, k = 0;
+    while (at < n) {
+        uint8_t count = (uint8_t)(n - at < VSTIG_MAVLINK_MAX_MESSAGES ? n - at : VSTIG_MAVLINK_MAX_MESSAGES);
+        uint16_t len;
+        vx_mav_tx_clock(&tx->mav);
+        len = vstig_mavlink_encode(&tx->mav.tx, msgs + at, count, out + w);
+        if (lens != NULL) lens[k++] = len;
+        w += len;
+        at += count;
+    }
+    return w;
 }
 
 size_t vx_tx_bytes(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out) {
@@ -313,6 +342,7 @@ size_t vx_tx_bytes(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out)
     uint32_t words[3];
     uint8_t k;
     if (tx->kind == VX_XBEE) return vstig_xbee_encode(&tx->xbee, msgs, n, out);
+    if (tx->kind == VX_MAVLINK) return mavlink_tunnels(tx, msgs, n, out, NULL);
     for (i = 0; i < n; i++) {
         switch (tx->kind) {
         case VX_COBS8:
@@ -350,15 +380,17 @@ PyObject *vx_frame_unit(const vx_tx_t *tx, const vstig_can_frame_t *frame) {
 
 static PyObject *Encoder_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     static char *kwlist[] = {"framing", "kilobot_type", "extended", "base", "stigmergy", "sender", "fd", "brs",
-                             "frame_type", "escaped", "dest", NULL};
-    PyObject *name, *base = Py_None, *frame_type = Py_None;
+                             "frame_type", "escaped", "dest", "sysid", "compid", "target", "key", "link_id", NULL};
+    PyObject *name, *base = Py_None, *frame_type = Py_None, *key = Py_None;
+    int sysid = 1, compid = VSTIG_MAVLINK_COMP_ID, target = 0, link_id = 0;
     int kilobot_type = VSTIG_KILOBOT_TYPE, extended = 0, stigmergy = 0, sender = 0, fd = 0, brs = 1, escaped = 0, kind;
     unsigned long long dest = 0xFFFFull;
     uint8_t dest_bytes[8];
     int i;
     vx_encoder_t *self;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O|$ipOiippOpK", kwlist, &name, &kilobot_type, &extended, &base,
-                                     &stigmergy, &sender, &fd, &brs, &frame_type, &escaped, &dest))
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O|$ipOiippOpKiiiOi", kwlist, &name, &kilobot_type, &extended,
+                                     &base, &stigmergy, &sender, &fd, &brs, &frame_type, &escaped, &dest, &sysid,
+                                     &compid, &target, &key, &link_id))
         return NULL;
     if ((kind = framing_kind(name)) < 0) return NULL;
     if (kind == VX_CAN && !PyCallable_Check(frame_type)) {
@@ -376,7 +408,8 @@ static PyObject *Encoder_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
     self->tx.frame_type = Py_NewRef(frame_type);
     for (i = 0; i < 8; i++) dest_bytes[i] = (uint8_t)(dest >> (56 - 8 * i));
     vstig_xbee_tx_init(&self->tx.xbee, (uint8_t)escaped, dest_bytes);
-    if (kind == VX_CAN && can_scheme(&self->tx.can, extended, base, stigmergy, sender, fd, brs) < 0) {
+    if ((kind == VX_CAN && can_scheme(&self->tx.can, extended, base, stigmergy, sender, fd, brs) < 0) ||
+        (kind == VX_MAVLINK && vx_mav_tx_init(&self->tx.mav, sysid, compid, target, key, link_id) < 0)) {
         Py_DECREF(self);
         return NULL;
     }
@@ -423,6 +456,40 @@ vstig_msg_t *vx_msgs_of(PyObject *messages, size_t *n) {
     return msgs;
 }
 
+/* MAVLink's units: one bytes object a TUNNEL, as the UDP transport sends each in its own datagram. */
+static PyObject *mavlink_units(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n) {
+    size_t tunnels = (n + VSTIG_MAVLINK_MAX_MESSAGES - 1u) / VSTIG_MAVLINK_MAX_MESSAGES, k, at = 0;
+    uint8_t *bytes = PyMem_Malloc(VX_MAV_TX_ROOM(n) + 1u);
+    uint16_t *lens = PyMem_Malloc((tunnels + 1u) * sizeof *lens);
+    PyObject *units = NULL;
+    if (bytes == NULL || lens == NULL) {
+        PyErr_NoMemory();
+    } else {
+        (void)mavlink_tunnels(tx, msgs, n, bytes, lens);
+        units = PyList_New((Py_ssize_t)tunnels);
+        for (k = 0; units != NULL && k < tunnels; at += lens[k++]) {
+            PyObject *unit = PyBytes_FromStringAndSize((const char *)bytes + at, lens[k]);
+            if (unit == NULL) Py_CLEAR(units);
+            else PyList_SET_ITEM(units, (Py_ssize_t)k, unit);
+        }
+    }
+    PyMem_Free(bytes);
+    PyMem_Free(lens);
+    return units;
+}
+
+/* MAVLink: the HEARTBEAT that announces the component, on the same sequence and timestamps as the TUNNELs. */
+static PyObject *Encoder_heartbeat(vx_encoder_t *self, PyObject *unused) {
+    uint8_t out[VSTIG_MAVLINK_FRAME_MAX];
+    (void)unused;
+    if (self->tx.kind != VX_MAVLINK) {
+        PyErr_SetString(PyExc_TypeError, "only a mavlink Encoder sends HEARTBEATs");
+        return NULL;
+    }
+    vx_mav_tx_clock(&self->tx.mav);
+    return PyBytes_FromStringAndSize((const char *)out, vstig_mavlink_heartbeat(&self->tx.mav.tx, out));
+}
+
 /* encode_batch(messages) -> units: one bytes object for a byte stream (as Link.units_of joins them), or the
  * CAN frames as can.Message */
 static PyObject *Encoder_encode_batch(vx_encoder_t *self, PyObject *messages) {
@@ -430,7 +497,9 @@ static PyObject *Encoder_encode_batch(vx_encoder_t *self, PyObject *messages) {
     vstig_msg_t *msgs = vx_msgs_of(messages, &n);
     PyObject *units = NULL;
     if (msgs == NULL) return NULL;
-    if (self->tx.kind != VX_CAN) {
+    if (self->tx.kind == VX_MAVLINK) {
+        units = mavlink_units(&self->tx, msgs, n);
+    } else if (self->tx.kind != VX_CAN) {
         uint8_t *bytes = PyMem_Malloc(vx_tx_room(&self->tx, n) + 1u);
         if (bytes == NULL) {
             PyErr_NoMemory();
@@ -460,6 +529,7 @@ static PyObject *Encoder_encode_batch(vx_encoder_t *self, PyObject *messages) {
 
 static PyMethodDef Encoder_methods[] = {
     {"encode_batch", (PyCFunction)Encoder_encode_batch, METH_O, "The units that carry these messages."},
+    {"heartbeat", (PyCFunction)Encoder_heartbeat, METH_NOARGS, "MAVLink: the HEARTBEAT frame that comes next."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -468,6 +538,7 @@ static PyMemberDef Encoder_members[] = {
     {"frame_id", T_UBYTE, offsetof(vx_encoder_t, tx.xbee.frame_id), 0, "XBee: the last frame id given (1..255)."},
     {"report", T_UBYTE, offsetof(vx_encoder_t, tx.xbee.report), 0,
      "XBee: the next frame asks for a Transmit Status (1)."},
+    {"seq", T_UBYTE, offsetof(vx_encoder_t, tx.mav.tx.seq), 0, "MAVLink: the next frame's sequence number."},
     {NULL, 0, 0, 0, NULL},
 };
 
@@ -489,7 +560,31 @@ static int Encoder_set_per_frame(vx_encoder_t *self, PyObject *value, void *clos
     return 0;
 }
 
+/* MAVLink: the last signing timestamp sent (10 us units since 2015); the next is max(this + 1, the clock). */
+static PyObject *Encoder_get_timestamp(vx_encoder_t *self, void *closure) {
+    unsigned long long stamp = 0;
+    int i;
+    (void)closure;
+    for (i = 6; i-- > 0;) stamp = stamp << 8 | self->tx.mav.tx.timestamp[i];
+    return PyLong_FromUnsignedLongLong(stamp);
+}
+
+static int Encoder_set_timestamp(vx_encoder_t *self, PyObject *value, void *closure) {
+    unsigned long long stamp = value == NULL ? (unsigned long long)-1 : PyLong_AsUnsignedLongLong(value);
+    int i;
+    (void)closure;
+    if (PyErr_Occurred()) return -1;
+    if (stamp >> 48) {
+        PyErr_Format(PyExc_ValueError, "a MAVLink signing timestamp is 48 bits, got %R", value == NULL ? Py_None : value);
+        return -1;
+    }
+    for (i = 0; i < 6; i++) self->tx.mav.tx.timestamp[i] = (uint8_t)(stamp >> (8 * i));
+    return 0;
+}
+
 static PyGetSetDef Encoder_getset[] = {
+    {"timestamp", (getter)Encoder_get_timestamp, (setter)Encoder_set_timestamp,
+     "MAVLink: the last signing timestamp sent.", NULL},
     {"per_frame", (getter)Encoder_get_per_frame, (setter)Encoder_set_per_frame,
      "XBee: messages a frame carries (the module's NP / 8).", NULL},
     {NULL, NULL, NULL, NULL, NULL},
@@ -499,7 +594,8 @@ PyTypeObject vx_EncoderType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "vstig_hw._vstig.Encoder",
     .tp_doc = "Encoder(framing, *, kilobot_type=0x56, extended=False, base=None, stigmergy=0, sender=0, fd=False, "
-              "brs=True, frame_type=None, escaped=False, dest=0xFFFF): a link's sending framing in C.",
+              "brs=True, frame_type=None, escaped=False, dest=0xFFFF, sysid=1, compid=191, target=0, key=None, "
+              "link_id=0): a link's sending framing in C.",
     .tp_basicsize = sizeof(vx_encoder_t),
     .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
     .tp_new = Encoder_new,

@@ -3,13 +3,15 @@
 #define VSTIG_EXT_FRAMING_H
 
 #include "ext.h"
+#include "mavlink.h"
 
 #define VX_COBS8 0u   /* = VSTIG_COBS8 */
 #define VX_EPUCK4 1u  /* = VSTIG_EPUCK4 */
 #define VX_KILOBOT 2u /* = VSTIG_KILOBOT */
 #define VX_CAN 3u
 #define VX_XBEE 4u
-#define VX_FRAMINGS 5u
+#define VX_MAVLINK 5u
+#define VX_FRAMINGS 6u
 
 /* The wire bytes of one message in each serial framing (cobs8 12, epuck4 3 x 8, kilobot 14). */
 #define VX_SERIAL_MAX_BYTES 24u
@@ -20,8 +22,9 @@ typedef struct {
     vstig_epuck4_reassembler_t epuck4;
     vstig_can_t can;
     vstig_xbee_rx_t xbee;
-    uint8_t has_sender;         /* XBee: the last unit's messages came in a Receive Packet, from `sender` */
-    unsigned long long sender;  /* its 64-bit source */
+    vx_mav_rx_t mav;
+    uint8_t has_sender;         /* XBee, MAVLink: the last unit's messages named their sender, `sender` */
+    unsigned long long sender;  /* an XBee module's 64-bit source; MAVLink's sysid << 8 | compid */
     PyObject *drops; /* the Python framing's drop Counters: what libvstig counts is added there */
     PyObject *on_tick; /* called at each tick, or None (XBee: the framing's tick, for what it sends) */
 } vx_rx_t;
@@ -31,6 +34,7 @@ typedef struct {
     uint8_t kilobot_type;
     vstig_can_t can;
     vstig_xbee_tx_t xbee; /* its frame ids and NP: the link's XBeeFraming sends with the same (`share`) */
+    vx_mav_tx_t mav;      /* its sequence and signing timestamps: the link's MavlinkFraming sends through it */
     PyObject *frame_type; /* CAN: can.Message, for the units handed to Python */
 } vx_tx_t;
 
@@ -49,6 +53,9 @@ size_t vx_rx_bytes(vx_rx_t *rx, const uint8_t *data, size_t len, size_t *used, v
 /* XBee: the messages of one unit (whole frames, as the transport cuts them), into out (room for len / 8 + 1);
  * rx->has_sender and rx->sender: the source of the first Receive Packet that carried any. */
 size_t vx_rx_xbee(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *out);
+/* XBee or MAVLink: the messages of one unit (whole frames, as the transport cuts them), into out (room for
+ * len / 8 + 1); rx->has_sender and rx->sender: the sender of the first frame that carried any. */
+size_t vx_rx_whole(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *out);
 /* The messages of one CAN frame, into out (room for 8). */
 size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8]);
 /* A python-can Message's fields as a libvstig frame; -1 with an exception if it has none of them. */

@@ -215,14 +215,14 @@ static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, s
     return status;
 }
 
-/* A serial read's bytes: one unit (an XBee transport's: whole frames, which name their sender). */
+/* A serial read's bytes: one unit (an XBee or MAVLink transport's: whole frames, which name their sender). */
 static int arrive_bytes(vx_path_t *p, Py_ssize_t index, double t, const uint8_t *data, size_t len, size_t *heard,
                         const vx_told_t *told) {
     vx_rx_t *rx = &p->links[index].receiver->rx;
     size_t at = 0, n = 0, used;
     if (room_for(p, len / 4u + 64u) < 0) return -1; /* the shortest frame is 4 bytes: room for all a read holds */
-    if (rx->kind == VX_XBEE) {
-        n = vx_rx_xbee(rx, data, len, p->msgs);
+    if (rx->kind == VX_XBEE || rx->kind == VX_MAVLINK) {
+        n = vx_rx_whole(rx, data, len, p->msgs);
         if (vx_rx_harvest(rx) < 0) return -1;
         *heard += n;
         return arrive(p, index, t, p->msgs, n, rx->has_sender, rx->sender, told);

@@ -1,5 +1,8 @@
 """`mavlink`: our 8-byte messages in MAVLink 2 TUNNEL (#385) messages, optionally signed (SPEC.md 6.10).
 
+C twin: vstig_hw/_cext/framing.c vstig_hw/_cext/mavlink.c (the compiled Receiver and Encoder of a mavlink link,
+libvstig's vstig_mavlink and the replay table; held equal by tests/native/test_native_mavlink.py).
+
 A MAVLink 2 frame (mavlink.io, "Serialization")::
 
     0xFD | len | incompat | compat | seq | sysid | compid | msgid (u24 LE) | payload (len) | crc (u16 LE)
@@ -28,7 +31,7 @@ import struct
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from ..counters import Counters
 from ..crc import crc16_mcrf4xx
@@ -289,6 +292,18 @@ class MavlinkFraming(SerialFraming):
         self._lock = threading.Lock()  # heartbeats go out from the link's reader thread: one sequence for both
         self._reader = MavlinkStreamReader(self.drops)
         self._last: tuple[bytes | None, int | None] = (None, None)
+        self._twin: Any = None  # the compiled Encoder this framing sends through, once shared (`share_sending`)
+
+    def share_sending(self, twin: Any) -> None:
+        """Send through the compiled Encoder `twin` from now on (it goes on from this framing's sequence and last
+        signing timestamp): the outlet's TUNNELs and the link's HEARTBEATs then share one sequence and one
+        signing clock, so a receiver never sees a timestamp go back (a replay). The Encoder's clock is the
+        system's realtime clock, as `Signing`'s default is."""
+        with self._lock:
+            twin.seq = self._seq
+            if self.signing is not None:
+                twin.timestamp = self.signing._sent
+            self._twin = twin
 
     # -- sending -------------------------------------------------------------------
     def _frame(self, msgid: int, payload: bytes) -> bytes:
@@ -301,16 +316,22 @@ class MavlinkFraming(SerialFraming):
                          link_id=signing.link_id, timestamp=signing.next_timestamp())
 
     def encode(self, msg: Message) -> list[bytes]:
-        return [self._frame(TUNNEL, tunnel_payload(encode(msg), self.target))]
+        return self.encode_batch((msg,))
 
     def encode_batch(self, messages: Sequence[Message]) -> list[bytes]:
         """As few TUNNELs as hold the messages, in order, 16 to a TUNNEL."""
+        if self._twin is not None:
+            units: list[bytes] = self._twin.encode_batch(messages)
+            return units
         data = b"".join(map(encode, messages))
         step = MAX_PER_TUNNEL * MESSAGE_SIZE
         return [self._frame(TUNNEL, tunnel_payload(data[i:i + step], self.target)) for i in range(0, len(data), step)]
 
     def heartbeat(self) -> bytes:
         """The HEARTBEAT that announces this component (once a second, from the link)."""
+        if self._twin is not None:
+            beat: bytes = self._twin.heartbeat()
+            return beat
         return self._frame(HEARTBEAT, _HEARTBEAT)
 
     # -- receiving -----------------------------------------------------------------

@@ -10,14 +10,18 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   touched only while a backlog lasts, and so does each link's `LinkWriter`;
 * `JumpGuard` for a guard of max_jump and learn only (the default); any other
   guard stays the Python one, which the compiled delivery asks per unit;
-* `Receiver` for each link whose framing is cobs8, epuck4, kilobot, CAN or XBee
-  (API mode 1 or 2, our 8-byte messages): its decoding lives there for the Node's
+* `Receiver` for each link whose framing is cobs8, epuck4, kilobot, CAN, XBee
+  (API mode 1 or 2, our 8-byte messages) or MAVLink (TUNNELs, the signature and
+  replay checks with the replay table): its decoding lives there for the Node's
   life, whichever side delivers a batch;
 * `Path`, the delivery (Node._deliver): one call per read. Links on a serial port
   or a SocketCAN bus are read by it (`pump`) and their writes go straight to the
   device while its writer is idle. An XBee link is read as its transport reads it:
   its module's bytes cut into frames (libvstig's), the module's own reports handed
-  to the transport, one unit a frame.
+  to the transport, one unit a frame. A mavlink link (serial or UDP) is read by its
+  transport's Python reader, which cuts frames and keeps heartbeats and peers; the
+  batch it hands over is decoded and delivered here, and its outlet encodes in C
+  and hands the TUNNELs to its writer (the transport paces them to the air).
 
 Everything else (zenoh, dialects, XbeeMav's packets, the overhead controller,
 blabbermouth...) takes the Python path through the same parts. What decides which links the
@@ -36,6 +40,7 @@ from ..engine import ConflictResolver, Stigmergy
 from ..framing.cobs8 import Cobs8Framing
 from ..framing.epuck4 import Epuck4Framing
 from ..framing.kilobot import KilobotFraming
+from ..framing.mavlink import MavlinkFraming
 from ..framing.xbee import XBeeApi2Framing, XBeeFraming
 from ..links.link import Heard, Link
 from ..native import native
@@ -70,14 +75,17 @@ def _is(obj: object, module: str, name: str) -> bool:
 
 
 def framing_of(link: Link[Any]) -> str | None:
-    """The compiled framing that decodes and encodes exactly as the link's does (cobs8, epuck4, kilobot, can, xbee),
-    or None: the link's framing stays Python (zenoh, dialects, XbeeMav's packets, the overhead controller...)."""
+    """The compiled framing that decodes and encodes exactly as the link's does (cobs8, epuck4, kilobot, can, xbee,
+    mavlink), or None: the link's framing stays Python (zenoh, dialects, XbeeMav's packets, the overhead
+    controller...)."""
     framing: Any = link.framing
     kind = type(framing)
     if kind is Cobs8Framing or kind is KilobotFraming:
         return str(framing.name)
     if kind is XBeeFraming or kind is XBeeApi2Framing:
         return "xbee"
+    if kind is MavlinkFraming:
+        return "mavlink"
     if kind is Epuck4Framing and framing.reassembler.expiry_ticks <= MAX_EXPIRY_TICKS:
         return "epuck4"
     if _is(framing, "vstig_hw.framing.can", "CanFraming"):
@@ -103,6 +111,9 @@ def receiver_for(link: Link[Any]) -> Receiver | None:
                                    stigmergy=scheme.stigmergy)
     elif kind == "xbee":  # its ticks are the framing's too: they set which frame asks the module for a report
         receiver = native.Receiver("xbee", framing.drops, escaped=framing.escaped, on_tick=framing.tick)
+    elif kind == "mavlink":  # the replay table is the Receiver's from now on
+        receiver = native.Receiver("mavlink", framing.drops, sysid=framing.sysid, compid=framing.compid,
+                                   key=None if framing.signing is None else framing.signing.key)
     return receiver
 
 
@@ -126,6 +137,12 @@ def encoder_for(link: Link[Any]) -> Encoder | None:
                                  frame_type=can.Message)
     elif kind == "xbee":
         encoder = native.Encoder("xbee", escaped=framing.escaped, dest=framing.dest)
+        framing.share_sending(encoder)
+    elif kind == "mavlink":  # the framing's HEARTBEATs then go out through it: one sequence, one signing clock
+        signing = framing.signing
+        encoder = native.Encoder("mavlink", sysid=framing.sysid, compid=framing.compid, target=framing.target,
+                                 key=None if signing is None else signing.key,
+                                 link_id=0 if signing is None else signing.link_id)
         framing.share_sending(encoder)
     return encoder
 
