@@ -104,7 +104,8 @@ class TaggedStigmergy:
             return True
         same = (held_epoch, local.timestamp) == (epoch, msg.timestamp)
         proof = self._proofs.get(msg.key)
-        return same and not proven and proof is not None and proof.tag is not None and msg.robot != local.robot
+        return same and not proven and proof is not None and proof.tag is not None and proof.entry == local \
+            and msg.robot != local.robot
 
     def _note(self, key: int, msg: Message, epoch: int, tag: bytes | None, held: tuple[int, Entry | None]) -> None:
         """Keep the proof of whatever the engine now holds for `key`."""

@@ -10,6 +10,7 @@
  *   vstig_engine    put, get, receive, the conflict rule as a callback, drain
  *   vstig_guard     a gateway's jump bound
  *   vstig_auth      tags that prove who wrote an entry: BLAKE2s, robot keys (SPEC.md section 10)
+ *   vstig_tagged    an engine with tags beside it, for a node holding the master secret (SPEC.md 10.4, 10.6)
  *
  * No malloc, no I/O, no clock, no global state: every structure is the caller's, passed
  * explicitly, with capacities fixed at compile time (vstig_config.h).
@@ -26,6 +27,7 @@
 #include "vstig_engine.h"
 #include "vstig_guard.h"
 #include "vstig_auth.h"
+#include "vstig_tagged.h"
 
 #define VSTIG_FORMAT_VERSION 1u /* SPEC.md section 8 */
 
