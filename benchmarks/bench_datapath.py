@@ -193,14 +193,17 @@ while True:
 """
 
 
-def _await(into: _Pty, out: _Arrivals, probe_key: int = 32767) -> None:
+def _await(into: _Pty, out: _Arrivals, probe_key: int = 32767, seconds: float = 30.0) -> None:
     cobs8 = make_serial_framing("cobs8")
-    for stamp in range(1, 300):
+    end = time.monotonic() + seconds
+    stamp = 0
+    while time.monotonic() < end:
+        stamp += 1
         os.write(into.master, cobs8.encode(Message(Op.PUT, probe_key, 1, stamp, 7))[0])
         time.sleep(0.1)
         if probe_key in out.arrived:
             return
-    raise RuntimeError("the relay never came up")
+    raise RuntimeError(f"the relay never came up in {seconds:g} s")
 
 
 @contextlib.contextmanager
@@ -222,7 +225,7 @@ def _relaying(argv: Callable[[str, str], list[str]], echo_back: bool, env: dict[
     out = _Arrivals(b)
     echo = _Arrivals(a, record=False) if echo_back else None  # an engine re-broadcasts onto A too: read it
     try:
-        _await(a, out)
+        _await(a, out, seconds=150.0 if prefix else 30.0)  # under callgrind a busy VM takes a while to start it
         yield process.pid, a, out
     finally:
         process.terminate()  # (callgrind writes its totals as the process exits)
