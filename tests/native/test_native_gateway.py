@@ -28,6 +28,7 @@ from vstig_hw import Entry, Message, Op, Stigmergy, encode
 from vstig_hw.counters import Counters
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.framing.mavlink import MavlinkFraming
 from vstig_hw.framing.xbee import api_frame, receive_packet
 from vstig_hw.gateway import compiled as compiled_module
 from vstig_hw.gateway import node as node_module
@@ -128,7 +129,7 @@ def _settled(node: Node) -> None:
 
 # (link name, framing, one broadcast domain)
 LINKS = [("radio", "cobs8", False), ("bus", "can", True), ("words", "epuck4", False), ("modules", "xbee", False),
-         ("kilo", "kilobot", False)]
+         ("kilo", "kilobot", False), ("drones", "mavlink", False)]
 LINK = st.integers(0, len(LINKS) - 1)
 
 
@@ -155,6 +156,10 @@ def _units(rng: random.Random, framing: str, sent: list[Message], frames: list[c
         return [frame for m in sent for frame in encoder.encode(m)] + frames
     if framing == "xbee":  # Receive Packets from two modules (the sender a Python guard is told), mostly one a unit
         units = [api_frame(receive_packet(rng.choice([0x0013A20040A1B2C3, 0x7E]), encode(m))) for m in sent]
+        if rng.random() < 0.8:
+            return units
+    elif framing == "mavlink":  # TUNNELs from two drones, mostly one frame a unit
+        units = [MavlinkFraming(rng.choice([3, 200]), 1).encode(m)[0] for m in sent]
         if rng.random() < 0.8:
             return units
     else:
@@ -451,7 +456,8 @@ def test_the_compiled_delivery_tells_listeners_as_the_python_node(
 
 def test_the_compiled_delivery_tells_each_link_s_sender(compiled: ModuleType) -> None:
     """The sender a `messages` listener is told: a CAN frame's node (from its ID), an XBee module's 64-bit source,
-    none on the other serial links; both deliveries, through `Node._deliver` as a reader thread calls it."""
+    a drone's sysid << 8 | compid, none on the other serial links; both deliveries, through `Node._deliver` as a
+    reader thread calls it."""
     told: list[list[tuple[str, int | None]]] = [[], []]
     for node, log in zip([_node(False, Mode.ENGINE, None, None), _node(True, Mode.ENGINE, None, None)], told,
                          strict=True):
@@ -460,13 +466,14 @@ def test_the_compiled_delivery_tells_each_link_s_sender(compiled: ModuleType) ->
             sent = Message(Op.PUT, 1, index, 1 + index, 2)
             units: list[Any] = CanFraming(CanIdScheme(), sender=4).encode(sent) if framing == "can" else \
                 [api_frame(receive_packet(0x0013A20040A1B2C3, encode(sent)))] if framing == "xbee" else \
+                MavlinkFraming(3, 1).encode(sent) if framing == "mavlink" else \
                 list(make_serial_framing(framing).encode(sent))
             (node._deliver if node._path is None else node._deliver_compiled)(index, 1_700_000_000.0, units)
         assert node._state.failure is None
     assert told[1] == told[0]
     senders = dict(told[0])
     assert senders["radio"] is senders["words"] is senders["kilo"] is None
-    assert (senders["bus"], senders["modules"]) == (4, 0x0013A20040A1B2C3)
+    assert (senders["bus"], senders["modules"], senders["drones"]) == (4, 0x0013A20040A1B2C3, 3 << 8 | 1)
 
 
 @pytest.mark.parametrize("kind", ["messages", "change", "refused"])

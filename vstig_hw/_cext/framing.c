@@ -321,16 +321,15 @@ size_t vx_tx_room(const vx_tx_t *tx, size_t n) {
     return tx->kind == VX_XBEE ? VSTIG_XBEE_TX_BYTES(n) : n * VX_SERIAL_MAX_BYTES;
 }
 
-/* MAVLink: the TUNNELs of n messages back to back, 16 to a TUNNEL (MavlinkFraming.encode_batch); each one's
- * length at lens[k] when lens is given (room for n / 16 + 1). */
-static size_t mavlink_tunnels(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out, uint16_t *lens) {
-    size_t at = 0, w = 0, k = 0;
+/* MAVLink: the TUNNELs of n messages back to back, 16 to a TUNNEL (MavlinkFraming.encode_batch, joined as
+ * Link.units_of joins a byte stream's units). */
+static size_t mavlink_tunnels(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out) {
+    size_t at = 0, w = 0;
     while (at < n) {
         uint8_t count = (uint8_t)(n - at < VSTIG_MAVLINK_MAX_MESSAGES ? n - at : VSTIG_MAVLINK_MAX_MESSAGES);
         uint16_t len;
         vx_mav_tx_clock(&tx->mav);
         len = vstig_mavlink_encode(&tx->mav.tx, msgs + at, count, out + w);
-        if (lens != NULL) lens[k++] = len;
         w += len;
         at += count;
     }
@@ -342,7 +341,7 @@ size_t vx_tx_bytes(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out)
     uint32_t words[3];
     uint8_t k;
     if (tx->kind == VX_XBEE) return vstig_xbee_encode(&tx->xbee, msgs, n, out);
-    if (tx->kind == VX_MAVLINK) return mavlink_tunnels(tx, msgs, n, out, NULL);
+    if (tx->kind == VX_MAVLINK) return mavlink_tunnels(tx, msgs, n, out);
     for (i = 0; i < n; i++) {
         switch (tx->kind) {
         case VX_COBS8:
@@ -456,28 +455,6 @@ vstig_msg_t *vx_msgs_of(PyObject *messages, size_t *n) {
     return msgs;
 }
 
-/* MAVLink's units: one bytes object a TUNNEL, as the UDP transport sends each in its own datagram. */
-static PyObject *mavlink_units(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n) {
-    size_t tunnels = (n + VSTIG_MAVLINK_MAX_MESSAGES - 1u) / VSTIG_MAVLINK_MAX_MESSAGES, k, at = 0;
-    uint8_t *bytes = PyMem_Malloc(VX_MAV_TX_ROOM(n) + 1u);
-    uint16_t *lens = PyMem_Malloc((tunnels + 1u) * sizeof *lens);
-    PyObject *units = NULL;
-    if (bytes == NULL || lens == NULL) {
-        PyErr_NoMemory();
-    } else {
-        (void)mavlink_tunnels(tx, msgs, n, bytes, lens);
-        units = PyList_New((Py_ssize_t)tunnels);
-        for (k = 0; units != NULL && k < tunnels; at += lens[k++]) {
-            PyObject *unit = PyBytes_FromStringAndSize((const char *)bytes + at, lens[k]);
-            if (unit == NULL) Py_CLEAR(units);
-            else PyList_SET_ITEM(units, (Py_ssize_t)k, unit);
-        }
-    }
-    PyMem_Free(bytes);
-    PyMem_Free(lens);
-    return units;
-}
-
 /* MAVLink: the HEARTBEAT that announces the component, on the same sequence and timestamps as the TUNNELs. */
 static PyObject *Encoder_heartbeat(vx_encoder_t *self, PyObject *unused) {
     uint8_t out[VSTIG_MAVLINK_FRAME_MAX];
@@ -497,9 +474,7 @@ static PyObject *Encoder_encode_batch(vx_encoder_t *self, PyObject *messages) {
     vstig_msg_t *msgs = vx_msgs_of(messages, &n);
     PyObject *units = NULL;
     if (msgs == NULL) return NULL;
-    if (self->tx.kind == VX_MAVLINK) {
-        units = mavlink_units(&self->tx, msgs, n);
-    } else if (self->tx.kind != VX_CAN) {
+    if (self->tx.kind != VX_CAN) {
         uint8_t *bytes = PyMem_Malloc(vx_tx_room(&self->tx, n) + 1u);
         if (bytes == NULL) {
             PyErr_NoMemory();

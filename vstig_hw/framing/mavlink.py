@@ -319,7 +319,8 @@ class MavlinkFraming(SerialFraming):
         return self.encode_batch((msg,))
 
     def encode_batch(self, messages: Sequence[Message]) -> list[bytes]:
-        """As few TUNNELs as hold the messages, in order, 16 to a TUNNEL."""
+        """As few TUNNELs as hold the messages, in order, 16 to a TUNNEL (once shared, the Encoder's: one unit,
+        the TUNNELs back to back, as `Link.units_of` joins them anyway)."""
         if self._twin is not None:
             units: list[bytes] = self._twin.encode_batch(messages)
             return units
