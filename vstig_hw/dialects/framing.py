@@ -241,6 +241,9 @@ class XbeeMavFraming(XBeeFraming):
 
     name = "xbeemav"
     default_baud = 230400  # XbeeMav's module profiles (BD=8)
+    carries_tags = False  # ROSBuzz's Buzz blocks have no room for a record
+    feed_tagged = SerialFraming.feed_tagged
+    encode_tagged = SerialFraming.encode_tagged
     default_max_payload = 256  # the NP of the modules XbeeMav runs on (900HP, SX), until the module says its own
 
     def __init__(self, deployment: Deployment, robot_id: int = 0, dest: int = BROADCAST,

@@ -26,7 +26,10 @@ unconditionally and mypy checks a new medium against them:
 * `carries_tags`: the medium has room for authenticated messages, a message with its
   writer's epoch and tag (SPEC.md 10.5: cobs8, CAN FD, XBee, zenoh, MAVLink, ROS 2); a
   framing without room (classic CAN, e-puck words, Kilobot IR) says False, and a link
-  on it cannot require tags;
+  on it cannot require tags. `encode_tagged` puts records in units (default: raises
+  NoRoomForTags); `feed_tagged` gives each message of a unit with its record, None when it
+  came untagged (default: `feed`'s messages, all untagged). `feed` keeps a tagged unit's
+  messages without their tags (a link with auth off);
 * `capture_medium`, `capture_name`: the capture format its units go into without .mcap (can, zenoh;
   default serial, bytes in our line capture) and the framing name its records carry there (CAN logs have
   no framing field: "can" whatever the frames; default `name`);
@@ -41,12 +44,18 @@ unconditionally and mypy checks a new medium against them:
 from __future__ import annotations
 
 import abc
+from collections.abc import Sequence
 from typing import ClassVar, Generic, TypeVar
 
+from ..auth import Tagged
 from ..counters import Counters
 from ..wire import Message, Op
 
-__all__ = ["Framing", "SerialFraming"]
+__all__ = ["Framing", "NoRoomForTags", "SerialFraming"]
+
+
+class NoRoomForTags(TypeError):
+    """A framing without room for tags was asked to carry them (a link on it cannot require tags)."""
 
 Unit = TypeVar("Unit")
 
@@ -58,7 +67,7 @@ class Framing(abc.ABC, Generic[Unit]):
     names_senders: ClassVar[bool] = False  # True: `sender_of` reads who transmitted a unit from the unit itself
     names_sources: ClassVar[bool] = False  # True: `source_of` says more than the sender a unit claims
     reports_link_quality: ClassVar[bool] = False  # True: `link_quality_of` reads RSSI/quality from a unit
-    carries_tags: ClassVar[bool] = False  # True: room for a message's epoch and tag (SPEC.md 10.5)
+    carries_tags: bool = False  # True: room for a message's epoch and tag (SPEC.md 10.5); per instance: CAN FD has it
     capture_medium: ClassVar[str] = "serial"  # a key of capture.records.WRITERS
     replays_received: ClassVar[bool] = True  # False: a unit it received is re-encoded by replay, not written back
     narrows: ClassVar[bool] = False  # True: `narrow` keeps what a unit says beyond its messages
@@ -78,6 +87,14 @@ class Framing(abc.ABC, Generic[Unit]):
         """The units that carry `messages`, as few as the medium allows (default: one `encode` each)."""
         encode = self.encode
         return [unit for msg in messages for unit in encode(msg)]
+
+    def encode_tagged(self, records: Sequence[Tagged]) -> list[Unit]:
+        """The units that carry `records`, messages with their epochs and tags (`carries_tags`)."""
+        raise NoRoomForTags(f"{self.name} has no room for tags (SPEC.md 10.5)")
+
+    def feed_tagged(self, unit: Unit) -> list[tuple[Message, Tagged | None]]:
+        """Each message this unit completes with its record, None for one that came untagged."""
+        return [(msg, None) for msg in self.feed(unit)]
 
     def sender_of(self, unit: Unit) -> int | None:
         """The transmitting node's id, where the medium names it (CAN IDs do); None otherwise."""

@@ -13,7 +13,8 @@ never send the same ID with different data (CAN arbitration needs that).
 
 A classic frame carries one 8-byte wire message (DLC 8). A CAN FD frame carries
 1, 2, 3, 4, 6 or 8 messages back to back (8..64 bytes, no padding), all of the
-frame's op. Anything else is dropped and counted, never raised.
+frame's op, or one authenticated message (a 20-byte record, DLC 11; SPEC.md 10.5).
+Anything else is dropped and counted, never raised.
 
 Batching (for the gateway): per control period, hand the whole drained outbox to
 `encode_batch(messages)` (or `Link.send_many`), which packs FD frames as full as
@@ -22,12 +23,13 @@ the allowed sizes permit and falls back to one classic frame per message.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import can
 
+from ..auth import RECORD_SIZE, Tagged, decode_record, encode_record
 from ..counters import Counters
 from ..wire import GET_BIT, MESSAGE_SIZE, Message, Op, decode_many, encode
 from .base import Framing
@@ -143,6 +145,7 @@ class CanFraming(Framing[can.Message]):
         self.fd = fd
         self.bitrate_switch = bitrate_switch and fd
         self.name = "canfd" if fd else "can"
+        self.carries_tags = fd  # a classic frame's 8 bytes have no room
         self.drops = Counters()
         self._ids = (scheme.can_id(Op.PUT, sender), scheme.can_id(Op.GET, sender))
         self._parse = scheme.parse
@@ -176,28 +179,55 @@ class CanFraming(Framing[can.Message]):
                 start += size
         return frames
 
+    def encode_tagged(self, records: Sequence[Tagged]) -> list[can.Message]:
+        """One FD frame of 20 data bytes per record, under its message's op (classic CAN: no room)."""
+        if not self.fd:
+            return super().encode_tagged(records)
+        return [self._frame(record.message[0] >> 15, encode_record(record)) for record in records]
+
     # -- receiving -------------------------------------------------------------
     def feed(self, frame: can.Message) -> list[Message]:
-        if frame.is_error_frame:
-            self.drops["error_frame"] += 1
-            return []
-        parsed = self._parse(frame.arbitration_id, frame.is_extended_id)
-        if parsed is None:
-            self.drops["unknown_id"] += 1
-            return []
-        if frame.is_remote_frame:
-            self.drops["remote_frame"] += 1
+        want_get = self._op_of(frame)
+        if want_get is None:
             return []
         data = frame.data
+        if frame.is_fd and len(data) == RECORD_SIZE:
+            return [msg for msg, _ in self._record(data, want_get)]
         if not (len(data) in _FD_LENGTHS if frame.is_fd else len(data) == MESSAGE_SIZE):
             self.drops["bad_dlc"] += 1
             return []
         messages = list(decode_many(data))
-        want_get = parsed[0] is Op.GET
         kept = [m for m in messages if bool(m[0] & GET_BIT) == want_get]
         if len(kept) != len(messages):
             self.drops["op_mismatch"] += len(messages) - len(kept)
         return kept
+
+    def feed_tagged(self, frame: can.Message) -> list[tuple[Message, Tagged | None]]:
+        if frame.is_fd and len(frame.data) == RECORD_SIZE:
+            want_get = self._op_of(frame)
+            return [] if want_get is None else self._record(frame.data, want_get)
+        return [(msg, None) for msg in self.feed(frame)]
+
+    def _op_of(self, frame: can.Message) -> bool | None:
+        """True for a frame under a GET ID of ours, False for a PUT's, None (counted) for any other frame."""
+        if frame.is_error_frame:
+            self.drops["error_frame"] += 1
+            return None
+        parsed = self._parse(frame.arbitration_id, frame.is_extended_id)
+        if parsed is None:
+            self.drops["unknown_id"] += 1
+            return None
+        if frame.is_remote_frame:
+            self.drops["remote_frame"] += 1
+            return None
+        return parsed[0] is Op.GET
+
+    def _record(self, data: bytes | bytearray, want_get: bool) -> list[tuple[Message, Tagged | None]]:
+        record = decode_record(bytes(data))
+        if bool(record.message[0] & GET_BIT) != want_get:
+            self.drops["op_mismatch"] += 1
+            return []
+        return [(record.message, record)]
 
     @property
     def capture_name(self) -> str:

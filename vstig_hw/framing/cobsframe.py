@@ -9,7 +9,8 @@ nothing after the next delimiter. Each bad frame is one counted drop:
   discarded as they come, so a noisy line cannot grow the buffer);
 - `cobs`: not valid COBS;
 - `crc`: the CRC over payload and CRC is not 0;
-- `bad_length`: a good frame with another payload length (another framing's frame).
+- `bad_length`: a good frame with another payload length (another framing's frame; cobs8 also
+  takes its authenticated frames, `tagged_size`, SPEC.md 10.5).
 
 Empty frames (0x00 0x00) are idle line, not drops: a sender may put a 0x00 before a
 frame to cut off whatever partial frame a receiver holds.
@@ -40,13 +41,15 @@ def encode_frame(payload: bytes) -> bytes:
 
 
 class CobsFrameReader:
-    """Stream in, checked payloads of exactly `payload_size` bytes out; bad frames counted in `drops`."""
+    """Stream in, checked payloads of exactly `payload_size` (or `tagged_size`) bytes out; bad frames counted in
+    `drops`."""
 
-    def __init__(self, payload_size: int, drops: Counters, max_encoded: int = MAX_ENCODED_FRAME) -> None:
+    def __init__(self, payload_size: int, drops: Counters, max_encoded: int = MAX_ENCODED_FRAME, *,
+                 tagged_size: int | None = None) -> None:
         self.payload_size = payload_size
         self.drops = drops
         self.max_encoded = max_encoded
-        self._frame_size = payload_size + 2
+        self._frame_sizes = frozenset(size + 2 for size in (payload_size, tagged_size) if size is not None)
         self._pending = b""
         self._discarding = False  # inside an overlong frame: skip to the next delimiter
 
@@ -99,7 +102,7 @@ class CobsFrameReader:
         if crc16_mcrf4xx(frame) != 0:
             self.drops["crc"] += 1
             return None
-        if len(frame) != self._frame_size:
+        if len(frame) not in self._frame_sizes:
             self.drops["bad_length"] += 1
             return None
         return frame[:-2]

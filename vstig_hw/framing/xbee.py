@@ -40,12 +40,13 @@ for its header). Everything here is pure: no device, no clock.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
+from ..auth import RECORD_SIZE, Tagged, decode_batch, encode_batch
 from ..counters import Counters
-from ..wire import MESSAGE_SIZE, Message, decode_many, encode
+from ..wire import MESSAGE_SIZE, DecodeError, Message, decode_many, encode
 from .base import SerialFraming
 
 __all__ = [
@@ -100,6 +101,7 @@ _RX_HEADER = 12  # 0x90, source64, source16, options
 _TX_HEADER = 14  # 0x10, frame id, dest64, dest16, radius, options
 # Messages a frame carries at most, whatever NP a module claims: its frame data stay within MAX_FRAME_DATA.
 MAX_PER_FRAME = (MAX_FRAME_DATA - _TX_HEADER) // MESSAGE_SIZE
+Heard = TypeVar("Heard", Message, tuple[Message, Tagged | None])  # what `feed` or `feed_tagged` gives per message
 
 
 def checksum(frame_data: bytes | bytearray) -> int:
@@ -354,6 +356,7 @@ class XBeeFraming(SerialFraming):
     preamble = b""  # a 0x7E starts every frame: nothing to cut off
     replays_received = False  # a 0x90 a module handed us cannot be written back: replay re-encodes it
     narrows = True  # a cut frame keeps its header (a 0x90 its sender's address)
+    carries_tags = True  # RF data of 0xA1 and records (SPEC.md 10.5)
 
     default_max_payload = DEFAULT_MAX_PAYLOAD  # the RF payload assumed until the module says its NP
 
@@ -406,6 +409,11 @@ class XBeeFraming(SerialFraming):
             return [b"".join(map(encode, messages))] if messages else []
         return [b"".join(map(encode, messages[i:i + step])) for i in range(0, len(messages), step)]
 
+    def encode_tagged(self, records: Sequence[Tagged]) -> list[bytes]:
+        """Transmit Requests of tagged batches, as many records in each as NP allows (3 in 64 bytes)."""
+        step = max(1, (min(self.max_payload, MAX_FRAME_DATA - _TX_HEADER) - 1) // RECORD_SIZE)
+        return [self._transmit(encode_batch(list(records[i:i + step]))) for i in range(0, len(records), step)]
+
     def _transmit(self, rf_data: bytes) -> bytes:
         """A Transmit Request. The first frame of each control period has a frame id (1..255), so the module
         reports its delivery (0x8B); the others have 0. A report per frame would cost the host's UART 11 bytes
@@ -422,7 +430,14 @@ class XBeeFraming(SerialFraming):
 
     # -- receiving -----------------------------------------------------------------
     def feed(self, unit: bytes) -> list[Message]:
-        messages: list[Message] = []
+        return self._heard(unit, self._messages)
+
+    def feed_tagged(self, unit: bytes) -> list[tuple[Message, Tagged | None]]:
+        return self._heard(unit, self._records)
+
+    def _heard(self, unit: bytes, read: Callable[[bytes, int | None], list[Heard]]) -> list[Heard]:
+        """What `read` makes of the RF data of each frame in `unit`."""
+        heard: list[Heard] = []
         sender = None
         for _wire, data in self._frames(unit):
             carried = rf_data_of(data)
@@ -431,19 +446,30 @@ class XBeeFraming(SerialFraming):
                 self.drops["bad_length" if kind in (RECEIVE_PACKET, TRANSMIT_REQUEST) else "unknown_type"] += 1
                 continue
             source, rf = carried
-            heard = self._messages(rf, source)
-            if heard:
-                messages.extend(heard)
+            got = read(rf, source)
+            if got:
+                heard.extend(got)
                 sender = source if sender is None else sender
         self._last = (unit, sender)  # the gateway asks `sender_of` the unit it just fed
-        return messages
+        return heard
 
     def _messages(self, rf_data: bytes, source: int | None) -> list[Message]:
-        """The messages in one frame's RF data: whole 8-byte messages, or a `bad_length` drop."""
-        if not rf_data or len(rf_data) % MESSAGE_SIZE:
+        """The messages in one frame's RF data: whole 8-byte messages (a tagged batch's without their tags), or
+        a `bad_length` drop."""
+        if rf_data and not len(rf_data) % MESSAGE_SIZE:
+            return decode_many(rf_data)
+        return [msg for msg, _ in self._records(rf_data, source)]
+
+    def _records(self, rf_data: bytes, source: int | None) -> list[tuple[Message, Tagged | None]]:
+        """Each message of one frame's RF data with its record (SPEC.md 10.5: a tagged batch is never 8*N
+        bytes), or a `bad_length` drop."""
+        if rf_data and not len(rf_data) % MESSAGE_SIZE:
+            return [(msg, None) for msg in decode_many(rf_data)]
+        try:
+            return [(record.message, record) for record in decode_batch(rf_data)]
+        except DecodeError:
             self.drops["bad_length"] += 1
             return []
-        return decode_many(rf_data)
 
     def sender_of(self, unit: bytes) -> int | None:
         """The 64-bit source address of the Receive Packet that is this unit; None for anything else."""

@@ -3,7 +3,8 @@
 This module is the one owner of how the stigmergy rides on Zenoh::
 
     key expression   vstig/<swarm>/<stigmergy>/<gateway id>      e.g. vstig/lab/0/200
-    payload          N >= 1 wire messages of 8 bytes, back to back (8*N bytes)
+    payload          N >= 1 wire messages of 8 bytes, back to back (8*N bytes),
+                     or 0xA1 then N >= 1 authenticated records of 20 bytes (1+20*N: never 8*N; SPEC.md 10.5)
 
 Every gateway publishes under its own key and subscribes to
 `vstig/<swarm>/<stigmergy>/*`, so each one hears every other on one broadcast
@@ -18,11 +19,12 @@ turns Zenoh's samples into these.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
+from ..auth import RECORD_SIZE, Tagged, decode_batch, encode_batch
 from ..counters import Counters
-from ..wire import MESSAGE_SIZE, Message, decode_many, encode
+from ..wire import MESSAGE_SIZE, DecodeError, Message, decode_many, encode
 from .base import Framing
 
 __all__ = ["KEY_ROOT", "MAX_GATEWAY", "MAX_SAMPLE", "MAX_STIGMERGY", "ZenohFraming", "ZenohKeySpace", "ZenohSample",
@@ -108,13 +110,14 @@ class ZenohFraming(Framing[ZenohSample]):
 
     `sender` is this gateway's id, the last chunk of the key it publishes under.
     Drops (counted, never raised): `foreign_key` (a key outside the space),
-    `bad_length` (a payload that is empty or not a multiple of 8 bytes).
+    `bad_length` (a payload that is empty, or neither 8*N bytes nor a whole tagged batch).
     """
 
     names_senders = True  # the key a sample is published under ends with the gateway's id
     names_sources = True  # each sample says which session published it
     capture_medium = "zenoh"  # our zenoh line capture: samples keep their keys
     narrows = True  # a cut sample keeps its key (its sender)
+    carries_tags = True
 
     name = "zenoh"
 
@@ -132,14 +135,30 @@ class ZenohFraming(Framing[ZenohSample]):
         payload = b"".join(map(encode, messages))
         return [ZenohSample(self.own_key, payload[i:i + MAX_SAMPLE]) for i in range(0, len(payload), MAX_SAMPLE)]
 
+    def encode_tagged(self, records: Sequence[Tagged]) -> list[ZenohSample]:
+        """One tagged batch for all `records` (none for no records); one per MAX_SAMPLE bytes of a huge one."""
+        per_sample = (MAX_SAMPLE - 1) // RECORD_SIZE
+        return [ZenohSample(self.own_key, encode_batch(list(records[i:i + per_sample])))
+                for i in range(0, len(records), per_sample)]
+
     def feed(self, unit: ZenohSample) -> list[Message]:
+        payload = unit.payload
+        if payload and not len(payload) % MESSAGE_SIZE and self.space.gateway_of(unit.key) is not None:
+            return decode_many(payload)  # the untagged batch, without the pairs
+        return [msg for msg, _ in self.feed_tagged(unit)]
+
+    def feed_tagged(self, unit: ZenohSample) -> list[tuple[Message, Tagged | None]]:
         if self.space.gateway_of(unit.key) is None:
             self.drops["foreign_key"] += 1
             return []
-        if not unit.payload or len(unit.payload) % MESSAGE_SIZE:
+        payload = unit.payload
+        if payload and not len(payload) % MESSAGE_SIZE:
+            return [(msg, None) for msg in decode_many(payload)]
+        try:
+            return [(record.message, record) for record in decode_batch(payload)]
+        except DecodeError:
             self.drops["bad_length"] += 1
             return []
-        return decode_many(unit.payload)
 
     def sender_of(self, unit: ZenohSample) -> int | None:
         return self.space.gateway_of(unit.key)
