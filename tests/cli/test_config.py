@@ -92,7 +92,8 @@ def test_a_misspelled_key_gets_the_closest_one(tmp_path: Path, key: str, meant: 
 MEGABYTE = "x" * 1_000_000
 
 
-@pytest.mark.parametrize("body", [f'tick = "{MEGABYTE}"', f'"{MEGABYTE}" = 1', f'links = ["serial:loop://", "{MEGABYTE}"]',
+@pytest.mark.parametrize("body", [f'tick = "{MEGABYTE}"', f'"{MEGABYTE}" = 1',
+                                  f'links = ["serial:loop://", "{MEGABYTE}"]',
                                   f'trust = ["{MEGABYTE}"]', f'foxglove = "{MEGABYTE}"'],
                          ids=["value", "key", "link", "list item", "address"])
 def test_an_error_echoes_at_most_the_start_of_a_huge_value(tmp_path: Path, body: str) -> None:
