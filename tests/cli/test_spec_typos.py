@@ -34,6 +34,7 @@ TYPOS = [
     ("ros2", "ros2:lab?domian=7", "domian", "domain"),
     ("mavlink", "mavlink:serial:/dev/ttyUSB0?bauds=57600", "bauds", "baud"),
     ("mavlink udp", "mavlink:udpin:127.0.0.1:14560?sysd=12", "sysd", "sysid"),
+    ("auth, every kind's", "zenoh:lab?auht=require", "auht", "auth"),
 ]
 
 

@@ -65,9 +65,11 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, TypeVar
 
+from ..auth import SwarmKeys
 from ..counters import ENGINE_STATS, Counters
 from ..engine import ConflictResolver, Entry, Stigmergy
 from ..links.link import Heard, Link
+from ..tagged import AuthPolicy
 from ..timestamps import TS_NONE
 from ..wire import Message, Op
 from .compiled import compiled_for, jump_guard, receiver_for
@@ -76,6 +78,7 @@ from .guard import Guard
 from .outlet import Outlet
 from .parts import INTAKE_TICKS, ChangeListener, RawRelay, Seat
 from .readers import READ_TIMEOUT, LinkReaders
+from .signing import Signing
 
 __all__ = ["CLOSE_DRAIN", "DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Listening", "Mode", "Node",
            "SwarmClosed", "favour_latency"]
@@ -168,10 +171,12 @@ class Node:
         count_outcomes: bool = False,
         guard: Guard | None = None,
         pure: bool = False,
+        swarm_keys: SwarmKeys | None = None,
     ) -> None:
         self.links = list(links)
         if not self.links:
             raise ValueError("a node needs at least one link")
+        self.signing = _signing(self.links, mode, swarm_keys)
         names = [link.name for link in self.links]
         if len(set(names)) != len(names):
             raise ValueError(f"link names must differ, got {', '.join(names)}")
@@ -183,8 +188,9 @@ class Node:
         self.label = f"the gateway on {', '.join(names)}"  # what errors call this node ("... is closed: why")
         # A relaying Node's parts are compiled where this install has the compiled path (`compiled`): the same
         # interfaces, so everything below works on either; VSTIG_PURE=1 keeps them Python, and so does `pure` (a
-        # recording bridge: the compiled outlets write to the device where no recorder sees what they send).
-        compiled = None if pure else compiled_for(mode is not Mode.LISTEN, self.links)
+        # recording bridge: the compiled outlets write to the device where no recorder sees what they send), and so
+        # does the swarm key (`signing`: the compiled path carries no tags).
+        compiled = None if pure or self.signing is not None else compiled_for(mode is not Mode.LISTEN, self.links)
         self.compiled = compiled is not None
         # what links hear passes it before the engine, a relay or a listener sees it
         self.guard = guard if compiled is None else jump_guard(guard)
@@ -213,8 +219,11 @@ class Node:
         if mode is Mode.RAW:
             self.part = (RawRelay if compiled is None else compiled.relay)(self.outlets, self.guard)
         elif mode is Mode.ENGINE or count_outcomes:
-            self.engine = Stigmergy(robot_id, onconflict=onconflict) if compiled is None else \
-                compiled.engine(robot_id, onconflict)
+            if self.signing is not None:
+                self.engine = self.signing.engine_for(robot_id, onconflict)
+            else:
+                self.engine = Stigmergy(robot_id, onconflict=onconflict) if compiled is None else \
+                    compiled.engine(robot_id, onconflict)
             intake = INTAKE_TICKS * budget if mode is Mode.ENGINE and budget is not None else None
             self.part = self.seat = (Seat if compiled is None else compiled.seat)(
                 self.engine, self.links, self.outlets, self.guard, self._on_change, intake, period)
@@ -228,6 +237,10 @@ class Node:
         self._decode: list[Callable[[Any], list[Message]]] = [
             link.decode if receiver is None else receiver.feed
             for link, receiver in zip(self.links, receivers, strict=True)]
+        if self.signing is not None:  # each unit's records kept for the check and the engine
+            self._decode = [self.signing.decoder(link) for link in self.links]
+            for link in self.links:
+                link.record_of = self.signing.record_of(link)
         self._tickers: list[Callable[[], None]] = [
             link.tick if receiver is None else receiver.tick for link, receiver in zip(self.links, receivers,
                                                                                       strict=True)]
@@ -568,6 +581,7 @@ class Node:
         on_unit, on_heard, on_messages = self._on_unit, self._on_heard, self._on_messages
         source_of = link.source_of if link.framing.names_sources else None  # one call less a unit where it says none
         admit = self.seat.admit if self.seat is not None and self.seat.intake is not None else None
+        signing = self.signing
         heard_count = 0
         for unit in units:
             for listener in on_unit:
@@ -576,6 +590,10 @@ class Node:
             if not messages:
                 continue
             heard_count += len(messages)
+            if signing is not None:  # tags by the link's policy, before the guard and the intake
+                messages = signing.check(link, messages, t, sender_of(unit), self._on_refused)
+                if not messages:
+                    continue
             source = source_of(unit) if source_of is not None else None  # which of the link's peers sent it
             if admit is not None:  # the engine's intake per source, before any other work
                 messages = admit(index, source, messages, t)
@@ -789,6 +807,20 @@ class Node:
 
     def summary(self) -> str:
         return "  ".join(f"{name}: {counters.summary()}" for name, counters in self.stats().items())
+
+
+def _signing(links: list[Link[Any]], mode: Mode, keys: SwarmKeys | None) -> Signing | None:
+    """The swarm key's part of a Node (None: without the key); ValueError naming what cannot work."""
+    asking = [link for link in links if link.auth is not AuthPolicy.OFF]
+    if keys is None:
+        if asking:
+            raise ValueError(f"link {asking[0].name} has auth={asking[0].auth.value}: checking tags needs the swarm "
+                             "key (--swarm-key FILE, swarm_key=)")
+        return None
+    if mode is Mode.RAW:
+        raise ValueError("a raw bridge keeps no entries, so it cannot keep their proofs: run it with an engine "
+                         "(without --raw) to check tags")
+    return Signing(keys, links)
 
 
 def _settle(future: concurrent.futures.Future[T], call: Callable[[], T]) -> None:

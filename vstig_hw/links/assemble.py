@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ..counters import ENGINE_STATS
+from ..tagged import AuthPolicy
 from .link import Link, LinkSpec, NamesSenders
 from .registry import parse
 
@@ -90,7 +91,12 @@ def assemble_links(items: Sequence[str | LinkSpec | Link[Any]], robot_id: int = 
         if seen[name] > 1:
             name = f"{name}-{seen[name]}"
         try:
-            links.append(spec.build(name, robot_id=robot_id, listen_only=listen_only))
+            link = spec.build(name, robot_id=robot_id, listen_only=listen_only)
         except ValueError as error:  # building opens nothing: what fails here is how the link was asked for
             raise LinkBuildError(f"{spec.kind}:{spec.name}: {error}", "links") from None
+        if spec.auth is AuthPolicy.REQUIRE and not link.framing.carries_tags:
+            raise LinkBuildError(f"{spec.kind}:{spec.name}: auth=require, but a {link.framing.name} link has no room "
+                                 "for tags (SPEC.md 10.5): give its robots a link of their own with auth=off", "links")
+        link.auth = spec.auth
+        links.append(link)
     return links

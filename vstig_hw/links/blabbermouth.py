@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from ..tagged import AuthPolicy
 from .grammar import bad, integer, split_query
 from .link import Link, LinkSpec
 
@@ -32,6 +33,7 @@ class BlabbermouthSpec(LinkSpec):
     robots: tuple[tuple[str, int], ...]
     size: int
     deployment: str
+    auth: AuthPolicy = AuthPolicy.OFF  # auth=: what the link does with untagged messages (SPEC.md 10.6)
 
     @property
     def kind(self) -> str:

@@ -10,6 +10,7 @@ import re
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
+from ..tagged import AuthPolicy
 from .grammar import bad, flag, integer, safe_name, split_query
 from .link import Link, LinkSpec
 
@@ -57,6 +58,7 @@ class CanSpec(LinkSpec):
     kernel_filter: bool = True  # False: every frame reaches us, and foreign IDs count as drop_unknown_id
     echo: bool = False  # True: a PUT heard on this bus is re-broadcast back onto it too (Link.one_domain off)
     bus_options: tuple[tuple[str, Any], ...] = ()  # bus.KEY=VALUE: more keywords for can.Bus (host, port...)
+    auth: AuthPolicy = AuthPolicy.OFF  # auth=: what the link does with untagged messages (SPEC.md 10.6)
     capture_medium = "can"  # python-can's log formats
 
     @property

@@ -15,7 +15,11 @@ import re
 from difflib import get_close_matches
 from urllib.parse import unquote_plus
 
-__all__ = ["bad", "check_port", "flag", "integer", "safe_name", "split_query", "unknown_key"]
+from ..tagged import AuthPolicy
+
+__all__ = ["AUTH_KEY", "bad", "check_port", "flag", "integer", "safe_name", "split_query", "take_auth", "unknown_key"]
+
+AUTH_KEY = "auth"  # every kind's: auth=require|prefer|off (SPEC.md 10.6), taken off before the medium's parser
 
 _NAME_UNSAFE = re.compile(r"[^A-Za-z0-9._:-]+")
 
@@ -65,11 +69,31 @@ def split_query(spec: str, body: str, example: str, ours: tuple[str, ...], their
         elif unquote_plus(key) in theirs:  # read as the URL's handler reads it, percent-decoded
             foreign.append(item)
         else:
-            raise unknown_key(spec, item, example, (*ours, f"{open_prefix}KEY") if open_prefix else ours, theirs,
-                              whose)
+            known = (*ours, f"{open_prefix}KEY") if open_prefix else ours
+            raise unknown_key(spec, item, example, (*known, AUTH_KEY), theirs, whose)
     if foreign:
         rest = f"{rest}{'&' if '?' in rest else '?'}{'&'.join(foreign)}"  # one query, as pyserial reads it
     return rest, params
+
+
+def take_auth(spec: str, body: str, example: str) -> tuple[str, AuthPolicy | None]:
+    """`body` without its `auth=` parameter, and the policy it names (None: not given); a bad or repeated one
+    raises the one-line error naming it."""
+    if "?" not in body:
+        return body, None
+    rest, query = body.rsplit("?", 1)
+    items = query.split("&")
+    given = [item.partition("=")[2] for item in items if item.partition("=")[0] == AUTH_KEY]
+    if not given:
+        return body, None
+    if len(given) > 1:
+        raise bad(spec, f"parameter {AUTH_KEY!r} given twice", example)
+    try:
+        policy = AuthPolicy.parse(given[0])
+    except ValueError as error:
+        raise bad(spec, str(error), example) from None
+    kept = [item for item in items if item.partition("=")[0] != AUTH_KEY]
+    return (f"{rest}?{'&'.join(kept)}" if kept else rest), policy
 
 
 def integer(spec: str, example: str, key: str, text: str, low: int, high: int) -> int:

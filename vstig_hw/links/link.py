@@ -8,8 +8,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar, Generic, Protocol, TypeVar, runtime_checkable
 
+from ..auth import Tagged
 from ..counters import Counters
 from ..framing.base import Framing
+from ..tagged import AuthPolicy
 from ..transports.base import Transport
 from ..wire import Message
 
@@ -54,6 +56,9 @@ class Link(Generic[Unit]):
         self.framing = framing
         self.one_domain = one_domain
         self.counters = Counters()
+        self.auth = AuthPolicy.OFF  # its spec's auth= (set as links are assembled): a gateway with a swarm key keeps it
+        # Each message's record, on a link that sends its entries' proofs (set by a Node with the swarm key)
+        self.record_of: Callable[[Message], Tagged | None] | None = None
         self.opened = False  # open() was called and close() was not: a Link may come already open
         # The device and the framing, as the gateway and replay use them (bound once: see the class docstring).
         self.read: Callable[[float], list[Unit]] = transport.read  # units within a timeout (maybe none)
@@ -116,11 +121,31 @@ class Link(Generic[Unit]):
     def units_of(self, messages: list[Message]) -> list[Unit]:
         """The units that carry `messages`, as few as the medium allows (see `send_many`)."""
         framing = self.framing
+        if self.record_of is not None:
+            units = self._tagged_units(messages, self.record_of)
         # One message (a quiet link's usual batch): its own units, without a batching call around them.
-        units = framing.encode(messages[0]) if len(messages) == 1 else framing.encode_batch(messages)
+        elif len(messages) == 1:
+            units = framing.encode(messages[0])
+        else:
+            units = framing.encode_batch(messages)
         if len(units) > 1 and isinstance(units[0], bytes):
             units = [b"".join(units)]  # type: ignore[list-item,arg-type]  # Unit is bytes here
         return units
+
+    def _tagged_units(self, messages: list[Message], record_of: Callable[[Message], Tagged | None]) -> list[Unit]:
+        """Each message with its entry's record; one without a verified proof goes untagged, or on a link that
+        requires tags not at all (`held_unverified`)."""
+        records, plain = [], []
+        for msg in messages:
+            record = record_of(msg)
+            if record is not None:
+                records.append(record)
+            elif self.auth is AuthPolicy.REQUIRE:
+                self.counters["held_unverified"] += 1
+            else:
+                plain.append(msg)
+        framing = self.framing
+        return (framing.encode_tagged(records) if records else []) + (framing.encode_batch(plain) if plain else [])
 
     def receive(self, timeout: float) -> list[Heard]:
         """Messages completed within `timeout` seconds, read and decoded as the gateway does."""
@@ -160,11 +185,13 @@ class LinkSpec(abc.ABC):
       the same medium (29-bit CAN IDs, a zenoh key space); default, a ValueError naming the link;
     * `lossless`: the spec for a command that must not lose what it sends (Zenoh BLOCKs); default, itself;
     * `deployment`, `files_read`: a dialect link's deployment file, and every file building it reads;
-    * `reach_note`: one line to tell the user about where it reaches (a bus only this process hears).
+    * `reach_note`: one line to tell the user about where it reaches (a bus only this process hears);
+    * `auth`: the link's policy for untagged messages and bad tags (every kind's `auth=`, SPEC.md 10.6).
     """
 
     __slots__ = ()
     capture_medium: ClassVar[str] = "serial"  # a key of capture.records.WRITERS: bytes in our line capture
+    auth: AuthPolicy = AuthPolicy.OFF  # each medium's spec has the field: `registry.parse` sets it
 
     @property
     @abc.abstractmethod

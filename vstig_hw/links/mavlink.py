@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..inputs import InputFileError, read_regular
+from ..tagged import AuthPolicy
 from .grammar import bad, check_port, integer, split_query
 from .link import Link, LinkSpec
 
@@ -62,6 +63,7 @@ class MavlinkSpec(LinkSpec):
     target: int = 0
     key: str | None = None  # a key file
     link_id: int = 0
+    auth: AuthPolicy = AuthPolicy.OFF  # auth=: what the link does with untagged messages (SPEC.md 10.6)
 
     @property
     def kind(self) -> str:

@@ -7,13 +7,14 @@ EXAMPLES, NOTES and builder, so a new medium is one module plus one line here.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from functools import cache
 from importlib import import_module
 from types import ModuleType
 from typing import cast
 
-from .grammar import bad
+from .grammar import bad, take_auth
 from .link import LinkSpec
 
 __all__ = ["SCHEMES", "examples", "grammar", "notes", "parse"]
@@ -43,7 +44,9 @@ def parse(spec: str) -> LinkSpec:
         raise bad(spec, f"unknown kind {scheme!r}; a spec starts with {', '.join(f'{s}:' for s in SCHEMES)}",
                   _ANY_EXAMPLE)
     module, parser = SCHEMES[scheme]
-    return cast(Callable[[str, str], LinkSpec], getattr(_module(module), parser))(spec, body)
+    body, policy = take_auth(spec, body, _ANY_EXAMPLE.replace("?", "?auth=require&"))
+    parsed = cast(Callable[[str, str], LinkSpec], getattr(_module(module), parser))(spec, body)
+    return parsed if policy is None else dataclasses.replace(parsed, auth=policy)  # type: ignore[type-var]
 
 
 def _media() -> list[ModuleType]:

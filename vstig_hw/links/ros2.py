@@ -21,6 +21,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+from ..tagged import AuthPolicy
 from .grammar import bad, integer, safe_name, split_query
 from .link import Link, LinkSpec
 
@@ -67,6 +68,7 @@ class Ros2Spec(LinkSpec):
     reliable: bool = True
     depth: int = 100
     write_rate: int = 500
+    auth: AuthPolicy = AuthPolicy.OFF  # auth=: what the link does with untagged messages (SPEC.md 10.6)
 
     @property
     def kind(self) -> str:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
 
+from ..tagged import AuthPolicy
 from .grammar import bad, check_port, integer, safe_name, split_query, unknown_key
 from .link import Link, LinkSpec
 
@@ -76,6 +77,7 @@ class SerialSpec(LinkSpec):
     deployment: str | None = None  # the deployment TOML file of a dialect link
     api: int = 1  # xbee only: the module's API mode (AP), 1 or 2 (escaped)
     dest: int | None = None  # xbee only: a 64-bit destination instead of broadcast
+    auth: AuthPolicy = AuthPolicy.OFF  # auth=: what the link does with untagged messages (SPEC.md 10.6)
 
     @property
     def kind(self) -> str:

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..framing.zenoh import MAX_SAMPLE, MAX_STIGMERGY, ZenohFraming, ZenohKeySpace, check_swarm
 from ..inputs import InputFileError
+from ..tagged import AuthPolicy
 from ..transports.base import TransportError, one_line
 from ..wire import MESSAGE_SIZE
 from .grammar import bad, flag, integer, safe_name, split_query
@@ -80,6 +81,7 @@ class ZenohSpec(LinkSpec):
     peer_wait: float | None = None  # seconds opening may wait for a peer it connects to (None: 3); one-shot commands
     max_sample: int = MAX_SAMPLE  # payload bytes: a bigger sample is refused before it is decoded
     echo: bool = False  # True: a PUT heard on zenoh is published back onto it (Link.one_domain off)
+    auth: AuthPolicy = AuthPolicy.OFF  # auth=: what the link does with untagged messages (SPEC.md 10.6)
     capture_medium = "zenoh"  # our zenoh line capture: samples keep their keys
 
     @property

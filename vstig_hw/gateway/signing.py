@@ -1,0 +1,147 @@
+"""A gateway that holds the swarm key (SPEC.md 10.6): tags checked by each link's policy, entries kept with their
+writers' proofs, and every message sent with its entry's proof on the links that carry tags.
+
+The Node builds a `Signing` when given the swarm key, and then runs in Python (the compiled data path carries no
+tags). Each link's units decode with their records (`decoder`); `check` refuses, before the guard, what the link's
+policy refuses: an untagged message on an `auth=require` link (`drop_untagged`), a tag that does not check out
+on a `require` or `prefer` link (`drop_bad_tag`), counted on the link and by claimed writer, told to the Node's
+`refused` listeners (sniff's refused column, the roster) and logged once per writer and episode. The engine is a
+`SignedEngine`: the engine with a `TaggedStigmergy` beside it, so it orders tagged entries by (epoch, timestamp)
+and keeps each entry's proof; `record_of` gives the outlets every message's proof again (`Link.record_of`), and a
+link that requires tags never carries an entry without one (`held_unverified`).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from ..auth import SwarmKeys, Tagged
+from ..engine import ConflictResolver, Outcome, Stigmergy
+from ..links import Heard, Link
+from ..tagged import AuthPolicy, Refusal, TaggedStigmergy
+from ..timestamps import TS_NONE
+from ..wire import Message
+
+__all__ = ["EPISODE_GAP", "SignedEngine", "Signing"]
+
+EPISODE_GAP = 10.0  # seconds without a refusal of a writer that end its episode: its next refusal is logged again
+_REFUSED = tuple[str, int]  # (drop counter, claimed writer)
+
+
+class SignedEngine(Stigmergy):
+    """The engine of a gateway with the swarm key: what it receives goes through `tagged` under the policy and
+    with the record of the link it came on (`policy`, `records`, set as each batch is checked); its own writes
+    are tagged with its own key. `TaggedStigmergy` calls the engine's own `receive` and `put` beneath these."""
+
+    def __init__(self, robot_id: int, keys: SwarmKeys, onconflict: ConflictResolver | None = None) -> None:
+        super().__init__(robot_id, onconflict)
+        self.tagged = TaggedStigmergy(self, keys)
+        self.policy = AuthPolicy.OFF
+        self.records: dict[Message, Tagged] = {}  # the batch being received: message -> its record
+        self._beneath = False  # inside `tagged`: its calls are the engine's own
+
+    def put(self, key: int, value: int) -> None:
+        if self._beneath:
+            return super().put(key, value)
+        self._beneath = True
+        try:
+            self.tagged.put(key, value)
+        finally:
+            self._beneath = False
+
+    def receive(self, msg: Message) -> Outcome:
+        if self._beneath:
+            return super().receive(msg)
+        record = self.records.get(msg)
+        self._beneath = True
+        try:
+            done = self.tagged.receive(msg, self.policy, *((None, None) if record is None else record[1:]))
+        finally:
+            self._beneath = False
+        return done if isinstance(done, Outcome) else Outcome.STALE  # `Signing.check` refused those already
+
+    def record_of(self, msg: Message) -> Tagged | None:
+        return self.tagged.record_of(msg)
+
+
+class Signing:
+    """The swarm key's part of one Node: decoding with records, checking by policy, proofs for the outlets."""
+
+    def __init__(self, keys: SwarmKeys, links: Sequence[Link[Any]]) -> None:
+        self.keys = keys
+        self.links = links
+        self.engine: SignedEngine | None = None  # the Node's engine, if it has one (`engine_for`)
+        self.records: dict[Message, Tagged] = {}  # of the unit just decoded
+        self.refused: Counter[_REFUSED] = Counter()
+        self.warnings: list[str] = []  # for the caller to print (and clear), as the guard's
+        self._last_refusal: dict[tuple[str, str, int], float] = {}  # (link, reason, writer) -> when
+
+    def engine_for(self, robot_id: int, onconflict: ConflictResolver | None) -> SignedEngine:
+        self.engine = SignedEngine(robot_id, self.keys, onconflict)
+        self.engine.records = self.records
+        return self.engine
+
+    def decoder(self, link: Link[Any]) -> Callable[[Any], list[Message]]:
+        """Link `link`'s decoding: its framing's messages, their records kept in `records` until the next unit."""
+        feed_tagged = link.framing.feed_tagged
+        records = self.records
+
+        def decode(unit: Any) -> list[Message]:
+            records.clear()
+            messages = []
+            for msg, record in feed_tagged(unit):
+                messages.append(msg)
+                if record is not None:
+                    records[msg] = record
+            return messages
+
+        return link.decode if link.transmit_only else decode
+
+    def record_of(self, link: Link[Any]) -> Callable[[Message], Tagged | None] | None:
+        """What link `link`'s outlet sends each message with: its entry's record, on a link that carries tags and
+        checks them (None: messages go untagged)."""
+        if self.engine is None or link.auth is AuthPolicy.OFF or not link.framing.carries_tags:
+            return None
+        return self.engine.record_of
+
+    def check(self, link: Link[Any], messages: list[Message], t: float, sender: int | None,
+              refused: Sequence[Callable[[Heard, str], None]]) -> list[Message]:
+        """The messages of one unit heard on `link` that its policy lets in; the others counted, told to the
+        `refused` listeners and logged. The engine receives what passes under this link's policy."""
+        policy = link.auth
+        records = self.records
+        if self.engine is not None:
+            self.engine.policy = policy
+        if policy is AuthPolicy.OFF:
+            records.clear()  # tags ignored: kept untagged
+            return messages
+        kept = []
+        for msg in messages:
+            reason = self._refusal(msg, records.get(msg), policy)
+            if reason is None:
+                kept.append(msg)
+                continue
+            self._count(link, reason, msg.robot, t)
+            for listener in refused:
+                listener(Heard(msg, link.name, t, sender), reason)
+        return kept
+
+    def _refusal(self, msg: Message, record: Tagged | None, policy: AuthPolicy) -> str | None:
+        if msg.timestamp == TS_NONE:  # an empty GET shows no entry: nothing to prove
+            return None
+        if record is None:
+            return Refusal.UNTAGGED.value if policy is AuthPolicy.REQUIRE else None
+        return None if self.keys.verify(record) else Refusal.BAD_TAG.value
+
+    def _count(self, link: Link[Any], reason: str, writer: int, t: float) -> None:
+        link.counters[reason] += 1
+        self.refused[reason, writer] += 1
+        episode = (link.name, reason, writer)
+        last = self._last_refusal.get(episode)
+        self._last_refusal[episode] = t
+        if last is None or t - last > EPISODE_GAP:
+            what = "untagged writes" if reason == Refusal.UNTAGGED.value else "writes whose tag does not check out"
+            self.warnings.append(f"warning: {link.name}: refusing {what} claiming robot {writer} ({reason}; "
+                                 f"counted, logged again after {EPISODE_GAP:g} s without one)")
