@@ -18,6 +18,7 @@ Twins (C file, its types, its Python references):
     parts.c    Seat Relay         vstig_hw/gateway/parts.py
     path.c     Path               vstig_hw/gateway/node.py vstig_hw/gateway/delivery_state.py
                                   vstig_hw/transports/serial.py vstig_hw/transports/can.py vstig_hw/transports/xbee.py
+    roster.c   RosterTally        vstig_hw/gateway/roster.py
     module.c   -                  vstig_hw/native.py
 
 Constants both sides use are defined once on each side and compared by tests/native/test_native_twins_named.py
@@ -36,7 +37,7 @@ from .gateway.outlet import SendWindow
 from .gateway.parts import RawRelay
 from .gateway.parts import Seat as _Seat
 from .gateway.writer import LinkWriter
-from .links.link import Link
+from .links.link import Heard, Link
 from .wire import Message
 
 KEYS: int
@@ -98,3 +99,10 @@ class Path:
     def pump(self, index: int, timeout: float) -> int | None: ...
     def pumps(self, index: int) -> bool: ...
     def serve(self, index: int, timeout: float, turn: Callable[[], None]) -> None: ...
+
+class RosterTally:  # a Tally (gateway/roster.py)
+    def __init__(self, max_robots: int) -> None: ...
+    def take(self, link: str, t: float, sender: int | None, messages: list[Message], /) -> None: ...
+    def __call__(self, heard: Heard, reason: str) -> None: ...
+    def mark(self, robot: int, gone: bool, /) -> None: ...
+    def fold(self) -> tuple[list[tuple[Any, ...]], list[int], int, int, int]: ...

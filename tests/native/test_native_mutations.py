@@ -15,10 +15,12 @@ from types import ModuleType
 
 import pytest
 import test_native_gateway as gateway_twins  # modules, not their tests: pytest would collect those here again
+import test_native_roster as roster_twins
 import test_native_twins as engine_twins
 
 import vstig_hw.engine as engine_module
 import vstig_hw.gateway.outlet as outlet_module
+import vstig_hw.gateway.roster as roster_module
 from vstig_hw.timestamps import is_newer
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -36,6 +38,20 @@ def test_a_python_engine_that_takes_an_equal_timestamp_as_newer_is_caught(compil
     monkeypatch.setattr(engine_module, "is_newer", lambda ts, held: ts == held or is_newer(ts, held))
     with pytest.raises((AssertionError, ExceptionGroup)):
         engine_twins.test_engine_equals_stigmergy(compiled=compiled)
+
+
+def test_a_python_roster_remembering_fewer_behind_keys_is_caught(compiled: ModuleType,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(roster_module, "MAX_BEHIND_KEYS", 2)
+    with pytest.raises((AssertionError, ExceptionGroup)):
+        roster_twins.test_the_tally_folded_in_equals_the_python_roster(compiled=compiled)
+
+
+def test_a_python_roster_whose_usual_gap_moves_faster_is_caught(compiled: ModuleType,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(roster_module, "_GAP_WEIGHT", 0.5)
+    with pytest.raises((AssertionError, ExceptionGroup)):
+        roster_twins.test_the_tally_folded_in_equals_the_python_roster(compiled=compiled)
 
 
 def _run_a_native_test(**env: str) -> subprocess.CompletedProcess[str]:

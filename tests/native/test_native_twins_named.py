@@ -36,12 +36,15 @@ MIRRORED = {
     ("mavlink.h", "VX_STREAMS_KEPT"): "vstig_hw.framing.mavlink:STREAMS_KEPT",
     ("mavlink.h", "VX_NEW_STREAM_WINDOW"): "vstig_hw.framing.mavlink:NEW_STREAM_WINDOW",
     ("mavlink.h", "VX_EPOCH_2015"): "vstig_hw.framing.mavlink:_EPOCH_2015",
+    ("roster.h", "VX_ROSTER_LINKS"): "vstig_hw.links.assemble:MAX_LINKS",
+    ("roster.h", "VX_ROSTER_BEHIND_KEYS"): "vstig_hw.gateway.roster:MAX_BEHIND_KEYS",
+    ("roster.c", "GAP_WEIGHT"): "vstig_hw.gateway.roster:_GAP_WEIGHT",
 }
 # C's own: sizes of its buffers, its enums over libvstig's, names of the declared types (module.c)
 C_ONLY = {
     "FEED_BATCH", "OUTLET", "NOT_NOTED", "UNNOTED", "XBEE_UNITS_ROOM", "VX_COUNT", "VX_SERIAL_MAX_BYTES",
     "VX_COBS8", "VX_EPUCK4", "VX_KILOBOT", "VX_CAN", "VX_XBEE", "VX_MAVLINK", "VX_FRAMINGS", "VX_REPLAY_BUCKETS",
-    "VX_MAV_TX_ROOM", "NONE", "VX_GUARD_UNITS",
+    "VX_MAV_TX_ROOM", "NONE", "VX_GUARD_UNITS", "FREE_SLOT", "HEARD",
     "VX_PORT_PYTHON", "VX_PORT_SERIAL", "VX_PORT_SOCKETCAN", "PY_SSIZE_T_CLEAN",
     "DELIVERY_STATE", "WAKEUP", "HANDLE", "DEVICE_TRANSPORT", "CAN_TRANSPORT", "XBEE_TRANSPORT", "SOCKETCAN_BUS",
     "LINK", "WRITER", "FAIR_QUEUE", "FAIR_FIFO", "GUARD", "ENGINE", "ENCODER", "LOCK", "CAN_MESSAGE_TYPE", "TIME",

@@ -14,6 +14,7 @@
  *   Seat       parts.c    vstig_hw.gateway.parts.Seat
  *   Relay      parts.c    vstig_hw.gateway.parts.RawRelay
  *   Path       path.c     vstig_hw.gateway.node.Node's delivery  (and the transports' reads)
+ *   RosterTally roster.c  vstig_hw.gateway.roster.Roster's take and refuse
  *
  * The index of the twins, by file, is vstig_hw/_vstig.pyi's docstring.
  *
@@ -61,6 +62,8 @@ typedef struct {
     PyObject *name, *transport, *units_of, *one_domain, *idle, *submit, *room, *close, *hold, *active, *sparse,
         *push, *drain, *filter, *check, *read_only, *confines, *put, *get, *encode_batch, *acquire, *release;
     /* a python-can Message; the time module's clocks */
+    /* a refused message as told (vstig_hw.links.link.Heard) */
+    PyObject *message, *t, *sender;
     PyObject *arbitration_id, *is_extended_id, *is_fd, *is_remote_frame, *is_error_frame, *data, *time, *monotonic;
 } vx_names_t;
 

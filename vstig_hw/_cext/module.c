@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "path.h"
+#include "roster.h"
 
 vx_python_t vx_py;
 vx_names_t vx_n;
@@ -31,6 +32,7 @@ vx_names_t vx_n;
 #define LOCK "_thread:RLock"
 #define CAN_MESSAGE_TYPE "can.message:Message"
 #define TIME "time"
+#define HEARD "vstig_hw.links.link:Heard"
 
 /* The one list of the names the data path uses: each with the declared type it belongs to (NULL: a counter). A
  * name used on two types is listed under each. */
@@ -74,6 +76,7 @@ static const struct {
     CAN_MESSAGE_TYPE}, {&vx_n.is_fd, "is_fd", CAN_MESSAGE_TYPE}, {&vx_n.is_remote_frame, "is_remote_frame",
     CAN_MESSAGE_TYPE}, {&vx_n.is_error_frame, "is_error_frame", CAN_MESSAGE_TYPE},
     {&vx_n.data, "data", CAN_MESSAGE_TYPE},
+    {&vx_n.message, "message", HEARD}, {&vx_n.t, "t", HEARD}, {&vx_n.sender, "sender", HEARD},
     {&vx_n.time, "time", TIME}, {&vx_n.monotonic, "monotonic", TIME},
 };
 
@@ -300,7 +303,8 @@ PyMODINIT_FUNC PyInit__vstig(void) {
         add_type(module, &vx_ReceiverType, "Receiver") < 0 || add_type(module, &vx_EncoderType, "Encoder") < 0 ||
         add_type(module, &vx_WindowType, "Window") < 0 || add_type(module, &vx_OutletType, "Outlet") < 0 ||
         add_type(module, &vx_SeatType, "Seat") < 0 || add_type(module, &vx_RelayType, "Relay") < 0 ||
-        add_type(module, &vx_PathType, "Path") < 0)
+        add_type(module, &vx_PathType, "Path") < 0 ||
+        add_type(module, &vx_RosterTallyType, "RosterTally") < 0)
         goto fail;
     if (PyModule_AddIntConstant(module, "KEYS", VSTIG_KEYS) < 0) goto fail;
     if ((declared = declared_names()) == NULL || PyModule_AddObject(module, "DECLARED", declared) < 0) {

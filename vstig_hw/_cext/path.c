@@ -22,6 +22,7 @@
  * decides what a stop hands on and what it counts.
  */
 #include "path.h"
+#include "roster.h"
 
 #include <errno.h>
 #include <time.h>
@@ -101,22 +102,34 @@ static int python_guard(vx_path_t *p, vx_link_t *link, PyObject *sender, double 
 typedef struct {
     PyObject *messages; /* `messages`: what each unit carried past the guard */
     PyObject *refused;  /* `refused`: each message the guard refused, with its drop counter's name */
+    Py_ssize_t python_messages, python_refused; /* of them, Python code (a RosterTally is fed here in C) */
 } vx_told_t;
 
-/* The Node's `messages` listeners, told what one unit carried past the guard, in their order (Node._arrive). */
-static int tell_messages(const vx_link_t *link, double t, PyObject *sender, const vstig_msg_t *msgs, size_t n,
-                         PyObject *listeners) {
-    PyObject *list = PyList_New((Py_ssize_t)n), *when = PyFloat_FromDouble(t);
+/* The Node's `messages` listeners, told what one unit carried past the guard, in their order (Node._arrive); a
+ * roster's tally in C, the others with a list of Message built once. */
+static int tell_messages(const vx_link_t *link, double t, PyObject *sender, int named, unsigned long long sender_id,
+                         const vstig_msg_t *msgs, size_t n, const vx_told_t *told) {
+    PyObject *listeners = told->messages, *list = NULL, *when = NULL;
     Py_ssize_t i;
-    int status = list == NULL || when == NULL ? -1 : 0;
-    for (i = 0; status == 0 && i < (Py_ssize_t)n; i++) {
+    int status = 0;
+    if (told->python_messages) {
+        list = PyList_New((Py_ssize_t)n);
+        when = PyFloat_FromDouble(t);
+        status = list == NULL || when == NULL ? -1 : 0;
+    }
+    for (i = 0; status == 0 && list != NULL && i < (Py_ssize_t)n; i++) {
         PyObject *m = vx_message(&msgs[i]);
         if (m == NULL) status = -1;
         else PyList_SET_ITEM(list, i, m);
     }
     for (i = 0; status == 0 && i < PyTuple_GET_SIZE(listeners); i++) {
-        PyObject *done = PyObject_CallFunctionObjArgs(PyTuple_GET_ITEM(listeners, i), link->name, when, sender, list,
-                                                      NULL);
+        vx_tally_t *tally = vx_tally_of_take(PyTuple_GET_ITEM(listeners, i));
+        PyObject *done;
+        if (tally != NULL) {
+            status = vx_tally_take(tally, link->name, t, named, sender_id, msgs, n);
+            continue;
+        }
+        done = PyObject_CallFunctionObjArgs(PyTuple_GET_ITEM(listeners, i), link->name, when, sender, list, NULL);
         if (done == NULL) status = -1;
         Py_XDECREF(done);
     }
@@ -166,19 +179,24 @@ static int judge_telling(vx_path_t *p, const vx_link_t *link, double t, PyObject
     return status;
 }
 
-/* Past the engine's intake: the guard, the `messages` listeners, the part. `sender`: as Python's (None: unsaid). */
+/* Past the engine's intake: the guard, the `messages` listeners, the part. `sender`: as Python's (None: unsaid),
+ * and as C's (`named`, `sender_id`). */
 static int judge_and_take(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, PyObject *sender,
-                          const vx_told_t *told) {
+                          int named, unsigned long long sender_id, const vx_told_t *told) {
     vx_link_t *link = &p->links[index];
     PyObject *part = p->part;
-    if (p->guard != Py_None && PyTuple_GET_SIZE(told->refused)) {
+    int jump = p->guard != Py_None && PyObject_TypeCheck(p->guard, &vx_JumpGuardType);
+    if (p->guard != Py_None && PyTuple_GET_SIZE(told->refused) && (told->python_refused || !jump)) {
         if (judge_telling(p, link, t, sender, msgs, &n, told->refused) < 0) return -1;
     } else if (p->guard != Py_None) {
-        if (PyObject_TypeCheck(p->guard, &vx_JumpGuardType)) {
+        if (jump) { /* the refused ones told to the rosters' tallies, if any listen, in C */
             uint32_t now = vx_guard_units(t);
             size_t i, kept = 0;
+            Py_ssize_t k;
             for (i = 0; i < n; i++) {
                 if (vx_guard_passes((vx_guard_t *)p->guard, &msgs[i], now)) msgs[kept++] = msgs[i];
+                else for (k = 0; k < PyTuple_GET_SIZE(told->refused); k++)
+                    vx_tally_refuse((vx_tally_t *)PyTuple_GET_ITEM(told->refused, k), t, named, sender_id, &msgs[i]);
             }
             if (vx_count(link->counters, vx_n.drop_jump, (Py_ssize_t)(n - kept)) < 0) return -1;
             n = kept;
@@ -187,7 +205,8 @@ static int judge_and_take(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t 
         }
     }
     if (n == 0) return 0;
-    if (PyTuple_GET_SIZE(told->messages) && tell_messages(link, t, sender, msgs, n, told->messages) < 0) return -1;
+    if (PyTuple_GET_SIZE(told->messages) && tell_messages(link, t, sender, named, sender_id, msgs, n, told) < 0)
+        return -1;
     if (part == Py_None) return 0;
     if (PyObject_TypeCheck(part, &vx_SeatType)) return vx_seat_take((vx_seat_t *)part, index, msgs, n, sender, Py_None);
     return vx_relay_take((vx_relay_t *)part, index, msgs, n, Py_None);
@@ -206,11 +225,11 @@ static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, s
     if (n == 0) return 0;
     /* the sender as a Python object only where Python code is told it (a Python guard, a listener) */
     if (seat && (telling = vx_seat_listening((vx_seat_t *)part)) < 0) return -1;
-    if (!named || !(telling || PyTuple_GET_SIZE(told->messages) || PyTuple_GET_SIZE(told->refused) ||
-                        (p->guard != Py_None && !PyObject_TypeCheck(p->guard, &vx_JumpGuardType))))
-        return judge_and_take(p, index, t, msgs, n, Py_None, told);
+    if (!named || !(telling || told->python_messages || told->python_refused ||
+                    (p->guard != Py_None && !PyObject_TypeCheck(p->guard, &vx_JumpGuardType))))
+        return judge_and_take(p, index, t, msgs, n, Py_None, named, sender, told);
     if ((who = PyLong_FromUnsignedLongLong(sender)) == NULL) return -1;
-    status = judge_and_take(p, index, t, msgs, n, who, told);
+    status = judge_and_take(p, index, t, msgs, n, who, named, sender, told);
     Py_DECREF(who);
     return status;
 }
@@ -352,7 +371,7 @@ static PyObject *thread_ident(void) { return PyLong_FromUnsignedLong(PyThread_ge
  * or -1 on error. */
 static int calls_python(const vx_path_t *p, const vx_told_t *told) {
     int seat = p->part != Py_None && PyObject_TypeCheck(p->part, &vx_SeatType);
-    if (PyTuple_GET_SIZE(told->messages) || PyTuple_GET_SIZE(told->refused)) return 1;
+    if (told->python_messages || told->python_refused) return 1;
     if (p->guard != Py_None && !PyObject_TypeCheck(p->guard, &vx_JumpGuardType)) return 1;
     if (seat && vx_engine_calls_python(((vx_seat_t *)p->part)->engine)) return 1;
     return seat ? vx_seat_listening((vx_seat_t *)p->part) : 0;
@@ -363,7 +382,15 @@ static int told_now(const vx_path_t *p, vx_told_t *told) {
     Py_ssize_t n = PyList_GET_SIZE(p->told);
     told->messages = n > 0 ? PySequence_Tuple(PyList_GET_ITEM(p->told, 0)) : PyTuple_New(0);
     told->refused = n > 1 ? PySequence_Tuple(PyList_GET_ITEM(p->told, 1)) : PyTuple_New(0);
-    if (told->messages != NULL && told->refused != NULL) return 0;
+    if (told->messages != NULL && told->refused != NULL) {
+        Py_ssize_t i;
+        told->python_messages = told->python_refused = 0;
+        for (i = 0; i < PyTuple_GET_SIZE(told->messages); i++)
+            told->python_messages += vx_tally_of_take(PyTuple_GET_ITEM(told->messages, i)) == NULL;
+        for (i = 0; i < PyTuple_GET_SIZE(told->refused); i++)
+            told->python_refused += !PyObject_TypeCheck(PyTuple_GET_ITEM(told->refused, i), &vx_RosterTallyType);
+        return 0;
+    }
     Py_CLEAR(told->messages);
     Py_CLEAR(told->refused);
     return -1;

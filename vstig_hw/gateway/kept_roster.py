@@ -3,8 +3,13 @@
 `keep_roster(node)` listens to what passed the guard (`messages`: one call per unit,
 no `Heard` built), what the guard refused (`refused`) and the ticks (`tick`: the
 roster's clock, every control period). Views read `snapshot()` from any thread, and
-`on_change` tells each state change on the thread that saw it (under the Node's lock:
-quick, never waiting). `cancel()` stops the feeding.
+`on_change` tells each state change on the thread that saw it (quick, never waiting).
+`cancel()` stops the feeding.
+
+Where the data path is compiled (not `VSTIG_PURE=1`), the roster takes messages and refusals
+through a `RosterTally` (vstig_hw/_cext/roster.c): a compiled Path feeds it with no Python
+per message, and the roster folds it in each tick and on every read; a robot heard again is
+then told alive on the thread that folded (the tick's, or a view's).
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ import time
 import weakref
 from typing import TYPE_CHECKING
 
+from ..native import native
 from .roster import RobotView, Roster, StateListener
 
 if TYPE_CHECKING:
@@ -27,7 +33,10 @@ _KEPT: weakref.WeakKeyDictionary[Node, KeptRoster] = weakref.WeakKeyDictionary()
 class KeptRoster:
     def __init__(self, node: Node, roster: Roster) -> None:
         self.roster = roster
-        self.listening = node.listen(messages=roster.take, refused=roster.refuse, tick=self._sweep)
+        if native is not None and not roster.tallied and len(roster) == 0:
+            roster.use_tally(native.RosterTally(roster.max_robots))
+        messages, refused = roster.listeners()
+        self.listening = node.listen(messages=messages, refused=refused, tick=self._sweep)
         _KEPT[node] = self
 
     @staticmethod

@@ -1,5 +1,7 @@
 """Who is in the swarm: per robot, where and when it was heard, what it wrote and asked, and its state.
 
+C twin: vstig_hw/_cext/roster.c (`RosterTally`: `take` and `refuse` in C, folded in by `fold`).
+
 Pure bookkeeping, sans-I/O: a gateway feeds it what passed its guard (`take`, the
 signature of the Node's `messages` listener: one call per unit, no `Heard` built),
 what its guard refused (`refuse`) and the time (`sweep`, every control period);
@@ -25,6 +27,11 @@ the writer whose old write is still being sent.
 Bounded: at most `max_robots` robots (default 4,096); a new one past that takes a
 `gone` robot's place, else is counted in `untracked` and never stored. Each robot
 keeps at most MAX_BEHIND_KEYS keys it lags on (more: `behind_untracked`).
+
+Compiled (`use_tally`): the per-message half, `take` and `refuse`, is a `RosterTally`'s,
+which a compiled Path feeds with no Python per message; the roster folds what it tallied in
+(`fold`) at every sweep and every read, then keeps states, rates and views as here. A robot
+heard again after going quiet or gone is told alive at the fold, with the time it was heard.
 """
 
 from __future__ import annotations
@@ -33,10 +40,11 @@ import array
 import enum
 import logging
 import math
+import threading
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 from ..links.link import Heard
 from ..timestamps import is_newer
@@ -120,6 +128,17 @@ class _Robot:
 
 
 StateListener = Callable[[StateChange], None]
+MessagesListener = Callable[[str, float, "int | None", list[Message]], None]
+RefusedListener = Callable[[Heard, str], None]
+
+
+class Tally(Protocol):
+    """The roster's per-message half in C (vstig_hw._vstig.RosterTally): fed as a Node's listeners, folded in."""
+
+    def take(self, link: str, t: float, sender: int | None, messages: list[Message], /) -> None: ...
+    def __call__(self, heard: Heard, reason: str) -> None: ...
+    def mark(self, robot: int, gone: bool, /) -> None: ...
+    def fold(self) -> tuple[list[tuple[Any, ...]], list[int], int, int, int]: ...
 
 
 class Roster:
@@ -147,6 +166,49 @@ class Roster:
         self.on_change: list[StateListener] = []
         self._swept = math.nan  # when `sweep` last ran
         self._gone = 0  # robots tracked whose state is gone
+        self._tally: Tally | None = None  # the per-message half in C, if the data path is compiled
+        self._folding = threading.Lock()  # one fold at a time (a sweep on the Node's thread, a view on its own)
+
+    # -- how it is fed ---------------------------------------------------------------------
+    def use_tally(self, tally: Tally) -> None:
+        """Take messages and refusals through `tally` (a RosterTally of `max_robots`), before any is fed."""
+        if self._robots or self._tally is not None:
+            raise ValueError("a roster takes a tally before it is fed, once")
+        self._tally = tally
+
+    @property
+    def tallied(self) -> bool:
+        """Whether a tally in C takes what it is fed."""
+        return self._tally is not None
+
+    def listeners(self) -> tuple[MessagesListener, RefusedListener]:
+        """What feeds it, as a Node's `messages` and `refused` listeners: its tally's (C), or its own `take`
+        and `refuse`."""
+        if self._tally is None:
+            return self.take, self.refuse
+        return self._tally.take, self._tally
+
+    def fold(self) -> None:
+        """What the tally took since the last fold, into the robots (no-op without a tally)."""
+        tally = self._tally
+        if tally is None:
+            return
+        with self._folding:
+            records, evicted, self.untracked, self.behind_untracked, self.unattributed = tally.fold()
+            robots = self._robots
+            for who in evicted:
+                forgotten = robots.pop(who, None)
+                if forgotten is not None and forgotten.state is RobotState.GONE:
+                    self._gone -= 1
+            for (who, named, fresh, first, last, gap, messages, writes, gets, refused, links, revived,
+                 behind) in records:
+                robot = robots.get(who)
+                if robot is None or fresh:
+                    robot = robots[who] = _Robot(who, named, first)
+                robot.last, robot.gap, robot.messages, robot.writes = last, gap, messages, writes
+                robot.gets, robot.refused, robot.links, robot.behind_since = gets, refused, set(links), dict(behind)
+                if revived is not None and robot.state is not _ALIVE:
+                    self._change(robot, _ALIVE, revived)
 
     # -- what the gateway heard: the hot path ---------------------------------------------
     # Per unit: one dict lookup and a few attributes; per message: its op and one timestamp compared with the
@@ -267,6 +329,7 @@ class Roster:
     # -- time ------------------------------------------------------------------------
     def sweep(self, now: float) -> None:
         """The time is `now` (the gateway's clock, as `take`'s): rates, states, and who is behind."""
+        self.fold()
         dt = now - self._swept
         smoothing = 1.0 - math.exp(-dt / RATE_WINDOW) if dt > 0 else 0.0  # nan on the first sweep: no rate yet
         for robot in list(self._robots.values()):
@@ -289,6 +352,8 @@ class Roster:
     def _change(self, robot: _Robot, state: RobotState, t: float) -> None:
         old, robot.state = robot.state, state
         self._gone += (state is RobotState.GONE) - (old is RobotState.GONE)
+        if self._tally is not None and (state is RobotState.GONE) != (old is RobotState.GONE):
+            self._tally.mark(robot.who, state is RobotState.GONE)  # only gone robots make room
         self.changes[f"{old.value}->{state.value}"] += 1
         links = tuple(sorted(robot.links))
         log.info("robot %d (%s on %s): %s -> %s", robot.who, "sender" if robot.named else "writer",
@@ -299,12 +364,14 @@ class Roster:
 
     # -- what views read --------------------------------------------------------------
     def __len__(self) -> int:
+        self.fold()
         return len(self._robots)
 
     def snapshot(self, now: float) -> list[RobotView]:
         """Every robot tracked, sorted by state (alive, quiet, gone) then id."""
         # Copies taken in one step each (a C-level list of a dict or a set), so that a view may be made on
         # another thread than the one feeding the roster: what it shows may be a message old, never torn.
+        self.fold()
         views = [self._view(robot, now) for robot in list(self._robots.values())]
         views.sort(key=lambda v: (STATE_ORDER[v.state], v.robot))
         return views
@@ -318,11 +385,13 @@ class Roster:
 
     def last_heard(self, robot: int) -> float | None:
         """When `robot` was last heard (`take`'s clock); None if it is not tracked."""
+        self.fold()
         tracked = self._robots.get(robot)
         return None if tracked is None else tracked.last
 
     def counts(self) -> dict[tuple[str, RobotState], int]:
         """(link, state) -> robots in that state heard on that link (the metrics' series: not one per robot)."""
+        self.fold()
         out: Counter[tuple[str, RobotState]] = Counter()
         for robot in list(self._robots.values()):
             for link in sorted(robot.links):

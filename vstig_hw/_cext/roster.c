@@ -1,0 +1,452 @@
+/*
+ * RosterTally: the per-message half of vstig_hw.gateway.roster.Roster in C (`take` and `refuse`: who was heard,
+ * when, on which link, what it wrote and asked, the keys it showed older than the newest), so that a compiled
+ * Path keeps the roster with no Python per message. The Roster folds it in (`fold`) each tick and on every read;
+ * states, their changes, rates and every view stay the Roster's. The same rules and float operations in the same
+ * order as Roster.take: the same tallies.
+ *
+ * Reference: vstig_hw/gateway/roster.py (held equal by tests/native; the index of the twins: vstig_hw/_vstig.pyi).
+ */
+#include "roster.h"
+
+#include <math.h>
+#include <string.h>
+
+#define GAP_WEIGHT 0.25 /* Roster's _GAP_WEIGHT: how fast a robot's usual gap follows its latest one */
+#define FREE_SLOT (-1)
+
+typedef struct {
+    unsigned long long who;
+    unsigned long long seq; /* when it was added: the Roster's dict order, which breaks an eviction's tie */
+    double first, last, gap;
+    double revived;         /* when first heard since the last fold (NaN: not heard since) */
+    long long messages, writes, gets, refused;
+    uint64_t links;         /* a bit per link name (the tally's `names`) */
+    uint8_t named, gone, used, fresh;
+    uint8_t nbehind;
+    uint16_t behind_key[VX_ROSTER_BEHIND_KEYS];
+    double behind_since[VX_ROSTER_BEHIND_KEYS];
+} robot_t;
+
+struct vx_tally {
+    PyObject_HEAD
+    Py_ssize_t max_robots;
+    robot_t *robots;         /* max_robots places */
+    int32_t *table;          /* who -> place, open addressing (linear probing), `mask + 1` slots */
+    size_t mask;
+    int32_t *spare;          /* places free, a stack */
+    Py_ssize_t nspare, count, ngone;
+    uint8_t *dirty;          /* per place: listed in `touched` since the last fold */
+    int32_t *touched;
+    Py_ssize_t ntouched;
+    unsigned long long *evicted; /* robots forgotten since the last fold (at most max_robots: only gone ones are) */
+    Py_ssize_t nevicted;
+    unsigned long long seq;
+    long long untracked, behind_untracked, unattributed;
+    PyObject *names;         /* list of link names, a bit each */
+    uint16_t newest[VSTIG_KEYS]; /* key -> newest timestamp heard (0: none) */
+};
+
+static size_t slot_of(const vx_tally_t *t, unsigned long long who) {
+    unsigned long long h = who * 0x9E3779B97F4A7C15ull;
+    return (size_t)(h >> 32) & t->mask;
+}
+
+static robot_t *find(const vx_tally_t *t, unsigned long long who) {
+    size_t i = slot_of(t, who);
+    while (t->table[i] != FREE_SLOT) {
+        robot_t *r = &t->robots[t->table[i]];
+        if (r->who == who) return r;
+        i = (i + 1) & t->mask;
+    }
+    return NULL;
+}
+
+static void touch(vx_tally_t *t, const robot_t *r) {
+    int32_t place = (int32_t)(r - t->robots);
+    if (!t->dirty[place]) {
+        t->dirty[place] = 1;
+        t->touched[t->ntouched++] = place;
+    }
+}
+
+static void unlink_who(vx_tally_t *t, unsigned long long who) {
+    /* backward-shift deletion: every later member of the run stays findable */
+    size_t i = slot_of(t, who), j, home;
+    while (t->robots[t->table[i]].who != who) i = (i + 1) & t->mask;
+    j = i;
+    for (;;) {
+        j = (j + 1) & t->mask;
+        if (t->table[j] == FREE_SLOT) break;
+        home = slot_of(t, t->robots[t->table[j]].who);
+        if (((j - home) & t->mask) >= ((j - i) & t->mask)) {
+            t->table[i] = t->table[j];
+            i = j;
+        }
+    }
+    t->table[i] = FREE_SLOT;
+}
+
+/* Roster._evict_gone: forget the gone robot heard longest ago (the first added of equals); 0 if none is gone. */
+static int evict_gone(vx_tally_t *t) {
+    robot_t *oldest = NULL;
+    Py_ssize_t i;
+    if (!t->ngone) return 0;
+    for (i = 0; i < t->max_robots; i++) {
+        robot_t *r = &t->robots[i];
+        if (r->used && r->gone &&
+            (oldest == NULL || r->last < oldest->last || (r->last == oldest->last && r->seq < oldest->seq)))
+            oldest = r;
+    }
+    unlink_who(t, oldest->who);
+    oldest->used = 0;
+    t->spare[t->nspare++] = (int32_t)(oldest - t->robots);
+    t->evicted[t->nevicted++] = oldest->who;
+    t->count--;
+    t->ngone--;
+    return 1;
+}
+
+/* Roster._new: NULL when the roster is full of robots not gone (counted in `untracked`). */
+static robot_t *add(vx_tally_t *t, unsigned long long who, int named, double when) {
+    robot_t *r;
+    int32_t place;
+    size_t i;
+    if (t->count >= t->max_robots && !evict_gone(t)) {
+        t->untracked++;
+        return NULL;
+    }
+    place = t->spare[--t->nspare];
+    r = &t->robots[place];
+    memset(r, 0, sizeof *r);
+    r->who = who;
+    r->seq = t->seq++;
+    r->named = (uint8_t)named;
+    r->used = r->fresh = 1;
+    r->first = r->last = when;
+    r->revived = NAN;
+    for (i = slot_of(t, who); t->table[i] != FREE_SLOT; i = (i + 1) & t->mask) {}
+    t->table[i] = place;
+    t->count++;
+    touch(t, r);
+    return r;
+}
+
+/* The bit of link name `link`, learning it; -1 with ValueError past VX_ROSTER_LINKS. */
+static int link_bit(vx_tally_t *t, PyObject *link) {
+    Py_ssize_t i, n = PyList_GET_SIZE(t->names);
+    for (i = 0; i < n; i++) {
+        if (PyList_GET_ITEM(t->names, i) == link) return (int)i;
+    }
+    for (i = 0; i < n; i++) {
+        int same = PyObject_RichCompareBool(PyList_GET_ITEM(t->names, i), link, Py_EQ);
+        if (same) return same < 0 ? -1 : (int)i;
+    }
+    if (n >= VX_ROSTER_LINKS) {
+        PyErr_Format(PyExc_ValueError, "a roster tracks at most %d links; %R is one more", VX_ROSTER_LINKS, link);
+        return -1;
+    }
+    return PyList_Append(t->names, link) < 0 ? -1 : (int)n;
+}
+
+static void heard_at(robot_t *r, double when) {
+    double gap = when - r->last;
+    if (gap > 0) r->gap = r->gap != 0.0 ? r->gap + (gap - r->gap) * GAP_WEIGHT : gap;
+    r->last = when;
+}
+
+/* Heard: on a link, alive again if it was gone (Roster._change to alive, which the fold tells). */
+static void heard(vx_tally_t *t, robot_t *r, uint64_t bit, double when) {
+    if (when != r->last) heard_at(r, when);
+    r->links |= bit;
+    if (r->gone) {
+        r->gone = 0;
+        t->ngone--;
+    }
+    if (isnan(r->revived)) r->revived = when;
+    touch(t, r);
+}
+
+static int behind_at(const robot_t *r, uint16_t key) {
+    int i;
+    for (i = 0; i < r->nbehind; i++) {
+        if (r->behind_key[i] == key) return i;
+    }
+    return -1;
+}
+
+static void caught_up(robot_t *r, uint16_t key) {
+    int i = r->nbehind ? behind_at(r, key) : -1;
+    if (i < 0) return;
+    r->nbehind--;
+    r->behind_key[i] = r->behind_key[r->nbehind];
+    r->behind_since[i] = r->behind_since[r->nbehind];
+}
+
+/* Roster._lags: `r` showed an entry for `key` older than the newest heard (bounded per robot). */
+static void lags(vx_tally_t *t, robot_t *r, uint16_t key, double when) {
+    if (behind_at(r, key) >= 0) return;
+    if (r->nbehind < VX_ROSTER_BEHIND_KEYS) {
+        r->behind_key[r->nbehind] = key;
+        r->behind_since[r->nbehind++] = when;
+    } else {
+        t->behind_untracked++;
+    }
+}
+
+static int is_newer(uint16_t a, uint16_t b) { /* vstig_hw.timestamps.is_newer */
+    uint16_t distance = (uint16_t)(a - b);
+    if (b == 0) return a != 0;
+    if (a == 0) return 0;
+    return (distance > 0 && distance < 0x8000u) || (distance == 0x8000u && a > b);
+}
+
+/* One message's timestamp against the newest of its key (Roster.take's loop body). */
+static void shown(vx_tally_t *t, robot_t *r, const vstig_msg_t *m, double when) {
+    uint16_t key = m->key, held = t->newest[key], ts = m->timestamp;
+    if (ts == held) {
+        caught_up(r, key);
+    } else if (is_newer(ts, held)) {
+        t->newest[key] = ts;
+        caught_up(r, key);
+    } else {
+        lags(t, r, key, when);
+    }
+}
+
+int vx_tally_take(vx_tally_t *t, PyObject *link, double when, int named, unsigned long long sender,
+                  const vstig_msg_t *msgs, size_t n) {
+    int bit = link_bit(t, link);
+    size_t i, gets = 0;
+    robot_t *r;
+    if (bit < 0) return -1;
+    if (named) {
+        if ((r = find(t, sender)) == NULL && (r = add(t, sender, 1, when)) == NULL) return 0;
+        heard(t, r, (uint64_t)1 << bit, when);
+        r->messages += (long long)n;
+        for (i = 0; i < n; i++) {
+            gets += msgs[i].op == VSTIG_GET;
+            shown(t, r, &msgs[i], when);
+        }
+        r->gets += (long long)gets;
+        r->writes += (long long)(n - gets);
+        return 0;
+    }
+    for (i = 0; i < n; i++) { /* a medium that names no sender: each PUT is its writer's, a GET nobody's */
+        if (msgs[i].op == VSTIG_GET) {
+            t->unattributed++;
+            continue;
+        }
+        if ((r = find(t, msgs[i].robot)) == NULL && (r = add(t, msgs[i].robot, 0, when)) == NULL) continue;
+        heard(t, r, (uint64_t)1 << bit, when);
+        r->messages++;
+        r->writes++;
+        shown(t, r, &msgs[i], when);
+    }
+    return 0;
+}
+
+void vx_tally_refuse(vx_tally_t *t, double when, int named, unsigned long long sender, const vstig_msg_t *msg) {
+    unsigned long long who = named ? sender : msg->robot;
+    robot_t *r;
+    if (!named && msg->op == VSTIG_GET) {
+        t->unattributed++;
+        return;
+    }
+    if ((r = find(t, who)) == NULL && (r = add(t, who, named, when)) == NULL) return;
+    r->refused++;
+    touch(t, r);
+}
+
+/* ---- the Python interface ---------------------------------------------------------------- */
+
+static PyObject *Tally_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
+    static char *kwlist[] = {"max_robots", NULL};
+    Py_ssize_t max_robots, i;
+    size_t slots = 2;
+    vx_tally_t *self;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "n", kwlist, &max_robots)) return NULL;
+    if (max_robots < 1 || max_robots > (1 << 24))
+        return PyErr_Format(PyExc_ValueError, "max_robots must be in 1..%d, got %zd", 1 << 24, max_robots);
+    while (slots < 2 * (size_t)max_robots) slots *= 2;
+    self = (vx_tally_t *)type->tp_alloc(type, 0);
+    if (self == NULL) return NULL;
+    self->max_robots = max_robots;
+    self->mask = slots - 1;
+    self->robots = PyMem_Calloc((size_t)max_robots, sizeof *self->robots);
+    self->table = PyMem_Malloc(slots * sizeof *self->table);
+    self->spare = PyMem_Malloc((size_t)max_robots * sizeof *self->spare);
+    self->dirty = PyMem_Calloc((size_t)max_robots, 1);
+    self->touched = PyMem_Malloc((size_t)max_robots * sizeof *self->touched);
+    self->evicted = PyMem_Malloc((size_t)max_robots * sizeof *self->evicted);
+    self->names = PyList_New(0);
+    if (self->robots == NULL || self->table == NULL || self->spare == NULL || self->dirty == NULL ||
+        self->touched == NULL || self->evicted == NULL || self->names == NULL) {
+        Py_DECREF(self);
+        return PyErr_NoMemory();
+    }
+    for (i = 0; i < (Py_ssize_t)slots; i++) self->table[i] = FREE_SLOT;
+    for (i = 0; i < max_robots; i++) self->spare[i] = (int32_t)(max_robots - 1 - i);
+    self->nspare = max_robots;
+    return (PyObject *)self;
+}
+
+static void Tally_dealloc(vx_tally_t *self) {
+    PyMem_Free(self->robots);
+    PyMem_Free(self->table);
+    PyMem_Free(self->spare);
+    PyMem_Free(self->dirty);
+    PyMem_Free(self->touched);
+    PyMem_Free(self->evicted);
+    Py_XDECREF(self->names);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+/* sender: None (unnamed) or an int; 0/1 into *named, -1 on error */
+static int sender_of(PyObject *obj, int *named, unsigned long long *sender) {
+    *named = obj != Py_None;
+    if (!*named) return 0;
+    *sender = PyLong_AsUnsignedLongLong(obj);
+    return *sender == (unsigned long long)-1 && PyErr_Occurred() ? -1 : 0;
+}
+
+static PyObject *Tally_take(vx_tally_t *self, PyObject *const *args, Py_ssize_t nargs) {
+    PyObject *seq;
+    vstig_msg_t *msgs;
+    unsigned long long sender = 0;
+    double when;
+    int named, status = 0;
+    Py_ssize_t i, n;
+    if (nargs != 4) return PyErr_Format(PyExc_TypeError, "take(link, t, sender, messages), got %zd arguments", nargs);
+    when = PyFloat_AsDouble(args[1]);
+    if ((when == -1.0 && PyErr_Occurred()) || sender_of(args[2], &named, &sender) < 0) return NULL;
+    if ((seq = PySequence_Fast(args[3], "messages must be a sequence of Message")) == NULL) return NULL;
+    n = PySequence_Fast_GET_SIZE(seq);
+    msgs = PyMem_Malloc((size_t)(n ? n : 1) * sizeof *msgs);
+    if (msgs == NULL) status = -1;
+    for (i = 0; status == 0 && i < n; i++) status = vx_msg_of(PySequence_Fast_GET_ITEM(seq, i), &msgs[i]);
+    if (status == 0) status = vx_tally_take(self, args[0], when, named, sender, msgs, (size_t)n);
+    PyMem_Free(msgs);
+    Py_DECREF(seq);
+    if (status < 0) return PyErr_Occurred() ? NULL : PyErr_NoMemory();
+    Py_RETURN_NONE;
+}
+
+/* The `refused` listener: tally(heard, reason), a Heard's message, time and sender. */
+static PyObject *Tally_call(vx_tally_t *self, PyObject *args, PyObject *kwds) {
+    PyObject *heard_obj, *reason, *message = NULL, *when_obj = NULL, *sender_obj = NULL;
+    vstig_msg_t msg;
+    unsigned long long sender = 0;
+    double when = -1.0;
+    int named = 0, ok;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OO", (char *[]){"heard", "reason", NULL}, &heard_obj, &reason))
+        return NULL;
+    ok = (message = PyObject_GetAttr(heard_obj, vx_n.message)) != NULL &&
+         (when_obj = PyObject_GetAttr(heard_obj, vx_n.t)) != NULL &&
+         (sender_obj = PyObject_GetAttr(heard_obj, vx_n.sender)) != NULL && vx_msg_of(message, &msg) == 0 &&
+         !((when = PyFloat_AsDouble(when_obj)) == -1.0 && PyErr_Occurred()) &&
+         sender_of(sender_obj, &named, &sender) == 0;
+    Py_XDECREF(message);
+    Py_XDECREF(when_obj);
+    Py_XDECREF(sender_obj);
+    if (!ok) return NULL;
+    vx_tally_refuse(self, when, named, sender, &msg);
+    Py_RETURN_NONE;
+}
+
+static PyObject *Tally_mark(vx_tally_t *self, PyObject *args) {
+    unsigned long long who;
+    int gone;
+    robot_t *r;
+    if (!PyArg_ParseTuple(args, "Kp", &who, &gone)) return NULL;
+    if ((r = find(self, who)) != NULL && r->gone != gone) {
+        r->gone = (uint8_t)gone;
+        self->ngone += gone ? 1 : -1;
+    }
+    Py_RETURN_NONE;
+}
+
+static PyObject *record_of(const vx_tally_t *t, robot_t *r) {
+    PyObject *links = PyList_New(0), *behind = PyTuple_New(r->nbehind), *record = NULL;
+    int i;
+    for (i = 0; links != NULL && i < VX_ROSTER_LINKS; i++) {
+        if ((r->links >> i & 1u) && PyList_Append(links, PyList_GET_ITEM(t->names, i)) < 0) Py_CLEAR(links);
+    }
+    for (i = 0; behind != NULL && i < r->nbehind; i++) {
+        PyObject *pair = Py_BuildValue("(Hd)", r->behind_key[i], r->behind_since[i]);
+        if (pair == NULL) Py_CLEAR(behind);
+        else PyTuple_SET_ITEM(behind, i, pair);
+    }
+    if (links != NULL && behind != NULL) {
+        PyObject *revived = isnan(r->revived) ? Py_NewRef(Py_None) : PyFloat_FromDouble(r->revived);
+        if (revived != NULL)
+            record = Py_BuildValue("(KNNdddLLLLNNN)", r->who, PyBool_FromLong(r->named), PyBool_FromLong(r->fresh),
+                                   r->first, r->last, r->gap, r->messages, r->writes, r->gets, r->refused, links,
+                                   revived, behind);
+        links = behind = NULL; /* stolen (N), or revived failed: freed below */
+    }
+    Py_XDECREF(links);
+    Py_XDECREF(behind);
+    return record;
+}
+
+/* What changed since the last fold: (records, evicted, untracked, behind_untracked, unattributed). */
+static PyObject *Tally_fold(vx_tally_t *self, PyObject *unused) {
+    PyObject *records = PyList_New(0), *evicted = PyList_New(self->nevicted), *record;
+    Py_ssize_t i;
+    (void)unused;
+    for (i = 0; evicted != NULL && i < self->nevicted; i++) {
+        PyObject *who = PyLong_FromUnsignedLongLong(self->evicted[i]);
+        if (who == NULL) Py_CLEAR(evicted);
+        else PyList_SET_ITEM(evicted, i, who);
+    }
+    for (i = 0; records != NULL && evicted != NULL && i < self->ntouched; i++) {
+        robot_t *r = &self->robots[self->touched[i]];
+        if (!r->used) continue; /* forgotten since: in `evicted` */
+        record = record_of(self, r);
+        if (record == NULL || PyList_Append(records, record) < 0) Py_CLEAR(records);
+        Py_XDECREF(record);
+    }
+    if (records == NULL || evicted == NULL) {
+        Py_XDECREF(records);
+        Py_XDECREF(evicted);
+        return NULL;
+    }
+    for (i = 0; i < self->ntouched; i++) {
+        robot_t *r = &self->robots[self->touched[i]];
+        self->dirty[self->touched[i]] = 0;
+        r->fresh = 0;
+        r->revived = NAN;
+    }
+    self->ntouched = self->nevicted = 0;
+    return Py_BuildValue("(NNLLL)", records, evicted, self->untracked, self->behind_untracked, self->unattributed);
+}
+
+static PyMethodDef Tally_methods[] = {
+    {"take", (PyCFunction)(void (*)(void))Tally_take, METH_FASTCALL,
+     "take(link, t, sender, messages): what one unit carried past the guard (Roster.take; a `messages` listener)."},
+    {"mark", (PyCFunction)Tally_mark, METH_VARARGS, "mark(robot, gone): the Roster's state of `robot` is gone or not."},
+    {"fold", (PyCFunction)Tally_fold, METH_NOARGS,
+     "(records, evicted, untracked, behind_untracked, unattributed): every robot changed since the last fold, as "
+     "(robot, named, fresh, first, last, gap, messages, writes, gets, refused, links, revived, behind)."},
+    {NULL, NULL, 0, NULL},
+};
+
+vx_tally_t *vx_tally_of_take(PyObject *listener) {
+    if (!PyCFunction_Check(listener) || PyCFunction_GET_FUNCTION(listener) != (PyCFunction)(void (*)(void))Tally_take)
+        return NULL;
+    return (vx_tally_t *)PyCFunction_GET_SELF(listener);
+}
+
+PyTypeObject vx_RosterTallyType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "vstig_hw._vstig.RosterTally",
+    .tp_doc = "RosterTally(max_robots): Roster.take and Roster.refuse in C; `take` is a `messages` listener, the "
+              "tally itself a `refused` one.",
+    .tp_basicsize = sizeof(vx_tally_t),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_new = Tally_new,
+    .tp_dealloc = (destructor)Tally_dealloc,
+    .tp_call = (ternaryfunc)Tally_call,
+    .tp_methods = Tally_methods,
+};
