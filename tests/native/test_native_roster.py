@@ -41,14 +41,19 @@ step_st = st.one_of(
 
 # one robot lagging on three keys at once, a full roster evicting its gone robot, and one coming back
 LAGGING: list[tuple[Any, ...]] = [("take", 0, 1, 1, [Message(Op.PUT, k, 1, 3, 1) for k in range(4)]),
-           ("take", 0, 1, 2, [Message(Op.GET, k, 0, 1, 1) for k in range(4)]),
-           ("sweep", 0, 4, None, None), ("take", 1, 12, None, [Message(Op.PUT, 0, 1, 2, 3)]),
-           ("sweep", 0, 12, None, None), ("take", 2, 1, 4, []), ("refuse", 0, 1, None, Message(Op.PUT, 1, 1, 9, 1)),
-           ("take", 0, 2, 1, [Message(Op.GET, 2, 0, 3, 1)]), ("sweep", 0, 2, None, None)]
+                                  ("take", 0, 1, 2, [Message(Op.GET, k, 0, 1, 1) for k in range(4)]),
+                                  ("sweep", 0, 4, None, None), ("take", 1, 12, None, [Message(Op.PUT, 0, 1, 2, 3)]),
+                                  ("sweep", 0, 12, None, None), ("take", 2, 1, 4, []),
+                                  ("refuse", 0, 1, None, Message(Op.PUT, 1, 1, 9, 1)),
+                                  ("take", 0, 2, 1, [Message(Op.GET, 2, 0, 3, 1)]), ("sweep", 0, 2, None, None)]
 
 # a robot whose usual gap grows (quiet at 1.25 s of silence only by the gap's own weighting)
-SLOWING: list[tuple[Any, ...]] = [("take", 0, 0, 1, []), ("take", 0, 1, 1, []), ("take", 0, 1, 1, []), ("take", 0, 8, 1, []),
-           ("sweep", 0, 10, None, None)]
+SLOWING: list[tuple[Any, ...]] = [("take", 0, 0, 1, []), ("take", 0, 1, 1, []), ("take", 0, 1, 1, []),
+                                  ("take", 0, 8, 1, []), ("sweep", 0, 10, None, None)]
+# two robots heard in one unit, gone alike: a newcomer takes the place of the first added
+EVICTING: list[tuple[Any, ...]] = [("take", 0, 0, None, [Message(Op.PUT, 0, 1, 1, 1), Message(Op.PUT, 1, 1, 1, 2)]),
+                                   ("sweep", 0, 13, None, None), ("take", 1, 0, 3, []), ("sweep", 0, 1, None, None)]
+
 
 def rosters(compiled: ModuleType, max_robots: int) -> tuple[Roster, Roster, list[StateChange], list[StateChange]]:
     python, c = (Roster(0.125, quiet_after=0.5, gone_after=1.5, behind_after=0.25, max_robots=max_robots)
@@ -69,6 +74,7 @@ def seen(roster: Roster, now: float) -> tuple[Any, ...]:
 @EXAMPLES
 @example(max_robots=2, steps=LAGGING)
 @example(max_robots=1, steps=SLOWING)
+@example(max_robots=2, steps=EVICTING)
 @given(max_robots=st.integers(1, 4), steps=st.lists(step_st, max_size=40))
 def test_the_tally_folded_in_equals_the_python_roster(compiled: ModuleType, max_robots: int,
                                                       steps: list[tuple[Any, ...]]) -> None:
