@@ -29,6 +29,7 @@ from vstig_hw.wire import KEY_MAX
 
 if TYPE_CHECKING:
     from vstig_hw.gateway.guard import Guard, IdSet
+    from vstig_hw.gateway.signing import Signing
     from vstig_hw.links import Link
 
 __all__ = [
@@ -492,8 +493,10 @@ def guard_options(fn: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
-def take_warnings(guard: Guard) -> list[str]:
-    """The guard's new warning lines, each handed out once."""
-    lines = guard.warnings[:]
-    guard.warnings.clear()
+def take_warnings(source: Guard | Signing | None) -> list[str]:
+    """The new warning lines of the guard or the swarm key's check (None: none), each handed out once."""
+    if source is None:
+        return []
+    lines = source.warnings[:]
+    source.warnings.clear()
     return lines

@@ -30,6 +30,7 @@ from ..running import (
     reports_errors,
     run_until_stopped,
 )
+from ..swarm_key import swarm_key_option, swarm_keys_for
 
 
 def _raw_note(robot_id: int | None) -> str:
@@ -61,12 +62,14 @@ def _raw_note(robot_id: int | None) -> str:
 @foxglove_option
 @metrics_option
 @guard_options
+@swarm_key_option
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budget: int, raw: bool,
             larger: bool, refresh: bool, duration: float | None, record: str | None, overwrite: bool,
             no_roster: bool, quiet_after: float | None, gone_after: float | None, max_robots: int,
-            foxglove: Address | None, foxglove_viewers: int, metrics: Address | None, guard: GuardChoice) -> None:
+            foxglove: Address | None, foxglove_viewers: int, metrics: Address | None, guard: GuardChoice,
+            swarm_key: bytes | None) -> None:
     """Run the gateway: one engine on every LINK, until Ctrl-C.
 
     The status line and the counters printed on exit have each link's counters
@@ -94,19 +97,26 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
 
     --record FILE keeps a capture of every link, what the bridge hears and what it sends, with
     notes of what it decided (refusals, drops, overflows, conflicts): vstig why reads it.
+
+    --swarm-key FILE checks the writers' tags on links with auth=require or auth=prefer, and sends
+    every entry with its writer's tag there (drop_untagged, drop_bad_tag; docs/how-to/auth.md).
     """
     if robot_id is None and not raw:
         raise click.UsageError("--robot-id is required (the PC's id in the swarm), or use --raw")
     if raw and len(links) < 2:
         raise click.UsageError("--raw needs at least two links to bridge")
+    if raw and swarm_key is not None:
+        raise click.UsageError("--swarm-key needs an engine to keep the entries' tags: drop --raw")
     built = build_links(links, robot_id or 0)
+    keys = swarm_keys_for(built, swarm_key)
     if record is not None:
         _check_record_file(record, built, overwrite)
     firewall = guard.build(built)
     # A recording bridge relays on the Python path, whose writes the recording sees (Recording).
     node = Node(built, robot_id or 0, mode=Mode.RAW if raw else Mode.ENGINE,
                 period=tick, budget=None if raw and budget == DEFAULT_BUDGET else budget,
-                onconflict=larger_value_wins if larger else None, guard=firewall, pure=record is not None)
+                onconflict=larger_value_wins if larger else None, guard=firewall, pure=record is not None,
+                swarm_keys=keys)
     recording = None if record is None else Recording(node, record, overwrite=True)
     start_roster(node, no_roster, quiet_after, gone_after, max_robots)  # who is heard: --metrics, the live view
     if refresh and not raw:
@@ -117,7 +127,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
 
     def status() -> None:
         line = node.summary()
-        for warning in take_warnings(firewall):
+        for warning in take_warnings(firewall) + take_warnings(node.signing):
             click.echo(f"\r\x1b[K{warning}" if live else warning, err=True)
         if live:
             click.echo(f"\r\x1b[K{line}", nl=False, err=True)
@@ -132,7 +142,7 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
         finally:
             if live:
                 click.echo(err=True)
-    for warning in take_warnings(firewall):
+    for warning in take_warnings(firewall) + take_warnings(node.signing):
         click.echo(warning, err=True)
     print_counters(node)
     if recording is not None:

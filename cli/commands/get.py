@@ -13,6 +13,7 @@ from vstig_hw.values import VALUE_TYPES, ValueType
 
 from ..options import KEY, Finite
 from ..running import LINK, build_links, reports_errors
+from ..swarm_key import swarm_key_option, swarm_keys_for
 from .put import shown
 
 
@@ -23,8 +24,10 @@ from .put import shown
               help="Seconds to ask and listen; the newest entry heard in that time is printed.")
 @click.option("--robot-id", type=click.IntRange(0, 0xFFFF), default=254, show_default=True)
 @click.option("--value-type", type=click.Choice(VALUE_TYPES), default="uint16", show_default=True)
+@swarm_key_option
 @reports_errors
-def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: ValueType) -> None:
+def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: ValueType,
+            swarm_key: bytes | None) -> None:
     """Print the newest value neighbours hold for KEY, heard within --wait (exit 1 if none answers).
 
     It asks every control step for the whole --wait, so a newer entry that
@@ -33,7 +36,8 @@ def command(key: int, link: LinkSpec, wait: float, robot_id: int, value_type: Va
     Example: vstig get 3 --on serial:/dev/ttyUSB0?framing=epuck4 --wait 5
     """
     started = time.monotonic()  # --wait bounds the whole command: opening the link is part of it
-    node = Node(build_links([link.lossless(opening=wait)], robot_id), robot_id)
+    built = build_links([link.lossless(opening=wait)], robot_id)
+    node = Node(built, robot_id, swarm_keys=swarm_keys_for(built, swarm_key))
     name = node.links[0].name
     if node.links[0].transmit_only:
         raise click.BadParameter(f"{name} only transmits: no neighbour can answer", param_hint="'--on'")

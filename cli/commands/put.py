@@ -14,6 +14,7 @@ from vstig_hw.values import VALUE_TYPES, ValueType, from_raw, to_raw
 
 from ..options import KEY, Finite, NegativeNumbersAreArguments
 from ..running import LINK, build_links, reports_errors
+from ..swarm_key import swarm_key_option, swarm_keys_for
 
 
 def shown(entry: Entry, value_type: ValueType) -> str:
@@ -34,9 +35,10 @@ def shown(entry: Entry, value_type: ValueType) -> str:
               help="Writes at most, when the swarm answers with a newer or conflicting entry.")
 @click.option("--no-confirm", is_flag=True,
               help="Write and exit 0 without a neighbour's answer (radios that cannot answer, e.g. kilobot-ohc).")
+@swarm_key_option
 @reports_errors
 def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: ValueType, learn: float,
-            wait: float, tries: int, no_confirm: bool) -> None:
+            wait: float, tries: int, no_confirm: bool, swarm_key: bytes | None) -> None:
     """Put VALUE under KEY, as a robot would; exit 0 only when a neighbour shows it took the write.
 
     It asks the swarm for KEY every control step for --learn seconds and writes
@@ -55,7 +57,8 @@ def command(key: int, value: str, link: LinkSpec, robot_id: int, value_type: Val
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="VALUE") from None
     started = time.monotonic()  # --learn and --wait bound the whole command: opening the link is part of them
-    node = Node(build_links([link.lossless(opening=learn + wait)], robot_id), robot_id)
+    built = build_links([link.lossless(opening=learn + wait)], robot_id)
+    node = Node(built, robot_id, swarm_keys=swarm_keys_for(built, swarm_key))
     name = node.links[0].name
     transmit_only = node.links[0].transmit_only
     if transmit_only and not no_confirm:

@@ -42,6 +42,7 @@ from ..running import (
     reports_errors,
     run_until_stopped,
 )
+from ..swarm_key import swarm_key_option, swarm_keys_for
 
 EARLY_UNITS = 1 << 16  # units heard before the file opened (a file opens in milliseconds: ~7 s of a full CAN bus)
 
@@ -79,11 +80,12 @@ def _refuse_to_destroy(path: str, overwrite: bool, append: bool) -> None:
 @roster_options
 @metrics_option
 @filter_options
+@swarm_key_option
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, append: bool, max_bytes: int | None,
             duration: float | None, no_roster: bool, quiet_after: float | None, gone_after: float | None,
-            max_robots: int, metrics: Address | None, keep: Filter) -> None:
+            max_robots: int, metrics: Address | None, keep: Filter, swarm_key: bytes | None) -> None:
     """Record the LINKS' traffic into a file until Ctrl-C (passive: never transmits).
 
     The links are opened before the file, and an existing capture is never replaced
@@ -107,7 +109,8 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
     _refuse_to_destroy(path, overwrite, append)
     if medium == "mcap":
         require("mcap", f"vstig record -o {path}")  # before the links open
-    node = Node(build_links(links, listen_only=True), mode=Mode.LISTEN)
+    built = build_links(links, listen_only=True)
+    node = Node(built, mode=Mode.LISTEN, swarm_keys=swarm_keys_for(built, swarm_key))
     start_roster(node, no_roster, quiet_after, gone_after, max_robots)  # who is heard: --metrics
     # Units become messages again for an .mcap file and for filters that look into messages: robot dialects'
     # links name the deployment file that maps their keys.

@@ -14,6 +14,7 @@ from vstig_hw.engine import larger_value_wins
 from vstig_hw.gateway import Mode, Node, stop_on_signals
 from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.ros2 import serve_ros2
+from vstig_hw.gateway.signing import Signing
 from vstig_hw.gateway.swarmview import SwarmView
 from vstig_hw.links import Heard, LinkSpec
 from vstig_hw.values import VALUE_TYPES, ValueType, from_raw
@@ -35,6 +36,7 @@ from ..running import (
     reports_errors,
     run_until_stopped,
 )
+from ..swarm_key import swarm_key_option, swarm_keys_for
 
 _TABLE_CHROME = 8  # lines a table needs besides its rows: title, header and its rule, counters caption, a spare
 # Short headers, so that the table fits 80 columns (docs/how-to/sniff.md explains each).
@@ -91,12 +93,13 @@ def _few(senders: list[int]) -> str:
 @metrics_option
 @filter_options
 @guard_options
+@swarm_key_option
 @config_options
 @reports_errors
 def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: ValueType, larger: bool,
             duration: float | None, hide_refused: bool, no_roster: bool, quiet_after: float | None,
             gone_after: float | None, max_robots: int, foxglove: Address | None, foxglove_viewers: int,
-            metrics: Address | None, keep: Filter, guard: GuardChoice) -> None:
+            metrics: Address | None, keep: Filter, guard: GuardChoice, swarm_key: bytes | None) -> None:
     """Decode what each LINK hears live, per key; passive: never transmits.
 
     The filters (--key, --robot, --sender, --op, --link, --since, --until) choose
@@ -111,7 +114,8 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
     The guard options are bridge's: what a bridge with them would refuse is shown too, marked
     with the reason (the "refused" column; "refused" in --jsonl, null for what passes), never
     changes a key's entry, and is counted under the table (drop_jump, drop_rate...).
-    --hide-refused leaves it out.
+    --hide-refused leaves it out. With --swarm-key FILE, the links with auth=require or auth=prefer
+    check the writers' tags: what fails is refused as drop_untagged or drop_bad_tag.
 
     --foxglove 8765 serves the same live, to Foxglove (docs/how-to/live-view.md): every
     message, the table, each write's spread and the counters.
@@ -128,7 +132,8 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
     built = build_links(links, listen_only=True)
     firewall = guard.build(built)
     # The engine never transmits: it counts what each message would do to a robot that heard them all.
-    node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule)
+    node = Node(built, mode=Mode.LISTEN, count_outcomes=True, guard=firewall, onconflict=rule,
+                swarm_keys=swarm_keys_for(built, swarm_key))
     serve_ros2(node)
     kept = start_roster(node, no_roster, quiet_after, gone_after, max_robots)
     view = SwarmView(rule) if rule else SwarmView()
@@ -169,7 +174,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
             listeners.append(emit)
         else:
             node.listen(tick=rows)
-        node.listen(tick=lambda _node: _warn(firewall))
+        node.listen(tick=lambda _node: _warn(firewall, node.signing))
         with (stop_on_signals() as stop,
               live_view(node, foxglove, value_type=value_type, larger_value_wins=larger, viewers=foxglove_viewers),
               metrics_served(node, metrics), opened(node, stop)):
@@ -177,7 +182,7 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
             run_until_stopped(node, stop, duration=duration)
         if rows is not None:
             rows.write()  # the roster as the sniff ends
-        _warn(firewall)
+        _warn(firewall, node.signing)
         print_counters(node)
         return
     from rich.live import Live
@@ -198,17 +203,17 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
 
         with ViewKeys().reading() as keys, Live(table(), refresh_per_second=4, transient=False) as live:
             def redraw() -> None:  # only what fits the terminal (a pipe gets every row, once, at the end)
-                _warn(firewall)  # on a terminal, Live prints stderr above the table
+                _warn(firewall, node.signing)  # on a terminal, Live prints stderr above the table
                 showing[0] ^= keys.pressed().lower().count(ROBOTS_KEY) % 2 == 1
                 height = live.console.size.height if live.console.is_terminal else None
                 live.update(table(height))
 
             describe_links(node)
             run_until_stopped(node, stop, redraw, duration)
-    _warn(firewall)
+    _warn(firewall, node.signing)
     print_counters(node)
 
 
-def _warn(firewall: Guard) -> None:
-    for warning in take_warnings(firewall):
+def _warn(firewall: Guard, signing: Signing | None) -> None:
+    for warning in take_warnings(firewall) + take_warnings(signing):
         click.echo(warning, err=True)

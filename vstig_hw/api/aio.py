@@ -151,9 +151,11 @@ class AsyncSwarm:
 def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget: int | None = DEFAULT_BUDGET,
          max_jump: int | None = DEFAULT_MAX_JUMP, guard: Guard | None = None,
          onconflict: ConflictResolver | None = None, onconflictlost: ConflictLost | None = None,
-         refresh: bool = True, value_type: ValueType = "uint16", roster: Roster | None = None) -> AsyncSwarm:
+         refresh: bool = True, value_type: ValueType = "uint16", roster: Roster | None = None,
+         swarm_key: str | os.PathLike[str] | None = None) -> AsyncSwarm:
     """`vstig_hw.join`'s arguments; an AsyncSwarm that joins on `async with` (or `await swarm.open()`)."""
     options: dict[str, Any] = {"robot_id": robot_id, "period": period, "budget": budget, "max_jump": max_jump,
                                "guard": guard, "onconflict": onconflict, "onconflictlost": onconflictlost,
-                               "refresh": refresh, "value_type": value_type, "roster": roster}
+                               "refresh": refresh, "value_type": value_type, "roster": roster,
+                               "swarm_key": swarm_key}
     return AsyncSwarm(lambda: join_sync(*links, **options))

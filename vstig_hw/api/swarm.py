@@ -20,6 +20,7 @@ import threading
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, TypeVar
 
+from ..auth import SwarmKeys, read_swarm_key
 from ..counters import Counters
 from ..engine import ConflictLost, ConflictResolver, Entry, higher_robot_wins
 from ..gateway.guard import DEFAULT_MAX_JUMP, Guard
@@ -29,6 +30,7 @@ from ..gateway.oneshot import HearsItself, PutResult, confirm_write, not_taken, 
 from ..gateway.refresh import RoundRobinGet
 from ..gateway.ros2 import serve_ros2
 from ..gateway.roster import RobotView, Roster, StateChange
+from ..gateway.signing import unkeyed_policy
 from ..links.assemble import LinkBuildError, assemble_links, check_link_count
 from ..links.link import Link, LinkSpec
 from ..links.registry import parse
@@ -74,11 +76,12 @@ class Swarm:
     def __init__(self, links: Sequence[Link[Any]], robot_id: int, *, period: float, budget: int | None,
                  guard: Guard | None, onconflict: ConflictResolver | None, onconflictlost: ConflictLost | None,
                  refresh: bool, value_type: ValueType, specs: Sequence[LinkSpec] | None = None,
-                 options: dict[str, Any] | None = None, roster: Roster | None = None) -> None:
+                 options: dict[str, Any] | None = None, roster: Roster | None = None,
+                 swarm_keys: SwarmKeys | None = None) -> None:
         if value_type not in VALUE_TYPES:
             raise ValueError(f"value_type must be one of {', '.join(VALUE_TYPES)}, got {value_type!r}")
         self.value_type: ValueType = value_type
-        self._node = Node(links, robot_id, period=period, budget=budget, guard=guard)
+        self._node = Node(links, robot_id, period=period, budget=budget, guard=guard, swarm_keys=swarm_keys)
         self._node.label = f"robot {robot_id}'s swarm on {', '.join(link.name for link in links)}"
         engine = self._node.engine
         assert engine is not None
@@ -438,7 +441,8 @@ class Swarm:
 def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget: int | None = DEFAULT_BUDGET,
          max_jump: int | None = DEFAULT_MAX_JUMP, guard: Guard | None = None,
          onconflict: ConflictResolver | None = None, onconflictlost: ConflictLost | None = None,
-         refresh: bool = True, value_type: ValueType = "uint16", roster: Roster | None = None) -> Swarm:
+         refresh: bool = True, value_type: ValueType = "uint16", roster: Roster | None = None,
+         swarm_key: str | os.PathLike[str] | None = None) -> Swarm:
     """Join the swarm on every link as robot `robot_id`; the open Swarm (a context manager).
 
     `links` are spec strings in the CLI's grammar ("can:socketcan:can0",
@@ -448,7 +452,9 @@ def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget
     period), the jump guard's `max_jump` (None: off) or a whole `guard`, the
     conflict rule (`onconflict`; default: higher robot id wins), a GET of one key
     per period (`refresh`), and how values read (`value_type`). `roster`: who is in
-    the swarm (`robots`), a `vstig_hw.gateway.roster.Roster` with thresholds of your own.
+    the swarm (`robots`), a `vstig_hw.gateway.roster.Roster` with thresholds of your own. `swarm_key`: the
+    swarm key file (bridge's --swarm-key FILE: mode 600), to check tags on links with auth=require or auth=prefer
+    and tag this robot's writes (docs/how-to/auth.md).
 
     A link told to connect somewhere (a zenoh link's `connect=`) that reaches nobody there within its wait
     (3 s) raises TransportError naming the endpoints, as a missing serial port does.
@@ -472,14 +478,19 @@ def join(*links: LinkLike, robot_id: int, period: float = DEFAULT_PERIOD, budget
         built = assemble_links(specs, robot_id)
     except LinkBuildError as error:
         raise ValueError(f"{error.argument}: {error}") from None
+    keys = None if swarm_key is None else SwarmKeys(read_swarm_key(swarm_key))
+    complaint = unkeyed_policy(built) if keys is None else None
+    if complaint is not None:
+        raise ValueError(f"swarm_key: {complaint}")
     options: dict[str, Any] = {"period": period, "budget": budget, "max_jump": max_jump, "onconflict": onconflict,
-                               "onconflictlost": onconflictlost, "refresh": refresh, "value_type": value_type}
+                               "onconflictlost": onconflictlost, "refresh": refresh, "value_type": value_type,
+                               "swarm_key": swarm_key}
     swarm = Swarm(built, robot_id, period=period, budget=budget,
                   guard=Guard(max_jump=max_jump) if guard is None and max_jump is not None else guard,
                   onconflict=onconflict, onconflictlost=onconflictlost, refresh=refresh, value_type=value_type,
                   specs=None if any(isinstance(spec, Link) for spec in specs) or guard is not None
                   else [spec for spec in specs if not isinstance(spec, Link)],
-                  options=options, roster=roster)
+                  options=options, roster=roster, swarm_keys=keys)
     swarm.open()
     why = unreached(built)
     if why:  # a program would otherwise write into the void, with one log line at most to tell it

@@ -24,10 +24,19 @@ from ..tagged import AuthPolicy, Refusal, TaggedStigmergy
 from ..timestamps import TS_NONE
 from ..wire import Message
 
-__all__ = ["EPISODE_GAP", "SignedEngine", "Signing"]
+__all__ = ["EPISODE_GAP", "SignedEngine", "Signing", "unkeyed_policy"]
 
 EPISODE_GAP = 10.0  # seconds without a refusal of a writer that end its episode: its next refusal is logged again
 _REFUSED = tuple[str, int]  # (drop counter, claimed writer)
+
+
+def unkeyed_policy(links: Sequence[Link[Any]]) -> str | None:
+    """The complaint for links that check tags on a node without the swarm key; None when none does."""
+    asking = [link for link in links if link.auth is not AuthPolicy.OFF]
+    if not asking:
+        return None
+    return f"link {asking[0].name} has auth={asking[0].auth.value}: checking tags needs the swarm key " \
+        "(--swarm-key FILE, swarm_key=)"
 
 
 class SignedEngine(Stigmergy):
@@ -64,6 +73,13 @@ class SignedEngine(Stigmergy):
 
     def record_of(self, msg: Message) -> Tagged | None:
         return self.tagged.record_of(msg)
+
+    @property
+    def counts(self) -> dict[Outcome, int]:
+        """The engine's outcomes, a replayed old write (older by epoch and timestamp, SPEC.md 10.4) as stale."""
+        counts = super().counts
+        counts[Outcome.STALE] += self.tagged.replays
+        return counts
 
 
 class Signing:
