@@ -31,14 +31,14 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from vstig_hw import Message, Op
 from vstig_hw.framing.mavlink import MavlinkFraming
 
-from .bench_datapath import INSTRUCTIONS_RATE_HZ, VSTIG, _Arrivals, _instructions, _paced, _totals, _usage
-from .bench_xbee import _ENGINE, COUNT, RATE_HZ, ROUNDS, _cobs8_run, _median
+from .bench_datapath import VSTIG, _Arrivals, _instructions, _paced, _usage
+from .bench_xbee import _ENGINE, COUNT, RATE_HZ, ROUNDS, _cobs8_run, _median, counted_instructions
 from .registry import Result, benchmark
 
 PROBE = 32767
@@ -172,14 +172,12 @@ def relay_cost() -> Iterator[Result]:
 
 def _mavlink_instructions(count: int, workdir: Path) -> int:
     """User-space instructions (callgrind's Ir) the MAVLink relay executed in all, having relayed `count`."""
-    out_file = workdir / f"mavlink.{count}.callgrind"
-    callgrind = ("valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}")
-    with _mavlink_relaying(callgrind) as (_pid, drone, into, out):
-        _paced(lambda frame: drone.sendto(frame, into), _tunnels(count), rate_hz=INSTRUCTIONS_RATE_HZ)
-        out.wait(count + 1, seconds=60)
-    if len(out.arrived) < count + 1:
-        raise RuntimeError(f"the MAVLink relay under callgrind relayed {len(out.arrived) - 1} of {count} messages")
-    return _totals(out_file)
+    @contextlib.contextmanager
+    def relaying(prefix: tuple[str, ...]) -> Iterator[tuple[Callable[[bytes], object], _Arrivals]]:
+        with _mavlink_relaying(prefix) as (_pid, drone, into, out):
+            yield lambda frame: drone.sendto(frame, into), out
+
+    return counted_instructions("MAVLink", count, workdir, relaying, _tunnels(count))
 
 
 @benchmark("mavlink")

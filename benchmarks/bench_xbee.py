@@ -24,7 +24,8 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager
 from pathlib import Path
 
 from vstig_hw import Message, Op, encode
@@ -157,17 +158,30 @@ def relay_cost() -> Iterator[Result]:
 
 
 
-def _xbee_instructions(count: int, workdir: Path) -> int:
-    """User-space instructions (callgrind's Ir) an XBee relay executed in all, having relayed `count` messages."""
-    out_file = workdir / f"xbee.{count}.callgrind"
-    callgrind = ("valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}")
-    with _xbee_relaying(prefix=callgrind) as (_pid, robot, address, out):
-        payloads = [encode(Message(Op.PUT, i, i, 1, 7)) for i in range(count)]
-        _paced(lambda rf: robot.transmit(rf, dest=address), payloads, rate_hz=INSTRUCTIONS_RATE_HZ)  # type: ignore[attr-defined]
+def counted_instructions(label: str, count: int, workdir: Path,
+                         relaying: Callable[[tuple[str, ...]], AbstractContextManager[tuple[Callable[[bytes], object],
+                                                                                        _Arrivals]]],
+                         units: list[bytes]) -> int:
+    """User-space instructions (callgrind's Ir) a relay executed in all, having relayed `count` messages:
+    `relaying(prefix)` starts it after `prefix` and yields (a call sending one of `units`, the far end's arrivals)."""
+    out_file = workdir / f"{label}.{count}.callgrind"
+    with relaying(("valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}")) as (send, out):
+        _paced(send, units, rate_hz=INSTRUCTIONS_RATE_HZ)
         out.wait(count + 1, seconds=60)
     if len(out.arrived) < count + 1:
-        raise RuntimeError(f"the XBee relay under callgrind relayed {len(out.arrived) - 1} of {count} messages")
+        raise RuntimeError(f"the {label} relay under callgrind relayed {len(out.arrived) - 1} of {count} messages")
     return _totals(out_file)
+
+
+def _xbee_instructions(count: int, workdir: Path) -> int:
+    """User-space instructions (callgrind's Ir) an XBee relay executed in all, having relayed `count` messages."""
+    @contextlib.contextmanager
+    def relaying(prefix: tuple[str, ...]) -> Iterator[tuple[Callable[[bytes], object], _Arrivals]]:
+        with _xbee_relaying(prefix=prefix) as (_pid, robot, address, out):
+            yield lambda rf: robot.transmit(rf, dest=address), out  # type: ignore[attr-defined]
+
+    return counted_instructions("XBee", count, workdir, relaying,
+                                [encode(Message(Op.PUT, i, i, 1, 7)) for i in range(count)])
 
 
 @benchmark("xbee")
