@@ -167,7 +167,7 @@ class Roster:
         self._swept = math.nan  # when `sweep` last ran
         self._gone = 0  # robots tracked whose state is gone
         self._tally: Tally | None = None  # the per-message half in C, if the data path is compiled
-        self._folding = threading.Lock()  # one fold at a time (a sweep on the Node's thread, a view on its own)
+        self._folding = threading.RLock()  # one fold or sweep at a time (the Node's thread, a view's)
 
     # -- how it is fed ---------------------------------------------------------------------
     def use_tally(self, tally: Tally) -> None:
@@ -329,7 +329,11 @@ class Roster:
     # -- time ------------------------------------------------------------------------
     def sweep(self, now: float) -> None:
         """The time is `now` (the gateway's clock, as `take`'s): rates, states, and who is behind."""
-        self.fold()
+        with self._folding:  # a view's fold tells no return between this sweep's reading and its changes
+            self.fold()
+            self._judge(now)
+
+    def _judge(self, now: float) -> None:
         dt = now - self._swept
         smoothing = 1.0 - math.exp(-dt / RATE_WINDOW) if dt > 0 else 0.0  # nan on the first sweep: no rate yet
         for robot in list(self._robots.values()):
