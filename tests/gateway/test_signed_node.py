@@ -130,7 +130,7 @@ def test_policies_need_a_key_and_room_for_tags(channels: tuple[str, str, str]) -
     links = assemble_links([f"can:virtual:{channels[0]}?fd=1&auth=prefer"], GATEWAY)
     with pytest.raises(ValueError, match=r"auth=prefer: checking tags needs the swarm key \(--swarm-key FILE"):
         Node(links, GATEWAY)
-    with pytest.raises(LinkBuildError, match="auth=require, but a can link has no room for tags"):
+    with pytest.raises(LinkBuildError, match="auth=require, but can frames have no room for tags"):
         assemble_links([f"can:virtual:{channels[0]}?auth=require"], GATEWAY)
 
 

@@ -35,7 +35,7 @@ def unkeyed_policy(links: Sequence[Link[Any]]) -> str | None:
     asking = [link for link in links if link.auth is not AuthPolicy.OFF]
     if not asking:
         return None
-    return f"link {asking[0].name} has auth={asking[0].auth.value}: checking tags needs the swarm key " \
+    return f"link {asking[0].name!r} has auth={asking[0].auth.value}: checking tags needs the swarm key " \
         "(--swarm-key FILE, swarm_key=)"
 
 

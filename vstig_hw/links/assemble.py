@@ -95,7 +95,7 @@ def assemble_links(items: Sequence[str | LinkSpec | Link[Any]], robot_id: int = 
         except ValueError as error:  # building opens nothing: what fails here is how the link was asked for
             raise LinkBuildError(f"{spec.kind}:{spec.name}: {error}", "links") from None
         if spec.auth is AuthPolicy.REQUIRE and not link.framing.carries_tags:
-            raise LinkBuildError(f"{spec.kind}:{spec.name}: auth=require, but a {link.framing.name} link has no room "
+            raise LinkBuildError(f"{spec.kind}:{spec.name}: auth=require, but {link.framing.name} frames have no room "
                                  "for tags (SPEC.md 10.5): give its robots a link of their own with auth=off", "links")
         link.auth = spec.auth
         links.append(link)
