@@ -11,13 +11,14 @@ robot 8's write is kept but never carried onto B.
 
 from __future__ import annotations
 
+import json
 import re
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
 from attacks import FLOOD_FIRST_KEY, Bridge, Radio, honest_delays, quantile, wait_until_relaying, zenoh_flood
-from peers import PtyPeer, start_vstig, stop, wait_for
+from peers import PtyPeer, has_open, start_vstig, stop, wait_for
 
 from vstig_hw.auth import SwarmKeys, Tagged, entry_tag, next_epoch, robot_key
 from vstig_hw.framing import make_serial_framing
@@ -160,3 +161,27 @@ def test_a_zenoh_peer_stamping_other_sessions_is_refused_whole_and_the_radios_ke
     print(f"A -> B p50 under the forged flood / quiet: {p50 / quiet_p50:.2f} ({p50 * 1e3:.2f} / "
           f"{quiet_p50 * 1e3:.2f} ms)")
     assert p50 <= max(2 * quiet_p50, quiet_p50 + 0.001), stderr
+
+
+def test_sniff_with_the_swarm_key_marks_untagged_and_forged_writes_refused(tmp_path: Path) -> None:
+    key_file = tmp_path / "swarm.key"
+    key_file.write_text(MASTER.hex() + "\n", encoding="ascii")
+    key_file.chmod(0o600)
+    radio = Robot()
+    sniffer = start_vstig("sniff", f"serial:{radio.radio.path}?framing=cobs8&auth=require", "--swarm-key",
+                          str(key_file), "--jsonl", "--for", "3")
+    try:
+        wait_for(lambda: has_open(sniffer.pid, radio.radio.path), 30)  # it never transmits: look at its fds
+        time.sleep(0.3)  # pyserial flushes the input right after opening
+        radio.send([own(5, Message(Op.PUT, 1, 10, 1, 5)), own(6, Message(Op.PUT, 2, 20, 1, 5))],
+                   [Message(Op.PUT, 3, 30, 1, 99)])
+        out, err = sniffer.communicate(timeout=60)
+    finally:
+        if sniffer.poll() is None:
+            stop(sniffer)
+        radio.radio.close()
+    rows = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    # (a unit's refusals are told before what it let through: the order within one read is not kept)
+    assert sorted((row["key"], row["robot"], row["refused"]) for row in rows) == \
+        [(1, 5, None), (2, 5, "drop_bad_tag"), (3, 99, "drop_untagged")], err
+    assert "drop_bad_tag=1" in err and "drop_untagged=1" in err, err
