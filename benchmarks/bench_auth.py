@@ -3,23 +3,34 @@
 * A gateway's engine with tags beside it (`TaggedStigmergy`, a link that requires tags: every message's tag
   checked, each drained message given its record) against the plain engine on the same traffic (auth off).
   Both are the Python path: the compiled path has no tags yet, so this is not the relay's whole cost.
+* A gateway's relay, link to link (two CAN FD links on python-can's virtual bus, each read handed to the Node's
+  data path as its reader thread hands it): thread CPU per message with both links auth=require and the swarm
+  key, against auth off, both on the Python path; and against auth off on the compiled path, the gateway's usual.
 * libvstig on a simulated ATmega328P (simavr, avr-gcc -Os): cycles per tag and per tag check, against one
   cobs8 frame of one message; flash and static RAM of vstig_auth, against the chip's.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import can
+
 from vstig_hw import Stigmergy
 from vstig_hw.auth import SwarmKeys
+from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.gateway import Node
+from vstig_hw.links.assemble import assemble_links
 from vstig_hw.tagged import AuthPolicy, TaggedStigmergy
+from vstig_hw.wire import Message, Op
 
 from .bench_wire import realistic_mix
 from .registry import Result, benchmark, rate
@@ -30,6 +41,42 @@ HERE = Path(__file__).resolve().parent
 LIBVSTIG = HERE.parent / "firmware_spec" / "libvstig"
 RUNS = 40
 FLASH, SRAM = 32768, 2048  # ATmega328P
+
+
+@benchmark("auth")
+def relay_cpu_require_vs_off() -> Iterator[Result]:
+    """Thread CPU per relayed message, links auth=require with the swarm key against auth off (Python and compiled)."""
+    keys = SwarmKeys(_MASTER)
+    robot = CanFraming(CanIdScheme(), 5, fd=True)
+    messages = [Message(Op.PUT, key, key, 1, 5) for key in range(1, 4001)]
+    tagged = [robot.encode_tagged([keys.tag(msg, 0)]) for msg in messages]
+    plain = [robot.encode(msg) for msg in messages]
+    us = {}
+    for name, policy, units, pure in (("off_compiled", "off", plain, False), ("off", "off", plain, True),
+                                      ("require", "require", tagged, True)):
+        us[name] = _relay_us(policy, units, keys if policy != "off" else None, pure)
+    yield Result("auth.relay_us_per_message_require", us["require"], "us", "auth off, Python path", us["off"])
+    yield Result("auth.relay_us_per_message_require_vs_compiled", us["require"], "us", "auth off, compiled path",
+                 us["off_compiled"])
+
+
+def _relay_us(policy: str, units: list[list[can.Message]], keys: SwarmKeys | None, pure: bool) -> float:
+    """Thread CPU (us) per message the Node relays from link A to link B, best of 5 rounds of distinct writes."""
+    best = float("inf")
+    for round_ in range(5):  # fresh buses and a fresh engine each round: every write is new to it
+        tag = f"{os.getpid()}-{policy}-{pure}-{round_}"
+        links = assemble_links([f"can:virtual:bench-auth-a-{tag}?fd=1&auth={policy}",
+                                f"can:virtual:bench-auth-b-{tag}?fd=1&auth={policy}"], 200)
+        with Node(links, 200, budget=None, swarm_keys=keys, pure=pure) as node:
+            start = time.thread_time()
+            for batch in range(0, len(units), 16):
+                node._deliver(0, time.time(), [unit for frames in units[batch:batch + 16] for unit in frames])
+            best = min(best, (time.thread_time() - start) / len(units) * 1e6)
+            stats = node.stats()
+        relayed = stats[links[1].name]["out"]
+        if relayed < len(units):  # the figure is a relay's only if every write went through
+            raise AssertionError(f"auth={policy}: {relayed} of {len(units)} writes relayed: {stats}")
+    return best
 
 
 @benchmark("auth")
