@@ -17,6 +17,7 @@ from vstig_hw.auth import SwarmKeys, Tagged, entry_tag, robot_key
 from vstig_hw.engine import Entry
 from vstig_hw.framing.can import CanFraming, CanIdScheme
 from vstig_hw.gateway import Node
+from vstig_hw.gateway.kept_roster import keep_roster
 from vstig_hw.links import Heard, examples, parse
 from vstig_hw.links.assemble import LinkBuildError, assemble_links
 from vstig_hw.tagged import AuthPolicy
@@ -70,6 +71,7 @@ def test_attacks_on_a_require_link_are_refused_and_honest_writes_relayed_with_th
     node = _node(channels, ("require", "require", "off"))
     refused: list[tuple[Heard, str]] = []
     node.listen(refused=lambda heard, reason: refused.append((heard, reason)))
+    kept = keep_roster(node)
     robot5, robot6, outsider = Robot(channels[0], 5), Robot(channels[0], 6), Robot(channels[0], 99)
     listener = Robot(channels[1], 7)
     honest = _own_tag(5, Message(Op.PUT, 1, 1000, 3, 5))
@@ -97,6 +99,9 @@ def test_attacks_on_a_require_link_are_refused_and_honest_writes_relayed_with_th
     assert sorted((heard.message.robot, reason) for heard, reason in refused) == \
         [(5, "drop_bad_tag"), (5, "drop_bad_tag"), (99, "drop_untagged")]
     assert len([w for w in node.signing.warnings if "claiming robot 5" in w]) == 1  # once per writer and episode
+    roster = {view.robot: view.refused for view in kept.snapshot()}
+    # The roster counts a refusal to the node the medium names as its sender (CAN IDs): robot 6 sent both forgeries
+    assert (roster[5], roster[6], roster[99]) == (0, 2, 1), roster
     assert node.signing.engine is not None and node.signing.engine.tagged.replays == 1  # the replay lost, counted
 
 
