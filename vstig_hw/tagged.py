@@ -70,13 +70,15 @@ class TaggedStigmergy:
 
     # -- what the links heard -------------------------------------------------
     def receive(self, msg: Message, policy: AuthPolicy, epoch: int | None = None,
-                tag: bytes | None = None) -> Outcome | Refusal:
-        """Apply `msg` heard on a link with `policy`; `epoch` and `tag` are its record's, None when untagged."""
+                tag: bytes | None = None, *, checked: bool = False) -> Outcome | Refusal:
+        """Apply `msg` heard on a link with `policy`; `epoch` and `tag` are its record's, None when untagged.
+        `checked`: the caller verified the tag already (a gateway's check before its guard): not again."""
         key, ts = msg.key, msg.timestamp
         if ts == TS_NONE:  # an empty GET (or an invalid PUT) shows no entry: nothing to prove
             return self.engine.receive(msg)
         proven = tag is not None and epoch is not None and policy is not AuthPolicy.OFF
-        if tag is not None and epoch is not None and proven and not self.keys.verify(Tagged(msg, epoch, tag)):
+        if tag is not None and epoch is not None and proven and not checked \
+                and not self.keys.verify(Tagged(msg, epoch, tag)):
             self.refused[Refusal.BAD_TAG, msg.robot] += 1
             return Refusal.BAD_TAG
         if not proven and policy is AuthPolicy.REQUIRE:

@@ -66,7 +66,8 @@ class SignedEngine(Stigmergy):
         record = self.records.get(msg)
         self._beneath = True
         try:
-            done = self.tagged.receive(msg, self.policy, *((None, None) if record is None else record[1:]))
+            done = self.tagged.receive(msg, self.policy, *((None, None) if record is None else record[1:]),
+                                       checked=True)  # `Signing.check` verified every record it left in
         finally:
             self._beneath = False
         return done if isinstance(done, Outcome) else Outcome.STALE  # `Signing.check` refused those already
