@@ -24,13 +24,15 @@ def _run(argv: list[str]) -> None:
     assert done.returncode == 0, f"{' '.join(argv)} failed:\n{done.stdout[-2000:]}{done.stderr[-3000:]}"
 
 
-def build(folder: Path, keys: int = 16) -> tuple[Path, Path]:
-    """(the firmware's ELF, the board program); skips, or fails under VSTIG_REQUIRE_PEERS=1, without the tools."""
+def build(folder: Path, keys: int = 16, robot_key: Path | None = None) -> tuple[Path, Path]:
+    """(the firmware's ELF, the board program); skips, or fails under VSTIG_REQUIRE_PEERS=1, without the tools.
+    `robot_key`: its own key as `vstig keys --format c` prints it, to tag its writes (SPEC.md section 10)."""
     make, gcc = require_tool("make"), require_tool("gcc")
     require_tool("avr-gcc", "gcc-avr and avr-libc")
     if not SIMAVR_HEADER.exists():
         missing(f"simavr's library and headers ({SIMAVR_HEADER}, libsimavr-dev)")
-    _run([make, "-s", "-C", str(LIBVSTIG), f"BUILD={folder}", f"KEYS={keys}", "robot"])
+    signed = [f"ROBOT_KEY={robot_key}"] if robot_key is not None else []
+    _run([make, "-s", "-C", str(LIBVSTIG), f"BUILD={folder}", f"KEYS={keys}", *signed, "robot"])
     board = folder / "simavr_pty"
     _run([gcc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-O2", "-o", str(board), str(BOARD), "-lsimavr"])
     return folder / "avr" / "avr_robot.elf", board

@@ -6,6 +6,13 @@
  * key 0x100 + its id, so a PC sees this robot's own view converge.
  *
  * Its robot id is read from EEPROM bytes 0xB0-0xB1, where kilolib keeps a Kilobot's.
+ *
+ * Built with -DVSTIG_ROBOT_KEY='"robot_key.h"' (`vstig keys --swarm-key FILE ID --format c`, for this robot's id:
+ * `make robot ROBOT_KEY=robot_key.h`), it is a robot of a swarm that checks tags (SPEC.md section 10), on a
+ * gateway link with auth=require: it sends each entry it wrote as a record tagged with its own key, refuses an
+ * entry claiming its id under a tag its key does not give, and takes only records. It holds no other robot's
+ * key, so it keeps others' entries untagged and relays them so (a gateway that requires tags refuses those: it
+ * holds them already). Its writes stay at epoch 0: this program never takes a key round the 16-bit wrap.
  * Build (the tests do it, and run it in simavr with its UART on a pty):
  *   avr-gcc -mmcu=atmega328p -DF_CPU=8000000UL -Os -DVSTIG_KEYS=16u -I.. avr_robot.c ../vstig_*.c
  */
@@ -15,6 +22,14 @@
 #include <avr/sleep.h>
 
 #include "vstig.h"
+
+#ifdef VSTIG_ROBOT_KEY
+#include VSTIG_ROBOT_KEY /* static const uint8_t vstig_own_key[VSTIG_KEY_SIZE] */
+#define RX_PAYLOAD VSTIG_RECORD_SIZE /* an auth=require link: every frame a record (SPEC.md 10.5) */
+static vstig_tag_key_t own_key;
+#else
+#define RX_PAYLOAD VSTIG_MESSAGE_SIZE /* cobs8: one message a frame */
+#endif
 
 #define BAUD_DIVISOR ((F_CPU / 8UL / 115200UL) - 1UL) /* 115200 8N1 (SPEC.md 6.0.1), double speed */
 #define STEP_TICKS ((F_CPU / 64UL / 20UL) - 1UL)      /* a control step every 50 ms (Timer1, clk/64) */
@@ -50,9 +65,34 @@ static void uart_send(const uint8_t *data, uint8_t len) {
 
 static void send_queue(vstig_engine_t *engine) {
     vstig_msg_t out[BUDGET];
-    uint8_t frame[VSTIG_COBS8_FRAME_SIZE];
+    uint8_t payload[RX_PAYLOAD], frame[VSTIG_FRAME_SIZE(RX_PAYLOAD)];
     size_t i, n = vstig_engine_drain(engine, out, BUDGET);
-    for (i = 0; i < n; i++) uart_send(frame, vstig_cobs8_encode(&out[i], frame));
+    for (i = 0; i < n; i++) {
+        uint8_t len = VSTIG_MESSAGE_SIZE;
+        vstig_msg_encode(&out[i], payload);
+#ifdef VSTIG_ROBOT_KEY
+        if (out[i].robot == engine->robot && out[i].timestamp != 0) { /* its own entry: the record */
+            uint8_t b;
+            for (b = VSTIG_MESSAGE_SIZE; b < VSTIG_MESSAGE_SIZE + 4u; b++) payload[b] = 0; /* epoch 0 */
+            vstig_tag(&own_key, 0, payload, 0, payload + VSTIG_MESSAGE_SIZE + 4u);
+            len = VSTIG_RECORD_SIZE;
+        }
+#endif
+        uart_send(frame, vstig_frame_encode(payload, len, frame));
+    }
+}
+
+/* Whether a received payload may reach the engine: with a key, an entry claiming this robot's id must carry
+ * the tag its key gives. */
+static uint8_t acceptable(const uint8_t *payload, const vstig_msg_t *heard, uint16_t uid) {
+#ifdef VSTIG_ROBOT_KEY
+    uint32_t epoch = (uint32_t)payload[8] << 24 | (uint32_t)payload[9] << 16 | (uint16_t)payload[10] << 8 | payload[11];
+    if (heard->robot == uid && heard->timestamp != 0)
+        return vstig_tag_ok(&own_key, 0, payload, epoch, payload + VSTIG_MESSAGE_SIZE + 4u);
+#else
+    (void)payload, (void)heard, (void)uid;
+#endif
+    return 1;
 }
 
 /* Everything the UART brought since the last pass, through the framing into the engine. */
@@ -61,7 +101,10 @@ static void take_in(vstig_engine_t *engine, vstig_deframer_t *deframer) {
     while (ring_tail != ring_head) {
         uint8_t byte = ring[ring_tail];
         ring_tail = (uint8_t)((ring_tail + 1u) % RX_RING);
-        if (vstig_cobs8_feed(deframer, byte, &heard)) vstig_engine_receive(engine, &heard);
+        if (vstig_deframer_feed(deframer, byte, RX_PAYLOAD)) {
+            vstig_msg_decode(deframer->buf, &heard);
+            if (acceptable(deframer->buf, &heard, engine->robot)) vstig_engine_receive(engine, &heard);
+        }
     }
 }
 
@@ -73,6 +116,9 @@ int main(void) {
     const uint8_t idle = 0; /* SPEC.md 6.0.3: a 0x00 first, so the far end drops any partial frame */
 
     vstig_engine_init(&engine, uid, vstig_larger_value_wins, 0, 0);
+#ifdef VSTIG_ROBOT_KEY
+    vstig_tag_key_init(&own_key, vstig_own_key);
+#endif
     vstig_deframer_init(&deframer);
     UBRR0 = BAUD_DIVISOR;
     UCSR0A = _BV(U2X0);
