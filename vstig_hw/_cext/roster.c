@@ -43,6 +43,7 @@ struct vx_tally {
     Py_ssize_t nevicted;
     unsigned long long seq;
     long long untracked, behind_untracked, unattributed;
+    int counted;             /* one of those three moved since the last fold */
     PyObject *names;         /* list of link names, a bit each */
     uint16_t newest[VSTIG_KEYS]; /* key -> newest timestamp heard (0: none) */
 };
@@ -114,6 +115,7 @@ static robot_t *add(vx_tally_t *t, unsigned long long who, int named, double whe
     size_t i;
     if (t->count >= t->max_robots && !evict_gone(t)) {
         t->untracked++;
+        t->counted = 1;
         return NULL;
     }
     place = t->spare[--t->nspare];
@@ -191,6 +193,7 @@ static void lags(vx_tally_t *t, robot_t *r, uint16_t key, double when) {
         r->behind_since[r->nbehind++] = when;
     } else {
         t->behind_untracked++;
+        t->counted = 1;
     }
 }
 
@@ -235,6 +238,7 @@ int vx_tally_take(vx_tally_t *t, PyObject *link, double when, int named, unsigne
     for (i = 0; i < n; i++) { /* a medium that names no sender: each PUT is its writer's, a GET nobody's */
         if (msgs[i].op == VSTIG_GET) {
             t->unattributed++;
+            t->counted = 1;
             continue;
         }
         if ((r = find(t, msgs[i].robot)) == NULL && (r = add(t, msgs[i].robot, 0, when)) == NULL) continue;
@@ -251,6 +255,7 @@ void vx_tally_refuse(vx_tally_t *t, double when, int named, unsigned long long s
     robot_t *r;
     if (!named && msg->op == VSTIG_GET) {
         t->unattributed++;
+        t->counted = 1;
         return;
     }
     if ((r = find(t, who)) == NULL && (r = add(t, who, named, when)) == NULL) return;
@@ -390,11 +395,15 @@ static PyObject *record_of(const vx_tally_t *t, robot_t *r) {
     return record;
 }
 
-/* What changed since the last fold: (records, evicted, untracked, behind_untracked, unattributed). */
+/* What changed since the last fold: (records, evicted, untracked, behind_untracked, unattributed); None if
+ * nothing did (a tick of a quiet swarm costs no lists). */
 static PyObject *Tally_fold(vx_tally_t *self, PyObject *unused) {
-    PyObject *records = PyList_New(0), *evicted = PyList_New(self->nevicted), *record;
+    PyObject *records, *evicted, *record;
     Py_ssize_t i;
     (void)unused;
+    if (!self->ntouched && !self->nevicted && !self->counted) Py_RETURN_NONE;
+    records = PyList_New(0);
+    evicted = PyList_New(self->nevicted);
     for (i = 0; evicted != NULL && i < self->nevicted; i++) {
         PyObject *who = PyLong_FromUnsignedLongLong(self->evicted[i]);
         if (who == NULL) Py_CLEAR(evicted);
@@ -419,6 +428,7 @@ static PyObject *Tally_fold(vx_tally_t *self, PyObject *unused) {
         r->revived = NAN;
     }
     self->ntouched = self->nevicted = 0;
+    self->counted = 0;
     return Py_BuildValue("(NNLLL)", records, evicted, self->untracked, self->behind_untracked, self->unattributed);
 }
 
@@ -428,7 +438,8 @@ static PyMethodDef Tally_methods[] = {
     {"mark", (PyCFunction)Tally_mark, METH_VARARGS, "mark(robot, gone): the Roster's state of `robot` is gone or not."},
     {"fold", (PyCFunction)Tally_fold, METH_NOARGS,
      "(records, evicted, untracked, behind_untracked, unattributed): every robot changed since the last fold, as "
-     "(robot, named, fresh, first, last, gap, messages, writes, gets, refused, links, revived, behind)."},
+     "(robot, named, fresh, first, last, gap, messages, writes, gets, refused, links, revived, behind); None if "
+     "nothing changed."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -138,7 +138,7 @@ class Tally(Protocol):
     def take(self, link: str, t: float, sender: int | None, messages: list[Message], /) -> None: ...
     def __call__(self, heard: Heard, reason: str) -> None: ...
     def mark(self, robot: int, gone: bool, /) -> None: ...
-    def fold(self) -> tuple[list[tuple[Any, ...]], list[int], int, int, int]: ...
+    def fold(self) -> tuple[list[tuple[Any, ...]], list[int], int, int, int] | None: ...
 
 
 class Roster:
@@ -194,7 +194,10 @@ class Roster:
         if tally is None:
             return
         with self._folding:
-            records, evicted, self.untracked, self.behind_untracked, self.unattributed = tally.fold()
+            folded = tally.fold()
+            if folded is None:  # nothing heard since
+                return
+            records, evicted, self.untracked, self.behind_untracked, self.unattributed = folded
             robots = self._robots
             for who in evicted:
                 forgotten = robots.pop(who, None)
