@@ -293,6 +293,7 @@ class MavlinkFraming(SerialFraming):
         self._reader = MavlinkStreamReader(self.drops)
         self._last: tuple[bytes | None, int | None] = (None, None)
         self._twin: Any = None  # the compiled Encoder this framing sends through, once shared (`share_sending`)
+        self._written = 0  # the newest signing timestamp the link wrote (`in_order`)
 
     def share_sending(self, twin: Any) -> None:
         """Send through the compiled Encoder `twin` from now on (it goes on from this framing's sequence and last
@@ -313,7 +314,44 @@ class MavlinkFraming(SerialFraming):
             if signing is None:
                 return frame(msgid, payload, seq=seq, sysid=self.sysid, compid=self.compid)
             return frame(msgid, payload, seq=seq, sysid=self.sysid, compid=self.compid, key=signing.key,
-                         link_id=signing.link_id, timestamp=signing.next_timestamp())
+                         link_id=signing.link_id, timestamp=self._next_timestamp(signing))
+
+    def in_order(self, unit: bytes) -> bytes:
+        """`unit` (whole frames this framing made) with every signed frame newer than the last one written.
+
+        The link calls this under its write lock as the device takes the unit: a frame is signed when it is
+        made, but a TUNNEL the air budget held, or one made on another thread, may go out after a newer
+        HEARTBEAT, and a receiver refuses a timestamp not newer than the last it took (SPEC.md 6.10.4). Such a
+        frame is signed again with the next timestamp; one in order goes as it is (the usual case: no hashing).
+        """
+        signing = self.signing
+        if signing is None:
+            return unit
+        fixed: bytearray | None = None
+        pos = 0
+        while pos + HEADER < len(unit) and unit[pos] == STX and unit[pos + 2] & SIGNED:
+            end = pos + HEADER + unit[pos + 1] + 2 + SIGNATURE
+            if end > len(unit):
+                break
+            stamp = int.from_bytes(unit[end - 12:end - 6], "little")
+            if stamp <= self._written:
+                with self._lock:
+                    stamp = max(self._written + 1, self._next_timestamp(signing))
+                fixed = bytearray(unit) if fixed is None else fixed
+                tail = bytes((unit[end - 13],)) + stamp.to_bytes(6, "little")
+                fixed[end - 13:end] = tail + _signature(signing.key, bytes(fixed[pos:end - 13]) + tail)
+            self._written = stamp
+            pos = end
+        return unit if fixed is None else bytes(fixed)
+
+    def _next_timestamp(self, signing: Signing) -> int:
+        """The next signing timestamp on the one clock this framing and its Encoder share (under `_lock`)."""
+        twin = self._twin
+        if twin is None:
+            return signing.next_timestamp()
+        stamp: int = max(twin.timestamp + 1, signing_timestamp(signing.clock()))
+        twin.timestamp = stamp
+        return stamp
 
     def encode(self, msg: Message) -> list[bytes]:
         return self.encode_batch((msg,))

@@ -143,14 +143,15 @@ def mavlink_link_from_spec(spec: MavlinkSpec, name: str, *, robot_id: int = 0,
     signing = None if spec.key is None else Signing(read_key(spec.key), spec.link_id)
     framing = MavlinkFraming(sysid, spec.compid, target=spec.target, signing=signing)
     heartbeat = None if listen_only else framing.heartbeat
+    stamp = None if signing is None else framing.in_order  # signed frames leave in timestamp order
     transport: Transport[bytes]
     if spec.medium == "serial":
         transport = MavlinkSerialTransport(spec.where, spec.baud, heartbeat=heartbeat, air_rate=spec.air_rate,
-                                           name=name)
+                                           stamp=stamp, name=name)
     else:
         host, _, port = spec.where.rpartition(":")
         transport = MavlinkUdpTransport(spec.medium, (host.strip("[]"), int(port)), heartbeat=heartbeat,
-                                        air_rate=spec.air_rate, name=name)
+                                        air_rate=spec.air_rate, stamp=stamp, name=name)
     if signing is None:
         log.warning("%s: WARNING: this MAVLink link is not signed (no key=): anyone on the radio or network can "
                     "read and write the swarm (give key=FILE, see docs/how-to/mavlink.md)", name)

@@ -7,6 +7,10 @@ under `drop_<reason>` (`drop_noise`, `drop_crc`, `drop_incompat_flags`, `drop_tr
 Both kinds also
 - announce the gateway: `heartbeat` (the framing's HEARTBEAT) goes out once a second from the reader thread, so
   MAVLink tools list the component (none while listen-only, or while a udpin link has heard no peer);
+- write in signing order: every write (a TUNNEL unit, a HEARTBEAT) passes `stamp` (the framing's `in_order`)
+  under one lock as the device takes it, so signed frames leave in timestamp order whichever thread made them
+  and however long the air budget held them; a HEARTBEAT never goes between the parts of a unit the port took
+  in part (it waits for the next read);
 - pace what they send to `air_rate` (bits a second on the air; a SiK radio's AIR_SPEED): at most half of it,
   `AIR_SHARE`, is ours, the rest the ground station's and the other vehicles'. A unit the budget has no room
   for is not taken by `write_nowait` (the link's writer waits for room in `write`), so what waits stays in the
@@ -23,6 +27,7 @@ from __future__ import annotations
 import errno
 import select
 import socket
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -87,11 +92,35 @@ class _Mavlink:
     heartbeat: Callable[[], bytes] | None
     budget: AirBudget | None
 
-    def _mavlink_init(self, heartbeat: Callable[[], bytes] | None, air_rate: int | None) -> None:
+    def _mavlink_init(self, heartbeat: Callable[[], bytes] | None, air_rate: int | None,
+                      stamp: Callable[[bytes], bytes] | None) -> None:
         self.heartbeat = heartbeat
         self.budget = None if air_rate is None else AirBudget(air_rate)
         self._next_beat = 0.0
         self._reader = MavlinkStreamReader(self.counters, prefix="drop_")
+        self._stamp = stamp or (lambda unit: unit)
+        self._writing = threading.Lock()  # one write at a time, each unit stamped as it goes (see the module)
+        self._tail: bytes | None = None  # what a write left of a unit the port took in part: it goes next, as is
+
+    def _in_order(self, unit: bytes) -> bytes:
+        """`unit` ready for the device (under `_writing`): stamped, unless it is the rest of one already begun."""
+        if unit is self._tail:
+            self._tail = None
+            return unit
+        self._tail = None
+        return self._stamp(unit)
+
+    def _beat(self, send: Callable[[bytes], object]) -> None:
+        """Send the HEARTBEAT if one is due and no write is under way (else it goes at a later read)."""
+        if self.heartbeat is None or time.monotonic() < self._next_beat or not self._writing.acquire(blocking=False):
+            return
+        try:
+            if self._tail is None:
+                beat = self._beat_due()
+                if beat is not None:
+                    send(self._stamp(beat))
+        finally:
+            self._writing.release()
 
     def cut(self, data: bytes) -> list[bytes]:
         """The frames this whole chunk holds (a datagram, or what a read took: see `flush_after`)."""
@@ -128,9 +157,10 @@ class MavlinkSerialTransport(_Mavlink, SerialTransport):
     quiet_after = 0.1  # seconds without a byte after which a frame still arriving is cut short
 
     def __init__(self, port: str, baudrate: int = 57600, *, heartbeat: Callable[[], bytes] | None = None,
-                 air_rate: int | None = None, **options: Any) -> None:
+                 air_rate: int | None = None, stamp: Callable[[bytes], bytes] | None = None,
+                 **options: Any) -> None:
         super().__init__(port, baudrate, **options)
-        self._mavlink_init(heartbeat, air_rate)
+        self._mavlink_init(heartbeat, air_rate, stamp)
         self._last_byte = 0.0
 
     def _open_device(self) -> Any:
@@ -139,9 +169,7 @@ class MavlinkSerialTransport(_Mavlink, SerialTransport):
         return port
 
     def _read_device(self, device: Any, timeout: float) -> list[bytes]:
-        beat = self._beat_due()
-        if beat is not None:
-            SerialTransport.write(self, beat)
+        self._beat(lambda beat: SerialTransport.write(self, beat))
         chunks = super()._read_device(device, min(timeout, HEARTBEAT_PERIOD))
         if chunks:
             self._last_byte = time.monotonic()
@@ -151,11 +179,16 @@ class MavlinkSerialTransport(_Mavlink, SerialTransport):
         return []
 
     def write_nowait(self, unit: bytes) -> bytes | None:
-        return super().write_nowait(unit) if self._room(unit) else unit
+        if not self._room(unit):
+            return unit
+        with self._writing:
+            self._tail = super().write_nowait(self._in_order(unit))  # the rest goes next, as it is (`write`)
+            return self._tail
 
     def write(self, unit: bytes) -> None:
         self._pace(unit, self._closed)
-        super().write(unit)
+        with self._writing:
+            super().write(self._in_order(unit))
 
 
 class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
@@ -165,14 +198,15 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
     lost_counter = "disconnects"
 
     def __init__(self, mode: str, address: tuple[str, int], *, heartbeat: Callable[[], bytes] | None = None,
-                 air_rate: int | None = None, name: str | None = None) -> None:
+                 air_rate: int | None = None, stamp: Callable[[bytes], bytes] | None = None,
+                 name: str | None = None) -> None:
         if mode not in ("udpin", "udpout"):
             raise ValueError(f"a MAVLink UDP link is udpin or udpout, got {mode!r}")
         super().__init__(name or f"{mode}:{address[0]}:{address[1]}", (0.1, 2.0))
         self.mode, self.address = mode, address
         self.peers: dict[tuple[str, int], float] = {} if mode == "udpin" else {address: float("inf")}
         self.listening = (f"udp/{address[0]}:{address[1]}",) if mode == "udpin" else ()
-        self._mavlink_init(heartbeat, air_rate)
+        self._mavlink_init(heartbeat, air_rate, stamp)
 
     @property
     def about(self) -> str:
@@ -202,9 +236,8 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
         device.close()
 
     def _read_device(self, device: socket.socket, timeout: float) -> list[bytes]:
-        beat = self._beat_due() if self.peers else None
-        if beat is not None:
-            self._send(device, beat)
+        if self.peers:
+            self._beat(lambda beat: self._send(device, beat))
         if not select.select([device], [], [], min(timeout, HEARTBEAT_PERIOD))[0]:
             return []
         frames: list[bytes] = []
@@ -266,9 +299,11 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
     def write_nowait(self, unit: bytes) -> bytes | None:
         if not self._room(unit):
             return unit
-        DeviceTransport.write(self, unit)  # a datagram goes whole or not at all: never half taken
+        with self._writing:
+            DeviceTransport.write(self, self._in_order(unit))  # a datagram goes whole or not at all
         return None
 
     def write(self, unit: bytes) -> None:
         self._pace(unit, self._closed)
-        super().write(unit)
+        with self._writing:
+            super().write(self._in_order(unit))
