@@ -131,6 +131,11 @@ def test_the_gateways_own_writes_carry_its_tag(channels: tuple[str, str, str]) -
     assert heard and all(record == _own_tag(GATEWAY, msg) for msg, record in heard)
 
 
+def test_a_key_without_a_link_that_checks_tags_changes_nothing(channels: tuple[str, str, str]) -> None:
+    node = _node(channels, ("off", "off", "off"))
+    assert node.signing is None and all(link.record_of is None for link in node.links)
+
+
 def test_policies_need_a_key_and_room_for_tags(channels: tuple[str, str, str]) -> None:
     links = assemble_links([f"can:virtual:{channels[0]}?fd=1&auth=prefer"], GATEWAY)
     with pytest.raises(ValueError, match=r"auth=prefer: checking tags needs the swarm key \(--swarm-key FILE"):

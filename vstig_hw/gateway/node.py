@@ -69,7 +69,6 @@ from ..auth import SwarmKeys
 from ..counters import ENGINE_STATS, Counters
 from ..engine import ConflictResolver, Entry, Stigmergy
 from ..links.link import Heard, Link
-from ..tagged import AuthPolicy
 from ..timestamps import TS_NONE
 from ..wire import Message, Op
 from .compiled import compiled_for, jump_guard, receiver_for
@@ -78,7 +77,7 @@ from .guard import Guard
 from .outlet import Outlet
 from .parts import INTAKE_TICKS, ChangeListener, RawRelay, Seat
 from .readers import READ_TIMEOUT, LinkReaders
-from .signing import Signing
+from .signing import Signing, unkeyed_policy
 
 __all__ = ["CLOSE_DRAIN", "DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Listening", "Mode", "Node",
            "SwarmClosed", "favour_latency"]
@@ -810,12 +809,12 @@ class Node:
 
 
 def _signing(links: list[Link[Any]], mode: Mode, keys: SwarmKeys | None) -> Signing | None:
-    """The swarm key's part of a Node (None: without the key); ValueError naming what cannot work."""
-    asking = [link for link in links if link.auth is not AuthPolicy.OFF]
-    if keys is None:
-        if asking:
-            raise ValueError(f"link {asking[0].name} has auth={asking[0].auth.value}: checking tags needs the swarm "
-                             "key (--swarm-key FILE, swarm_key=)")
+    """The swarm key's part of a Node (None: without the key, or no link with auth=require or prefer: every tag
+    would be ignored, and the compiled path serves); ValueError naming what cannot work."""
+    complaint = unkeyed_policy(links)
+    if keys is None or complaint is None:
+        if keys is None and complaint is not None:
+            raise ValueError(complaint)
         return None
     if mode is Mode.RAW:
         raise ValueError("a raw bridge keeps no entries, so it cannot keep their proofs: run it with an engine "
