@@ -9,10 +9,12 @@ import os
 import time
 from collections.abc import Iterator
 from dataclasses import replace
+from pathlib import Path
 
 import can
 import pytest
 
+import vstig_hw
 from vstig_hw.auth import SwarmKeys, Tagged, entry_tag, robot_key
 from vstig_hw.engine import Entry
 from vstig_hw.framing.can import CanFraming, CanIdScheme
@@ -153,3 +155,22 @@ def test_every_kind_takes_a_policy(spec: str) -> None:
         parse(f"{spec}{joined}auth=maybe")
     with pytest.raises(ValueError, match="parameter 'auth' given twice"):
         parse(f"{spec}{joined}auth=off&auth=require")
+
+
+def test_join_takes_the_swarm_key_file(channels: tuple[str, str, str], tmp_path: Path) -> None:
+    key_file = tmp_path / "swarm.key"
+    key_file.write_text(MASTER.hex() + "\n", encoding="ascii")
+    spec = f"can:virtual:{channels[0]}?fd=1&auth=require"
+    with pytest.raises(ValueError, match=r"swarm_key: link '.*' has auth=require: checking tags needs the swarm key"):
+        vstig_hw.join(spec, robot_id=GATEWAY)
+    key_file.chmod(0o644)
+    with pytest.raises(ValueError, match=f"{key_file}"):  # group and others may read it: refused, named
+        vstig_hw.join(spec, robot_id=GATEWAY, swarm_key=key_file)
+    key_file.chmod(0o600)
+    listener = Robot(channels[0], 12)
+    with vstig_hw.join(spec, robot_id=GATEWAY, swarm_key=key_file) as swarm:
+        swarm.put(7, 70)
+        time.sleep(0.2)
+    heard = [(msg, record) for msg, record in listener.heard() if msg.key == 7]
+    listener.bus.shutdown()
+    assert heard and all(record == _own_tag(GATEWAY, msg) for msg, record in heard)  # the program's write, tagged
