@@ -13,6 +13,8 @@ def command() -> None:
     click.echo("A LINK names a transport, a device and a framing in one string:\n")
     for rule in grammar():
         click.echo(f"  {rule}")
+    click.echo("  Every kind also takes auth=require|prefer|off (default off): what a gateway with --swarm-key does "
+               "with untagged messages and bad tags on it (docs/how-to/auth.md).")
     click.echo("\nExamples:")
     for specs in examples().values():
         for example in specs:

@@ -77,7 +77,8 @@ def test_links_lists_the_grammar_with_examples() -> None:
     code, output = invoke("links")
     assert code == 0
     for text in ("can:<python-can interface>:<channel>", "serial:<port or pyserial URL>", "kilobot-ohc:",
-                 "can:socketcan:vcan0", "serial:socket://localhost:7000?framing=epuck4"):
+                 "can:socketcan:vcan0", "serial:socket://localhost:7000?framing=epuck4",
+                 "Every kind also takes auth=require|prefer|off"):
         assert text in output
 
 
