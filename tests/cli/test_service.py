@@ -257,7 +257,10 @@ def test_a_link_planted_at_any_moment_is_never_followed(outside_tmp: Path) -> No
     outcomes: Counter[str] = Counter()
     try:
         time.sleep(0.3)  # racing
-        for n in range(400):
+        deadline = time.monotonic() + 20  # 400 writes at least, then on until both sides of the race were met
+        n = 0
+        while n < 400 or (len(outcomes) < 2 and time.monotonic() < deadline):
+            n += 1
             try:
                 write_new_file(str(output), f"unit {n}\n", overwrite=n % 2 == 1)
                 outcomes["written"] += 1
