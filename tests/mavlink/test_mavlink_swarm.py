@@ -113,7 +113,10 @@ def test_two_gateways_converge_through_mavproxy_beside_a_ground_station(
                            "2", "--larger-value-wins", "--tick", "0.05")]
     station = GroundStation(out_station, KEY if signed else None)
     try:
-        wait_for(lambda: all(r.value(1) == 20 for r in robots) and len(station.heard) > 20, 40,
+        # converged, and the station heard the gateway announce itself (a HEARTBEAT a second) and relay the write
+        wait_for(lambda: all(r.value(1) == 20 for r in robots) and len(station.heard) > 20
+                 and any(m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 191 for m in station.heard)
+                 and Message(Op.PUT, 1, 20, 1, 20) in station.messages(), 40,
                  step=lambda: ([r.step() for r in robots], station.step(), time.sleep(0.05)))
     finally:
         errs = [stop(bridge)[1] for bridge in bridges]
