@@ -1,9 +1,8 @@
 """The roster (issue 47): what keeping it costs a relay, and sniff's robots table at 1,000 robots.
 
 * CPU per message of a `vstig bridge` relaying pty -> pty (raw and engine, the compiled data path), the roster on
-  (the default) beside the same bridge with `--no-roster`, the runs alternating, each keeping its least CPU of
-  ROUNDS (datapath's method: bench_datapath.py); and, where valgrind is, user-space instructions per message
-  (callgrind: a figure the shared VM's load cannot move).
+  (the default) beside the same bridge with `--no-roster`, the runs alternating, the median of ROUNDS each; and,
+  where valgrind is, user-space instructions per message (callgrind: a figure the shared VM's load cannot move).
 * `vstig sniff --robots`'s table at 1,000 robots, built and drawn at 80 columns: against one control period.
 """
 
@@ -11,6 +10,7 @@ from __future__ import annotations
 
 import io
 import shutil
+import statistics
 import sys
 import tempfile
 import time
@@ -24,7 +24,7 @@ from vstig_hw.wire import Message, Op
 from .bench_datapath import _engine, _instructions, _raw, _relay_run
 from .registry import Result, benchmark
 
-ROUNDS = 3
+ROUNDS = 5
 
 
 def _without_roster(argv: Callable[[str, str], list[str]]) -> Callable[[str, str], list[str]]:
@@ -42,14 +42,13 @@ _RELAYS: dict[str, tuple[Callable[[str, str], list[str]], bool]] = {
 
 @benchmark("roster")
 def relay_cpu_roster_on_vs_off() -> Iterator[Result]:
-    runs: dict[str, float] = {}
-    for _ in range(ROUNDS):
+    runs: dict[str, list[float]] = {}
+    for _ in range(ROUNDS):  # alternated, so the VM's load falls on both alike; the median of each
         for name, (argv, echo) in _RELAYS.items():
-            cpu = _relay_run(argv, echo)[0]
-            runs[name] = min(cpu, runs.get(name, cpu))
+            runs.setdefault(name, []).append(_relay_run(argv, echo)[0])
     for name in ("raw", "engine"):
-        yield Result(f"roster.relay_{name}_cpu_per_msg", runs[name] * 1e6, "us", "same bridge --no-roster",
-                     runs[f"{name}_no_roster"] * 1e6)
+        yield Result(f"roster.relay_{name}_cpu_per_msg", statistics.median(runs[name]) * 1e6, "us",
+                     "same bridge --no-roster", statistics.median(runs[f"{name}_no_roster"]) * 1e6)
 
 
 @benchmark("roster")
