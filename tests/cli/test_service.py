@@ -22,11 +22,12 @@ from pathlib import Path
 
 import click
 import pytest
-from peers import has_open, run_vstig, start_vstig, stop, wait_for
+from peers import has_open, start_vstig, stop, wait_for
 from ports import free_port
 from real_systemd import RealSystemd
 from required import require_tool
 from robots import PtyRobot
+from service_install import service_vstig
 
 from vstig_cli.ops.notify import ServiceNotifier
 from vstig_cli.ops.unit_file import write_new_file
@@ -75,6 +76,12 @@ class ServiceManager:
         self.socket.close()
 
 
+def run_service(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+    """`vstig service ARGS` from a vstig its unit's own user can see (service_install.py)."""
+    return subprocess.run([service_vstig(), "service", *args], capture_output=True, text=True, timeout=timeout,
+                          check=False)
+
+
 def _env(address: str, **extra: str) -> dict[str, str]:
     return {**os.environ, "NOTIFY_SOCKET": address, "WATCHDOG_USEC": str(int(WATCHDOG_S * 1e6)), **extra}
 
@@ -117,7 +124,7 @@ def test_the_unit_passes_systemd_analyze_verify(tmp_path: Path) -> None:
     config = folder / "lab.toml"
     config.write_text(LAB)
     unit = tmp_path / "vstig-lab.service"
-    made = run_vstig("service", "--config", str(config), "--user", "daemon", "-o", str(unit))
+    made = run_service("--config", str(config), "--user", "daemon", "-o", str(unit))
     assert made.returncode == 0, made.stderr
     text = unit.read_text()
     assert "Type=notify" in text and "WatchdogSec=30" in text and "Restart=on-failure" in text
@@ -127,7 +134,7 @@ def test_the_unit_passes_systemd_analyze_verify(tmp_path: Path) -> None:
     assert f"--config {quoted}\n" in text
     assert "PrivateTmp=yes" not in text  # the config is in /tmp: a /tmp of its own would hide it
     assert "warning: user daemon cannot read" in made.stderr  # pytest's folders are root's alone
-    again = run_vstig("service", "--config", str(config), "--user", "daemon", "-o", str(unit))
+    again = run_service("--config", str(config), "--user", "daemon", "-o", str(unit))
     assert again.returncode == 2 and "--overwrite" in again.stderr  # a unit the user has is not replaced
 
 
@@ -143,7 +150,7 @@ def test_the_unit_is_sandboxed_to_what_its_config_needs(outside_tmp: Path, body:
     config = outside_tmp / "lab.toml"
     config.write_text(body)
     unit = outside_tmp / "vstig-lab.service"
-    made = run_vstig("service", "--config", str(config), "-o", str(unit))
+    made = run_service("--config", str(config), "-o", str(unit))
     assert made.returncode == 0, made.stderr
     settings = _settings(unit.read_text())
     assert settings["User"] == ["vstig"] and settings["DynamicUser"] == ["yes"]  # not root, by default
@@ -161,7 +168,7 @@ def test_root_is_warned_and_still_sandboxed(outside_tmp: Path) -> None:
     config = outside_tmp / "lab.toml"
     config.write_text(LAB)
     unit = outside_tmp / "vstig-lab.service"
-    made = run_vstig("service", "--config", str(config), "--user", "root", "-o", str(unit))
+    made = run_service("--config", str(config), "--user", "root", "-o", str(unit))
     assert made.returncode == 0 and "warning: the unit runs the gateway as root (uid 0)" in made.stderr
     assert "User=" not in unit.read_text() and _exposure(unit) <= 3.5
 
@@ -169,7 +176,7 @@ def test_root_is_warned_and_still_sandboxed(outside_tmp: Path) -> None:
 def test_a_user_that_does_not_exist_is_refused(outside_tmp: Path) -> None:
     config = outside_tmp / "lab.toml"
     config.write_text(LAB)
-    done = run_vstig("service", "--config", str(config), "--user", "nosuchuser")
+    done = run_service("--config", str(config), "--user", "nosuchuser")
     assert done.returncode == 2 and "no user 'nosuchuser' on this machine" in done.stderr
     assert "useradd --system" in done.stderr and done.stdout == ""
 
@@ -181,20 +188,20 @@ def test_a_control_character_in_any_value_is_refused(outside_tmp: Path, bad: str
     folder = outside_tmp / f"lab{bad}ExecStartPre=touch {outside_tmp}/pwned"
     folder.mkdir(parents=True)
     (folder / "lab.toml").write_text(LAB)
-    done = run_vstig("service", "--config", str(folder / "lab.toml"))
+    done = run_service("--config", str(folder / "lab.toml"))
     assert done.returncode == 2 and "--config '" in done.stderr and "holds a control character" in done.stderr
     assert done.stdout == ""
     named = outside_tmp / f"lab{bad}.toml"  # the description, from the file's name
     named.write_text(LAB)
-    assert "holds a control character" in run_vstig("service", "--config", str(named)).stderr
+    assert "holds a control character" in run_service("--config", str(named)).stderr
     record = outside_tmp / "record.toml"  # ReadWritePaths=, from the record output in the file
     record.write_text(f'links = ["serial:loop://"]\noutput = "{outside_tmp}/caps{_toml(bad)}x/"\n')
     (outside_tmp / f"caps{bad}x").mkdir()
-    done = run_vstig("service", "--command", "record", "--config", str(record))
+    done = run_service("--command", "record", "--config", str(record))
     assert done.returncode == 2 and "the folder recorded into '" in done.stderr, done.stderr
     clean = outside_tmp / "clean.toml"
     clean.write_text(LAB)
-    done = run_vstig("service", "--config", str(clean), "--user", f"x{bad}")
+    done = run_service("--config", str(clean), "--user", f"x{bad}")
     assert done.returncode == 2 and "is not a user name" in done.stderr
 
 
@@ -212,14 +219,14 @@ def test_a_link_planted_at_the_output_is_never_followed(outside_tmp: Path) -> No
     for dangling in (False, True):
         unit.symlink_to(outside_tmp / "absent" if dangling else target)
         for extra in ((), ("--overwrite",)):
-            done = run_vstig("service", "--config", str(config), "-o", str(unit), *extra)
+            done = run_service("--config", str(config), "-o", str(unit), *extra)
             assert done.returncode == 2 and f"{unit} is a symbolic link" in done.stderr, done.stderr
         unit.unlink()
     assert target.read_text() == "root:x:0:0\n" and not (outside_tmp / "absent").exists()
-    made = run_vstig("service", "--config", str(config), "-o", str(unit))
+    made = run_service("--config", str(config), "-o", str(unit))
     assert made.returncode == 0 and stat.S_IMODE(unit.stat().st_mode) == 0o644, made.stderr
     before = unit.stat().st_ino
-    replaced = run_vstig("service", "--config", str(config), "--watchdog", "7", "-o", str(unit), "--overwrite")
+    replaced = run_service("--config", str(config), "--watchdog", "7", "-o", str(unit), "--overwrite")
     assert replaced.returncode == 0 and "WatchdogSec=7" in unit.read_text()
     assert unit.stat().st_ino != before  # a new file renamed over the old name, not the old one rewritten
     assert [p.name for p in outside_tmp.iterdir() if p.name.endswith(".tmp")] == []
@@ -279,38 +286,38 @@ def test_a_typo_in_the_config_is_named_as_vstig_service(outside_tmp: Path) -> No
     """issue 44: `vstig service --config typo.toml` printed `Usage: vstig bridge ...`."""
     config = outside_tmp / "typo.toml"
     config.write_text('links = ["serial:loop://"]\nrobot_id = 200\n')
-    done = run_vstig("service", "--config", str(config))
+    done = run_service("--config", str(config))
     assert done.returncode == 2 and "Usage: vstig service" in done.stderr and "vstig bridge [" not in done.stderr
     assert f"{config}:2: 'robot_id' is not an option of vstig bridge; did you mean robot-id?" in done.stderr
-    done = run_vstig("service", "--config", str(outside_tmp / "none.toml"))
+    done = run_service("--config", str(outside_tmp / "none.toml"))
     assert done.returncode == 2 and "Usage: vstig service" in done.stderr and "none.toml" in done.stderr
 
 
 def test_the_default_user_cannot_see_a_config_in_tmp(tmp_path: Path) -> None:
     config = tmp_path / "lab.toml"
     config.write_text(LAB)
-    done = run_vstig("service", "--config", str(config))
+    done = run_service("--config", str(config))
     assert done.returncode == 2 and f"move {config} out of /tmp, or give --user NAME" in done.stderr
 
 
 def test_a_record_service_needs_a_folder_to_record_into(outside_tmp: Path) -> None:
     config = outside_tmp / "rec.toml"
     config.write_text('links = ["serial:loop://"]\n')
-    done = run_vstig("service", "--command", "record", "--config", str(config))
+    done = run_service("--command", "record", "--config", str(config))
     assert done.returncode == 2 and "a record service needs output" in done.stderr
     (outside_tmp / "caps").mkdir()
     config.write_text(f'links = ["serial:loop://"]\noutput = "{outside_tmp}/caps"\n')
-    done = run_vstig("service", "--command", "record", "--config", str(config))
+    done = run_service("--command", "record", "--config", str(config))
     assert done.returncode == 0 and f"ReadWritePaths={outside_tmp}/caps\n" in done.stdout
 
 
 def test_service_refuses_a_config_the_gateway_would_refuse(tmp_path: Path) -> None:
     config = tmp_path / "lab.toml"
     config.write_text("robot-id = 200\ntick = nan\n")
-    done = run_vstig("service", "--config", str(config))
+    done = run_service("--config", str(config))
     assert done.returncode == 2 and "lab.toml:2: tick: 'nan' is not a finite number" in done.stderr
     config.write_text("robot-id = 200\n")
-    done = run_vstig("service", "--config", str(config))
+    done = run_service("--config", str(config))
     assert done.returncode == 2 and "needs links" in done.stderr
 
 
@@ -428,7 +435,7 @@ def test_the_gateway_runs_under_its_sandboxed_unit_in_a_real_systemd(outside_tmp
     config.write_text(f'robot-id = 200\ntick = 0.05\nlinks = ["{writer.spec}", "{reader.spec}"{zenoh_lines}')
     units = outside_tmp / "units"
     units.mkdir()
-    made = run_vstig("service", "--config", str(config), "--watchdog", "5", "-o", str(units / "vstig-lab.service"))
+    made = run_service("--config", str(config), "--watchdog", "5", "-o", str(units / "vstig-lab.service"))
     assert made.returncode == 0 and "warning" not in made.stderr, made.stderr
     sentinel = tempfile.NamedTemporaryFile(prefix="vstig-sentinel-")  # noqa: SIM115  # the host's /tmp, untouched
     try:
