@@ -24,6 +24,7 @@ from peers import VSTIG
 ROOT = Path(__file__).resolve().parents[2]
 TEMPORARY = (Path("/tmp"), Path("/var/tmp"))  # what PrivateTmp= replaces (cli/ops/unit.py)
 CACHE = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "vstig-hw"
+EXTRAS = "zenoh,metrics"  # what the units under test run: zenoh links, --metrics
 
 
 def _under_temporary(path: Path) -> bool:
@@ -36,7 +37,7 @@ def service_vstig() -> str:
     if not any(map(_under_temporary, (ROOT, Path(VSTIG), Path(sys.executable)))):
         return VSTIG
     key = hashlib.sha256(b"\0".join([(ROOT / "pyproject.toml").read_bytes(), str(ROOT).encode(),
-                                     sys.version.encode()])).hexdigest()[:16]
+                                     sys.version.encode(), EXTRAS.encode()])).hexdigest()[:16]
     folder = CACHE / f"service-venv-{key}"
     CACHE.mkdir(parents=True, exist_ok=True)
     with open(folder.with_suffix(".lock"), "w") as lock:
@@ -47,7 +48,7 @@ def service_vstig() -> str:
             # CC=false: the pure path serves (the unit's tests relay a few messages); no compile, and nothing
             # written into the checkout
             done = subprocess.run([str(folder / "bin" / "python"), "-m", "pip", "install", "--quiet",
-                                   "--disable-pip-version-check", str(ROOT)],
+                                   "--disable-pip-version-check", f"{ROOT}[{EXTRAS}]"],
                                   capture_output=True, text=True, timeout=600, check=False,
                                   env={**os.environ, "CC": "false"})
             if done.returncode:
