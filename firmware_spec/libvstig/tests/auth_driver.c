@@ -9,23 +9,7 @@
 #include <string.h>
 
 #include "vstig_auth.h"
-
-static int unhex(const char *text, uint8_t *out, size_t n) {
-    size_t i;
-    unsigned byte;
-    if (strlen(text) != 2 * n) return 0;
-    for (i = 0; i < n; i++) {
-        if (sscanf(text + 2 * i, "%2x", &byte) != 1) return 0;
-        out[i] = (uint8_t)byte;
-    }
-    return 1;
-}
-
-static void print_hex(const uint8_t *data, size_t n) {
-    size_t i;
-    for (i = 0; i < n; i++) printf("%02x", data[i]);
-    printf("\n");
-}
+#include "hex_io.h"
 
 int main(void) {
     char line[512], cmd[8], a[80], c[80], d[80];
@@ -38,11 +22,13 @@ int main(void) {
             vstig_master_init(&ready, key);
             vstig_robot_key(&ready, (uint16_t)robot, key);
             print_hex(key, sizeof key);
+            printf("\n");
         } else if (!strcmp(cmd, "tag") && sscanf(line, "%*s %79s %lu %79s %lu", a, &stigmergy, c, &epoch) == 4 &&
                    unhex(a, key, sizeof key) && unhex(c, msg, sizeof msg)) {
             vstig_tag_key_init(&ready, key);
             vstig_tag(&ready, (uint16_t)stigmergy, msg, (uint32_t)epoch, tag);
             print_hex(tag, sizeof tag);
+            printf("\n");
         } else if (!strcmp(cmd, "ok") &&
                    sscanf(line, "%*s %79s %lu %79s %lu %79s", a, &stigmergy, c, &epoch, d) == 5 &&
                    unhex(a, key, sizeof key) && unhex(c, msg, sizeof msg) && unhex(d, tag, sizeof tag)) {

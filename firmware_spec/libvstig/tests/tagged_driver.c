@@ -12,22 +12,7 @@
 
 #include "vstig_engine.h"
 #include "vstig_tagged.h"
-
-static int unhex(const char *text, uint8_t *out, size_t n) {
-    size_t i;
-    unsigned byte;
-    if (strlen(text) != 2 * n) return 0;
-    for (i = 0; i < n; i++) {
-        if (sscanf(text + 2 * i, "%2x", &byte) != 1) return 0;
-        out[i] = (uint8_t)byte;
-    }
-    return 1;
-}
-
-static void print_hex(const uint8_t *data, size_t n) {
-    size_t i;
-    for (i = 0; i < n; i++) printf("%02x", data[i]);
-}
+#include "hex_io.h"
 
 static vstig_engine_t engine;
 static vstig_tagged_t tagged;
