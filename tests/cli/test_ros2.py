@@ -147,6 +147,24 @@ class Lab:
         return self.closed
 
 
+@contextlib.contextmanager
+def joined_program_and_peer(host: Host, env: dict[str, str], script: str) -> Iterator[Process]:
+    """`python -c script` in the namespace (a program that prints "joined" once its vstig_hw.join is up), then a
+    ROS 2 peer once it has: yields the peer, ready or failed; stops both."""
+    program = Process([*host.command(), sys.executable, "-c", script], dds.vstig_environment(), stdin=True)
+    try:
+        wait_for(lambda: "joined\n" in program.lines or program.process.poll() is not None, 60)
+        assert "joined\n" in program.lines, "".join(program.errors)[-2000:]
+        peer = Process([*host.command(), sys.executable, PEER, NAMESPACE], env, stdin=True)
+        try:
+            wait_for(lambda: bool(peer.records("ready") or peer.records("error")), 60)
+            yield peer
+        finally:
+            peer.stop()
+    finally:
+        program.stop()
+
+
 def counters(stderr: str, link: str) -> dict[str, int]:
     """The counters `vstig bridge` printed for `link` when it stopped."""
     lines = [line for line in stderr.splitlines() if line.startswith(f"{link}: ") and "=" in line]
@@ -467,29 +485,19 @@ def test_a_stopped_subscriber_does_not_delay_radio_to_radio_traffic(lab: Callabl
 
 def test_a_python_program_joins_with_a_ros2_link(host: Host, ros2_env: dict[str, str]) -> None:
     """`vstig_hw.join(..., "ros2:lab")`: its puts reach a ROS 2 node's changes and get service."""
-    program = Process([*host.command(), sys.executable, "-c", """
+    with joined_program_and_peer(host, ros2_env, """
 import sys, time
 import vstig_hw
 with vstig_hw.join("can:virtual:api", "ros2:lab", robot_id=200) as swarm:
     swarm.put(5, 55)
     print("joined", flush=True)
     sys.stdin.read()
-"""], dds.vstig_environment(), stdin=True)
-    try:
-        wait_for(lambda: "joined\n" in program.lines or program.process.poll() is not None, 60)
-        assert "joined\n" in program.lines, "".join(program.errors)[-2000:]
-        peer = Process([*host.command(), sys.executable, PEER, NAMESPACE], ros2_env, stdin=True)
-        try:
-            wait_for(lambda: bool(peer.records("ready") or peer.records("error")), 60)
-            peer.send("get 5")
-            wait_for(lambda: bool(peer.records("get")))
-            assert peer.records("get")[-1] == {"found": True, "entry": [5, 55, 1, 200]}
-            wait_for(lambda: bool(peer.records("change")), 10)  # another reader than the service's: it may be later
-            assert [c["change"]["new"] for c in peer.records("change")] == [[5, 55, 1, 200]]
-        finally:
-            peer.stop()
-    finally:
-        program.stop()
+""") as peer:
+        peer.send("get 5")
+        wait_for(lambda: bool(peer.records("get")))
+        assert peer.records("get")[-1] == {"found": True, "entry": [5, 55, 1, 200]}
+        wait_for(lambda: bool(peer.records("change")), 10)  # another reader than the service's: it may be later
+        assert [c["change"]["new"] for c in peer.records("change")] == [[5, 55, 1, 200]]
 
 
 def test_two_puts_at_once_and_the_rest_busy_at_once_while_a_get_is_answered(lab: Callable[..., Lab]) -> None:
