@@ -30,6 +30,9 @@ from vstig_hw.clocks import MAX_PEERS
 from vstig_hw.transports.zenoh_clock import PROBE_EVERY_S
 from vstig_hw.wire import Message, Op, encode
 
+sys.path.append(str(Path(__file__).resolve().parents[1] / "cli"))  # tests/cli's process helpers, as tests/mavlink's
+from peers import stop
+
 VSTIG = str(Path(sys.executable).with_name("vstig"))
 pytestmark = pytest.mark.slow
 
@@ -62,13 +65,7 @@ def _recording(*argv: str) -> Iterator[subprocess.Popen[str]]:
     try:
         yield process
     finally:
-        if process.poll() is None:
-            process.terminate()
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+        stop(process, timeout=20)
 
 
 def _session(*connect: str, config: str = "{}") -> zenoh.Session:

@@ -59,16 +59,11 @@ def mavproxy(tmp_path: Path) -> Iterator[tuple[int, int, int]]:
         [str(MAVPROXY), f"--master=udpin:127.0.0.1:{master}", f"--out=udpout:127.0.0.1:{out_gateway}",
          f"--out=udpout:127.0.0.1:{out_station}", "--daemon", "--non-interactive", "--nowait",
          "--default-modules=", f"--state-basedir={tmp_path}"],
-        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         yield master, out_gateway, out_station
     finally:
-        process.terminate()
-        try:
-            process.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.communicate()
+        stop(process)
 
 
 class GroundStation:
