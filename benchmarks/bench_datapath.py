@@ -21,12 +21,14 @@ import contextlib
 import json
 import os
 import select
+import shutil
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import tty
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -260,11 +262,14 @@ def _engine(a: str, b: str) -> list[str]:
             "--budget", "2000", "--no-refresh"]
 
 
+# A relay: its argv for pty paths A, B; whether it re-broadcasts onto A; extra environment.
+Relay = tuple[Callable[[str, str], list[str]], bool, dict[str, str]]
+
 _PURE = {"VSTIG_PURE": "1"}  # the bridge's pure-Python path (vstig_hw/native.py)
 
 # The pty -> pty relays measured, in the order they run (argv for pty paths A, B; whether it re-broadcasts onto A;
 # extra environment): each bridge on the compiled data path, then on the pure-Python one, alternating.
-_RELAYS: dict[str, tuple[Callable[[str, str], list[str]], bool, dict[str, str]]] = {
+_RELAYS: dict[str, Relay] = {
     "bare": (lambda a, b: [sys.executable, "-c", _BARE_HOP, a, b], False, {}),
     "floor": (lambda a, b: [sys.executable, "-c", _FRAMING_FLOOR, a, b], False, {}),
     "raw": (_raw, False, {}),
@@ -301,8 +306,7 @@ def relay_cost() -> Iterator[Result]:
                  bare[0] * 1e6)
 
 
-def _instructions(name: str, count: int, workdir: Path,
-                  relay: tuple[Callable[[str, str], list[str]], bool, dict[str, str]] | None = None) -> int:
+def _instructions(name: str, count: int, workdir: Path, relay: Relay | None = None) -> int:
     """User-space instructions (callgrind's Ir) relay `name` (of _RELAYS, unless `relay` gives its argv, echo and
     environment) executed in all, having relayed `count` messages."""
     out_file = workdir / f"{name}.{count}.callgrind"
@@ -326,22 +330,31 @@ def _totals(out_file: Path) -> int:
 INSTRUCTIONS_RATE_HZ = 200  # slow enough for an engine under callgrind (~50x slower) to take each message alone
 
 
-@benchmark("datapath")
-def relay_instructions() -> Iterator[Result]:
-    """Instructions per relayed message (callgrind, so the same on a busy or an idle VM): the difference between a
-    run of 2,500 messages and one of 500, so start-up and imports cancel out. User space only: the kernel's pty and
-    wake-up work, which every relay pays alike, is not counted."""
-    import shutil
-    import tempfile
-
+def instructions_per_msg(label: str, relays: Mapping[str, Relay]) -> dict[str, float] | None:
+    """User-space instructions per relayed message of each relay, in order (callgrind): a run of 2,500 messages
+    less one of 500, so start-up and imports cancel out. None, said on stderr under `label`, without valgrind; a
+    RuntimeError naming the relay when one does not relay."""
     if shutil.which("valgrind") is None:
-        print("datapath.relay_instructions: needs valgrind (apt-get install valgrind)", file=sys.stderr)
-        return
+        print(f"{label}: needs valgrind (apt-get install valgrind)", file=sys.stderr)
+        return None
     per_msg = {}
     with tempfile.TemporaryDirectory(prefix="vstig-bench-") as tmp:
-        for name in _RELAYS:
-            few, many = (_instructions(name, count, Path(tmp)) for count in (500, 2500))
+        for name, relay in relays.items():
+            try:
+                few, many = (_instructions(name, count, Path(tmp), relay) for count in (500, 2500))
+            except RuntimeError as error:
+                raise RuntimeError(f"{name}: {error}") from error
             per_msg[name] = (many - few) / 2000
+    return per_msg
+
+
+@benchmark("datapath")
+def relay_instructions() -> Iterator[Result]:
+    """Instructions per relayed message (callgrind, so the same on a busy or an idle VM). User space only: the
+    kernel's pty and wake-up work, which every relay pays alike, is not counted."""
+    per_msg = instructions_per_msg("datapath.relay_instructions", _RELAYS)
+    if per_msg is None:
+        return
     for name in ("floor", "raw", "raw_pure", "engine", "engine_pure"):
         yield Result(f"datapath.relay_{name}_instructions_per_msg", per_msg[name], "instr", "bare pty hop instr/msg",
                      per_msg["bare"])

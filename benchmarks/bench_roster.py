@@ -9,19 +9,16 @@
 from __future__ import annotations
 
 import io
-import shutil
 import statistics
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 
 from vstig_hw.gateway.node import DEFAULT_PERIOD
 from vstig_hw.gateway.roster import Roster
 from vstig_hw.wire import Message, Op
 
-from .bench_datapath import _engine, _instructions, _raw, _relay_run
+from .bench_datapath import _engine, _raw, _relay_run, instructions_per_msg
 from .registry import Result, benchmark
 
 ROUNDS = 5
@@ -54,19 +51,14 @@ def relay_cpu_roster_on_vs_off() -> Iterator[Result]:
 @benchmark("roster")
 def relay_instructions_roster_on_vs_off() -> Iterator[Result]:
     """Instructions per message: a run of 2,500 messages less one of 500 (start-up cancels out)."""
-    if shutil.which("valgrind") is None:
-        print("roster.relay_instructions: needs valgrind (apt-get install valgrind)", file=sys.stderr)
+    try:
+        per_msg = instructions_per_msg("roster.relay_instructions",
+                                       {name: (argv, echo, {}) for name, (argv, echo) in _RELAYS.items()})
+    except RuntimeError as error:  # a bridge under callgrind on a busy VM may not come up in time
+        print(f"roster.relay_instructions: {error}", file=sys.stderr)
         return
-    per_msg = {}
-    with tempfile.TemporaryDirectory(prefix="vstig-bench-") as tmp:
-        for name in _RELAYS:
-            try:
-                relay = (*_RELAYS[name], {})
-                few, many = (_instructions(name, count, Path(tmp), relay) for count in (500, 2500))
-            except RuntimeError as error:  # a bridge under callgrind on a busy VM may not come up in 30 s
-                print(f"roster.relay_instructions: {name}: {error}", file=sys.stderr)
-                return
-            per_msg[name] = (many - few) / 2000
+    if per_msg is None:
+        return
     for name in ("raw", "engine"):
         yield Result(f"roster.relay_{name}_instructions_per_msg", per_msg[name], "instr", "same bridge --no-roster",
                      per_msg[f"{name}_no_roster"])
