@@ -156,8 +156,11 @@ def kill_what_tests_left_running() -> None:
 
 
 def _as_from_a_terminal() -> None:
-    """In the child: SIGHUP as a terminal session has it, even when the tests run under nohup (which ignores it)."""
-    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    """In the child: SIGHUP, SIGINT and SIGQUIT as a terminal's foreground job has them, even when the tests run
+    under nohup (which ignores SIGHUP) or as a background job (`make test &`: SIGINT and SIGQUIT ignored), which
+    vstig would rightly keep ignoring."""
+    for signum in (signal.SIGHUP, signal.SIGINT, signal.SIGQUIT):
+        signal.signal(signum, signal.SIG_DFL)
 
 
 def start_vstig(*args: str, **kwargs: Any) -> subprocess.Popen[str]:

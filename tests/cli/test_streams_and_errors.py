@@ -80,6 +80,14 @@ def test_decode_reads_stdin_and_pipes_and_tells_the_type_by_content(tmp_path: Pa
     assert done.returncode == 1 and "Error: <stdin>:2: not a candump line" in _one_line(done.stderr)
 
 
+def _sigint_as_a_terminal_has_it() -> None:
+    """In the child: SIGINT as a foreground job has it, even when the tests run as a background job (which
+    ignores it, and vstig rightly keeps it ignored)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_ends_a_command_quietly_with_status_130() -> None:
     import os
     import signal
@@ -87,7 +95,8 @@ def test_ctrl_c_ends_a_command_quietly_with_status_130() -> None:
 
     # As a terminal delivers it: to the whole process group, simulation workers included.
     sim = subprocess.Popen([VSTIG, "sim", "--robots", "2000", "--runs", "400", "--workers", "2"],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                           preexec_fn=_sigint_as_a_terminal_has_it)
     time.sleep(3)
     os.killpg(sim.pid, signal.SIGINT)
     _, err = sim.communicate(timeout=60)
