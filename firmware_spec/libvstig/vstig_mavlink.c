@@ -155,17 +155,30 @@ static uint16_t frame_out(vstig_mavlink_tx_t *tx, uint16_t msgid, uint8_t crc_ex
     return (uint16_t)(end + 6u);
 }
 
+/* A TUNNEL's payload head: its type, the target and `size` bytes carried; the rest zeros. */
+static void tunnel_head(const vstig_mavlink_tx_t *tx, uint16_t type, uint8_t size, uint8_t payload[TUNNEL_SIZE]) {
+    memset(payload, 0, TUNNEL_SIZE);
+    payload[0] = (uint8_t)(type & 0xFFu);
+    payload[1] = (uint8_t)(type >> 8);
+    payload[2] = tx->target_system;
+    payload[3] = tx->target_component;
+    payload[4] = size;
+}
+
 uint16_t vstig_mavlink_encode(vstig_mavlink_tx_t *tx, const vstig_msg_t *msgs, uint8_t n, uint8_t *out) {
     uint8_t payload[TUNNEL_SIZE];
     uint8_t i;
     if (n > VSTIG_MAVLINK_MAX_MESSAGES) n = VSTIG_MAVLINK_MAX_MESSAGES;
-    memset(payload, 0, sizeof payload);
-    payload[0] = (uint8_t)(VSTIG_MAVLINK_PAYLOAD_TYPE & 0xFFu);
-    payload[1] = (uint8_t)(VSTIG_MAVLINK_PAYLOAD_TYPE >> 8);
-    payload[2] = tx->target_system;
-    payload[3] = tx->target_component;
-    payload[4] = (uint8_t)(n * VSTIG_MESSAGE_SIZE);
+    tunnel_head(tx, VSTIG_MAVLINK_PAYLOAD_TYPE, (uint8_t)(n * VSTIG_MESSAGE_SIZE), payload);
     for (i = 0; i < n; i++) vstig_msg_encode(&msgs[i], payload + TUNNEL_HEAD + VSTIG_MESSAGE_SIZE * i);
+    return frame_out(tx, VSTIG_MAVLINK_TUNNEL, CRC_EXTRA_TUNNEL, payload, TUNNEL_SIZE, out);
+}
+
+uint16_t vstig_mavlink_encode_tagged(vstig_mavlink_tx_t *tx, const uint8_t *records, uint8_t n, uint8_t *out) {
+    uint8_t payload[TUNNEL_SIZE];
+    if (n > VSTIG_MAVLINK_MAX_RECORDS) n = VSTIG_MAVLINK_MAX_RECORDS;
+    tunnel_head(tx, VSTIG_MAVLINK_PAYLOAD_TYPE_TAGGED, (uint8_t)(n * VSTIG_RECORD_SIZE), payload);
+    memcpy(payload + TUNNEL_HEAD, records, (size_t)n * VSTIG_RECORD_SIZE);
     return frame_out(tx, VSTIG_MAVLINK_TUNNEL, CRC_EXTRA_TUNNEL, payload, TUNNEL_SIZE, out);
 }
 
@@ -306,9 +319,18 @@ uint8_t vstig_mavlink_check(vstig_mavlink_rx_t *rx, const uint8_t *frame, uint16
 uint8_t vstig_mavlink_messages(vstig_mavlink_rx_t *rx, const uint8_t *frame, uint8_t sysid, uint8_t compid,
                                vstig_msg_t out[VSTIG_MAVLINK_MAX_MESSAGES], uint8_t *from_sysid,
                                uint8_t *from_compid) {
+    uint8_t tagged;
+    return vstig_mavlink_records(rx, frame, sysid, compid, out, NULL, &tagged, from_sysid, from_compid);
+}
+
+uint8_t vstig_mavlink_records(vstig_mavlink_rx_t *rx, const uint8_t *frame, uint8_t sysid, uint8_t compid,
+                              vstig_msg_t out[VSTIG_MAVLINK_MAX_MESSAGES],
+                              uint8_t records[VSTIG_MAVLINK_MAX_RECORDS * VSTIG_RECORD_SIZE], uint8_t *tagged,
+                              uint8_t *from_sysid, uint8_t *from_compid) {
     uint8_t payload[TUNNEL_SIZE];
-    uint8_t carried, i;
+    uint8_t carried, i, size, most;
     uint16_t type;
+    *tagged = 0;
     if ((frame[7] | frame[8] << 8 | (uint32_t)frame[9] << 16) != VSTIG_MAVLINK_TUNNEL) {
         vstig_mavlink_count(rx, VSTIG_MAVLINK_DROP_OTHER_MESSAGE);
         return 0;
@@ -316,7 +338,7 @@ uint8_t vstig_mavlink_messages(vstig_mavlink_rx_t *rx, const uint8_t *frame, uin
     memset(payload, 0, sizeof payload);
     memcpy(payload, frame + VSTIG_MAVLINK_HEADER, frame[1] < TUNNEL_SIZE ? frame[1] : TUNNEL_SIZE);
     type = (uint16_t)(payload[0] | payload[1] << 8);
-    if (type != VSTIG_MAVLINK_PAYLOAD_TYPE) {
+    if (type != VSTIG_MAVLINK_PAYLOAD_TYPE && type != VSTIG_MAVLINK_PAYLOAD_TYPE_TAGGED) {
         vstig_mavlink_count(rx, VSTIG_MAVLINK_DROP_OTHER_PAYLOAD_TYPE);
         return 0;
     }
@@ -325,13 +347,18 @@ uint8_t vstig_mavlink_messages(vstig_mavlink_rx_t *rx, const uint8_t *frame, uin
         return 0;
     }
     carried = payload[4];
-    if (carried == 0 || carried % VSTIG_MESSAGE_SIZE || carried > VSTIG_MAVLINK_MAX_MESSAGES * VSTIG_MESSAGE_SIZE) {
+    size = type == VSTIG_MAVLINK_PAYLOAD_TYPE_TAGGED ? VSTIG_RECORD_SIZE : VSTIG_MESSAGE_SIZE;
+    most = size == VSTIG_RECORD_SIZE ? VSTIG_MAVLINK_MAX_RECORDS : VSTIG_MAVLINK_MAX_MESSAGES;
+    if (carried == 0 || carried % size || carried > most * size) {
         vstig_mavlink_count(rx, VSTIG_MAVLINK_DROP_BAD_LENGTH);
         return 0;
     }
-    for (i = 0; i < carried / VSTIG_MESSAGE_SIZE; i++)
-        vstig_msg_decode(payload + TUNNEL_HEAD + VSTIG_MESSAGE_SIZE * i, &out[i]);
+    for (i = 0; i < carried / size; i++) vstig_msg_decode(payload + TUNNEL_HEAD + size * i, &out[i]);
+    if (size == VSTIG_RECORD_SIZE && records) {
+        memcpy(records, payload + TUNNEL_HEAD, carried);
+        *tagged = 1;
+    }
     *from_sysid = frame[5];
     *from_compid = frame[6];
-    return (uint8_t)(carried / VSTIG_MESSAGE_SIZE);
+    return (uint8_t)(carried / size);
 }

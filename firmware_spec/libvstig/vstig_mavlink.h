@@ -7,7 +7,8 @@
  *
  * crc: CRC-16/MCRF4XX over len..payload, then the message's CRC_EXTRA (TUNNEL 147, HEARTBEAT 50).
  * TUNNEL's payload: payload_type (u16 LE, ours 46449), target_system, target_component,
- * payload_length, payload[128] = up to 16 messages; trailing zero bytes are not sent.
+ * payload_length, payload[128] = up to 16 messages; trailing zero bytes are not sent. A TUNNEL of
+ * payload_type 46450 carries up to 6 authenticated messages instead (20-byte records, SPEC.md 10.5).
  * signature: the first 6 bytes of SHA-256(key | frame through crc | link id | timestamp).
  *
  * The receiver is fed one byte at a time and resynchronises at the byte after a bad frame's start:
@@ -20,6 +21,7 @@
 #ifndef VSTIG_MAVLINK_H
 #define VSTIG_MAVLINK_H
 
+#include "vstig_auth.h"
 #include "vstig_wire.h"
 
 #ifdef __cplusplus
@@ -34,7 +36,9 @@ extern "C" {
 #define VSTIG_MAVLINK_TUNNEL 385u
 #define VSTIG_MAVLINK_HEARTBEAT 0u
 #define VSTIG_MAVLINK_PAYLOAD_TYPE 46449u /* 0xB571, in MAVLink's range for local use */
+#define VSTIG_MAVLINK_PAYLOAD_TYPE_TAGGED 46450u /* 0xB572: records, SPEC.md 10.5 */
 #define VSTIG_MAVLINK_MAX_MESSAGES 16u
+#define VSTIG_MAVLINK_MAX_RECORDS 6u /* 120 of the 128 bytes */
 #define VSTIG_MAVLINK_FRAME_MAX (VSTIG_MAVLINK_HEADER + 255u + 2u + VSTIG_MAVLINK_SIGNATURE)
 #define VSTIG_MAVLINK_KEY_SIZE 32u
 #define VSTIG_MAVLINK_COMP_ID 191u /* MAV_COMP_ID_ONBOARD_COMPUTER */
@@ -78,6 +82,9 @@ void vstig_mavlink_tx_init(vstig_mavlink_tx_t *tx, uint8_t sysid, uint8_t compid
 /* One TUNNEL carrying n (1..16) messages into out (VSTIG_MAVLINK_FRAME_MAX bytes); its length.
  * A signed frame takes the timestamp one more than the last. */
 uint16_t vstig_mavlink_encode(vstig_mavlink_tx_t *tx, const vstig_msg_t *msgs, uint8_t n, uint8_t *out);
+/* One tagged TUNNEL (payload_type 46450) carrying n (1..6) records, VSTIG_RECORD_SIZE bytes each back to back
+ * (message || epoch || tag: vstig_tag makes the tag, vstig_tagged_record gives a relayed entry's). */
+uint16_t vstig_mavlink_encode_tagged(vstig_mavlink_tx_t *tx, const uint8_t *records, uint8_t n, uint8_t *out);
 /* The HEARTBEAT of an onboard controller (type 18, autopilot 8, active), once a second. */
 uint16_t vstig_mavlink_heartbeat(vstig_mavlink_tx_t *tx, uint8_t *out);
 
@@ -114,6 +121,13 @@ uint8_t vstig_mavlink_check(vstig_mavlink_rx_t *rx, const uint8_t *frame, uint16
 uint8_t vstig_mavlink_messages(vstig_mavlink_rx_t *rx, const uint8_t *frame, uint8_t sysid, uint8_t compid,
                                vstig_msg_t out[VSTIG_MAVLINK_MAX_MESSAGES], uint8_t *from_sysid,
                                uint8_t *from_compid);
+/* vstig_mavlink_messages for a node that reads tags: the same messages and drops, and *tagged 1 when they came
+ * as records (a TUNNEL of payload_type 46450), record i at records + VSTIG_RECORD_SIZE * i; 0 for untagged ones.
+ * vstig_mavlink_messages gives a tagged TUNNEL's messages without their tags (a link with auth off). */
+uint8_t vstig_mavlink_records(vstig_mavlink_rx_t *rx, const uint8_t *frame, uint8_t sysid, uint8_t compid,
+                              vstig_msg_t out[VSTIG_MAVLINK_MAX_MESSAGES],
+                              uint8_t records[VSTIG_MAVLINK_MAX_RECORDS * VSTIG_RECORD_SIZE], uint8_t *tagged,
+                              uint8_t *from_sysid, uint8_t *from_compid);
 /* A signed frame's link id and timestamp (6 bytes, least significant first); 0 if it is not signed. */
 uint8_t vstig_mavlink_timestamp(const uint8_t *frame, uint16_t len, uint8_t *link_id, uint8_t stamp[6]);
 

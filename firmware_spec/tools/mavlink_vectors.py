@@ -16,10 +16,13 @@ Crc = Callable[[bytes], int]
 TUNNEL, HEARTBEAT, PARAM_REQUEST_LIST = 385, 0, 21
 CRC_EXTRA = {TUNNEL: 147, HEARTBEAT: 50, PARAM_REQUEST_LIST: 159}  # from MAVLink's common.xml (mavgen)
 PAYLOAD_TYPE = 0xB571
+PAYLOAD_TYPE_TAGGED = 0xB572  # authenticated messages, 20-byte records (SPEC.md 10.5)
 KEY = hashlib.sha256(b"vstig swarm").digest()  # a passphrase's SHA-256, as MAVProxy and QGroundControl make a key
 A = bytes.fromhex("0001123400010007")  # PUT key 1 = 0x1234, timestamp 1, robot 7
 B = bytes.fromhex("8002000000020007")  # GET key 2, value 0, timestamp 2, robot 7
 C = bytes.fromhex("0003000000000000")  # PUT key 3, all zero after the key: a TUNNEL's trailing zeros are cut
+R = bytes.fromhex("0102abcd8000002a0000000064f6ab19de24cfe6")  # SPEC.md 10.3's record (robot 42's PUT, epoch 0)
+E = bytes.fromhex("810200000000002a") + bytes(12)  # a GET showing no entry: epoch and tag all zero (SPEC.md 10.2)
 
 
 def crc_x25(crc16: Crc, data: bytes, extra: int) -> int:
@@ -58,8 +61,11 @@ def mavlink1_heartbeat(crc16: Crc) -> bytes:
 
 def _stream(name: str, stream: bytes, frames: list[tuple[str, list[bytes]]], drops: dict[str, int],
             key: bool = False) -> dict[str, object]:
+    """A receive case; a frame's 20-byte units are records: its messages are their first 8 bytes."""
     return {"name": name, "key": KEY.hex() if key else None, "stream": stream.hex(),
-            "frames": [{"sender": sender, "messages": [m.hex() for m in msgs]} for sender, msgs in frames],
+            "frames": [{"sender": sender, "messages": [m[:8].hex() for m in units]}
+                       | ({"records": [r.hex() for r in units]} if len(units[0]) == 20 else {})
+                       for sender, units in frames],
             "drops": drops}
 
 
@@ -84,6 +90,16 @@ def mavlink_vectors(crc16: Crc) -> dict[str, object]:
                          "messages": [data[i:i + 8].hex() for i in range(0, len(data), 8)],
                          "key": None if key is None else key.hex(), "link_id": link_id, "timestamp": stamp,
                          "wire": wire.hex()})
+    transmit_tagged = []
+    for name, data, key, stamp in (
+            ("two records: SPEC.md 10.3's, and an empty GET's (its zeros cut)", R + E, None, 0),
+            ("six records, signed: a full tagged TUNNEL", R * 6, KEY, 0x000000000001)):
+        wire = mavlink2(crc16, TUNNEL, tunnel_payload(data, payload_type=PAYLOAD_TYPE_TAGGED), 0, 1, 191, key, 0,
+                        stamp)
+        transmit_tagged.append({"name": name, "sysid": 1, "compid": 191, "seq": 0, "target": 0,
+                                "records": [data[i:i + 20].hex() for i in range(0, len(data), 20)],
+                                "key": None if key is None else key.hex(), "link_id": 0, "timestamp": stamp,
+                                "wire": wire.hex()})
     heartbeat = mavlink2(crc16, HEARTBEAT, bytes([0, 0, 0, 0, 18, 8, 0, 4, 3]), 0, 1, 191)
     good = tunnel(A + B)
     bad_crc = bytearray(good)
@@ -109,7 +125,7 @@ def mavlink_vectors(crc16: Crc) -> dict[str, object]:
         _stream("other messages: counted", heartbeat + mavlink2(crc16, PARAM_REQUEST_LIST, bytes([1, 191]), 1, 255,
                                                                  190) + good, [(sender, [A, B])],
                 {"other_message": 2}),
-        _stream("a TUNNEL of another payload_type", tunnel(A, payload_type=PAYLOAD_TYPE + 1) + good,
+        _stream("a TUNNEL of another payload_type", tunnel(A, payload_type=PAYLOAD_TYPE - 1) + good,
                 [(sender, [A, B])], {"other_payload_type": 1}),
         _stream("a TUNNEL for another system (the receiver is 4/191)", tunnel(A, target_system=5)
                 + tunnel(B, target_system=4), [(sender, [B])], {"not_for_us": 1}),
@@ -117,6 +133,10 @@ def mavlink_vectors(crc16: Crc) -> dict[str, object]:
                 {"not_for_us": 1}),
         _stream("a payload that is not whole messages", tunnel(A[:7]), [], {"bad_length": 1}),
         _stream("a signed frame, no key: taken", signed_good, [(sender, [A])], {}),
+        _stream("a tagged TUNNEL: its records, then an untagged one", tunnel(R + E, payload_type=PAYLOAD_TYPE_TAGGED)
+                + good, [(sender, [R, E]), (sender, [A, B])], {}),
+        _stream("a tagged TUNNEL that is not whole records", tunnel(R + A, payload_type=PAYLOAD_TYPE_TAGGED)
+                + tunnel(R[:8], payload_type=PAYLOAD_TYPE_TAGGED), [], {"bad_length": 2}),
         _stream("with a key: signed, then replayed", signed_good + signed_good, [(sender, [A])], {"replay": 1},
                 key=True),
         _stream("with a key: unsigned, forged, tampered", good + signed_forged + bytes(tampered) + signed_good,
@@ -134,11 +154,17 @@ def mavlink_vectors(crc16: Crc) -> dict[str, object]:
                        f"payload_type u16 LE ({PAYLOAD_TYPE}), target_system, target_component, payload_length, "
                        "payload[128]; trailing zeros cut. `transmit`: what a sender writes. `heartbeat`: the "
                        "gateway's HEARTBEAT. `streams`: bytes a receiver (sysid 4, compid 191; `key` when "
-                       "given) reads -> each TUNNEL's sender (sysid/compid) and messages, and drops by reason.",
+                       "given) reads -> each TUNNEL's sender (sysid/compid) and messages, and drops by reason. "
+                       f"A TUNNEL of payload_type {PAYLOAD_TYPE_TAGGED} carries 1..6 authenticated messages "
+                       "(SPEC.md 10.5: 20-byte records, message || epoch u32 || tag): `transmit_tagged`, and "
+                       "`records` beside a frame's messages (a receiver with auth off takes the messages; tags "
+                       "are checked by the gateway's policy, not here).",
         "payload_type": PAYLOAD_TYPE,
         "crc_extra": {"TUNNEL": 147, "HEARTBEAT": 50},
         "receiver": {"sysid": 4, "compid": 191},
         "transmit": transmit,
+        "payload_type_tagged": PAYLOAD_TYPE_TAGGED,
+        "transmit_tagged": transmit_tagged,
         "heartbeat": {"sysid": 1, "compid": 191, "seq": 0, "wire": heartbeat.hex()},
         "streams": streams,
     }

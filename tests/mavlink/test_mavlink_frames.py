@@ -151,7 +151,7 @@ def test_mavlink1_other_messages_other_payload_types_and_targets_are_counted_nev
         bytes(mav1.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3).pack(v1)),
         bytes(mav2.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(them)),
         bytes(mav2.MAVLink_param_request_list_message(4, 191).pack(them)),
-        their_tunnel(them, packed(messages(1)), payload_type=PAYLOAD_TYPE + 1),
+        their_tunnel(them, packed(messages(1)), payload_type=PAYLOAD_TYPE - 1),
         their_tunnel(them, packed(messages(1)), target=5),  # for system 5, not us
         their_tunnel(them, packed(messages(1)), target=4),  # for us
         their_tunnel(them, packed(messages(1))[:7]),  # not whole messages

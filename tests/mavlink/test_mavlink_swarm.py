@@ -174,7 +174,7 @@ def test_hostile_input_is_dropped_and_counted_and_the_other_link_keeps_its_pace(
             _tunnel(_signer(9, None), [Message(Op.PUT, 6, 2, 1, 66)]),  # unsigned
             _tunnel(honest, [Message(Op.PUT, 6, 3, 1, 66)])[:30],  # truncated
             bytes(mav1.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3).pack(v1)),  # MAVLink 1
-            _tunnel(honest, [Message(Op.PUT, 6, 4, 1, 66)], payload_type=PAYLOAD_TYPE + 1),  # not ours
+            _tunnel(honest, [Message(Op.PUT, 6, 4, 1, 66)], payload_type=PAYLOAD_TYPE - 1),  # not ours
             b"\x00noise\x00",
         ):
             attacker.sendto(datagram, to)

@@ -12,9 +12,10 @@ import pytest
 from conftest import BUILDS, C_DIR, STRICT_FLAGS, Driver, load
 from required import require_tool
 
+from vstig_hw.auth import SwarmKeys, encode_record
 from vstig_hw.counters import Counters
 from vstig_hw.framing.mavlink import MavlinkFraming, MavlinkStreamReader, Signing
-from vstig_hw.wire import Message, Op
+from vstig_hw.wire import Message, Op, encode
 
 VECTORS_OF = load("mavlink.json")
 ORDER = ["noise", "incompat_flags", "crc", "truncated", "mavlink1", "unsigned", "signature", "replay",
@@ -33,7 +34,10 @@ def mavlink_driver(request: pytest.FixtureRequest, tmp_path_factory: pytest.Temp
 
 
 def _result(frames: list[dict[str, Any]], drops: dict[str, int]) -> str:
-    shown = ";".join(f"{f['sender']}={','.join(f['messages'])}" for f in frames) or "-"
+    """The driver's line: a tagged TUNNEL's messages as MSG/RECORD."""
+    shown = ";".join(f"{f['sender']}=" + ",".join(
+        f"{m}/{r}" for m, r in zip(f["messages"], f["records"], strict=True)) if "records" in f
+        else f"{f['sender']}={','.join(f['messages'])}" for f in frames) or "-"
     return f"{shown} drops={','.join(f'{n}:{drops[n]}' for n in ORDER if drops.get(n)) or '-'}"
 
 
@@ -41,9 +45,12 @@ def test_transmit_and_heartbeat(mavlink_driver: Driver) -> None:
     cases = VECTORS_OF["transmit"]
     commands = [f"tx {c['sysid']} {c['compid']} {c['key'] or '-'} {c['link_id']} "
                 f"{(max(c['timestamp'] - 1, 0)).to_bytes(6, 'little').hex()} {','.join(c['messages'])}" for c in cases]
+    tagged = VECTORS_OF["transmit_tagged"]
+    commands += [f"txt {c['sysid']} {c['compid']} {c['key'] or '-'} {c['link_id']} "
+                 f"{(max(c['timestamp'] - 1, 0)).to_bytes(6, 'little').hex()} {''.join(c['records'])}" for c in tagged]
     beat = VECTORS_OF["heartbeat"]
     out = mavlink_driver.run([*commands, f"hb {beat['sysid']} {beat['compid']}"])
-    assert out == [c["wire"] for c in cases] + [beat["wire"]]
+    assert out == [c["wire"] for c in cases + tagged] + [beat["wire"]]
 
 
 def test_streams_whole_and_byte_by_byte(mavlink_driver: Driver) -> None:
@@ -63,17 +70,21 @@ def _python(stream: bytes, key: bytes | None) -> str:
     reader = MavlinkStreamReader(drops)
     frames = []
     for unit in reader.feed(stream) + reader.flush():
-        heard = framing.feed(unit)
+        heard = framing.feed_tagged(unit)
         if heard:
             sender = framing.sender_of(unit) or 0
-            frames.append({"sender": f"{sender >> 8}/{sender & 0xFF}",
-                           "messages": [b"".join(w.to_bytes(2, "big") for w in m).hex() for m in heard]})
+            frames.append({"sender": f"{sender >> 8}/{sender & 0xFF}", "messages": [encode(m).hex() for m, _ in heard]}
+                          | ({"records": [encode_record(r).hex() for _, r in heard if r]} if heard[0][1] else {}))
     drops.update(framing.drops)
     return _result(frames, dict(drops))
 
 
+_KEYS = SwarmKeys(bytes(range(32, 64)))
+
+
 def _hostile_stream(rng: random.Random, key: bytes | None) -> bytes:
-    """Frames of every kind (ours, signed or not, other messages, MAVLink 1), mangled, cut and glued with noise."""
+    """Frames of every kind (ours, tagged or not, signed or not, other messages, MAVLink 1), mangled, cut and glued
+    with noise."""
     sender = MavlinkFraming(rng.randrange(1, 256), rng.choice((1, 191)), target=rng.choice((0, 0, 4, 5)),
                             signing=Signing(key) if key and rng.random() < 0.8 else None)
     parts = []
@@ -82,7 +93,8 @@ def _hostile_stream(rng: random.Random, key: bytes | None) -> bytes:
         if kind < 0.6:
             msgs = [Message(Op(rng.randrange(2)), rng.randrange(32768), rng.randrange(65536), rng.randrange(65536),
                             rng.randrange(65536)) for _ in range(rng.randrange(1, 17))]
-            unit = sender.encode_batch(msgs)[0]
+            unit = sender.encode_tagged([_KEYS.tag(m, rng.randrange(3)) for m in msgs[:6]])[0] if rng.random() < 0.3 \
+                else sender.encode_batch(msgs)[0]
         elif kind < 0.75:
             unit = sender.heartbeat()
         elif kind < 0.85:

@@ -10,9 +10,10 @@ from typing import Any
 import pytest
 from conftest import SPEC, VECTORS, load
 
+from vstig_hw.auth import decode_record, encode_record
 from vstig_hw.counters import Counters
 from vstig_hw.framing.mavlink import MavlinkFraming, MavlinkStreamReader, Signing
-from vstig_hw.wire import decode_many
+from vstig_hw.wire import decode_many, encode
 
 VECTORS_OF = load("mavlink.json")
 
@@ -52,6 +53,33 @@ def test_pymavlink_reads_every_transmit_vector(case: dict[str, Any]) -> None:
     assert bytes(msg.payload[:msg.payload_length]).hex() == "".join(case["messages"])
 
 
+@pytest.mark.parametrize("case", VECTORS_OF["transmit_tagged"], ids=lambda c: c["name"])
+def test_transmit_tagged_and_pymavlink_reads_it(case: dict[str, Any]) -> None:
+    from pymavlink.dialects.v20 import common as mav2
+
+    framing = MavlinkFraming(case["sysid"], case["compid"], target=case["target"],
+                             signing=_signing(case["key"], case["link_id"], case["timestamp"]))
+    records = [decode_record(bytes.fromhex(record)) for record in case["records"]]
+    assert framing.encode_tagged(records) == [bytes.fromhex(case["wire"])]
+    parser = mav2.MAVLink(None)
+    if case["key"] is not None:
+        parser.signing.secret_key = bytes.fromhex(case["key"])
+    (msg,) = parser.parse_buffer(bytes.fromhex(case["wire"]))
+    assert (msg.get_type(), msg.payload_type) == ("TUNNEL", VECTORS_OF["payload_type_tagged"])
+    assert bytes(msg.payload[:msg.payload_length]).hex() == "".join(case["records"])
+
+
+def test_seven_records_take_two_tunnels_and_come_back_whole() -> None:
+    records = [decode_record(bytes.fromhex(record)) for record in VECTORS_OF["transmit_tagged"][1]["records"]] + \
+        [decode_record(bytes.fromhex(VECTORS_OF["transmit_tagged"][0]["records"][1]))]
+    sender, receiver = MavlinkFraming(1), MavlinkFraming(4)
+    units = sender.encode_tagged(records)
+    assert len(units) == 2 and [unit[4] for unit in units] == [0, 1]  # one sequence for every frame
+    assert [record for unit in units for _, record in receiver.feed_tagged(unit)] == records
+    assert [msg for unit in units for msg in receiver.feed(unit)] == [record.message for record in records]
+    assert not receiver.drops
+
+
 def test_heartbeat() -> None:
     from pymavlink.dialects.v20 import common as mav2
 
@@ -70,12 +98,13 @@ def _read(case: dict[str, Any], chunks: list[bytes]) -> tuple[list[dict[str, obj
     frames: list[dict[str, object]] = []
     cut = [frame for chunk in chunks for frame in reader.feed(chunk)] + reader.flush()
     for unit in cut:
-        heard = framing.feed(unit)
+        heard = framing.feed_tagged(unit)
         if heard:
             sender = framing.sender_of(unit)
             assert sender is not None
-            frames.append({"sender": f"{sender >> 8}/{sender & 0xFF}",
-                           "messages": [b"".join(m.to_bytes(2, "big") for m in msg).hex() for msg in heard]})
+            frames.append({"sender": f"{sender >> 8}/{sender & 0xFF}", "messages": [encode(m).hex() for m, _ in heard]}
+                          | ({"records": [encode_record(r).hex() for _, r in heard if r]} if heard[0][1] else {}))
+            assert [m for m, _ in heard] == MavlinkFraming(4, 191).feed(unit)  # auth off: the same messages
     drops.update(framing.drops)
     return frames, dict(drops)
 

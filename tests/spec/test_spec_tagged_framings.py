@@ -27,12 +27,13 @@ RECORDS = [KEYS.tag(Message(Op.GET if i % 3 == 2 else Op.PUT, 0x100 + i, 1000 + 
 
 def _with_tags() -> list[Framing[Any]]:
     return [make_serial_framing("cobs8"), make_serial_framing("xbee"), make_serial_framing("xbee-api2"),
-            CanFraming(CanIdScheme(), 7, fd=True), ZenohFraming(ZenohKeySpace("lab"), 7)]
+            make_serial_framing("mavlink"), CanFraming(CanIdScheme(), 7, fd=True),
+            ZenohFraming(ZenohKeySpace("lab"), 7)]
 
 
 def _without_room() -> list[Framing[Any]]:
     deployment = parse_deployment('[buzz]\nstigmergy = 1\n[keys]\nx = { key = 1, type = "int16" }\n')
-    return [make_serial_framing(name) for name in ("epuck4", "kilobot", "kilobot-ohc", "mavlink")] + \
+    return [make_serial_framing(name) for name in ("epuck4", "kilobot", "kilobot-ohc")] + \
         [CanFraming(CanIdScheme(), 7), XbeeMavFraming(deployment)]
 
 

@@ -26,7 +26,7 @@ def _frames() -> list[bytes]:
     theirs = mav2.MAVLink(_Sink(), srcSystem=9, srcComponent=1)
     data = b"".join(bytes.fromhex(f"{m[0]:04x}{m[1]:04x}{m[2]:04x}{m[3]:04x}") for m in msgs[:2])
     tunnel = bytes(mav2.MAVLink_tunnel_message(0, 0, PAYLOAD_TYPE, len(data), list(data) + [0] * 112).pack(theirs))
-    other = bytes(mav2.MAVLink_tunnel_message(0, 0, PAYLOAD_TYPE + 1, 2, [1, 2] + [0] * 126).pack(theirs))
+    other = bytes(mav2.MAVLink_tunnel_message(0, 0, PAYLOAD_TYPE - 1, 2, [1, 2] + [0] * 126).pack(theirs))
     beat = bytes(mav2.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(theirs))
     bad_crc = bytearray(tunnel)
     bad_crc[15] ^= 1

@@ -11,7 +11,10 @@ A MAVLink 2 frame (mavlink.io, "Serialization")::
 crc is CRC-16/MCRF4XX (X.25) over everything after the 0xFD up to the payload's end, then the message's
 CRC_EXTRA byte (147 for TUNNEL, 50 for HEARTBEAT). A payload's trailing zero bytes are not sent (at least one
 byte is). TUNNEL's payload, in wire order: payload_type (u16 LE), target_system, target_component,
-payload_length, payload[128]. Ours: payload_type `PAYLOAD_TYPE`, payload = up to 16 messages back to back.
+payload_length, payload[128]. Ours: payload_type `PAYLOAD_TYPE`, payload = up to 16 messages back to back; or
+payload_type `PAYLOAD_TYPE_TAGGED`, payload = up to 6 authenticated messages (20-byte records, SPEC.md 10.5).
+The compiled twin carries no tags: it drops a tagged TUNNEL as `other_payload_type` (a gateway with the swarm key
+runs in Python).
 
 The signature is the first 6 bytes of SHA-256(key | the frame from the 0xFD through the crc | link id |
 timestamp); the timestamp counts 10 microseconds since 2015-01-01 00:00 UTC. With a key, a frame that is not
@@ -31,8 +34,9 @@ import struct
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
+from ..auth import RECORD_SIZE, Tagged, decode_record, encode_record
 from ..counters import Counters
 from ..crc import crc16_mcrf4xx
 from ..wire import MESSAGE_SIZE, Message, decode_many, encode
@@ -44,7 +48,9 @@ __all__ = [
     "HEARTBEAT",
     "KEY_SIZE",
     "MAX_PER_TUNNEL",
+    "MAX_RECORDS_PER_TUNNEL",
     "PAYLOAD_TYPE",
+    "PAYLOAD_TYPE_TAGGED",
     "STREAMS_KEPT",
     "TUNNEL",
     "MavlinkFraming",
@@ -66,12 +72,15 @@ TUNNEL = 385
 HEARTBEAT = 0
 CRC_EXTRA = {TUNNEL: 147, HEARTBEAT: 50}  # the messages a link sends and checks; others' crc cannot be checked
 PAYLOAD_TYPE = 0xB571  # ours, in the range MAVLink leaves for local use (32768..65535); SPEC.md 6.10.1
+PAYLOAD_TYPE_TAGGED = 0xB572  # ours too: authenticated messages (SPEC.md 10.5)
 BROADCAST = 0  # target_system 0: every system
 COMP_ID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER: a companion computer's component id
 MAX_PER_TUNNEL = 16  # TUNNEL's payload holds 128 bytes
+MAX_RECORDS_PER_TUNNEL = 6  # 120 of its 128 bytes
 KEY_SIZE = 32
 STREAMS_KEPT = 1024  # (sysid, compid, link id) streams whose last timestamp is kept; SPEC.md 6.10.4
 NEW_STREAM_WINDOW = 6_000_000  # 60 s in 10 us units: a new stream's first timestamp may be this much behind
+Heard = TypeVar("Heard", Message, tuple[Message, Tagged | None])  # what `feed` or `feed_tagged` gives per message
 _EPOCH_2015 = 1420070400  # 2015-01-01 00:00:00 UTC in Unix seconds
 _TUNNEL_HEAD = struct.Struct("<HBBB")  # payload_type, target_system, target_component, payload_length
 _TUNNEL_SIZE = _TUNNEL_HEAD.size + MAX_PER_TUNNEL * MESSAGE_SIZE  # 133: the payload before truncation
@@ -279,6 +288,7 @@ class MavlinkFraming(SerialFraming):
     preamble = b""  # a 0xFD starts every frame
     replays_received: ClassVar[bool] = False  # a received frame carries another's sysid (and signature): re-encode
     narrows: ClassVar[bool] = True  # a cut TUNNEL keeps its sender, sequence and target
+    carries_tags = True  # TUNNELs of payload_type PAYLOAD_TYPE_TAGGED (SPEC.md 10.5)
 
     def __init__(self, sysid: int = 1, compid: int = COMP_ID, *, target: int = BROADCAST,
                  signing: Signing | None = None) -> None:
@@ -309,7 +319,12 @@ class MavlinkFraming(SerialFraming):
     # -- sending -------------------------------------------------------------------
     def _frame(self, msgid: int, payload: bytes) -> bytes:
         with self._lock:
-            seq, self._seq = self._seq, (self._seq + 1) & 0xFF
+            twin = self._twin
+            if twin is None:
+                seq, self._seq = self._seq, (self._seq + 1) & 0xFF
+            else:  # the Encoder's sequence: one for every frame the link sends
+                seq = twin.seq
+                twin.seq = (seq + 1) & 0xFF
             signing = self.signing
             if signing is None:
                 return frame(msgid, payload, seq=seq, sysid=self.sysid, compid=self.compid)
@@ -366,6 +381,13 @@ class MavlinkFraming(SerialFraming):
         step = MAX_PER_TUNNEL * MESSAGE_SIZE
         return [self._frame(TUNNEL, tunnel_payload(data[i:i + step], self.target)) for i in range(0, len(data), step)]
 
+    def encode_tagged(self, records: Sequence[Tagged]) -> list[bytes]:
+        """TUNNELs of payload_type PAYLOAD_TYPE_TAGGED, 6 records to a TUNNEL, in order (SPEC.md 10.5)."""
+        step = MAX_RECORDS_PER_TUNNEL
+        return [self._frame(TUNNEL, tunnel_payload(b"".join(map(encode_record, records[i:i + step])), self.target,
+                                                   payload_type=PAYLOAD_TYPE_TAGGED))
+                for i in range(0, len(records), step)]
+
     def heartbeat(self) -> bytes:
         """The HEARTBEAT that announces this component (once a second, from the link)."""
         if self._twin is not None:
@@ -375,43 +397,74 @@ class MavlinkFraming(SerialFraming):
 
     # -- receiving -----------------------------------------------------------------
     def feed(self, unit: bytes) -> list[Message]:
-        messages: list[Message] = []
+        return self._heard(unit, self._messages)
+
+    def feed_tagged(self, unit: bytes) -> list[tuple[Message, Tagged | None]]:
+        return self._heard(unit, self._records)
+
+    def _heard(self, unit: bytes, read: Callable[[bytes], list[Heard]]) -> list[Heard]:
+        """What `read` makes of each whole frame in `unit`; the sender of the first that gave anything kept."""
+        heard: list[Heard] = []
         sender = None
         for wire in self._frames(unit):
-            heard = self._messages(wire)
-            if heard:
-                messages.extend(heard)
+            got = read(wire)
+            if got:
+                heard.extend(got)
                 sender = wire[5] << 8 | wire[6] if sender is None else sender
         self._last = (unit, sender)
-        return messages
+        return heard
 
     def _messages(self, wire: bytes) -> list[Message]:
-        """The messages of one whole frame, or none and the reason counted (SPEC.md 6.10.3)."""
+        """The messages of one whole frame (a tagged TUNNEL's without their tags: a link with auth off)."""
+        carried = self._carried(wire)
+        if carried is None:
+            return []
+        tagged, data = carried
+        if tagged:
+            data = b"".join(data[i:i + MESSAGE_SIZE] for i in range(0, len(data), RECORD_SIZE))
+        return decode_many(data)
+
+    def _records(self, wire: bytes) -> list[tuple[Message, Tagged | None]]:
+        """Each message of one whole frame with its record, None for an untagged TUNNEL's."""
+        carried = self._carried(wire)
+        if carried is None:
+            return []
+        tagged, data = carried
+        if not tagged:
+            return [(msg, None) for msg in decode_many(data)]
+        records = [decode_record(data[i:i + RECORD_SIZE]) for i in range(0, len(data), RECORD_SIZE)]
+        return [(record.message, record) for record in records]
+
+    def _carried(self, wire: bytes) -> tuple[bool, bytes] | None:
+        """(tagged, the records or messages back to back) of one whole frame, or None and the reason counted
+        (SPEC.md 6.10.3 and 10.5)."""
         drops = self.drops
         if wire[0] == STX_V1:
             drops["mavlink1"] += 1
-            return []
+            return None
         if self.signing is not None:
             refused = self.signing.check(wire)
             if refused is not None:
                 drops[refused] += 1
-                return []
+                return None
         if int.from_bytes(wire[7:10], "little") != TUNNEL:
             drops["other_message"] += 1
-            return []
+            return None
         payload = wire[HEADER:HEADER + wire[1]]
         payload += bytes(_TUNNEL_SIZE - len(payload)) if len(payload) < _TUNNEL_SIZE else b""
         payload_type, target_system, target_component, length = _TUNNEL_HEAD.unpack_from(payload)
-        if payload_type != PAYLOAD_TYPE:
+        if payload_type != PAYLOAD_TYPE and payload_type != PAYLOAD_TYPE_TAGGED:
             drops["other_payload_type"] += 1
-            return []
+            return None
         if target_system not in (BROADCAST, self.sysid) or target_component not in (0, self.compid):
             drops["not_for_us"] += 1
-            return []
-        if not length or length % MESSAGE_SIZE or length > MAX_PER_TUNNEL * MESSAGE_SIZE:
+            return None
+        tagged = payload_type == PAYLOAD_TYPE_TAGGED
+        size, most = (RECORD_SIZE, MAX_RECORDS_PER_TUNNEL) if tagged else (MESSAGE_SIZE, MAX_PER_TUNNEL)
+        if not length or length % size or length > most * size:
             drops["bad_length"] += 1
-            return []
-        return decode_many(payload[_TUNNEL_HEAD.size:_TUNNEL_HEAD.size + length])
+            return None
+        return tagged, payload[_TUNNEL_HEAD.size:_TUNNEL_HEAD.size + length]
 
     def sender_of(self, unit: bytes) -> int | None:
         """sysid << 8 | compid of the TUNNEL that is this unit; None for anything else."""

@@ -4,9 +4,11 @@
  *
  *   tx SYSID COMPID KEY LINK_ID STAMP MSGS  -> the TUNNEL's hex  (KEY hex or -; STAMP: the last timestamp signed
  *                                              with, 12 hex digits least significant first; MSGS comma-separated)
+ *   txt SYSID COMPID KEY LINK_ID STAMP RECORDS  -> a tagged TUNNEL's hex (RECORDS: 20-byte records back to back)
  *   hb SYSID COMPID                         -> the HEARTBEAT's hex
  *   rx SYSID COMPID KEY CHUNK..             -> SENDER=MSGS;.. drops=name:n,..  (each chunk fed byte by byte, then
- *                                              the line goes quiet; SENDER sysid/compid; - if no frame)
+ *                                              the line goes quiet; SENDER sysid/compid; - if no frame; a tagged
+ *                                              TUNNEL's messages are shown as MSG/RECORD)
  * With a key, rx keeps the last timestamp per (sysid, compid, link id) as SPEC.md 6.10.3 rule 6 says.
  */
 #include <stdio.h>
@@ -82,13 +84,15 @@ static unsigned frames_shown;
 
 static void take(vstig_mavlink_rx_t *rx, uint8_t sysid, uint8_t compid, const uint8_t *key) {
     vstig_msg_t msgs[VSTIG_MAVLINK_MAX_MESSAGES];
-    uint8_t from_sysid, from_compid, n, i;
+    uint8_t records[VSTIG_MAVLINK_MAX_RECORDS * VSTIG_RECORD_SIZE];
+    uint8_t from_sysid, from_compid, n, i, tagged;
     if (!vstig_mavlink_check(rx, vstig_mavlink_frame(rx), vstig_mavlink_frame_len(rx), key)) return;
     if (key && !fresh(vstig_mavlink_frame(rx), vstig_mavlink_frame_len(rx))) {
         vstig_mavlink_count(rx, VSTIG_MAVLINK_DROP_REPLAY);
         return;
     }
-    n = vstig_mavlink_messages(rx, vstig_mavlink_frame(rx), sysid, compid, msgs, &from_sysid, &from_compid);
+    n = vstig_mavlink_records(rx, vstig_mavlink_frame(rx), sysid, compid, msgs, records, &tagged, &from_sysid,
+                              &from_compid);
     if (!n) return;
     printf("%s%u/%u=", frames_shown++ ? ";" : "", from_sysid, from_compid);
     for (i = 0; i < n; i++) {
@@ -96,6 +100,10 @@ static void take(vstig_mavlink_rx_t *rx, uint8_t sysid, uint8_t compid, const ui
         vstig_msg_encode(&msgs[i], raw);
         fputs(i ? "," : "", stdout);
         print_hex(raw, sizeof raw);
+        if (tagged) {
+            fputs("/", stdout);
+            print_hex(records + VSTIG_RECORD_SIZE * i, VSTIG_RECORD_SIZE);
+        }
     }
 }
 
@@ -133,11 +141,13 @@ static void rx_command(char **arg, int argc) {
     if (!shown) fputs("-", stdout);
 }
 
-static void tx_command(char **arg) {
+/* tx (tagged 0) or txt (tagged 1) */
+static void tx_command(char **arg, int tagged) {
     static uint8_t key[VSTIG_MAVLINK_KEY_SIZE];
     vstig_mavlink_tx_t tx;
     vstig_msg_t msgs[VSTIG_MAVLINK_MAX_MESSAGES];
     uint8_t out[VSTIG_MAVLINK_FRAME_MAX], raw[VSTIG_MESSAGE_SIZE];
+    uint8_t records[VSTIG_MAVLINK_MAX_RECORDS * VSTIG_RECORD_SIZE];
     const char *m = arg[5];
     uint8_t n = 0;
     int signed_ = parse_hex(arg[2], key, sizeof key) == sizeof key;
@@ -145,6 +155,11 @@ static void tx_command(char **arg) {
                           signed_ ? key : NULL);
     tx.link_id = (uint8_t)strtoul(arg[3], NULL, 0);
     parse_hex(arg[4], tx.timestamp, sizeof tx.timestamp);
+    if (tagged) {
+        n = (uint8_t)(parse_hex(m, records, sizeof records) / VSTIG_RECORD_SIZE);
+        print_hex(out, vstig_mavlink_encode_tagged(&tx, records, n, out));
+        return;
+    }
     while (*m && n < VSTIG_MAVLINK_MAX_MESSAGES) {
         char hex[17];
         memcpy(hex, m, 16);
@@ -171,8 +186,8 @@ int main(void) {
             puts("?");
             continue;
         }
-        if (strcmp(arg[0], "tx") == 0 && argc == 7) {
-            tx_command(arg + 1);
+        if ((strcmp(arg[0], "tx") == 0 || strcmp(arg[0], "txt") == 0) && argc == 7) {
+            tx_command(arg + 1, arg[0][2] == 't');
         } else if (strcmp(arg[0], "hb") == 0 && argc == 3) {
             vstig_mavlink_tx_t tx;
             uint8_t out[VSTIG_MAVLINK_FRAME_MAX];
