@@ -23,7 +23,8 @@ setup(
             depends=sorted(str(p) for p in (*GLUE.glob("*.h"), *LIBVSTIG.glob("*.h"))),
             include_dirs=[str(LIBVSTIG), str(GLUE)],
             # the gateway's tables hold every key: never full, one comparison a lookup
-            define_macros=[("VSTIG_KEYS", "32768u"), ("VSTIG_QUEUE", "32768u"), ("VSTIG_GUARD_KEYS", "32768u")],
+            define_macros=[("VSTIG_KEYS", "32768u"), ("VSTIG_QUEUE", "32768u"), ("VSTIG_GUARD_KEYS", "32768u"),
+                           ("VSTIG_WRITER_KEYS", "1024u")],
             extra_compile_args=["-O2"],
             # VSTIG_BUILD_NATIVE=1 (make test does): a compile error fails the install instead of leaving it pure
             optional=os.environ.get("VSTIG_BUILD_NATIVE") != "1",

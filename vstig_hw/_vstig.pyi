@@ -9,6 +9,7 @@ nothing checks them with isinstance). tests/native/test_native_twins_named.py ch
 Twins (C file, its types, its Python references):
 
     engine.c   Engine             vstig_hw/engine.py
+    tags.c     -                  vstig_hw/gateway/signing.py vstig_hw/tagged.py
     guard.c    JumpGuard          vstig_hw/gateway/guard.py
     framing.c  Receiver Encoder   vstig_hw/framing/cobs8.py vstig_hw/framing/epuck4.py vstig_hw/framing/kilobot.py
                                   vstig_hw/framing/can.py vstig_hw/framing/xbee.py vstig_hw/framing/mavlink.py
@@ -27,6 +28,7 @@ Constants both sides use are defined once on each side and compared by tests/nat
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from .auth import Tagged
 from .counters import Counters
 from .engine import Entry, Outcome, Stigmergy
 from .gateway.delivery_state import DeliveryState
@@ -38,6 +40,7 @@ from .gateway.parts import RawRelay
 from .gateway.parts import Seat as _Seat
 from .gateway.writer import LinkWriter
 from .links.link import Heard, Link
+from .tagged import AuthPolicy
 from .wire import Message
 
 KEYS: int
@@ -47,7 +50,14 @@ DECLARED: dict[str, tuple[str, ...]]
 def setup(message: type[Message], entry: type[Entry], outcomes: tuple[Outcome, ...],
           rules: tuple[Any, Any, Any]) -> None: ...
 
-class Engine(Stigmergy): ...
+class Engine(Stigmergy):
+    # Given swarm_key it is SignedEngine's twin (tags.c): `policy`, `records` and `record_of` are then its
+    policy: AuthPolicy
+    records: dict[Message, Tagged] | None
+    def __init__(self, robot_id: int, onconflict: Any = None, onconflictlost: Any = None, *,
+                 swarm_key: bytes | None = None, stigmergy: int = 0, policies: tuple[AuthPolicy, ...] = (),
+                 record: type[Tagged] | None = None) -> None: ...
+    def record_of(self, msg: Message) -> Tagged | None: ...
 
 class JumpGuard(Guard):
     def __init__(self, max_jump: int, learn: float | None = None) -> None: ...

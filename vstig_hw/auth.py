@@ -127,6 +127,11 @@ class SwarmKeys:
         # at most 65536 robots, a few hundred bytes each.
         self._ready: dict[int, Any] = {}
 
+    @property
+    def master(self) -> bytes:
+        """The master secret (for the compiled engine, which derives and caches the writers' keys itself)."""
+        return self._master
+
     def key_of(self, robot: int) -> bytes:
         return robot_key(self._master, robot)
 

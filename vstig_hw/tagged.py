@@ -1,5 +1,8 @@
 """A gateway's engine with tags beside it (SPEC.md 10.4 and 10.6): pure, no I/O, the engine itself unchanged.
 
+C twin: firmware_spec/libvstig/vstig_tagged.c, and vstig_hw/_cext/tags.c over it (a compiled Engine given the
+swarm key); held equal by tests/spec/test_spec_c_tagged.py and tests/native.
+
 `TaggedStigmergy` wraps a `Stigmergy` for a gateway that holds the swarm key. Every message it is fed comes
 with the policy of the link that heard it and its record's epoch and tag, if the link carries them. It checks
 the tag against the writer's key, refuses what the policy refuses (counted by reason and claimed writer),

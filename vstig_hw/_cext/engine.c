@@ -3,6 +3,7 @@
  * entry, entries, counts, receive, drain, pending; onconflict and onconflictlost settable).
  *
  * Reference: vstig_hw/engine.py (held equal by tests/native; the index of the twins: vstig_hw/_vstig.pyi).
+ * Given the swarm key (`swarm_key=`), it is vstig_hw/gateway/signing.py's SignedEngine instead (tags.c).
  *
  * The conflict rule: Stigmergy's ready-made rules run as their libvstig twins; any other
  * callable is called back from C with Entry objects, and what it raises (or a winner the
@@ -117,7 +118,17 @@ int vx_engine_calls_python(const vx_engine_t *self) {
 
 vstig_outcome_t vx_engine_receive(vx_engine_t *self, const vstig_msg_t *msg) {
     uint16_t before = self->engine.size;
-    vstig_outcome_t outcome = vstig_engine_receive(&self->engine, msg);
+    vstig_outcome_t outcome;
+    if (self->tags != NULL) {
+        int done = vx_tags_receive(self->tags, msg);
+        if (done < 0) { /* a record that is none: raised as a callback's error is, the message not received */
+            stash(self);
+            return VSTIG_STALE;
+        }
+        outcome = (vstig_outcome_t)done;
+    } else {
+        outcome = vstig_engine_receive(&self->engine, msg);
+    }
     if (self->engine.size != before) self->order[self->engine.size - 1u] = (uint16_t)(msg->key & VSTIG_KEY_MAX);
     if (self->lost_raised) { /* Python's receive raised before counting the outcome */
         self->lost_raised = 0;
@@ -142,11 +153,15 @@ int vx_engine_raise(vx_engine_t *self, vstig_outcome_t outcome) {
 /* ---- the Python type ------------------------------------------------------------------ */
 
 static PyObject *Engine_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
-    static char *kwlist[] = {"robot_id", "onconflict", "onconflictlost", NULL};
-    PyObject *robot_obj, *onconflict = Py_None, *onconflictlost = Py_None;
+    static char *kwlist[] = {"robot_id", "onconflict", "onconflictlost", "swarm_key", "stigmergy", "policies",
+                             "record", NULL};
+    PyObject *robot_obj, *onconflict = Py_None, *onconflictlost = Py_None, *swarm_key = Py_None;
+    PyObject *policies = Py_None, *record = Py_None;
+    int stigmergy = 0;
     vx_engine_t *self;
     long robot;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O|OO", kwlist, &robot_obj, &onconflict, &onconflictlost))
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "O|OO$OiOO", kwlist, &robot_obj, &onconflict, &onconflictlost,
+                                     &swarm_key, &stigmergy, &policies, &record))
         return NULL;
     if ((robot = vx_field("robot_id", 0xFFFF, robot_obj)) < 0) return NULL;
     self = (vx_engine_t *)type->tp_alloc(type, 0);
@@ -156,6 +171,11 @@ static PyObject *Engine_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
         vstig_engine_init(&self->engine, (uint16_t)robot, NULL, python_lost, self) != 0) {
         Py_DECREF(self);
         return PyErr_NoMemory();
+    }
+    if (swarm_key != Py_None &&
+        (self->tags = vx_tags_new(&self->engine, swarm_key, stigmergy, policies, record)) == NULL) {
+        Py_DECREF(self);
+        return NULL;
     }
     self->onconflict = onconflict == Py_None ? PyTuple_GET_ITEM(vx_py.rules, 0) : onconflict;
     Py_INCREF(self->onconflict);
@@ -168,12 +188,13 @@ static PyObject *Engine_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
 static int Engine_traverse(vx_engine_t *self, visitproc visit, void *arg) {
     Py_VISIT(self->onconflict);
     Py_VISIT(self->onconflictlost);
-    return 0;
+    return vx_tags_traverse(self->tags, visit, arg);
 }
 
 static int Engine_clear(vx_engine_t *self) {
     Py_CLEAR(self->onconflict);
     Py_CLEAR(self->onconflictlost);
+    vx_tags_clear(self->tags);
     return 0;
 }
 
@@ -184,6 +205,7 @@ static void Engine_dealloc(vx_engine_t *self) {
     Py_XDECREF(self->error_value);
     Py_XDECREF(self->error_tb);
     PyMem_Free(self->order);
+    vx_tags_free(self->tags);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -193,7 +215,9 @@ static PyObject *Engine_put(vx_engine_t *self, PyObject *const *args, Py_ssize_t
     if (nargs != 2) return PyErr_Format(PyExc_TypeError, "put() takes key and value, got %zd arguments", nargs);
     if ((key = vx_field("key", VSTIG_KEY_MAX, args[0])) < 0 || (value = vx_field("value", 0xFFFF, args[1])) < 0)
         return NULL;
-    if (vstig_engine_put(&self->engine, (uint16_t)key, (uint16_t)value) != 0) return PyErr_NoMemory();
+    if ((self->tags != NULL ? vstig_tagged_put(&self->tags->tagged, (uint16_t)key, (uint16_t)value)
+                            : vstig_engine_put(&self->engine, (uint16_t)key, (uint16_t)value)) != 0)
+        return PyErr_NoMemory();
     if (self->engine.size != before) self->order[before] = (uint16_t)key;
     Py_RETURN_NONE;
 }
@@ -261,7 +285,9 @@ static PyObject *Engine_counts(vx_engine_t *self, void *closure) {
     (void)closure;
     if (counts == NULL) return NULL;
     for (i = 0; i < PyTuple_GET_SIZE(vx_py.outcomes); i++) {
-        PyObject *n = PyLong_FromUnsignedLong(self->engine.counts[i]);
+        /* a replayed old write (older by epoch and timestamp) counts as stale, as SignedEngine.counts has it */
+        unsigned long extra = self->tags != NULL && i == VSTIG_STALE ? self->tags->tagged.replays : 0ul;
+        PyObject *n = PyLong_FromUnsignedLong(self->engine.counts[i] + extra);
         if (n == NULL || PyDict_SetItem(counts, PyTuple_GET_ITEM(vx_py.outcomes, i), n) < 0) {
             Py_XDECREF(n);
             Py_DECREF(counts);
@@ -368,6 +394,37 @@ static int Engine_set_onconflictlost(vx_engine_t *self, PyObject *value, void *c
     return 0;
 }
 
+/* SignedEngine's own: what a swarm key adds (tags.c); AttributeError without one, as a Stigmergy has none */
+static int has_tags(vx_engine_t *self, const char *what) {
+    if (self->tags != NULL) return 1;
+    PyErr_Format(PyExc_AttributeError, "an Engine without swarm_key has no %s", what);
+    return 0;
+}
+
+static PyObject *Engine_record_of(vx_engine_t *self, PyObject *msg) {
+    return has_tags(self, "record_of") ? vx_tags_record_of(self->tags, msg) : NULL;
+}
+
+static PyObject *Engine_get_policy(vx_engine_t *self, void *closure) {
+    (void)closure;
+    return has_tags(self, "policy") ? vx_tags_get_policy(self->tags) : NULL;
+}
+
+static int Engine_set_policy(vx_engine_t *self, PyObject *value, void *closure) {
+    (void)closure;
+    return has_tags(self, "policy") ? vx_tags_set_policy(self->tags, value) : -1;
+}
+
+static PyObject *Engine_get_records(vx_engine_t *self, void *closure) {
+    (void)closure;
+    return has_tags(self, "records") ? vx_tags_get_records(self->tags) : NULL;
+}
+
+static int Engine_set_records(vx_engine_t *self, PyObject *value, void *closure) {
+    (void)closure;
+    return has_tags(self, "records") ? vx_tags_set_records(self->tags, value) : -1;
+}
+
 static PyMethodDef Engine_methods[] = {
     {"put", (PyCFunction)(void (*)(void))Engine_put, METH_FASTCALL, "Write locally and queue a PUT."},
     {"get", (PyCFunction)Engine_get, METH_O, "The local value (None if unknown); queues a GET."},
@@ -378,6 +435,7 @@ static PyMethodDef Engine_methods[] = {
     {"receive", (PyCFunction)Engine_receive, METH_O, "Apply one message heard from a neighbour."},
     {"drain", (PyCFunction)(void (*)(void))Engine_drain, METH_VARARGS | METH_KEYWORDS, "Messages to broadcast now."},
     {"pending", (PyCFunction)Engine_pending, METH_NOARGS, NULL},
+    {"record_of", (PyCFunction)Engine_record_of, METH_O, "A drained message with its entry's proof, or None."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -386,6 +444,8 @@ static PyGetSetDef Engine_getset[] = {
     {"counts", (getter)Engine_counts, NULL, "How many received messages had each outcome.", NULL},
     {"onconflict", (getter)Engine_get_onconflict, (setter)Engine_set_onconflict, NULL, NULL},
     {"onconflictlost", (getter)Engine_get_onconflictlost, (setter)Engine_set_onconflictlost, NULL, NULL},
+    {"policy", (getter)Engine_get_policy, (setter)Engine_set_policy, "The policy of the link being received.", NULL},
+    {"records", (getter)Engine_get_records, (setter)Engine_set_records, "The unit's records (Signing's).", NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
 

@@ -3,6 +3,7 @@
 #define VSTIG_EXT_ENGINE_H
 
 #include "ext.h"
+#include "tags.h"
 
 struct vx_engine {
     PyObject_HEAD
@@ -12,6 +13,7 @@ struct vx_engine {
     PyObject *onconflictlost; /* or None */
     PyObject *error_type, *error_value, *error_tb; /* what a callback raised, raised after libvstig returns */
     uint8_t lost_raised;     /* onconflictlost raised: the outcome was not counted, as in Python */
+    vx_tags_t *tags;         /* given the swarm key: SignedEngine's twin (tags.c); else NULL */
 };
 
 /* Receive one message as Engine.receive does; then vx_engine_raise (0, or -1 with the exception a

@@ -36,6 +36,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from ..auth import SwarmKeys, Tagged
 from ..engine import ConflictResolver, Stigmergy
 from ..framing.cobs8 import Cobs8Framing
 from ..framing.epuck4 import Epuck4Framing
@@ -44,6 +45,7 @@ from ..framing.mavlink import MavlinkFraming
 from ..framing.xbee import XBeeApi2Framing, XBeeFraming
 from ..links.link import Heard, Link
 from ..native import native
+from ..tagged import AuthPolicy
 from ..transports.serial import SerialTransport
 from ..transports.xbee import XBeeTransport
 from .delivery_state import DeliveryState
@@ -55,6 +57,7 @@ from .writer import TX_QUEUE_LIMIT, LinkWriter
 
 if TYPE_CHECKING:
     from .._vstig import Encoder, Path, Receiver
+    from .._vstig import Engine as CompiledEngine
     from .._vstig import Outlet as _NativeOutlet
 else:
     _NativeOutlet = object if native is None else native.Outlet
@@ -206,6 +209,13 @@ class Compiled:
 
     def engine(self, robot_id: int, onconflict: ConflictResolver | None) -> Stigmergy:
         engine: Stigmergy = self.native.Engine(robot_id, onconflict)
+        return engine
+
+    def signed_engine(self, robot_id: int, onconflict: ConflictResolver | None, keys: SwarmKeys) -> CompiledEngine:
+        """The engine of a Node with the swarm key: SignedEngine's twin (tags.c), writers' keys derived in C."""
+        engine: CompiledEngine = self.native.Engine(robot_id, onconflict, swarm_key=keys.master,
+                                                    stigmergy=keys.stigmergy, policies=tuple(AuthPolicy),
+                                                    record=Tagged)
         return engine
 
     def seat(self, engine: Stigmergy, links: list[Link[Any]], outlets: list[Outlet], guard: Guard | None,

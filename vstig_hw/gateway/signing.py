@@ -1,6 +1,8 @@
 """A gateway that holds the swarm key (SPEC.md 10.6): tags checked by each link's policy, entries kept with their
 writers' proofs, and every message sent with its entry's proof on the links that carry tags.
 
+C twin: vstig_hw/_cext/tags.c (the engine, over libvstig's vstig_tagged); held equal by tests/native.
+
 The Node builds a `Signing` when given the swarm key, and then runs in Python (the compiled data path carries no
 tags). Each link's units decode with their records (`decoder`); `check` refuses, before the guard, what the link's
 policy refuses: an untagged message on an `auth=require` link (`drop_untagged`), a tag that does not check out
@@ -15,7 +17,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..auth import SwarmKeys, Tagged
 from ..engine import ConflictResolver, Outcome, Stigmergy
@@ -23,6 +25,10 @@ from ..links import Heard, Link
 from ..tagged import AuthPolicy, Refusal, TaggedStigmergy
 from ..timestamps import TS_NONE
 from ..wire import Message
+
+if TYPE_CHECKING:
+    from .._vstig import Engine as CompiledEngine
+    from .compiled import Compiled
 
 __all__ = ["EPISODE_GAP", "SignedEngine", "Signing", "unkeyed_policy"]
 
@@ -89,16 +95,20 @@ class Signing:
     def __init__(self, keys: SwarmKeys, links: Sequence[Link[Any]]) -> None:
         self.keys = keys
         self.links = links
-        self.engine: SignedEngine | None = None  # the Node's engine, if it has one (`engine_for`)
+        self.engine: SignedEngine | CompiledEngine | None = None  # the Node's engine, if it has one (`engine_for`)
         self.records: dict[Message, Tagged] = {}  # of the unit just decoded
         self.refused: Counter[_REFUSED] = Counter()
         self.warnings: list[str] = []  # for the caller to print (and clear), as the guard's
         self._last_refusal: dict[tuple[str, str, int], float] = {}  # (link, reason, writer) -> when
 
-    def engine_for(self, robot_id: int, onconflict: ConflictResolver | None) -> SignedEngine:
-        self.engine = SignedEngine(robot_id, self.keys, onconflict)
-        self.engine.records = self.records
-        return self.engine
+    def engine_for(self, robot_id: int, onconflict: ConflictResolver | None,
+                   compiled: Compiled | None = None) -> Stigmergy:
+        """The Node's engine: a SignedEngine, or its compiled twin when the Node's parts are `compiled`."""
+        engine = SignedEngine(robot_id, self.keys, onconflict) if compiled is None else \
+            compiled.signed_engine(robot_id, onconflict, self.keys)
+        engine.records = self.records
+        self.engine = engine
+        return engine
 
     def decoder(self, link: Link[Any]) -> Callable[[Any], list[Message]]:
         """Link `link`'s decoding: its framing's messages, their records kept in `records` until the next unit."""
