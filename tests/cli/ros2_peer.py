@@ -12,6 +12,9 @@ change it hears (`{"change": ...}`) as it comes, stamped with the wall-clock tim
                          {"puts": {"answers": [[seconds to the answer, taken, reason], ...], "get": seconds}}
     tables N             N table calls at once: {"tables": [[seconds to the answer, entries], ...]}
     write KEY VALUE ROBOT   one sample on the write topic (timestamp 0: the gateway stamps it)
+    write_tagged OP KEY VALUE TIMESTAMP ROBOT EPOCH TAG   one TaggedMessage on write_tagged (TAG: 16 hex digits)
+    listen_tagged        prints every TaggedMessage on broadcast_tagged as {"tagged": [op, key, value, timestamp,
+                         robot, sender, epoch, tag hex]}, after {"listening": "broadcast_tagged"}
     listen TOPIC         subscribes to TOPIC under the namespace (vstig_msgs/Message), then {"listening": TOPIC}
     flood SECONDS [TOPIC [mixed]]   writes as fast as rclpy publishes (on TOPIC under the namespace: default
                          write; mixed: valid, out of range and garbage), then {"flooded": {kind: N}}
@@ -33,7 +36,7 @@ from typing import Any
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from vstig_msgs.msg import Change, Message
+from vstig_msgs.msg import Change, Message, TaggedMessage
 from vstig_msgs.srv import Get, Put, Table
 
 CALL_TIMEOUT = 20.0
@@ -124,6 +127,7 @@ def main(namespace: str, wait: float) -> None:
 
     changes = node.create_subscription(Change, f"{namespace}/changes", changed, table_qos)
     writes = node.create_publisher(Message, f"{namespace}/write", 100)
+    tagged_writes = node.create_publisher(TaggedMessage, f"{namespace}/write_tagged", 100)
     burst = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
     clients = {name: node.create_client(kind, f"{namespace}/{name}", qos_profile=burst)  # 50 calls at once
                for name, kind in (("put", Put), ("get", Get), ("table", Table))}
@@ -166,6 +170,16 @@ def main(namespace: str, wait: float) -> None:
             writes.publish(Message(op=Message.PUT, key=args[0], value=args[1], timestamp=0, robot=args[2],
                                    sender=-1))
             say({"written": args[:2]})
+        elif command == "write_tagged":
+            tagged_writes.publish(TaggedMessage(op=args[0], key=args[1], value=args[2], timestamp=args[3],
+                                                robot=args[4], sender=-1, epoch=args[5],
+                                                tag=list(bytes.fromhex(words[7]))))  # as written: hex may be all digits
+            say({"written_tagged": args[1:3]})
+        elif command == "listen_tagged":
+            def tagged(m: TaggedMessage) -> None:
+                say({"tagged": [m.op, m.key, m.value, m.timestamp, m.robot, m.sender, m.epoch, bytes(m.tag).hex()]})
+            node.create_subscription(TaggedMessage, f"{namespace}/broadcast_tagged", tagged, 100)
+            say({"listening": "broadcast_tagged"})
         elif command == "listen":
             node.create_subscription(Message, f"{namespace}/{args[0]}", lambda _: None, 10)
             say({"listening": args[0]})

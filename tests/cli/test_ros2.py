@@ -111,9 +111,10 @@ class Process:
 class Lab:
     """A gateway (`vstig bridge`) and ROS 2 peers in one namespace, with robots stepped by the test."""
 
-    def __init__(self, host: Host, env: dict[str, str], robots: list[Robot], *extra: str) -> None:
+    def __init__(self, host: Host, env: dict[str, str], robots: list[Robot], *extra: str,
+                 ros2: str = "ros2:lab") -> None:
         self.host, self.env, self.robots = host, env, robots
-        self.gateway = Process([*host.command(), VSTIG, "bridge", *(r.spec for r in robots), *extra, "ros2:lab",
+        self.gateway = Process([*host.command(), VSTIG, "bridge", *(r.spec for r in robots), *extra, ros2,
                                 "--robot-id", "200"], dds.vstig_environment())
         wait_for(lambda: self.gateway.said("ros2-lab: ROS 2 domain") or self.gateway.process.poll() is not None, 60)
         assert self.gateway.process.poll() is None, "".join(self.gateway.errors)
@@ -176,8 +177,8 @@ def counters(stderr: str, link: str) -> dict[str, int]:
 def lab(host: Host, ros2_env: dict[str, str]) -> Iterator[Callable[..., Lab]]:
     made: list[Lab] = []
 
-    def make(robots: list[Robot], *extra: str) -> Lab:
-        made.append(Lab(host, ros2_env, robots, *extra))
+    def make(robots: list[Robot], *extra: str, ros2: str = "ros2:lab") -> Lab:
+        made.append(Lab(host, ros2_env, robots, *extra, ros2=ros2))
         return made[-1]
 
     yield make

@@ -13,14 +13,18 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from vstig_hw.auth import Tagged
 from vstig_hw.extras import missing
 from vstig_hw.framing.ros2 import (
+    TAGGED_CDR_SIZE,
     Ros2Framing,
     Ros2Sample,
     cdr_message,
+    cdr_tagged,
     message_of_cdr,
     ros_name,
     sender_of_wire,
+    tagged_of_cdr,
     wire_sender,
 )
 from vstig_hw.links import parse
@@ -87,6 +91,21 @@ def test_what_is_not_a_vstig_message_is_dropped_and_counted(payload: bytes) -> N
     assert framing.drops == {"bad_cdr": 1}
 
 
+def test_a_tagged_write_is_taken_as_written_and_a_broken_one_counted() -> None:
+    """Its tag covers its timestamp: a tagged PUT with timestamp 0 is not stamped (the gateway's policy judges it);
+    with auth off the link takes its message without the tag."""
+    framing = Ros2Framing(200)
+    framing.stamp = lambda key: 6
+    record = Tagged(Message(Op.PUT, 9, 99, 0, 300), 2, bytes(range(8)))
+    sample = Ros2Sample(cdr_tagged(record, None))
+    assert framing.feed_tagged(sample) == [(record.message, record)] and framing.feed(sample) == [record.message]
+    assert framing.encode_tagged([record]) == [Ros2Sample(cdr_tagged(record, 200))]
+    for broken in (sample.payload[:4] + bytes([2]) + sample.payload[5:],  # an op neither PUT nor GET
+                   b"\x00\x00\x00\x00" + sample.payload[4:]):  # big-endian CDR
+        assert framing.feed_tagged(Ros2Sample(broken)) == [] and framing.feed(Ros2Sample(broken)) == []
+    assert framing.drops == {"bad_cdr": 4} and len(sample.payload) == TAGGED_CDR_SIZE
+
+
 ros2 = pytest.mark.skipif(bool(missing(["rclpy"])) and os.environ.get("VSTIG_REQUIRE_PEERS") != "1",
                           reason="the ros2 extra is not installed (pip install 'vstig-hw[ros2]')")
 
@@ -117,6 +136,23 @@ def test_our_cdr_is_what_rclpy_serializes_and_reads_back(types: Any, op: Op, key
     assert deserialize_message(ours, types.msg.Message) == theirs
     decoded = message_of_cdr(serialize_message(theirs))
     assert decoded is not None and decoded[0] == message and sender_of_wire(decoded[1]) == sender
+
+
+@ros2
+@given(op=st.sampled_from(Op), key=st.integers(0, 0x7FFF), words=st.tuples(*[st.integers(0, 0xFFFF)] * 3),
+       epoch=st.integers(0, 0xFFFFFFFF), tag=st.binary(min_size=8, max_size=8),
+       sender=st.none() | st.integers(0, (1 << 64) - 2))
+def test_our_tagged_cdr_is_what_rclpy_serializes_and_reads_back(types: Any, op: Op, key: int,
+                                                                words: tuple[int, int, int], epoch: int, tag: bytes,
+                                                                sender: int | None) -> None:
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    record = Tagged(Message(op, key, *words), epoch, tag)
+    theirs = types.msg.TaggedMessage(op=int(op), key=key, value=words[0], timestamp=words[1], robot=words[2],
+                                     sender=wire_sender(sender), epoch=epoch, tag=list(tag))
+    assert deserialize_message(cdr_tagged(record, sender), types.msg.TaggedMessage) == theirs
+    decoded = tagged_of_cdr(serialize_message(theirs))
+    assert decoded is not None and decoded[0] == record and sender_of_wire(decoded[1]) == sender
 
 
 @ros2

@@ -15,6 +15,7 @@ from vstig_hw.dialects.mapping import parse_deployment
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.base import Framing, NoRoomForTags
 from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.framing.ros2 import Ros2Framing
 from vstig_hw.framing.xbee import api_frame, receive_packet
 from vstig_hw.framing.zenoh import ZenohFraming, ZenohKeySpace, ZenohSample
 from vstig_hw.wire import Message, Op
@@ -28,7 +29,7 @@ RECORDS = [KEYS.tag(Message(Op.GET if i % 3 == 2 else Op.PUT, 0x100 + i, 1000 + 
 def _with_tags() -> list[Framing[Any]]:
     return [make_serial_framing("cobs8"), make_serial_framing("xbee"), make_serial_framing("xbee-api2"),
             make_serial_framing("mavlink"), CanFraming(CanIdScheme(), 7, fd=True),
-            ZenohFraming(ZenohKeySpace("lab"), 7)]
+            ZenohFraming(ZenohKeySpace("lab"), 7), Ros2Framing(7)]
 
 
 def _without_room() -> list[Framing[Any]]:

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 from ..engine import Entry
 from ..framing.ros2 import Ros2Framing
 from ..links.link import Link
+from ..tagged import AuthPolicy
 from ..timestamps import next_timestamp
 from ..transports.ros2 import (  # no rclpy at import: it loads when the node opens
     TABLE_RECORD,
@@ -105,6 +106,7 @@ class Ros2Part:
     def __init__(self, node: Node, link: Link[Any], transport: Ros2Transport) -> None:
         self.node = node
         self.transport = transport
+        self._auth = link.auth
         self._where = ", ".join(other.name for other in node.links)
         self.snapshots = TableSnapshots(node.entries)
         self._next_robots = 0.0
@@ -153,6 +155,9 @@ class Ros2Part:
             return PutAnswer(False, None, key, f"key must be 0..{KEY_MAX}, got {key}")
         if node.engine is None or node.mode.value != "engine":
             return PutAnswer(False, None, key, f"a {node.mode.value} gateway does not write: give it --robot-id")
+        if self._auth is not AuthPolicy.OFF:  # the service writes as the gateway, under its key: no caller's proof
+            return PutAnswer(False, None, key, f"this link checks tags (auth={self._auth.value}): a put would write "
+                             "under the gateway's key for anyone; publish your robot's signed write on write_tagged")
         try:
             result = confirm_write(node, key, value, learn=0.0, wait=PUT_WAIT, tries=PUT_TRIES).result(
                 timeout=PUT_WAIT * PUT_TRIES + _GRACE)

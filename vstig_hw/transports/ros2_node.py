@@ -6,14 +6,15 @@ stdin and reads frames from our stdout (the protocol: `ros2.py`):
 
     in   H  messages a link heard      -> <ns>/heard/<link>       (vstig_msgs/Message, raw CDR)
          C  changes of the table       -> <ns>/changes            (vstig_msgs/Change, keyed)
-         B  what the gateway broadcasts -> <ns>/broadcast          (CDR, as the framing encoded it)
+         B  what the gateway broadcasts -> <ns>/broadcast          (CDR, as the framing encoded it; a
+                                               TaggedMessage, by its size, -> <ns>/broadcast_tagged)
          A  the answer to a request we asked;  S  the gateway's counters -> /diagnostics
          T  a page of a table snapshot (before the answer that names it; we keep the last one)
          O  a part of the roster (JSON, its last part flagged) -> <ns>/robots (vstig_msgs/Robots, transient local)
-    out  W  what ROS 2 nodes wrote on <ns>/write (at most write_rate a second)
+    out  W  what ROS 2 nodes wrote on <ns>/write and <ns>/write_tagged (at most write_rate a second, both)
          Q  a service request (put, get, table) for the gateway to answer
          K  what we counted since the last K (once a second and when we end), with the writes refused here
-            (`drop_bad_cdr`: not a vstig_msgs/Message, a key or an op out of range)
+            (`drop_bad_cdr`: not a vstig_msgs/Message or TaggedMessage, a key or an op out of range)
 
 It ends when its stdin closes (the gateway closed the link, or died), and ignores
 SIGINT: Ctrl-C is the gateway's to handle, which then closes us.
@@ -33,7 +34,7 @@ from importlib.resources import files
 from typing import IO, Any
 
 from ..counters import Counters
-from ..framing.ros2 import CDR_SIZE, cdr_message, message_of_cdr, ros_name
+from ..framing.ros2 import CDR_SIZE, TAGGED_CDR_SIZE, cdr_message, message_of_cdr, ros_name, tagged_of_cdr
 from ..wire import Message
 from .ros2 import CHANGE, FRAME, HEARD, PUTS_AT_ONCE, ROBOTS_PART, TABLE_PAGE, TABLE_RECORD, Ros2Options
 
@@ -116,11 +117,13 @@ class Ros2Node:
         table = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.broadcast = node.create_publisher(msg.Message, "broadcast", stream)
+        self.broadcast_tagged = node.create_publisher(msg.TaggedMessage, "broadcast_tagged", stream)
         self.heard = [node.create_publisher(msg.Message, f"heard/{ros_name(link)}", stream) for link in self.links]
         # What ROS 2 nodes write is taken at a bounded pace, not as it comes: its subscription sits on a node no
         # executor spins; a timer takes what `write_rate` allows, and Fast DDS drops the rest (rx_lost).
         self.intake = _node(f"{node.get_name()}_write", options.namespace, self.context)
-        self.writes = self.intake.create_subscription(msg.Message, "write", _never, stream, raw=True)
+        self.writes = [self.intake.create_subscription(kind, topic, _never, stream, raw=True)
+                       for kind, topic in ((msg.Message, "write"), (msg.TaggedMessage, "write_tagged"))]
         # Each callback in a group of its own, so none waits for another (a default group runs one callback at a
         # time): puts are reentrant, `_put` bounds those in flight and answers the rest busy at once.
         node.create_timer(WRITE_POLL, self._take_writes, MutuallyExclusiveCallbackGroup())
@@ -198,6 +201,9 @@ class Ros2Node:
                 published += 1
             self._count("published", published)
         elif kind == b"B":  # CDR already: the framing encoded them with the gateway's robot id as sender
+            if len(payload) == TAGGED_CDR_SIZE:  # one record (a link that checks tags sends each so)
+                self.broadcast_tagged.publish(payload)
+                return
             for start in range(0, len(payload), CDR_SIZE):
                 self.broadcast.publish(payload[start:start + CDR_SIZE])
         elif kind == b"C" and self.changes is not None:
@@ -252,19 +258,19 @@ class Ros2Node:
         self._refilled = now
         taken: list[list[Any]] = []
         garbage = 0
-        subscription = self.writes
-        while self._tokens >= 1.0:
-            with subscription.handle:  # rclpy's executor takes a sample this way (Subscription.handle)
-                sample = subscription.handle.take_message(subscription.msg_type, True)
-            if sample is None:
-                break
-            self._tokens -= 1.0  # garbage costs its taking too: a garbage flood is bounded as any other
-            payload, info = sample
-            source = self._writer_of(info)
-            if message_of_cdr(payload) is None:  # refused here, not shipped to the gateway's data path
-                garbage += 1
-            else:
-                taken.append([payload.hex(), source])
+        for subscription, valid in zip(self.writes, (message_of_cdr, tagged_of_cdr), strict=True):
+            while self._tokens >= 1.0:  # the tokens are both topics': untagged writes first
+                with subscription.handle:  # rclpy's executor takes a sample this way (Subscription.handle)
+                    sample = subscription.handle.take_message(subscription.msg_type, True)
+                if sample is None:
+                    break
+                self._tokens -= 1.0  # garbage costs its taking too: a garbage flood is bounded as any other
+                payload, info = sample
+                source = self._writer_of(info)
+                if valid(payload) is None:  # refused here, not shipped to the gateway's data path
+                    garbage += 1
+                else:
+                    taken.append([payload.hex(), source])
         if garbage:
             self._count("drop_bad_cdr", garbage)
         if taken:
