@@ -46,7 +46,8 @@ NOTES = {
                "AIR_SPEED): the link sends at most half the air rate. udpin listens and sends to every address heard "
                "in the last 10 s (at most 8); "
                "udpout sends to a router (MAVProxy, mavlink-router). key=FILE signs and checks every frame "
-               "(docs/how-to/mavlink.md).",
+               "(docs/how-to/mavlink.md). With auth=require or prefer, entries go with their writers' tags in TUNNELs "
+               "of payload_type 46450 (docs/how-to/auth.md).",
 }
 _EXAMPLE = EXAMPLES["mavlink"][0]
 _KEY_MAX_BYTES = 4096

@@ -5,7 +5,8 @@
 table's changes, the roster (`robots`), put/get/table services, the counters on /diagnostics, and a
 `write` topic whose samples come in as this link's heard messages (the guard, the
 engine and a per-source share see them as any link's). What the gateway
-broadcasts goes out on `broadcast`. Topics, types and QoS: docs/how-to/ros2.md.
+broadcasts goes out on `broadcast`; signed writes and entries with their writers' tags on
+`write_tagged` and `broadcast_tagged` (SPEC.md 10.5). Topics, types and QoS: docs/how-to/ros2.md.
 
 Closed by default, as the zenoh: links: Fast DDS listens on loopback and shared
 memory only, so ROS 2 nodes on this PC find the gateway and nothing beyond it can;
@@ -41,7 +42,9 @@ NOTES = {
             "table), robots (vstig_msgs/Robots, transient-local: the roster, on change, at most once a second), "
             "put/get/table services, the counters on /diagnostics; what ROS 2 nodes publish on write comes "
             "in as this link's messages (a PUT with timestamp 0 is stamped after the gateway's entry), at most "
-            "write_rate= a second (default 500). domain= is the ROS domain id (default $ROS_DOMAIN_ID, else 0). "
+            "write_rate= a second (default 500); write_tagged and broadcast_tagged (vstig_msgs/TaggedMessage) carry "
+            "writers' tags where auth= checks them (docs/how-to/auth.md). "
+            "domain= is the ROS domain id (default $ROS_DOMAIN_ID, else 0). "
             "Closed by default: Fast DDS on this PC only (loopback and shared memory); discovery=subnet opens it "
             "to the LAN (a warning: nobody is authenticated), profile= passes a Fast DDS XML profile through. "
             "qos= and depth= (default reliable, 100) are the topics' reliability and history.",

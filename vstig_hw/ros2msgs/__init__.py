@@ -1,4 +1,5 @@
-"""The `vstig_msgs` ROS 2 interfaces (Message, Entry, Change; Put, Get, Table), built once per machine.
+"""The `vstig_msgs` ROS 2 interfaces (Message, TaggedMessage, Entry, Change, Robot, Robots; Put, Get, Table),
+built once per machine.
 
 The IDL files in msg/ and srv/ are their one definition (Message is also the
 schema of our MCAP captures: `capture.rosbag.MSGDEF`). ROS 2 wheels on PyPI carry
