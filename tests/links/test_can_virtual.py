@@ -146,3 +146,27 @@ def test_filter_off_lets_foreign_ids_in_and_counts_them() -> None:
     heard, stats = _hear_a_foreign_frame_then_ours("can:virtual:{channel}?filter=0")
     assert [h.message for h in heard] == [Message(Op.GET, 1, 2, 3, 4)]
     assert stats["rx"] == 2 and stats["drop_unknown_id"] == 1
+
+
+def test_a_frame_that_just_arrived_ends_the_read_and_a_backlog_is_read_whole() -> None:
+    """A read asks the bus again only after a frame that waited (its timestamp is older than a millisecond): a
+    python-can recv(0) that finds nothing costs as much as a frame. Every frame is read either way."""
+    channel = _fresh_channel()
+    ours = can_link("virtual", channel, robot_id=1)
+    peer = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)  # the frames' own stamps
+    ours.open()
+
+    def send(stamp: float, count: int) -> None:
+        for key in range(count):
+            peer.send(can.Message(timestamp=stamp, arbitration_id=0x602, is_extended_id=False,
+                                  data=bytes([0, key, 0, 5, 0, 1, 0, 2])))
+
+    try:
+        send(time.time() + 3600, 3)  # "just arrived", as far as the reader can tell: one frame per read
+        assert [len(ours.read(1.0)) for _ in range(3)] == [1, 1, 1]
+        send(time.time() - 1.0, 3)  # waited a second: the read takes the queue whole
+        assert len(ours.read(1.0)) == 3
+        assert ours.transport.counters["rx"] == 6
+    finally:
+        ours.close()
+        peer.shutdown()

@@ -363,10 +363,80 @@ size_t vx_tx_frames(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, vstig_
     return vstig_can_encode(&tx->can, msgs, n, frames);
 }
 
+/* CAN units are copies of one can.Message that frame_type's own constructor made when the Encoder was built (the
+ * template), with a frame's fields written into the slots python-can declares (can.Message.__slots__): python-can's
+ * __init__ is Python, ~8k instructions a frame; a copy is ~1k. Only a class of slots alone (no __dict__, no base but
+ * object, object's __new__) whose template holds nothing mutable is copied; any other frame_type is called per
+ * frame. tests/native holds every slot of a unit equal to the one CanFraming makes. */
+static const char *const UNIT_FIELDS[6] = {"arbitration_id", "is_extended_id", "data", "dlc", "is_fd",
+                                           "bitrate_switch"};
+
+static int immutable(PyObject *value) {
+    return value == NULL || value == Py_None || PyBool_Check(value) || PyLong_CheckExact(value) ||
+           PyFloat_CheckExact(value) || PyUnicode_CheckExact(value) || PyBytes_CheckExact(value);
+}
+
+static int unit_template(vx_tx_t *tx) {
+    PyTypeObject *type;
+    PyMemberDef *member;
+    PyObject *made;
+    int i, found = 0;
+    if (!PyType_Check(tx->frame_type)) return 0;
+    type = (PyTypeObject *)tx->frame_type;
+    if (!(type->tp_flags & Py_TPFLAGS_HEAPTYPE) || type->tp_base != &PyBaseObject_Type || type->tp_dictoffset != 0 ||
+        type->tp_new != PyBaseObject_Type.tp_new || type->tp_members == NULL)
+        return 0;
+    if ((made = PyObject_CallNoArgs(tx->frame_type)) == NULL) return -1;
+    for (member = type->tp_members; member->name != NULL && Py_TYPE(made) == type; member++) {
+        PyObject *value = *(PyObject **)((char *)made + member->offset);
+        if (member->type != T_OBJECT_EX) continue;
+        for (i = 0; i < 6; i++) {
+            if (strcmp(member->name, UNIT_FIELDS[i]) == 0) {
+                tx->unit_slots[i] = member->offset;
+                found |= 1 << i;
+            }
+        }
+        if (strcmp(member->name, "data") != 0 && !immutable(value)) found = -1;
+    }
+    if (found == 0x3F && Py_TYPE(made) == type)
+        tx->unit_template = made;
+    else
+        Py_DECREF(made);
+    return 0;
+}
+
+static PyObject *copied_unit(const vx_tx_t *tx, const vstig_can_frame_t *frame) {
+    PyObject *template = tx->unit_template, *unit = NULL, *fields[6];
+    PyTypeObject *type = Py_TYPE(template);
+    PyMemberDef *member;
+    int i;
+    fields[0] = PyLong_FromUnsignedLong(frame->id);
+    fields[1] = Py_NewRef(frame->extended ? Py_True : Py_False);
+    fields[2] = PyByteArray_FromStringAndSize((const char *)frame->data, (Py_ssize_t)frame->len);
+    fields[3] = PyLong_FromLong((long)frame->len);
+    fields[4] = Py_NewRef(frame->fd ? Py_True : Py_False);
+    fields[5] = Py_NewRef(frame->brs ? Py_True : Py_False);
+    if (fields[0] != NULL && fields[2] != NULL && fields[3] != NULL) unit = type->tp_alloc(type, 0);
+    if (unit != NULL) {
+        for (member = type->tp_members; member->name != NULL; member++) {
+            if (member->type == T_OBJECT_EX)
+                *(PyObject **)((char *)unit + member->offset) =
+                    Py_XNewRef(*(PyObject **)((char *)template + member->offset));
+        }
+        for (i = 0; i < 6; i++) {
+            Py_XSETREF(*(PyObject **)((char *)unit + tx->unit_slots[i]), fields[i]);
+            fields[i] = NULL;
+        }
+    }
+    for (i = 0; i < 6; i++) Py_XDECREF(fields[i]);
+    return unit;
+}
+
 PyObject *vx_frame_unit(const vx_tx_t *tx, const vstig_can_frame_t *frame) {
     /* can.Message(arbitration_id=, is_extended_id=, data=, is_fd=, bitrate_switch=), as CanFraming builds it */
-    PyObject *args = PyTuple_New(0), *kwargs, *unit = NULL;
-    if (args == NULL) return NULL;
+    PyObject *args, *kwargs, *unit = NULL;
+    if (tx->unit_template != NULL) return copied_unit(tx, frame);
+    if ((args = PyTuple_New(0)) == NULL) return NULL;
     kwargs = Py_BuildValue("{s:k,s:O,s:y#,s:O,s:O}", "arbitration_id", (unsigned long)frame->id, "is_extended_id",
                            frame->extended ? Py_True : Py_False, "data", (const char *)frame->data,
                            (Py_ssize_t)frame->len, "is_fd", frame->fd ? Py_True : Py_False, "bitrate_switch",
@@ -405,6 +475,10 @@ static PyObject *Encoder_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
     self->tx.kind = (uint8_t)kind;
     self->tx.kilobot_type = (uint8_t)kilobot_type;
     self->tx.frame_type = Py_NewRef(frame_type);
+    if (kind == VX_CAN && unit_template(&self->tx) < 0) {
+        Py_DECREF(self);
+        return NULL;
+    }
     for (i = 0; i < 8; i++) dest_bytes[i] = (uint8_t)(dest >> (56 - 8 * i));
     vstig_xbee_tx_init(&self->tx.xbee, (uint8_t)escaped, dest_bytes);
     if ((kind == VX_CAN && can_scheme(&self->tx.can, extended, base, stigmergy, sender, fd, brs) < 0) ||
@@ -417,11 +491,13 @@ static PyObject *Encoder_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
 
 static int Encoder_traverse(vx_encoder_t *self, visitproc visit, void *arg) {
     Py_VISIT(self->tx.frame_type);
+    Py_VISIT(self->tx.unit_template);
     return 0;
 }
 
 static int Encoder_clear(vx_encoder_t *self) {
     Py_CLEAR(self->tx.frame_type);
+    Py_CLEAR(self->tx.unit_template);
     return 0;
 }
 

@@ -36,6 +36,8 @@ typedef struct {
     vstig_xbee_tx_t xbee; /* its frame ids and NP: the link's XBeeFraming sends with the same (`share`) */
     vx_mav_tx_t mav;      /* its sequence and signing timestamps: the link's MavlinkFraming sends through it */
     PyObject *frame_type; /* CAN: can.Message, for the units handed to Python */
+    PyObject *unit_template;   /* CAN: a frame_type() made once, copied per unit (NULL: frame_type is called) */
+    Py_ssize_t unit_slots[6];  /* where the template's class keeps the fields a frame sets (framing.c UNIT_FIELDS) */
 } vx_tx_t;
 
 typedef struct {

@@ -45,6 +45,11 @@ log = logging.getLogger(__name__)
 # SocketCAN error frames up with the kernel's class bits as the arbitration id.
 _CAN_ERR_BUSOFF = 0x40
 _DRAIN_LIMIT = 512  # frames taken per read() after the first, so one busy bus cannot starve the loop
+# A frame read within this long of its arrival (its timestamp) had most likely nothing queued behind it: the read
+# ends there rather than ask once more (a python-can recv(0) that finds nothing costs as much as one that finds a
+# frame). A frame that waited longer drains the queue; a bus whose timestamps are on another clock drains always
+# or never, and either way every frame is read (the next read takes what came since).
+_ALONE_S = 0.001
 _STATE_POLL_S = 1.0  # how often to ask interfaces that report it (pcan, kvaser...) for bus-off
 # Send failures that mean "the bus is busy", not "the device is gone".
 _TRANSIENT_ERRNOS = frozenset({errno.ENOBUFS, errno.EAGAIN})
@@ -137,7 +142,8 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
                 frames.append(frame)
                 if frame.is_error_frame:
                     self.note_error_frame(frame)
-                if len(frames) > _DRAIN_LIMIT or self._live.device is None:
+                if len(frames) > _DRAIN_LIMIT or self._live.device is None or \
+                        time.time() - frame.timestamp < _ALONE_S:
                     break
                 frame = device.recv(0)
             if self._live.device is not None:
