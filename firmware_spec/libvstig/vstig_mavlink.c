@@ -328,7 +328,7 @@ uint8_t vstig_mavlink_records(vstig_mavlink_rx_t *rx, const uint8_t *frame, uint
                               uint8_t records[VSTIG_MAVLINK_MAX_RECORDS * VSTIG_RECORD_SIZE], uint8_t *tagged,
                               uint8_t *from_sysid, uint8_t *from_compid) {
     uint8_t payload[TUNNEL_SIZE];
-    uint8_t carried, i, size, most;
+    uint8_t carried, i, n, size, most;
     uint16_t type;
     *tagged = 0;
     if ((frame[7] | frame[8] << 8 | (uint32_t)frame[9] << 16) != VSTIG_MAVLINK_TUNNEL) {
@@ -353,12 +353,13 @@ uint8_t vstig_mavlink_records(vstig_mavlink_rx_t *rx, const uint8_t *frame, uint
         vstig_mavlink_count(rx, VSTIG_MAVLINK_DROP_BAD_LENGTH);
         return 0;
     }
-    for (i = 0; i < carried / size; i++) vstig_msg_decode(payload + TUNNEL_HEAD + size * i, &out[i]);
+    n = (uint8_t)(carried / size);
+    for (i = 0; i < n; i++) vstig_msg_decode(payload + TUNNEL_HEAD + (uint8_t)(size * i), &out[i]);
     if (size == VSTIG_RECORD_SIZE && records) {
         memcpy(records, payload + TUNNEL_HEAD, carried);
         *tagged = 1;
     }
     *from_sysid = frame[5];
     *from_compid = frame[6];
-    return (uint8_t)(carried / size);
+    return n;
 }
