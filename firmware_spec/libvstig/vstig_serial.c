@@ -42,6 +42,10 @@ static int16_t cobs_decode_in_place(uint8_t *buf, uint8_t len) {
 }
 
 uint8_t vstig_deframer_feed(vstig_deframer_t *d, uint8_t byte, uint8_t want) {
+    return vstig_deframer_feed_either(d, byte, want, want) != 0;
+}
+
+uint8_t vstig_deframer_feed_either(vstig_deframer_t *d, uint8_t byte, uint8_t want, uint8_t also) {
     int16_t n;
     if (byte != 0) {
         if (d->discarding) return 0;
@@ -69,11 +73,11 @@ uint8_t vstig_deframer_feed(vstig_deframer_t *d, uint8_t byte, uint8_t want) {
         vstig_drops_count(&d->drops, VSTIG_DROP_CRC);
         return 0;
     }
-    if (n - 2 != want) {
+    if (n - 2 != want && n - 2 != also) {
         vstig_drops_count(&d->drops, VSTIG_DROP_BAD_LENGTH);
         return 0;
     }
-    return 1;
+    return (uint8_t)(n - 2);
 }
 
 /* ---- cobs8 --------------------------------------------------------------- */

@@ -35,6 +35,9 @@ void vstig_deframer_init(vstig_deframer_t *d);
 /* Feed one received byte. Returns 1 when a frame whose payload is exactly `want` bytes
  * and whose CRC checks has ended with this byte: the payload is d->buf[0..want). */
 uint8_t vstig_deframer_feed(vstig_deframer_t *d, uint8_t byte, uint8_t want);
+/* The same for a receiver of two payload sizes (cobs8 with authenticated messages, SPEC.md 10.5): the size of
+ * the payload accepted (`want` or `also`), or 0. */
+uint8_t vstig_deframer_feed_either(vstig_deframer_t *d, uint8_t byte, uint8_t want, uint8_t also);
 
 /* ---- cobs8: one message per serial frame (SPEC.md section 6.1) ----------- */
 #define VSTIG_COBS8_FRAME_SIZE 12u

@@ -104,7 +104,7 @@ def test_attacks_on_a_require_link_are_refused_and_honest_writes_relayed_with_th
     roster = {view.robot: view.refused for view in kept.snapshot()}
     # The roster counts a refusal to the node the medium names as its sender (CAN IDs): robot 6 sent both forgeries
     assert (roster[5], roster[6], roster[99]) == (0, 2, 1), roster
-    assert node.signing.engine is not None and node.signing.engine.tagged.replays == 1  # the replay lost, counted
+    assert node.signing.engine is not None and node.signing.engine.replays == 1  # the replay lost, counted
 
 
 def test_an_untagged_write_on_an_off_link_never_reaches_a_require_link(channels: tuple[str, str, str]) -> None:

@@ -425,6 +425,11 @@ static int Engine_set_records(vx_engine_t *self, PyObject *value, void *closure)
     return has_tags(self, "records") ? vx_tags_set_records(self->tags, value) : -1;
 }
 
+static PyObject *Engine_get_replays(vx_engine_t *self, void *closure) {
+    (void)closure;
+    return has_tags(self, "replays") ? PyLong_FromUnsignedLong(self->tags->tagged.replays) : NULL;
+}
+
 static PyMethodDef Engine_methods[] = {
     {"put", (PyCFunction)(void (*)(void))Engine_put, METH_FASTCALL, "Write locally and queue a PUT."},
     {"get", (PyCFunction)Engine_get, METH_O, "The local value (None if unknown); queues a GET."},
@@ -446,6 +451,7 @@ static PyGetSetDef Engine_getset[] = {
     {"onconflictlost", (getter)Engine_get_onconflictlost, (setter)Engine_set_onconflictlost, NULL, NULL},
     {"policy", (getter)Engine_get_policy, (setter)Engine_set_policy, "The policy of the link being received.", NULL},
     {"records", (getter)Engine_get_records, (setter)Engine_set_records, "The unit's records (Signing's).", NULL},
+    {"replays", (getter)Engine_get_replays, NULL, "Tagged messages older by (epoch, timestamp): lost.", NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
 

@@ -46,8 +46,31 @@ static int can_scheme(vstig_can_t *can, int extended, PyObject *base, int stigme
 
 /* ---- receiving ------------------------------------------------------------------------- */
 
+/* cobs8: a frame's payload is a message, or a record (SPEC.md 10.5), kept where the link checks tags */
+static size_t cobs8_bytes(vx_rx_t *rx, const uint8_t *data, size_t len, size_t *used, vstig_msg_t *out, size_t max) {
+    vstig_deframer_t *d = &rx->serial.deframer;
+    size_t i, n = 0;
+    for (i = 0; i < len && n < max; i++) {
+        uint8_t size = vstig_deframer_feed_either(d, data[i], VSTIG_MESSAGE_SIZE, VSTIG_RECORD_SIZE);
+        if (size == 0) continue;
+        vstig_msg_decode(d->buf, &out[n]);
+        if (size == VSTIG_RECORD_SIZE && rx->policy != VSTIG_AUTH_OFF)
+            vx_records_add(&rx->records, &out[n], d->buf + VSTIG_MESSAGE_SIZE, rx->emitted + n);
+        n++;
+    }
+    *used = i;
+    rx->emitted += n;
+    return n;
+}
+
 size_t vx_rx_bytes(vx_rx_t *rx, const uint8_t *data, size_t len, size_t *used, vstig_msg_t *out, size_t max) {
+    if (rx->kind == VX_COBS8) return cobs8_bytes(rx, data, len, used, out, max);
     return vstig_serial_receive(&rx->serial, data, len, used, out, max);
+}
+
+void vx_rx_unit_done(vx_rx_t *rx) {
+    rx->records.n = 0;
+    rx->emitted = 0;
 }
 
 /* One whole frame the XBee receiver cut: its messages at out[n..], the sender noted. */
@@ -81,12 +104,28 @@ size_t vx_rx_whole(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *ou
     return vx_rx_xbee(rx, data, len, out);
 }
 
-size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8]) {
-    uint16_t sender;
-    return vstig_can_receive(&rx->can, frame, out, &sender);
+size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8], uint16_t *sender) {
+    vstig_can_frame_t message;
+    size_t n;
+    if (!frame->fd || frame->len != VSTIG_RECORD_SIZE) {
+        n = vstig_can_receive(&rx->can, frame, out, sender);
+        rx->emitted += n;
+        return n;
+    }
+    message = *frame; /* a record: its message as the 8-byte frame it starts with (IDs and op checked alike) */
+    message.len = VSTIG_MESSAGE_SIZE;
+    n = vstig_can_receive(&rx->can, &message, out, sender);
+    if (n == 1 && rx->policy != VSTIG_AUTH_OFF) vx_records_add(&rx->records, &out[0], frame->data + 8, rx->emitted);
+    rx->emitted += n;
+    return n;
 }
 
 int vx_rx_harvest(vx_rx_t *rx) {
+    if (rx->records.lost) { /* a record without room: the unit cannot be judged as it came */
+        rx->records.lost = 0;
+        PyErr_SetString(PyExc_MemoryError, "no memory for a unit's records");
+        return -1;
+    }
     if (rx->kind == VX_CAN) return vx_harvest_drops(&rx->can.drops, rx->drops);
     if (rx->kind == VX_XBEE) return vx_harvest_drops(&rx->xbee.drops, rx->drops);
     if (rx->kind == VX_MAVLINK) return vx_mav_harvest(&rx->mav, rx->drops);
@@ -149,6 +188,8 @@ static PyObject *Receiver_new(PyTypeObject *type, PyObject *args, PyObject *kwds
     self->rx.kind = (uint8_t)kind;
     self->rx.drops = Py_NewRef(drops);
     self->rx.on_tick = Py_NewRef(on_tick);
+    self->rx.policy = VSTIG_AUTH_OFF;
+    self->rx.refuse = Py_NewRef(Py_None);
     vstig_epuck4_init(&self->rx.epuck4, (uint8_t)expiry_ticks);
     vstig_xbee_rx_init(&self->rx.xbee, (uint8_t)escaped);
     if (kind == VX_XBEE) {
@@ -171,12 +212,14 @@ fail:
 static int Receiver_traverse(vx_receiver_t *self, visitproc visit, void *arg) {
     Py_VISIT(self->rx.drops);
     Py_VISIT(self->rx.on_tick);
+    Py_VISIT(self->rx.refuse);
     return 0;
 }
 
 static int Receiver_clear(vx_receiver_t *self) {
     Py_CLEAR(self->rx.drops);
     Py_CLEAR(self->rx.on_tick);
+    Py_CLEAR(self->rx.refuse);
     return 0;
 }
 
@@ -184,6 +227,7 @@ static void Receiver_dealloc(vx_receiver_t *self) {
     PyObject_GC_UnTrack(self);
     Receiver_clear(self);
     vx_mav_rx_free(&self->rx.mav);
+    PyMem_Free(self->rx.records.at);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -195,10 +239,12 @@ static PyObject *Receiver_feed(vx_receiver_t *self, PyObject *unit) {
     PyObject *list = PyList_New(0);
     size_t n, i;
     if (list == NULL) return NULL;
+    vx_rx_unit_done(&self->rx);
     if (self->rx.kind == VX_CAN) {
         vstig_can_frame_t frame;
+        uint16_t sender;
         if (vx_frame_of(unit, &frame) < 0) goto fail;
-        n = vx_rx_frame(&self->rx, &frame, out);
+        n = vx_rx_frame(&self->rx, &frame, out, &sender);
         for (i = 0; i < n; i++) {
             PyObject *m = vx_message(&out[i]);
             if (m == NULL || PyList_Append(list, m) < 0) {
@@ -255,6 +301,47 @@ fail:
     return NULL;
 }
 
+/* check_tags(auth, refuse): the link checks tags by policy `auth` (0 require, 1 prefer, 2 off: AuthPolicy's order),
+ * refusing through `refuse` (its Signing.refuse): records are kept from now on (SPEC.md 10.5, 10.6) */
+static PyObject *Receiver_check_tags(vx_receiver_t *self, PyObject *args) {
+    int auth;
+    PyObject *refuse;
+    if (!PyArg_ParseTuple(args, "iO:check_tags", &auth, &refuse)) return NULL;
+    if (auth < VSTIG_AUTH_REQUIRE || auth > VSTIG_AUTH_OFF || !PyCallable_Check(refuse)) {
+        PyErr_Format(PyExc_ValueError, "check_tags takes auth 0 (require), 1 (prefer) or 2 (off) and a callable, "
+                                       "got %d and %R", auth, refuse);
+        return NULL;
+    }
+    self->rx.policy = (vstig_auth_policy_t)auth;
+    Py_INCREF(refuse);
+    Py_SETREF(self->rx.refuse, refuse);
+    vx_rx_unit_done(&self->rx);
+    Py_RETURN_NONE;
+}
+
+/* feed_tagged(unit) -> [(message, (epoch, tag) or None)]: feed's messages, each with its record's epoch and tag
+ * where the link checks tags and it came as one (the Python delivery's Signing.decoder) */
+static PyObject *Receiver_feed_tagged(vx_receiver_t *self, PyObject *unit) {
+    PyObject *messages = Receiver_feed(self, unit), *pairs;
+    Py_ssize_t i;
+    size_t r = 0;
+    if (messages == NULL) return NULL;
+    pairs = PyList_New(PyList_GET_SIZE(messages));
+    for (i = 0; pairs != NULL && i < PyList_GET_SIZE(messages); i++) {
+        const vx_record_t *record = r < self->rx.records.n && self->rx.records.at[r].place == (size_t)i
+                                        ? &self->rx.records.at[r++] : NULL;
+        PyObject *pair = record == NULL
+            ? Py_BuildValue("(OO)", PyList_GET_ITEM(messages, i), Py_None)
+            : Py_BuildValue("(O(ky#))", PyList_GET_ITEM(messages, i), (unsigned long)record->epoch,
+                            (const char *)record->tag, (Py_ssize_t)VSTIG_TAG_SIZE);
+        if (pair == NULL) Py_CLEAR(pairs);
+        else PyList_SET_ITEM(pairs, i, pair);
+    }
+    vx_rx_unit_done(&self->rx);
+    Py_DECREF(messages);
+    return pairs;
+}
+
 static PyObject *Receiver_tick(vx_receiver_t *self, PyObject *unused) {
     (void)unused;
     if (self->rx.kind == VX_EPUCK4) {
@@ -294,6 +381,8 @@ static PyGetSetDef Receiver_getset[] = {
 
 static PyMethodDef Receiver_methods[] = {
     {"feed", (PyCFunction)Receiver_feed, METH_O, "The messages this unit completes; drops counted in `drops`."},
+    {"feed_tagged", (PyCFunction)Receiver_feed_tagged, METH_O, "feed's messages, each with its (epoch, tag) or None."},
+    {"check_tags", (PyCFunction)Receiver_check_tags, METH_VARARGS, "The link checks tags: by this policy, refusing so."},
     {"tick", (PyCFunction)Receiver_tick, METH_NOARGS, "One control period passed (expires epuck4 fragments)."},
     {"reset", (PyCFunction)Receiver_reset, METH_NOARGS, "Forget any partial frame."},
     {NULL, NULL, 0, NULL},

@@ -4,6 +4,7 @@
 
 #include "ext.h"
 #include "mavlink.h"
+#include "tags.h"
 
 #define VX_COBS8 0u   /* = VSTIG_COBS8 */
 #define VX_EPUCK4 1u  /* = VSTIG_EPUCK4 */
@@ -27,6 +28,12 @@ typedef struct {
     unsigned long long sender;  /* an XBee module's 64-bit source; MAVLink's sysid << 8 | compid */
     PyObject *drops; /* the Python framing's drop Counters: what libvstig counts is added there */
     PyObject *on_tick; /* called at each tick, or None (XBee: the framing's tick, for what it sends) */
+    /* a link that checks tags (SPEC.md 10.6; cobs8 and CAN FD carry records, 10.5): its policy, the records of the
+     * unit being decoded (each at its message's place: `emitted` so far), and its Signing.refuse (or None) */
+    vstig_auth_policy_t policy;
+    vx_records_t records;
+    size_t emitted;
+    PyObject *refuse;
 } vx_rx_t;
 
 typedef struct {
@@ -58,8 +65,11 @@ size_t vx_rx_xbee(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *out
 /* XBee or MAVLink: the messages of one unit (whole frames, as the transport cuts them), into out (room for
  * len / 8 + 1); rx->has_sender and rx->sender: the sender of the first frame that carried any. */
 size_t vx_rx_whole(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *out);
-/* The messages of one CAN frame, into out (room for 8). */
-size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8]);
+/* The messages of one CAN frame, into out (room for 8); *sender: the node its ID names. A CAN FD frame of one
+ * record (20 bytes) gives its message, and the record where the link checks tags. */
+size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8], uint16_t *sender);
+/* The unit's records were taken (or none were wanted): the next unit starts afresh. */
+void vx_rx_unit_done(vx_rx_t *rx);
 /* A python-can Message's fields as a libvstig frame; -1 with an exception if it has none of them. */
 int vx_frame_of(PyObject *unit, vstig_can_frame_t *frame);
 /* Adds what libvstig counted to the Python framing's drops; -1 on failure. */

@@ -214,8 +214,8 @@ static int judge_and_take(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t 
 
 /* What one unit carried, after its decoding: Node._arrive's steps for it. `sender`: who the medium says sent it (a
  * CAN node, an XBee module's 64-bit address), when `named`; `told`: this batch's listeners told here. */
-static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, int named,
-                  unsigned long long sender, const vx_told_t *told) {
+static int arrive_checked(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, int named,
+                          unsigned long long sender, const vx_told_t *told) {
     PyObject *part = p->part, *who;
     int seat = part != Py_None && PyObject_TypeCheck(part, &vx_SeatType), telling = 0, status;
     if (n == 0) return 0;
@@ -231,6 +231,23 @@ static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, s
     if ((who = PyLong_FromUnsignedLongLong(sender)) == NULL) return -1;
     status = judge_and_take(p, index, t, msgs, n, who, named, sender, told);
     Py_DECREF(who);
+    return status;
+}
+
+/* An engine given the swarm key (tags.c): each unit checked by its link's policy before anything else
+ * (Signing.check), its records the engine's while it takes the unit. */
+static int arrive(vx_path_t *p, Py_ssize_t index, double t, vstig_msg_t *msgs, size_t n, int named,
+                  unsigned long long sender, const vx_told_t *told) {
+    vx_rx_t *rx = &p->links[index].receiver->rx;
+    vx_tags_t *tags = p->part != Py_None && PyObject_TypeCheck(p->part, &vx_SeatType)
+                          ? ((vx_seat_t *)p->part)->engine->tags : NULL;
+    int status = 0;
+    if (tags != NULL && n != 0)
+        status = vx_tags_check_unit(tags, rx->policy, &rx->records, rx->refuse, t, msgs, &n, named, sender,
+                                    told->refused);
+    if (status == 0) status = arrive_checked(p, index, t, msgs, n, named, sender, told);
+    if (tags != NULL) vx_tags_unit_done(tags, &rx->records);
+    vx_rx_unit_done(rx);
     return status;
 }
 
@@ -262,7 +279,7 @@ static int arrive_frame(vx_path_t *p, Py_ssize_t index, double t, const vstig_ca
     uint16_t sender = 0;
     size_t n;
     if (room_for(p, 8) < 0) return -1;
-    n = vstig_can_receive(&rx->can, frame, p->msgs, &sender);
+    n = vx_rx_frame(rx, frame, p->msgs, &sender);
     if (vx_rx_harvest(rx) < 0) return -1;
     *heard += n;
     return arrive(p, index, t, p->msgs, n, n != 0, sender, told);

@@ -50,6 +50,7 @@ void vx_tags_clear(vx_tags_t *tags) {
 
 void vx_tags_free(vx_tags_t *tags) {
     vx_tags_clear(tags);
+    if (tags != NULL) PyMem_Free(tags->slots);
     PyMem_Free(tags);
 }
 
@@ -64,6 +65,14 @@ int vx_tags_traverse(vx_tags_t *tags, visitproc visit, void *arg) {
 static int same_msg(const vstig_msg_t *a, const vstig_msg_t *b) {
     return a->op == b->op && a->key == b->key && a->value == b->value && a->timestamp == b->timestamp &&
            a->robot == b->robot;
+}
+
+#define LINEAR_RECORDS 8u /* a unit of at most this many records is searched in order; a longer one by slot */
+
+static size_t slot_of(const vx_tags_t *tags, const vstig_msg_t *msg) {
+    uint32_t h = (uint32_t)msg->key * 2654435761u ^ (uint32_t)msg->timestamp * 40503u ^ msg->robot ^
+                 (uint32_t)msg->value << 7 ^ msg->op;
+    return (size_t)h & (tags->nslots - 1u);
 }
 
 /* A Tagged's epoch and tag (its fields 1 and 2); 0, or -1 with TypeError. */
@@ -88,7 +97,16 @@ bad:
 int vx_tags_record_in_unit(vx_tags_t *tags, const vstig_msg_t *msg, vx_record_t *record) {
     PyObject *key, *found;
     size_t i;
-    for (i = 0; i < tags->nrecords; i++) {
+    if (tags->nrecords > LINEAR_RECORDS) {
+        for (i = slot_of(tags, msg); tags->slots[i]; i = (i + 1u) & (tags->nslots - 1u)) {
+            if (same_msg(&tags->records[tags->slots[i] - 1u].msg, msg)) {
+                *record = tags->records[tags->slots[i] - 1u];
+                return 1;
+            }
+        }
+        return 0;
+    }
+    for (i = tags->nrecords; i-- > 0;) { /* the last of equal messages, as Signing.records keeps it */
         if (same_msg(&tags->records[i].msg, msg)) {
             *record = tags->records[i];
             return 1;
@@ -148,4 +166,94 @@ int vx_tags_set_records(vx_tags_t *tags, PyObject *value) {
     }
     Py_XSETREF(tags->records_dict, value == NULL || value == Py_None ? NULL : Py_NewRef(value));
     return 0;
+}
+
+/* ---- a unit's check, for the compiled delivery (path.c) ------------------------------------------------------ */
+
+void vx_records_add(vx_records_t *records, const vstig_msg_t *msg, const uint8_t *epoch_and_tag, size_t place) {
+    vx_record_t *record;
+    if (records->n == records->cap) {
+        size_t cap = records->cap ? 2u * records->cap : 16u;
+        vx_record_t *grown = PyMem_Realloc(records->at, cap * sizeof *grown);
+        if (grown == NULL) {
+            records->lost = 1;
+            return;
+        }
+        records->at = grown;
+        records->cap = cap;
+    }
+    record = &records->at[records->n++];
+    record->msg = *msg;
+    record->epoch = (uint32_t)epoch_and_tag[0] << 24 | (uint32_t)epoch_and_tag[1] << 16 |
+                    (uint32_t)epoch_and_tag[2] << 8 | epoch_and_tag[3];
+    memcpy(record->tag, epoch_and_tag + 4, VSTIG_TAG_SIZE);
+    record->place = place;
+}
+
+/* The slots of the unit's records by message, the last of equal messages kept (a dict's rule); 0 or -1. */
+static int index_records(vx_tags_t *tags) {
+    size_t i, want = 16u;
+    while (want < 2u * tags->nrecords) want *= 2u;
+    if (want > tags->nslots) {
+        uint32_t *grown = PyMem_Realloc(tags->slots, want * sizeof *grown);
+        if (grown == NULL) {
+            PyErr_NoMemory();
+            return -1;
+        }
+        tags->slots = grown;
+        tags->nslots = want;
+    }
+    memset(tags->slots, 0, tags->nslots * sizeof *tags->slots);
+    for (i = 0; i < tags->nrecords; i++) {
+        size_t s = slot_of(tags, &tags->records[i].msg);
+        while (tags->slots[s] && !same_msg(&tags->records[tags->slots[s] - 1u].msg, &tags->records[i].msg))
+            s = (s + 1u) & (tags->nslots - 1u);
+        tags->slots[s] = (uint32_t)(i + 1u);
+    }
+    return 0;
+}
+
+static int refuse_one(PyObject *refuse, const vstig_msg_t *msg, int reason, double t, int named,
+                      unsigned long long sender, PyObject *listeners) {
+    PyObject *m = vx_message(msg), *who = named ? PyLong_FromUnsignedLongLong(sender) : Py_NewRef(Py_None), *done;
+    PyObject *name = vx_name(reason == VSTIG_REFUSED_UNTAGGED ? "drop_untagged" : "drop_bad_tag");
+    done = m == NULL || who == NULL || name == NULL ? NULL
+                                                     : PyObject_CallFunction(refuse, "OOdOO", m, name, t, who, listeners);
+    Py_XDECREF(m);
+    Py_XDECREF(who);
+    Py_XDECREF(done);
+    return done == NULL ? -1 : 0;
+}
+
+int vx_tags_check_unit(vx_tags_t *tags, vstig_auth_policy_t policy, vx_records_t *records, PyObject *refuse,
+                       double t, vstig_msg_t *msgs, size_t *n, int named, unsigned long long sender,
+                       PyObject *listeners) {
+    size_t i, kept = 0, r = 0, passed = 0;
+    tags->policy = policy; /* the engine receives under it (Signing.check sets engine.policy) */
+    if (policy == VSTIG_AUTH_OFF) { /* tags ignored: kept untagged */
+        records->n = 0;
+        return 0;
+    }
+    for (i = 0; i < *n; i++) {
+        const vx_record_t *record = r < records->n && records->at[r].place == i ? &records->at[r++] : NULL;
+        int refused = vstig_tagged_check(&tags->tagged, policy, &msgs[i], record ? &record->epoch : NULL,
+                                         record ? record->tag : NULL);
+        if (refused) {
+            if (refuse_one(refuse, &msgs[i], refused, t, named, sender, listeners) < 0) return -1;
+            continue;
+        }
+        if (record != NULL) records->at[passed++] = *record; /* passed < r: never one not yet read */
+        msgs[kept++] = msgs[i];
+    }
+    records->n = passed;
+    *n = kept;
+    tags->records = records->at;
+    tags->nrecords = passed;
+    return passed > LINEAR_RECORDS ? index_records(tags) : 0;
+}
+
+void vx_tags_unit_done(vx_tags_t *tags, vx_records_t *records) {
+    tags->records = NULL;
+    tags->nrecords = 0;
+    records->n = 0;
 }

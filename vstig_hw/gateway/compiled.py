@@ -201,7 +201,7 @@ class Compiled:
                on_room: Callable[[], None] | None = None) -> Outlet:
         writer = LinkWriter(link, TX_QUEUE_LIMIT, on_room=on_room)
         queue = FairFifo(RAW_QUEUE_LIMIT) if keep_all else FairQueue()
-        encoder = encoder_for(link)
+        encoder = None if sends_tags(link) else encoder_for(link)
         port = port_for(link) if encoder is not None else "python"
         outlet: Outlet = CompiledOutlet(link, writer, self.native.Window(budget, period), queue,
                                         keep_all=keep_all, encoder=encoder, port=port)
@@ -247,7 +247,23 @@ class Compiled:
 
 def compiled_for(relays: bool, links: Sequence[Link[Any]]) -> Compiled | None:
     """The builder for a Node that relays (ENGINE or RAW) over at least one link the compiled path decodes, when
-    this install has it; else None (the Node is pure Python: nothing it reads would be decoded in C)."""
+    this install has it; else None (the Node is pure Python: nothing it reads would be decoded in C). A Node with
+    the swarm key also needs every link to pass `checks_tags_for`."""
     if not relays or native is None or not any(framing_of(link) is not None for link in links):
         return None
     return Compiled()
+
+
+def checks_tags_for(link: Link[Any]) -> bool:
+    """Whether the compiled path can check and send the link's tags as its framing does: a link with auth off, one
+    whose framing stays Python (zenoh, ROS 2...: the Python delivery checks it, the compiled engine keeps the
+    proofs), one whose framing carries no tags (nothing to check), or cobs8 and CAN, whose records the compiled
+    Receiver decodes (XBee batches and MAVLink's tagged TUNNELs are Python's only: such a Node runs in Python)."""
+    kind = framing_of(link)
+    return link.auth is AuthPolicy.OFF or kind is None or kind in ("cobs8", "can") or not link.framing.carries_tags
+
+
+def sends_tags(link: Link[Any]) -> bool:
+    """Whether the link's outlet sends records (a link that checks tags and has room for them): its units are then
+    made by `Link.units_of` (each message's record from the engine), not by a compiled Encoder."""
+    return link.auth is not AuthPolicy.OFF and bool(link.framing.carries_tags)

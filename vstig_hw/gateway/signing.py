@@ -15,6 +15,7 @@ link that requires tags never carries an entry without one (`held_unverified`).
 
 from __future__ import annotations
 
+import functools
 from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -28,6 +29,7 @@ from ..wire import Message
 
 if TYPE_CHECKING:
     from .._vstig import Engine as CompiledEngine
+    from .._vstig import Receiver
     from .compiled import Compiled
 
 __all__ = ["EPISODE_GAP", "SignedEngine", "Signing", "unkeyed_policy"]
@@ -82,6 +84,11 @@ class SignedEngine(Stigmergy):
         return self.tagged.record_of(msg)
 
     @property
+    def replays(self) -> int:
+        """Tagged messages older than the entry by (epoch, timestamp): lost, and counted as stale."""
+        return self.tagged.replays
+
+    @property
     def counts(self) -> dict[Outcome, int]:
         """The engine's outcomes, a replayed old write (older by epoch and timestamp, SPEC.md 10.4) as stale."""
         counts = super().counts
@@ -96,7 +103,8 @@ class Signing:
         self.keys = keys
         self.links = links
         self.engine: SignedEngine | CompiledEngine | None = None  # the Node's engine, if it has one (`engine_for`)
-        self.records: dict[Message, Tagged] = {}  # of the unit just decoded
+        self.records: dict[Message, Tagged] = {}  # of the unit just decoded: those that passed `check`, for the engine
+        self._unit: list[Tagged | None] = []  # the unit's record of each message, in the order decoded
         self.refused: Counter[_REFUSED] = Counter()
         self.warnings: list[str] = []  # for the caller to print (and clear), as the guard's
         self._last_refusal: dict[tuple[str, str, int], float] = {}  # (link, reason, writer) -> when
@@ -110,18 +118,25 @@ class Signing:
         self.engine = engine
         return engine
 
-    def decoder(self, link: Link[Any]) -> Callable[[Any], list[Message]]:
-        """Link `link`'s decoding: its framing's messages, their records kept in `records` until the next unit."""
-        feed_tagged = link.framing.feed_tagged
-        records = self.records
+    def decoder(self, link: Link[Any], receiver: Receiver | None = None) -> Callable[[Any], list[Message]]:
+        """Link `link`'s decoding: its framing's messages (its compiled `receiver`'s, which then decodes for both
+        deliveries and checks by the link's policy on the compiled one), each one's record kept until the next unit."""
+        unit_records = self._unit
+        if receiver is not None:
+            receiver.check_tags(list(AuthPolicy).index(link.auth), functools.partial(self.refuse, link))
+            feed = receiver.feed_tagged
+
+            def feed_tagged(unit: Any) -> list[tuple[Message, Tagged | None]]:
+                return [(msg, None if proof is None else Tagged(msg, *proof)) for msg, proof in feed(unit)]
+        else:
+            feed_tagged = link.framing.feed_tagged
 
         def decode(unit: Any) -> list[Message]:
-            records.clear()
+            unit_records.clear()
             messages = []
             for msg, record in feed_tagged(unit):
                 messages.append(msg)
-                if record is not None:
-                    records[msg] = record
+                unit_records.append(record)
             return messages
 
         return link.decode if link.transmit_only else decode
@@ -139,21 +154,29 @@ class Signing:
         `refused` listeners and logged. The engine receives what passes under this link's policy."""
         policy = link.auth
         records = self.records
+        records.clear()
         if self.engine is not None:
             self.engine.policy = policy
         if policy is AuthPolicy.OFF:
-            records.clear()  # tags ignored: kept untagged
-            return messages
+            return messages  # tags ignored: kept untagged
         kept = []
-        for msg in messages:
-            reason = self._refusal(msg, records.get(msg), policy)
-            if reason is None:
-                kept.append(msg)
+        for msg, record in zip(messages, self._unit, strict=True):
+            reason = self._refusal(msg, record, policy)
+            if reason is not None:
+                self.refuse(link, msg, reason, t, sender, refused)
                 continue
-            self._count(link, reason, msg.robot, t)
-            for listener in refused:
-                listener(Heard(msg, link.name, t, sender), reason)
+            kept.append(msg)
+            if record is not None:  # only a record that passed: a forged copy beside an honest one is not kept
+                records[msg] = record
         return kept
+
+    def refuse(self, link: Link[Any], msg: Message, reason: str, t: float, sender: int | None,
+               refused: Sequence[Callable[[Heard, str], None]]) -> None:
+        """A message `link`'s policy refused: counted on the link and by claimed writer, logged once per episode,
+        told to the `refused` listeners (the compiled delivery calls this for each one it refuses)."""
+        self._count(link, reason, msg.robot, t)
+        for listener in refused:
+            listener(Heard(msg, link.name, t, sender), reason)
 
     def _refusal(self, msg: Message, record: Tagged | None, policy: AuthPolicy) -> str | None:
         if msg.timestamp == TS_NONE:  # an empty GET shows no entry: nothing to prove
