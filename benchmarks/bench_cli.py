@@ -17,7 +17,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 import tty
 from collections.abc import Callable, Iterator
@@ -230,19 +229,10 @@ def gateway_latency() -> Iterator[Result]:
              parse(f"serial:{path}").build("radio", robot_id=200)]
     node = Node(links, 200, budget=2000)  # 20,000 messages/s per link: above the offered load
     favour_latency()  # where `vstig bridge` calls it: after building the node, before opening it
-    stop = threading.Event()
-    loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
 
-    def start_gateway() -> None:  # after the listener is forked
-        node.open()
-        loop.start()
-
-    try:
-        latencies = hop(lambda i: robot.send(frames[i]), master, start_gateway)
+    try:  # the node opens after the listener is forked; its loop runs on its own thread
+        latencies = hop(lambda i: robot.send(frames[i]), master, node.open)
     finally:
-        stop.set()
-        if loop.is_alive():
-            loop.join(timeout=5)
         node.close()
     robot.shutdown()
     cobs = make_serial_framing("cobs8")

@@ -495,16 +495,18 @@ def _can_to_pty(relay: str) -> tuple[float, float, int, tuple[float, ...]]:
         links = [parse(f"can:virtual:{channel}").build("bus", robot_id=200),
                  parse(f"serial:{radio.path}?framing=cobs8").build("radio", robot_id=200)]
         node = Node(links, 200, budget=20_000)
-        node.open()
-        worker = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
-    worker.start()
+    if node is None:
+        worker.start()
+    else:
+        node.open()  # the loop runs on the node's own thread
+        worker = node._loop.thread
     try:
         for _ in range(100):
             robot.send(probe)
             time.sleep(0.05)
             if 32767 in out.arrived:
                 break
-        relay_threads = [worker] if node is None else [worker, *node._readers._threads]  # the loop, the readers
+        relay_threads = [worker] if node is None else [worker, *node._lifecycle.reader_threads]  # loop, readers
         cpu0, sw0 = _threads_usage(relay_threads)
         sent = _paced(robot.send, frames)  # type: ignore[arg-type]
         out.wait(COUNT + 1)
@@ -513,10 +515,10 @@ def _can_to_pty(relay: str) -> tuple[float, float, int, tuple[float, ...]]:
         cpu1, sw1 = _threads_usage(relay_threads)
     finally:
         stop.set()
-        worker.join(timeout=5)
         if node is not None:
             node.close()
         else:
+            worker.join(timeout=5)
             bus.shutdown()
         robot.shutdown()
         out.close()
@@ -561,12 +563,9 @@ def canfd_relay_capacity() -> Iterator[Result]:
     links = [parse(f"can:virtual:fd-in-{tag}?fd=1").build("in", robot_id=200),
              parse(f"can:virtual:fd-out-{tag}?fd=1").build("out", robot_id=200)]
     node = Node(links, 200, mode=Mode.RAW, budget=None)
-    stop = threading.Event()
-    node.open()
-    loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
-    loop.start()
+    node.open()  # the loop runs on the node's own thread
     try:
-        threads = [loop, *node._readers._threads]
+        threads = [node._loop.thread, *node._lifecycle.reader_threads]
         cpu0, _ = _threads_usage(threads)
         _sleep_paced(len(frames), FD_BUS_MSGS_PER_S // 8, lambda i: robot.send(frames[i]))  # a saturated FD bus
         end = time.monotonic() + 20
@@ -576,8 +575,6 @@ def canfd_relay_capacity() -> Iterator[Result]:
         cpu1, _ = _threads_usage(threads)
         relayed = links[1].counters["out"]
     finally:
-        stop.set()
-        loop.join(timeout=5)
         node.close()
         robot.shutdown()
         sink.shutdown()

@@ -79,16 +79,11 @@ def _gateway_hop(rate_hz: int, count: int) -> list[float]:
              parse(f"zenoh:bench?listen=tcp/127.0.0.1:{port}").build("zenoh", robot_id=201)]
     node = Node(links, 201, budget=20000, period=0.1)
     favour_latency()
-    stop = threading.Event()
-    loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
     try:
-        node.open()
-        loop.start()
+        node.open()  # its loop runs on its own thread
         _wait_for_peer(links[1])
         return radio.latencies(_sleep_paced(count, rate_hz, lambda i: robot.send(frames[i])))
     finally:
-        stop.set()
-        loop.join(timeout=5)
         node.close()
         robot.shutdown()
         far.terminate()

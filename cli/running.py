@@ -228,6 +228,7 @@ def describe_links(node: Node) -> None:
 
 
 OPEN_POLL = 0.05  # seconds between two looks at the stop while links open
+STATUS_PERIOD = 0.5  # seconds between two redraws of a command's status line
 
 
 def open_unless_stopped(open_links: Callable[[], None], stop: threading.Event) -> bool:
@@ -273,8 +274,9 @@ def opened(node: Node, stop: threading.Event) -> Iterator[Node]:
 
 
 def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, duration: float | None = None) -> None:
-    """Run the node until `stop` (the command's `stop_on_signals()`, entered before its links opened: a signal
-    any time after "Ctrl-C stops" is said ends it cleanly) or `duration`, refreshing `status()` every half second.
+    """Wait while the open node runs (on its own thread) until `stop` (the command's `stop_on_signals()`, entered
+    before its links opened: a signal any time after "Ctrl-C stops" is said ends it cleanly), `duration`, or the
+    node closing by itself (what broke it is raised here), refreshing `status()` every half second.
 
     Under a service manager (systemd's $NOTIFY_SOCKET, `Type=notify`) it says READY=1 as it starts (every link
     is open by then), pings the watchdog from the loop's tick, and says STOPPING=1 as the stop begins.
@@ -282,18 +284,22 @@ def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, dur
     from .ops.notify import ServiceNotifier
 
     service = ServiceNotifier.from_environment()
+    ended = node.listen(closed=stop.set)  # a Node whose loop failed closed itself: the command ends, saying why
     if service is not None:
         node.listen(tick=service.tick)
         service.ready(_readiness(node))
     try:
-        if status is None:
-            node.run(stop=stop, duration=duration)
-            return
         end = None if duration is None else time.monotonic() + duration
         while not stop.is_set() and (end is None or time.monotonic() < end):
-            node.run(stop=stop, duration=0.5 if end is None else max(0.0, min(0.5, end - time.monotonic())))
-            status()
+            left = STATUS_PERIOD if end is None else max(0.0, end - time.monotonic())
+            if stop.wait(left if status is None else min(left, STATUS_PERIOD)):
+                break
+            if status is not None:
+                status()
+        if node.failure is not None:
+            raise node.failure
     finally:
+        ended.cancel()
         if service is not None:
             service.stopping()
             service.close()

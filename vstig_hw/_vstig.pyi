@@ -17,7 +17,8 @@ Twins (C file, its types, its Python references):
     window.c   Window             vstig_hw/gateway/outlet.py
     outlet.c   Outlet             vstig_hw/gateway/outlet.py vstig_hw/transports/serial.py vstig_hw/transports/can.py
     parts.c    Seat Relay         vstig_hw/gateway/parts.py
-    path.c     Path               vstig_hw/gateway/node.py vstig_hw/gateway/delivery_state.py
+    path.c     Path               vstig_hw/gateway/delivery.py vstig_hw/gateway/outbound.py
+                                  vstig_hw/gateway/delivery_state.py
                                   vstig_hw/transports/serial.py vstig_hw/transports/can.py vstig_hw/transports/xbee.py
     roster.c   RosterTally        vstig_hw/gateway/roster.py
     module.c   -                  vstig_hw/native.py

@@ -155,9 +155,7 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
                     write(*unit)
                 early.clear()
 
-            started = node.submit(start_writing)
-            node.run(until=started.done)
-            started.result()
+            node.submit(start_writing).result()  # the Node's loop runs it; a Node that closes first raises
             click.echo(f"recording {', '.join(link.name for link in node.links)} to {path}; Ctrl-C stops",
                        err=True)
             if clocks and not capture.takes_notes:

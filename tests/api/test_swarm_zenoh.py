@@ -55,7 +55,7 @@ def test_a_confirmed_put_through_a_zenoh_gateway_is_taken_at_its_answer_not_the_
     lab = f"api-gw-{os.getpid()}-{time.monotonic_ns() % 100000}"
     gateway = Node([parse(f"zenoh:{lab}").build(robot_id=200),
                     parse(f"can:virtual:{lab}").build(robot_id=200)], 200, period=2.0)
-    gateway.start()
+    gateway.open()
     try:
         [[endpoint]] = {link.name: link.listening for link in gateway.links if link.listening}.values()
         with vstig_hw.join(f"zenoh:{lab}?connect={endpoint}", robot_id=9, period=2.0) as program:

@@ -204,7 +204,7 @@ with node:
         threading.Thread(target=flood, daemon=True).start()
     print("ready", flush=True)
     try:
-        node.run(stop=stop)
+        node.wait_closed()  # the Node runs itself until Ctrl-C
     except KeyboardInterrupt:
         pass
     print(node.summary(), file=sys.stderr)

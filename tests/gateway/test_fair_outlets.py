@@ -131,7 +131,7 @@ def test_the_engine_takes_at_most_its_intake_from_one_source(bus: str) -> None:
             robot.send(codec.encode(Message(Op.PUT, i, i, 1, 7))[0])
         deadline = time.monotonic() + 10
         while node.stats()["bus"]["in"] < burst + 80 and time.monotonic() < deadline:
-            node.run(duration=0.05)
+            time.sleep(0.05)
         stats = node.stats()
     robot.shutdown()
     assert stats["bus"]["drop_intake"] == 80 and stats["engine"]["stored"] == burst
@@ -171,10 +171,10 @@ def test_an_answer_belongs_to_the_asker_and_leaves_ahead_of_the_flood_whose_entr
             flooder.send(codec.encode(msg)[0])
         deadline = time.monotonic() + 10
         while node.stats()[b_bus].get("queued", 0) < 184 and time.monotonic() < deadline:
-            node.run(duration=0.05)
+            time.sleep(0.05)
         robot_b.send(can_framing_for(5).encode(Message(Op.GET, 1150, 0, 0, 5))[0])  # B asks for key 1150
         while node.engine is not None and node.engine.counts[Outcome.ANSWERED] < 1 and time.monotonic() < deadline:
-            node.run(duration=0.05)
+            time.sleep(0.05)
         with node._lock:
             queue = node.outlets[1].queue
             assert len(queue) == 184  # the answer is the flood's pending entry: not queued twice

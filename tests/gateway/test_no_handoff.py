@@ -11,7 +11,7 @@ import pytest
 
 from vstig_hw import Message, Op
 from vstig_hw.framing.can import can_framing_for
-from vstig_hw.gateway import Mode, Node
+from vstig_hw.gateway import Mode, Node, SwarmClosed
 from vstig_hw.links import Heard, parse
 
 
@@ -50,7 +50,7 @@ def test_a_frame_crosses_on_its_reader_thread_with_no_loop_running(mode: Mode) -
     assert threads == ["read-a"]  # heard, judged and sent by the thread that read it
 
 
-def test_a_listener_raising_on_a_reader_thread_ends_run_at_once_with_its_error() -> None:
+def test_a_listener_raising_on_a_reader_thread_closes_the_node_at_once_naming_its_error() -> None:
     (a, _b) = _channels()
     robot = can.Bus(interface="virtual", channel=a)
     node = Node([parse(f"can:virtual:{a}").build("a", robot_id=100)], 100, mode=Mode.LISTEN, period=10.0)
@@ -62,10 +62,10 @@ def test_a_listener_raising_on_a_reader_thread_ends_run_at_once_with_its_error()
     try:
         with node:
             robot.send(can_framing_for(7).encode(Message(Op.PUT, 1, 1, 1, 7))[0])
-            started = time.monotonic()
-            with pytest.raises(ValueError, match="disk is full"):
-                node.run(duration=5.0)
-            assert time.monotonic() - started < 1.0  # woken for it, not at the end of its wait
+            assert node.wait_closed(1.0)  # woken for it, not at its next tick (10 s)
+            assert isinstance(node.failure, ValueError) and "disk is full" in str(node.failure)
+            with pytest.raises(SwarmClosed, match="its gateway stopped: ValueError: the capture disk is full"):
+                node.check_open()
     finally:
         robot.shutdown()
 

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 import can
 import pytest
+from waiting import wait_until
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.counters import Counters
@@ -59,7 +60,7 @@ def run_until(node: Node, done: Callable[[], bool], robots: list[BusRobot] = (),
         assert time.monotonic() < end, "timed out"
         for robot in robots:
             robot.step()
-        node.run(duration=0.02)
+        time.sleep(0.02)
 
 
 def test_engine_mode_carries_a_put_across_buses(channels: tuple[str, str]) -> None:
@@ -140,7 +141,7 @@ def test_a_put_heard_on_a_bus_crosses_but_is_not_echoed_onto_that_bus(channels: 
         robot.send(can_framing_for(7).encode(put)[0])
         crossed: list[can.Message] = []
         run_until(node, lambda: bool(crossed.extend(_drain(on_b)) or crossed))
-        node.run(duration=0.3)  # ticks in which an echo would have gone out
+        time.sleep(0.3)  # ticks in which an echo would have gone out
         stats = node.stats()
     decode = can_framing_for(100).feed
     assert [m for f in crossed for m in decode(f)] == [put]
@@ -159,15 +160,9 @@ def test_the_gateways_own_get_of_another_key_in_that_poll_does_not_undo_it(chann
         node.put(9, 1)
         node.listen(tick=lambda n: n.get(9) and None)
         robot.send(can_framing_for(7).encode(put)[0])
-        time.sleep(0.2)  # the PUT waits in the arrival queue: the next poll hears it, then ticks
         crossed: list[can.Message] = []
-        end = time.monotonic() + 10
-        while put not in [m for f in crossed for m in ours(f)]:
-            assert time.monotonic() < end, "timed out"
-            node.poll(0.01)
-            crossed.extend(_drain(on_b))
-        for _ in range(10):
-            node.poll(0.01)
+        wait_until(lambda: put in [m for f in crossed for m in ours(f)], step=lambda: crossed.extend(_drain(on_b)))
+        time.sleep(0.1)  # many more ticks, each with its GET of key 9
     assert put not in [m for f in _drain(on_a) if can_framing_for(100).sender_of(f) == 100 for m in ours(f)]
     for bus in (robot, on_a, on_b):
         bus.shutdown()
@@ -211,7 +206,7 @@ def test_listen_mode_never_transmits_and_reports_what_it_heard(channels: tuple[s
         for frame in can_framing_for(42).encode(Message(Op.GET, 2, 0, 0, 42)):
             tap.send(frame)
         run_until(node, lambda: bool(heard))
-        node.run(duration=0.3)  # a few ticks in which a robot would have answered or re-broadcast
+        time.sleep(0.3)  # a few ticks in which a robot would have answered or re-broadcast
     assert heard[0].sender == 42 and heard[0].message.op is Op.GET
     assert observer.recv(0) is not None  # the GET itself
     assert observer.recv(0) is None  # and nothing from the sniffer
@@ -234,7 +229,7 @@ def test_status_has_the_engine_outcomes_and_a_counting_listener_still_never_tran
             for frame in can_framing_for(42).encode(msg):
                 tap.send(frame)
         run_until(listener, lambda: listener.stats()["engine"].total() == 3)
-        listener.run(duration=0.3)  # ticks in which a robot would answer the GET and re-broadcast the PUT
+        time.sleep(0.3)  # ticks in which a robot would answer the GET and re-broadcast the PUT
         assert listener.summary().endswith("engine: answered=1 stored=1 unknown=1")
         with pytest.raises(RuntimeError):
             listener.put(1, 1)
@@ -361,7 +356,7 @@ def test_drain_ends_once_what_was_held_back_left_though_the_swarm_keeps_talking(
     thread = threading.Thread(target=talk, daemon=True)
     with Node([bus_link(a), bus_link(b)], robot_id=100, period=0.1, budget=1) as node:
         thread.start()
-        node.run(until=lambda: node.stats()[b].get("queued", 0) >= 3, duration=5)
+        wait_until(lambda: node.stats()[b].get("queued", 0) >= 3, 5)
         heard = node.stats()[a]["in"]
         started = time.monotonic()
         drained = node.drain(3.0)

@@ -3,10 +3,10 @@ every change of the table with the link and sender it came from; on a real pytho
 
 from __future__ import annotations
 
-import threading
 import time
 
 import can
+from waiting import wait_until
 
 from vstig_hw import Entry, Message, Op
 from vstig_hw.framing.can import can_framing_for
@@ -27,9 +27,9 @@ def test_on_change_tells_heard_and_own_writes_once_each() -> None:
         for msg in (Message(Op.PUT, 3, 30, 1, 7), Message(Op.PUT, 3, 30, 1, 7), Message(Op.PUT, 3, 31, 2, 7)):
             for frame in codec.encode(msg):
                 robot.send(frame)
-        node.run(until=lambda: len(told) >= 2, duration=5)
+        wait_until(lambda: len(told) >= 2, 5)
         node.put(3, 99)
-        node.run(duration=0.05)
+        time.sleep(0.05)
     robot.shutdown()
     assert told == [
         (3, None, Entry(30, 1, 7), "bus", 7),
@@ -42,19 +42,10 @@ def test_submit_wakes_a_waiting_loop_at_once() -> None:
     channel = f"hooks-{time.monotonic_ns()}"
     node = Node([parse(f"can:virtual:{channel}").build("bus", robot_id=50)], 50, period=10.0)  # no tick for 10 s
     ran: list[float] = []
-    stop = threading.Event()
     with node:
-        loop = threading.Thread(target=node.run, kwargs={"stop": stop})
-        loop.start()
         time.sleep(0.1)  # the loop waits for the links now
         asked = time.monotonic()
         done = node.submit(lambda: ran.append(time.monotonic()) or 7)
-        deadline = time.monotonic() + 5
-        while not ran and time.monotonic() < deadline:
-            time.sleep(0.001)
-        assert done.result(1) == 7
-        stop.set()
-        node.submit(lambda: None)
-        loop.join(5)
+        assert done.result(5) == 7
     assert ran and ran[0] - asked < 0.1  # not at the end of its 0.25 s wait, nor at the next tick
-    assert not loop.is_alive()
+    assert node.wait_closed(0)

@@ -13,6 +13,7 @@ import time
 import tty
 
 import can
+from waiting import wait_until
 
 from vstig_hw import Message, Op, Stigmergy
 from vstig_hw.framing import make_serial_framing
@@ -39,13 +40,13 @@ def test_put_on_the_bus_reaches_a_radio_robot_and_back() -> None:
     radio_robot = Stigmergy(40)
     links = [parse(f"can:virtual:{channel}").build("bus", robot_id=200),
              parse(f"serial:{path}?framing=epuck4").build("radio", robot_id=200)]
-    with Node(links, 200) as node:
+    with Node(links, 200):
         for frame in bus_codec.encode(Message(Op.PUT, 5, 4242, 1, 7)):
             bus_robot.send(frame)
         end = time.monotonic() + 10
         while radio_robot.entry(5) is None:
             assert time.monotonic() < end, "the PUT never crossed to the radio"
-            node.run(duration=0.02)
+            time.sleep(0.02)
             try:
                 for msg in radio_codec.feed(os.read(master, 4096) if _readable(master) else b""):
                     radio_robot.receive(msg)
@@ -59,7 +60,7 @@ def test_put_on_the_bus_reaches_a_radio_robot_and_back() -> None:
         heard: list[Message] = []
         while not any(m.key == 6 for m in heard):
             assert time.monotonic() < end + 10, "the radio's PUT never reached the bus"
-            node.run(duration=0.02)
+            time.sleep(0.02)
             while (frame := bus_robot.recv(0)) is not None:
                 heard += bus_codec.feed(frame)
         assert Message(Op.PUT, 6, 99, 1, 40) in heard
@@ -77,18 +78,18 @@ def test_a_radio_vanishing_mid_run_is_survived() -> None:
              parse(f"serial:{path}").build("radio", robot_id=200)]
     node = Node(links, 200)
     with node:
-        node.run(duration=0.2)
+        time.sleep(0.2)
         os.close(master)  # the radio is unplugged: its pty is gone for good
         os.close(slave)
-        node.run(duration=0.5)
+        time.sleep(0.5)
         for frame in codec.encode(Message(Op.PUT, 1, 11, 1, 9)):
             bus_robot.send(frame)
         engine = node.engine
         assert engine is not None
-        node.run(until=lambda: engine.has(1), duration=5)
+        wait_until(lambda: engine.has(1), 5)
         assert engine.entry(1) == (11, 1, 9)  # the rest of the gateway kept working
         node.put(2, 22)  # and sending to the vanished radio is counted, not raised
-        node.run(duration=0.3)
+        time.sleep(0.3)
     bus_robot.shutdown()
 
 
@@ -106,12 +107,12 @@ def test_bytes_from_a_transmit_only_link_are_counted_not_raised() -> None:
         end = time.monotonic() + 10
         while not node.stats()["ohc"]["drop_undecodable"]:
             assert time.monotonic() < end
-            node.run(duration=0.05)
+            time.sleep(0.05)
         node.put(1, 2)  # and sending still works: one 132-byte controller packet
         data = b""
         while len(data) < 132:
             assert time.monotonic() < end + 10
-            node.run(duration=0.05)
+            time.sleep(0.05)
             if _readable(master):
                 data += os.read(master, 4096)
     assert data[0] == 0x55 and len(data) == 132

@@ -8,7 +8,6 @@ device read (`rx_bytes // 12`: a read may end inside a frame) are exactly `in + 
 
 from __future__ import annotations
 
-import threading
 import time
 
 from flooded_pty import FRAME, FloodedPty
@@ -28,11 +27,9 @@ def test_a_loaded_bridge_stopped_at_any_moment_handles_or_counts_every_frame_it_
                 200, mode=mode, budget=budget)
     try:
         node.open()
-        loop = threading.Thread(target=node.run, kwargs={"duration": 5.0}, daemon=True)
-        loop.start()
         time.sleep(after)
         node.close(drain=0.1)  # from another thread, while the loop runs: it stops it, then closes
-        loop.join(2)
+        assert node.wait_closed(0)
     finally:
         for radio in radios:
             radio.stop()

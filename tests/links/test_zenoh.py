@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from waiting import wait_until
 
 from vstig_hw.framing.zenoh import ZenohFraming, ZenohKeySpace, ZenohSample
 from vstig_hw.links import Link, parse
@@ -442,7 +443,7 @@ def test_a_peer_naming_a_new_gateway_per_sample_is_held_to_its_source_rate_and_o
                 return (attacker_heard + refused() >= 1000
                         and sum(h.message.key == 2 for h in heard) >= 20)
 
-            node.run(until=all_accounted, duration=10.0)
+            wait_until(all_accounted, 10.0)
         finally:
             attacker.close()  # type: ignore[no-untyped-call]
             honest.close()
@@ -483,7 +484,7 @@ def test_a_peer_stamping_a_fresh_session_id_on_every_sample_is_held_to_one_sourc
                     honest.send_many([Message(Op.PUT, 2, sent // 50, sent // 50, 202)])
                     time.sleep(0.04)
             took = time.monotonic() - start
-            node.run(duration=0.5)
+            time.sleep(0.5)
         finally:
             forger.close()  # type: ignore[no-untyped-call]
             honest.close()
@@ -507,9 +508,6 @@ def test_a_gateway_closes_at_once_while_a_peer_floods_it_through_zenohs_callback
     node.listen(messages=lambda link, _t, _sender, _messages: threads.add(threading.current_thread().name)
                             if link == gateway.name else None)
     node.open()
-    stop = threading.Event()
-    loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
-    loop.start()
     [endpoint] = gateway.transport.listening  # type: ignore[attr-defined]
     peer = parse(f"zenoh:lab?connect={endpoint}").build(robot_id=202)
     peer.open()
@@ -526,8 +524,6 @@ def test_a_gateway_closes_at_once_while_a_peer_floods_it_through_zenohs_callback
     try:
         _until(lambda: gateway.counters["in"] > 2000)
         assert node.on_node_thread() is False  # the test's thread is not a gateway thread
-        stop.set()
-        loop.join(timeout=5)
         flowing = set(threads)  # while it ran (at the stop the read thread may hand over what zenoh queued then)
         began = time.monotonic()
         node.close()
@@ -537,7 +533,7 @@ def test_a_gateway_closes_at_once_while_a_peer_floods_it_through_zenohs_callback
         flooder.join(timeout=5)
         peer.close()
     assert took < 3.0, f"close took {took:.1f} s under a zenoh flood"
-    assert not loop.is_alive()
+    assert node.wait_closed(0)
     heard = gateway.counters["in"]
     assert bus.counters["out"] > 0  # what zenoh carried went on to the bus
     assert flowing and not any(name.startswith("read-") for name in flowing)  # from zenoh's thread, not our reader

@@ -3,10 +3,10 @@ of links get the same reads, ticks and program calls, and must write the same un
 the same counters, tables and queues.
 
 The links are in memory (a transport that keeps what it is given and can refuse it, so the writers' queues and the
-fair share's lines fill) and the clock is the test's: the pure Node delivers through `_arrive` and `_spread` at the
-test's time, the compiled one through `Path.deliver` at the same time. What only real devices show (the compiled
-path reading a pty or a SocketCAN socket itself, writing straight to it) is tested with them: the rest of
-tests/native, and every gateway and CLI suite, which `make test` runs on both paths.
+fair share's lines fill) and the clock is the test's: the pure Node delivers through `Delivery.arrive` and
+`Outbound.spread` at the test's time, the compiled one through `Path.deliver` at the same time. What only real
+devices show (the compiled path reading a pty or a SocketCAN socket itself, writing straight to it) is tested with
+them: the rest of tests/native, and every gateway and CLI suite, which `make test` runs on both paths.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
 from vstig_hw.framing.mavlink import MavlinkFraming
 from vstig_hw.framing.xbee import api_frame, receive_packet
+from vstig_hw.gateway import assembly as assembly_module
 from vstig_hw.gateway import compiled as compiled_module
-from vstig_hw.gateway import node as node_module
 from vstig_hw.gateway.fairshare import FairFifo, FairQueue
 from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.node import Listening, Mode, Node
@@ -144,9 +144,9 @@ def _links() -> list[Link[Any]]:
 def _node(compiled: bool, mode: Mode, budget: int | None, guard: Guard | None) -> Node:
     with pytest.MonkeyPatch.context() as patch:
         if not compiled:
-            patch.setattr(node_module, "compiled_for", lambda relays, links: None)
+            patch.setattr(assembly_module, "compiled_for", lambda relays, links: None)
         node = Node(_links(), 9, mode=mode, period=1.0, budget=budget, guard=guard)
-    assert (node._path is not None) == compiled
+    assert (node._delivery.path is not None) == compiled
     return node
 
 
@@ -211,18 +211,19 @@ def _run(node: Node, call: tuple[Any, ...], clock: list[float]) -> None:
         index, seed, sent, frames = args if name == "heard" else (*args[:2], _flood(args[2]), [])
         units = _units(random.Random(seed), LINKS[index][1], sent, frames)
         with node._lock:
-            if node._path is None or not node._path.deliver(index, t, units, now):
-                assert node._path is None or node._on_heard, "only a `heard` listener takes the Python delivery"
-                node._arrive(index, t, units)
-                node._spread(now, 1 << index)
+            if node._delivery.path is None or not node._delivery.path.deliver(index, t, units, now):
+                assert node._delivery.path is None or node._listeners.heard, \
+                    "only a `heard` listener takes the Python delivery"
+                node._delivery.arrive(index, t, units)
+                node._outbound.spread(now, 1 << index)
     elif name == "tick":
         with node._lock:
-            node._tick(now)
-            node._spread(now)
+            node._tick()
+            node._outbound.spread(now)
     elif node.mode is Mode.ENGINE:
         with node._lock:
             getattr(node.seat, name)(*args)
-            node._spread(now)
+            node._outbound.spread(now)
 
 
 def _guard(kind: str) -> Guard | None:
@@ -257,7 +258,7 @@ def test_the_compiled_delivery_equals_the_python_node(compiled: ModuleType, mode
 def test_a_pure_node_is_built_when_vstig_pure_says_so(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(compiled_module, "native", None)
     node = Node(_links(), 9)
-    assert node._path is None and type(node.engine).__module__ == "vstig_hw.engine"
+    assert node._delivery.path is None and type(node.engine).__module__ == "vstig_hw.engine"
 
 
 def _outlets(compiled: ModuleType, keep_all: bool, budget: int | None) -> tuple[Outlet, Outlet]:
@@ -456,7 +457,7 @@ def test_the_compiled_delivery_tells_listeners_as_the_python_node(
 
 def test_the_compiled_delivery_tells_each_link_s_sender(compiled: ModuleType) -> None:
     """The sender a `messages` listener is told: a CAN frame's node (from its ID), an XBee module's 64-bit source,
-    a drone's sysid << 8 | compid, none on the other serial links; both deliveries, through `Node._deliver` as a
+    a drone's sysid << 8 | compid, none on the other serial links; both deliveries, through `Delivery.take` as a
     reader thread calls it."""
     told: list[list[tuple[str, int | None]]] = [[], []]
     for node, log in zip([_node(False, Mode.ENGINE, None, None), _node(True, Mode.ENGINE, None, None)], told,
@@ -468,7 +469,7 @@ def test_the_compiled_delivery_tells_each_link_s_sender(compiled: ModuleType) ->
                 [api_frame(receive_packet(0x0013A20040A1B2C3, encode(sent)))] if framing == "xbee" else \
                 MavlinkFraming(3, 1).encode(sent) if framing == "mavlink" else \
                 list(make_serial_framing(framing).encode(sent))
-            (node._deliver if node._path is None else node._deliver_compiled)(index, 1_700_000_000.0, units)
+            node._delivery.take(index, 1_700_000_000.0, units)
         assert node._state.failure is None
     assert told[1] == told[0]
     senders = dict(told[0])
@@ -477,10 +478,10 @@ def test_the_compiled_delivery_tells_each_link_s_sender(compiled: ModuleType) ->
 
 
 @pytest.mark.parametrize("kind", ["messages", "change", "refused"])
-def test_a_listener_that_raises_ends_run_on_either_delivery(compiled: ModuleType, kind: str) -> None:
+def test_a_listener_that_raises_ends_the_loop_on_either_delivery(compiled: ModuleType, kind: str) -> None:
     """A listener raising on its second call: the batch stops where Python's stops (what was taken stays taken,
     what was refused stays counted, nothing is sent for it, its messages are not counted in), and the loop's next
-    poll raises the same error."""
+    step raises the same error."""
     refusing = kind == "refused"  # key 1 jumps from timestamp 1 to 100 and 200: refused twice
     sent = [Message(Op.PUT, 1, 7, ts, 2) for ts in (1, 100, 200, 2)] if refusing else \
         [Message(Op.PUT, key, 7, 1, 2) for key in (1, 2, 3)]
@@ -496,12 +497,12 @@ def test_a_listener_that_raises_ends_run_on_either_delivery(compiled: ModuleType
 
         node.listen(**{kind: listener})
         units = [unit for m in sent for unit in make_serial_framing("cobs8").encode(m)]
-        (node._deliver if node._path is None else node._deliver_compiled)(0, 1_700_000_000.0, units)
+        node._delivery.take(0, 1_700_000_000.0, units)
         _settled(node)
         with pytest.raises(RuntimeError) as raised:
-            node.poll(0)
+            node._loop._step(0)
         outcomes.append((str(raised.value), calls, _state(node)))
-        node.poll(0)  # raised once: the loop goes on
+        node._loop._step(0)  # raised once: the loop goes on
         _close(node)
     assert outcomes[1] == outcomes[0]
     assert len(outcomes[0][1]) == 2 and outcomes[0][2]["table"] == [(1, Entry(7, 1, 2))] + \

@@ -19,7 +19,7 @@ from traffic import xbee_stream
 
 from vstig_hw import Message
 from vstig_hw.counters import Counters
-from vstig_hw.gateway import node as node_module
+from vstig_hw.gateway import assembly as assembly_module
 from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.node import Mode, Node
 from vstig_hw.links.serial import serial_link
@@ -52,9 +52,9 @@ def _node(module: Module, sink: str, compiled: bool) -> tuple[Node, RecordingGua
              serial_link(sink, "cobs8", 115200, name="sink")]
     with pytest.MonkeyPatch.context() as patch:
         if not compiled:
-            patch.setattr(node_module, "compiled_for", lambda relays, links: None)
+            patch.setattr(assembly_module, "compiled_for", lambda relays, links: None)
         node = Node(links, 9, mode=Mode.RAW, guard=guard)
-    assert (node._path is not None) == compiled
+    assert (node._delivery.path is not None) == compiled
     return node, guard
 
 
@@ -88,12 +88,12 @@ def test_the_compiled_xbee_read_equals_the_transports(compiled: ModuleType, netw
     nodes = [_node(module, sink, compiled=i == 1) for i, (module, sink) in enumerate(zip(modules, sinks, strict=True))]
     try:
         for node, _guard in nodes:
-            node.start()
+            node.open()
         deadline = time.monotonic() + 10
         while not all(node.links[0].transport.connected for node, _ in nodes):  # the modules answered at open
             assert time.monotonic() < deadline, "a node did not open its module"
             time.sleep(0.01)
-        assert nodes[1][0]._path is not None and nodes[1][0]._path.pumps(0)  # read in C
+        assert nodes[1][0]._delivery.path is not None and nodes[1][0]._delivery.path.pumps(0)  # read in C
         sent = 0
         for _ in range(12):
             stream = xbee_stream(rng, api == 2, frames=6)

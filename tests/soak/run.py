@@ -193,10 +193,7 @@ def main() -> int:
                     bus_heard.add(msg)
 
     listener = threading.Thread(target=listen, daemon=True)
-    stop = threading.Event()
-    loop = threading.Thread(target=node.run, kwargs={"stop": stop}, daemon=True)
-    node.open()
-    loop.start()
+    node.open()  # its loop runs on its own thread
     listener.start()
     conn.send("go")
     warmup = min(30.0, args.seconds / 5)
@@ -227,8 +224,6 @@ def main() -> int:
         conn.recv()  # "flushed": every radio byte is written
         time.sleep(args.drain)
     finally:
-        stop.set()
-        loop.join(timeout=10)
         rss_end = rss_mb()
         node.close()
         stop_listening.set()

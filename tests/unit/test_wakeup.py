@@ -36,14 +36,14 @@ def test_a_wait_interrupted_by_a_slow_signal_handler_ends() -> None:
     """)
 
 
-def test_a_nodes_poll_interrupted_by_a_slow_signal_handler_ends() -> None:
+def test_a_wait_on_a_running_node_interrupted_by_a_slow_signal_handler_ends() -> None:
     _ends_in_time("""
         from vstig_hw.gateway import Node, Mode
         from vstig_hw.links import parse
         node = Node([parse("can:virtual:wakeup-test").build("bus")], mode=Mode.LISTEN)
         with node:
             alarm_soon()
-            node.poll(0.2)
+            assert node.wait_closed(0.2) is False
     """)
 
 

@@ -1,7 +1,9 @@
 /*
- * Path: a Node's delivery in C (vstig_hw.gateway.node.Node._deliver, _arrive and _spread), one call per read.
+ * Path: a Node's delivery in C (vstig_hw.gateway.delivery.Delivery.deliver and arrive, then Outbound.spread), one
+ * call per read.
  *
- * Reference: vstig_hw/gateway/node.py vstig_hw/gateway/delivery_state.py vstig_hw/transports/serial.py
+ * Reference: vstig_hw/gateway/delivery.py vstig_hw/gateway/outbound.py vstig_hw/gateway/delivery_state.py
+ *   vstig_hw/transports/serial.py
  *   vstig_hw/transports/can.py vstig_hw/transports/xbee.py (held equal by tests/native; the index of the twins:
  *   vstig_hw/_vstig.pyi).
  *
@@ -16,7 +18,7 @@
  * Receiver, so a frame cut across two reads is whole either way).
  *
  * What it shares with the Node is declared: its lock, and its DeliveryState (vstig_hw/gateway/delivery_state.py):
- * `reader_thread`, `failure` and `wake` (a listener or rule that raised ends `run` on the loop's thread),
+ * `reader_thread`, `failure` and `wake` (a listener or rule that raised ends the Node's loop, on its thread),
  * `retry_at`, `sleep_until` and `wake_on_arrival` (when the loop must look); a device it reads, through the
  * transport's CompiledHandle. While its readers stop (`stopping`), every batch takes the Python delivery, which
  * decides what a stop hands on and what it counts.

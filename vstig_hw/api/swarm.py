@@ -1,7 +1,7 @@
 """`vstig_hw.join(...)`: a Python program as a swarm member, through the gateway's Node.
 
 `Swarm` is a thin public face: the Node owns its threads (its loop runs on a thread of
-its own, `Node.start`), its lock and its listeners. A call from another thread
+its own from `Node.open`), its lock and its listeners. A call from another thread
 (`put`, `get`, `items`...) runs on the caller's thread through the Node's own
 thread-safe calls, which take its lock only while they work: no thread hand-off,
 so a put reaches the links as fast as through the Node itself. What must wait
@@ -116,7 +116,7 @@ class Swarm:
             raise SwarmClosed("this swarm was opened once already; join again for a new one")
         self._opened = True
         self._node.listen(closed=self._node_closed)
-        self._node.start()
+        self._node.open()
         return self
 
     def close(self) -> None:
@@ -373,7 +373,9 @@ class Swarm:
         return confirm_write(self._node, key, raw, learn=learn, wait=timeout, tries=tries)
 
     def _node_closed(self) -> None:
-        """The gateway closed (close(), or its loop failed): every watch ends."""
+        """The gateway closed (close(), or its loop failed: logged with what broke it): every watch ends."""
+        if self._node.failure is not None:
+            log.error("%s stopped", self._node.label, exc_info=self._node.failure)
         self._hub.close()
         self._robot_hub.close()
 

@@ -213,7 +213,6 @@ def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] 
     for robot in everyone:
         robot.put(KEY, robot.robot_id)
     stopped = stop or threading.Event()
-    threads: list[threading.Thread] = []
     converged_at = None
     start = time.monotonic()
     step = 0
@@ -222,10 +221,6 @@ def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] 
         for n, arena in enumerate(_arenas(links, config.gateways, f"demo-{channel}")):
             nodes.append(Node(arena, GATEWAY_ID + n, period=config.step, onconflict=larger_value_wins))
             nodes[-1].open()  # before the next arena is built: it connects to the port this one bound
-        threads = [threading.Thread(target=node.run, kwargs={"stop": stopped}, name=f"gateway-{node_id(node)}",
-                                    daemon=True) for node in nodes]
-        for thread in threads:
-            thread.start()
         for step in range(1, config.max_steps + 1):
             deadline = start + step * config.step
             can_side.step()
@@ -242,9 +237,6 @@ def run_demo(config: DemoConfig, show: Callable[[int, list[Medium], int], None] 
                 break
     finally:
         stopped.set()
-        for thread in threads:
-            if thread.is_alive():
-                thread.join(timeout=2.0)
         for node in nodes:
             node.close()
         can_side.close()

@@ -1,6 +1,8 @@
 """The gateway: the PC's seat in the swarm (`Node`), its event loop and its ways out; what a new part or
-listener builds on is `Node`'s own API (`listen` -> `Listening`, `submit`, `drain`, `close`: see `node`)."""
+listener builds on is `Node`'s own API (`listen` -> `Listening`, `submit`, `drain`, `close`: see `node`, which
+names the collaborators it composes)."""
 
+from .latency import favour_latency
 from .node import (
     CLOSE_DRAIN,
     DEFAULT_BUDGET,
@@ -10,7 +12,6 @@ from .node import (
     Mode,
     Node,
     SwarmClosed,
-    favour_latency,
 )
 from .outlet import Outlet, SendWindow
 from .refresh import RoundRobinGet

@@ -40,7 +40,7 @@ def confirm_write(node: Node, key: int, value: int, *, learn: float = 0.0, wait:
                   confirm: bool = True, spent: float = 0.0) -> concurrent.futures.Future[PutResult]:
     """Write `value` under `key` through an ENGINE node, checked as `confirm` says; its PutResult as a Future.
 
-    It starts on the Node's loop (`submit`): that loop must run (`start`, or `run` until the future is done).
+    It starts on the Node's loop (`submit`), which runs once the Node is open.
     Each write waits up to `wait` seconds for a neighbour to show it; `learn` seconds of asking come first.
     `spent`: seconds already used opening the node, taken from `learn`, then from the first write's wait.
     The future raises HearsItself when a link brings our own probe back, SwarmClosed when the node closes first.
@@ -139,9 +139,8 @@ class _Driver:
 
 def put_confirmed(node: Node, key: int, value: int, *, learn: float, wait: float, tries: int = 3,
                   confirm: bool = True, spent: float = 0.0) -> PutResult:
-    """`confirm_write` on an open node whose loop nobody else runs: runs it until the verdict, and returns it."""
+    """`confirm_write` on an open node, waiting for its verdict (the Node closing first raises SwarmClosed)."""
     future = confirm_write(node, key, value, learn=learn, wait=wait, tries=tries, confirm=confirm, spent=spent)
-    node.run(until=future.done)
     return future.result()
 
 
@@ -191,5 +190,5 @@ def get_newest(node: Node, key: int, wait: float) -> Entry | None:
     asker = _Asker(key)
     with node.listen(tick=asker):
         asker(node)
-        node.run(duration=wait)
+        node.wait_closed(wait)  # the loop asks at every tick meanwhile; a Node that closes ends the wait
     return engine.entry(key)

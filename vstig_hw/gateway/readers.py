@@ -4,7 +4,7 @@ Only the blocking device read waits here, one thread per link (as python-can's
 Notifier does). What a read returned is handed over in the same thread, with
 no queue and no wake-up of another thread: the Node then frames, guards, judges
 and sends the whole batch under its lock before this thread reads again (see
-`Node._deliver`). Each batch is stamped with the wall-clock time it was read.
+`Delivery.deliver`). Each batch is stamped with the wall-clock time it was read.
 
 A link that floods therefore waits for its own batch to be handled before it
 reads more (its device buffers, or its transport drops and counts), and the
@@ -51,9 +51,9 @@ class LinkReaders:
         self._threads: list[threading.Thread] = []
 
     @property
-    def stopping(self) -> bool:
-        """stop() was called: a batch not yet handled is left for the closer, not waited on."""
-        return self._stop.is_set()
+    def threads(self) -> list[threading.Thread]:
+        """The reader threads running now (one per link)."""
+        return self._threads
 
     def start(self) -> None:
         self._stop.clear()
