@@ -23,7 +23,7 @@ os.environ["MAVLINK20"] = "1"  # mavutil's connections speak MAVLink 2 (1 unless
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mav2
 from test_isolation import _counters
-from test_mavlink_swarm import free_udp_port, key_file
+from test_mavlink_swarm import _Sink, free_udp_port, key_file
 
 from vstig_hw.auth import SwarmKeys, Tagged, decode_record, encode_record, entry_tag, robot_key
 from vstig_hw.framing.mavlink import PAYLOAD_TYPE, PAYLOAD_TYPE_TAGGED
@@ -32,11 +32,6 @@ from vstig_hw.wire import Message, Op, encode
 MASTER = bytes(range(0x40, 0x60))
 LINK_KEY = hashlib.sha256(b"lab swarm").digest()  # key_file's passphrase
 HONEST_KEYS = range(10, 40)
-
-
-class _Sink:
-    def write(self, data: bytes) -> None:
-        pass
 
 
 def own(robot: int, msg: Message) -> Tagged:
