@@ -11,6 +11,7 @@
  * a link's stats read the same whichever side decoded.
  */
 #include "framing.h"
+#include "engine.h"
 
 #include <string.h>
 #include <structmember.h>
@@ -581,12 +582,16 @@ static PyObject *Encoder_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
 static int Encoder_traverse(vx_encoder_t *self, visitproc visit, void *arg) {
     Py_VISIT(self->tx.frame_type);
     Py_VISIT(self->tx.unit_template);
+    Py_VISIT(self->tx.tag_engine);
+    Py_VISIT(self->tx.tag_counters);
     return 0;
 }
 
 static int Encoder_clear(vx_encoder_t *self) {
     Py_CLEAR(self->tx.frame_type);
     Py_CLEAR(self->tx.unit_template);
+    Py_CLEAR(self->tx.tag_engine);
+    Py_CLEAR(self->tx.tag_counters);
     return 0;
 }
 
@@ -634,12 +639,94 @@ static PyObject *Encoder_heartbeat(vx_encoder_t *self, PyObject *unused) {
 
 /* encode_batch(messages) -> units: one bytes object for a byte stream (as Link.units_of joins them), or the
  * CAN frames as can.Message */
+/* A record's 20 bytes (SPEC.md 10.3): its message, epoch and tag. */
+static void record_bytes(const vx_record_t *record, uint8_t out[VSTIG_RECORD_SIZE]) {
+    vstig_msg_encode(&record->msg, out);
+    out[8] = (uint8_t)(record->epoch >> 24);
+    out[9] = (uint8_t)(record->epoch >> 16);
+    out[10] = (uint8_t)(record->epoch >> 8);
+    out[11] = (uint8_t)record->epoch;
+    memcpy(out + 12, record->tag, VSTIG_TAG_SIZE);
+}
+
+/* Link.units_of with records (Link._tagged_units): each message with its entry's record first, one unit each
+ * (cobs8 frames joined as a byte stream's units are); those without a proof untagged after them, or held back
+ * (counted held_unverified) on a link that requires tags. msgs is reordered: the untagged ones first. */
+static PyObject *tagged_units(vx_tx_t *tx, vstig_msg_t *msgs, size_t n) {
+    const vstig_tagged_t *tagged = &((vx_engine_t *)tx->tag_engine)->tags->tagged;
+    vx_record_t *records = PyMem_Malloc((n ? n : 1u) * sizeof *records);
+    vstig_can_frame_t *frames = tx->kind == VX_CAN ? PyMem_Malloc((n ? n : 1u) * sizeof *frames) : NULL;
+    uint8_t *bytes = tx->kind == VX_CAN ? NULL : PyMem_Malloc(vx_tx_room(tx, n) + 1u);
+    uint8_t payload[VSTIG_RECORD_SIZE];
+    size_t i, r = 0, plain = 0, held = 0, count = 0, w = 0;
+    PyObject *units = NULL;
+    if (records == NULL || (tx->kind == VX_CAN ? frames == NULL : bytes == NULL)) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (i = 0; i < n; i++) {
+        if (vstig_tagged_record(tagged, &msgs[i], &records[r].epoch, records[r].tag)) records[r++].msg = msgs[i];
+        else if (tx->tag_require) held++;
+        else msgs[plain++] = msgs[i];
+    }
+    if (held && vx_count(tx->tag_counters, vx_name("held_unverified"), (Py_ssize_t)held) < 0) goto done;
+    for (i = 0; i < r; i++) {
+        record_bytes(&records[i], payload);
+        if (tx->kind == VX_CAN) { /* one FD frame of the record under its message's op (CanFraming.encode_tagged) */
+            (void)vstig_can_encode(&tx->can, &records[i].msg, 1, &frames[count]);
+            memcpy(frames[count].data, payload, VSTIG_RECORD_SIZE);
+            frames[count++].len = VSTIG_RECORD_SIZE;
+        } else {
+            w += vstig_frame_encode(payload, VSTIG_RECORD_SIZE, bytes + w);
+        }
+    }
+    if (tx->kind == VX_CAN) {
+        count += vx_tx_frames(tx, msgs, plain, frames + count);
+        units = PyList_New((Py_ssize_t)count);
+        for (i = 0; units != NULL && i < count; i++) {
+            PyObject *unit = vx_frame_unit(tx, &frames[i]);
+            if (unit == NULL) Py_CLEAR(units);
+            else PyList_SET_ITEM(units, (Py_ssize_t)i, unit);
+        }
+    } else {
+        w += vx_tx_bytes(tx, msgs, plain, bytes + w);
+        units = w == 0 ? PyList_New(0) : Py_BuildValue("[y#]", (const char *)bytes, (Py_ssize_t)w);
+    }
+done:
+    PyMem_Free(records);
+    PyMem_Free(frames);
+    PyMem_Free(bytes);
+    return units;
+}
+
+/* send_tags(engine, require, counters): from now on each message goes with its entry's record from `engine` (an
+ * Engine given the swarm key), as Link.units_of sends them where Link.record_of is set; cobs8 and CAN FD only */
+static PyObject *Encoder_send_tags(vx_encoder_t *self, PyObject *args) {
+    PyObject *engine, *counters;
+    int require;
+    if (!PyArg_ParseTuple(args, "O!pO!:send_tags", &vx_EngineType, &engine, &require, &PyDict_Type, &counters))
+        return NULL;
+    if (((vx_engine_t *)engine)->tags == NULL ||
+        !(self->tx.kind == VX_COBS8 || (self->tx.kind == VX_CAN && self->tx.can.fd))) {
+        PyErr_SetString(PyExc_ValueError, "send_tags needs an Engine given swarm_key, and a cobs8 or CAN FD encoder");
+        return NULL;
+    }
+    Py_INCREF(engine);
+    Py_XSETREF(self->tx.tag_engine, engine);
+    Py_INCREF(counters);
+    Py_XSETREF(self->tx.tag_counters, counters);
+    self->tx.tag_require = (uint8_t)require;
+    Py_RETURN_NONE;
+}
+
 static PyObject *Encoder_encode_batch(vx_encoder_t *self, PyObject *messages) {
     size_t n, i, count;
     vstig_msg_t *msgs = vx_msgs_of(messages, &n);
     PyObject *units = NULL;
     if (msgs == NULL) return NULL;
-    if (self->tx.kind != VX_CAN) {
+    if (self->tx.tag_engine != NULL) {
+        units = tagged_units(&self->tx, msgs, n);
+    } else if (self->tx.kind != VX_CAN) {
         uint8_t *bytes = PyMem_Malloc(vx_tx_room(&self->tx, n) + 1u);
         if (bytes == NULL) {
             PyErr_NoMemory();
@@ -669,6 +756,7 @@ static PyObject *Encoder_encode_batch(vx_encoder_t *self, PyObject *messages) {
 
 static PyMethodDef Encoder_methods[] = {
     {"encode_batch", (PyCFunction)Encoder_encode_batch, METH_O, "The units that carry these messages."},
+    {"send_tags", (PyCFunction)Encoder_send_tags, METH_VARARGS, "Each message with its entry's record from now on."},
     {"heartbeat", (PyCFunction)Encoder_heartbeat, METH_NOARGS, "MAVLink: the HEARTBEAT frame that comes next."},
     {NULL, NULL, 0, NULL},
 };

@@ -45,6 +45,10 @@ typedef struct {
     PyObject *frame_type; /* CAN: can.Message, for the units handed to Python */
     PyObject *unit_template;   /* CAN: a frame_type() made once, copied per unit (NULL: frame_type is called) */
     Py_ssize_t unit_slots[6];  /* where the template's class keeps the fields a frame sets (framing.c UNIT_FIELDS) */
+    /* a link that sends tags (cobs8, CAN FD: `send_tags`): the engine whose proofs go with each message, whether the
+     * link requires them (a message without one is held back, counted in `tag_counters`' held_unverified) */
+    PyObject *tag_engine, *tag_counters;
+    uint8_t tag_require;
 } vx_tx_t;
 
 typedef struct {

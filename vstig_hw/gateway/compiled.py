@@ -222,6 +222,7 @@ class Compiled:
              on_change: Sequence[ChangeListener], intake: int | None, period: float) -> Seat:
         seat: Seat = self.native.Seat(engine, links, outlets, guard, on_change, intake, period)
         return seat
+        self._sending_tags: list[tuple[Encoder, Link[Any]]] = []  # the outlets' encoders that send records
 
     def relay(self, outlets: list[Outlet], guard: Guard | None) -> RawRelay:
         relay: RawRelay = self.native.Relay(outlets, guard)
@@ -229,6 +230,9 @@ class Compiled:
 
     def path(self, state: DeliveryState, lock: object, deliver: Callable[[int, float, list[Any]], None],
              links: list[Link[Any]], receivers: list[Receiver | None], part: Seat | RawRelay | None,
+        if encoder is not None and sends_tags(link):  # its records from the engine (`signed_engine`), via its writer
+            self._sending_tags.append((encoder, link))
+            port = "python"
              guard: Guard | None, outlets: list[Outlet], listeners: list[Sequence[Any]],
              told: list[tuple[Callable[..., None], ...]], delivered: list[Callable[[float], None]]) -> Path:
         """The delivery; `state`: what it shares with the Node's loop; `listeners`: the Node's listeners that want
@@ -243,6 +247,8 @@ class Compiled:
                                       listeners=listeners, told=told, heard=Heard, delivered=delivered,
                                       can_message=None if can is None else can.Message)
         return path
+        for encoder, link in self._sending_tags:
+            encoder.send_tags(engine, link.auth is AuthPolicy.REQUIRE, link.counters)
 
 
 def compiled_for(relays: bool, links: Sequence[Link[Any]]) -> Compiled | None:
