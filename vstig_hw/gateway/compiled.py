@@ -196,13 +196,17 @@ class Compiled:
     def __init__(self) -> None:
         assert native is not None
         self.native = native
+        self._sending_tags: list[tuple[Encoder, Link[Any]]] = []  # the outlets' encoders that send records
 
     def outlet(self, link: Link[Any], budget: int | None, period: float, *, keep_all: bool = False,
                on_room: Callable[[], None] | None = None) -> Outlet:
         writer = LinkWriter(link, TX_QUEUE_LIMIT, on_room=on_room)
         queue = FairFifo(RAW_QUEUE_LIMIT) if keep_all else FairQueue()
-        encoder = None if sends_tags(link) else encoder_for(link)
+        encoder = encoder_for(link)
         port = port_for(link) if encoder is not None else "python"
+        if encoder is not None and sends_tags(link):  # its records from the engine (`signed_engine`), via its writer
+            self._sending_tags.append((encoder, link))
+            port = "python"
         outlet: Outlet = CompiledOutlet(link, writer, self.native.Window(budget, period), queue,
                                         keep_all=keep_all, encoder=encoder, port=port)
         return outlet
@@ -212,17 +216,19 @@ class Compiled:
         return engine
 
     def signed_engine(self, robot_id: int, onconflict: ConflictResolver | None, keys: SwarmKeys) -> CompiledEngine:
-        """The engine of a Node with the swarm key: SignedEngine's twin (tags.c), writers' keys derived in C."""
+        """The engine of a Node with the swarm key: SignedEngine's twin (tags.c), writers' keys derived in C; the
+        outlets built before it that send tags take each message's record from it."""
         engine: CompiledEngine = self.native.Engine(robot_id, onconflict, swarm_key=keys.master,
                                                     stigmergy=keys.stigmergy, policies=tuple(AuthPolicy),
                                                     record=Tagged)
+        for encoder, link in self._sending_tags:
+            encoder.send_tags(engine, link.auth is AuthPolicy.REQUIRE, link.counters)
         return engine
 
     def seat(self, engine: Stigmergy, links: list[Link[Any]], outlets: list[Outlet], guard: Guard | None,
              on_change: Sequence[ChangeListener], intake: int | None, period: float) -> Seat:
         seat: Seat = self.native.Seat(engine, links, outlets, guard, on_change, intake, period)
         return seat
-        self._sending_tags: list[tuple[Encoder, Link[Any]]] = []  # the outlets' encoders that send records
 
     def relay(self, outlets: list[Outlet], guard: Guard | None) -> RawRelay:
         relay: RawRelay = self.native.Relay(outlets, guard)
@@ -230,9 +236,6 @@ class Compiled:
 
     def path(self, state: DeliveryState, lock: object, deliver: Callable[[int, float, list[Any]], None],
              links: list[Link[Any]], receivers: list[Receiver | None], part: Seat | RawRelay | None,
-        if encoder is not None and sends_tags(link):  # its records from the engine (`signed_engine`), via its writer
-            self._sending_tags.append((encoder, link))
-            port = "python"
              guard: Guard | None, outlets: list[Outlet], listeners: list[Sequence[Any]],
              told: list[tuple[Callable[..., None], ...]], delivered: list[Callable[[float], None]]) -> Path:
         """The delivery; `state`: what it shares with the Node's loop; `listeners`: the Node's listeners that want
@@ -247,8 +250,6 @@ class Compiled:
                                       listeners=listeners, told=told, heard=Heard, delivered=delivered,
                                       can_message=None if can is None else can.Message)
         return path
-        for encoder, link in self._sending_tags:
-            encoder.send_tags(engine, link.auth is AuthPolicy.REQUIRE, link.counters)
 
 
 def compiled_for(relays: bool, links: Sequence[Link[Any]]) -> Compiled | None:
