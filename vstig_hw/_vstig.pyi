@@ -16,10 +16,13 @@ Twins (C file, its types, its Python references):
     mavlink.c  -                  vstig_hw/framing/mavlink.py
     window.c   Window             vstig_hw/gateway/outlet.py
     outlet.c   Outlet             vstig_hw/gateway/outlet.py vstig_hw/transports/serial.py vstig_hw/transports/can.py
+                                  vstig_hw/transports/mavlink.py
     parts.c    Seat Relay         vstig_hw/gateway/parts.py
     path.c     Path               vstig_hw/gateway/delivery.py vstig_hw/gateway/outbound.py
                                   vstig_hw/gateway/delivery_state.py
                                   vstig_hw/transports/serial.py vstig_hw/transports/can.py vstig_hw/transports/xbee.py
+                                  vstig_hw/transports/mavlink.py
+    peers.c    UdpPeers           vstig_hw/transports/mavlink.py
     roster.c   RosterTally        vstig_hw/gateway/roster.py
     module.c   -                  vstig_hw/native.py
 
@@ -116,6 +119,14 @@ class Path:
     def pump(self, index: int, timeout: float) -> int | None: ...
     def pumps(self, index: int) -> bool: ...
     def serve(self, index: int, timeout: float, turn: Callable[[], None]) -> None: ...
+
+class UdpPeers:  # transports.mavlink.UdpPeers: a udpin link's peers
+    most: int
+    timeout: float
+    def __init__(self, most: int = 8, timeout: float = 10.0) -> None: ...
+    def __len__(self) -> int: ...
+    def heard(self, address: tuple[Any, ...], now: float, /) -> None: ...
+    def live(self, now: float, /) -> list[tuple[Any, ...]]: ...
 
 class RosterTally:  # a Tally (gateway/roster.py)
     def __init__(self, max_robots: int) -> None: ...

@@ -33,6 +33,9 @@ MIRRORED = {
     ("path.h", "VX_READ_SERIAL"): "vstig_hw.gateway.compiled:READS_SERIAL",
     ("path.h", "VX_READ_SOCKETCAN"): "vstig_hw.gateway.compiled:READS_SOCKETCAN",
     ("path.h", "VX_READ_XBEE"): "vstig_hw.gateway.compiled:READS_XBEE",
+    ("path.h", "VX_READ_UDP"): "vstig_hw.gateway.compiled:READS_UDP",
+    ("path.c", "DATAGRAMS_PER_READ"): "vstig_hw.transports.mavlink:_DATAGRAMS_PER_READ",
+    ("path.c", "DATAGRAM"): "vstig_hw.transports.mavlink:_DATAGRAM",
     ("mavlink.h", "VX_STREAMS_KEPT"): "vstig_hw.framing.mavlink:STREAMS_KEPT",
     ("mavlink.h", "VX_NEW_STREAM_WINDOW"): "vstig_hw.framing.mavlink:NEW_STREAM_WINDOW",
     ("mavlink.h", "VX_EPOCH_2015"): "vstig_hw.framing.mavlink:_EPOCH_2015",
@@ -45,7 +48,7 @@ C_ONLY = {
     "FEED_BATCH", "OUTLET", "NOT_NOTED", "UNNOTED", "XBEE_UNITS_ROOM", "VX_COUNT", "VX_SERIAL_MAX_BYTES",
     "VX_COBS8", "VX_EPUCK4", "VX_KILOBOT", "VX_CAN", "VX_XBEE", "VX_MAVLINK", "VX_FRAMINGS", "VX_REPLAY_BUCKETS",
     "VX_MAV_TX_ROOM", "NONE", "VX_GUARD_UNITS", "FREE_SLOT", "HEARD",
-    "VX_PORT_PYTHON", "VX_PORT_SERIAL", "VX_PORT_SOCKETCAN", "PY_SSIZE_T_CLEAN",
+    "VX_PORT_PYTHON", "VX_PORT_SERIAL", "VX_PORT_SOCKETCAN", "VX_PORT_UDP", "MAVLINK_UDP", "PY_SSIZE_T_CLEAN",
     "DELIVERY_STATE", "WAKEUP", "HANDLE", "DEVICE_TRANSPORT", "CAN_TRANSPORT", "XBEE_TRANSPORT", "SOCKETCAN_BUS",
     "LINK", "WRITER", "FAIR_QUEUE", "FAIR_FIFO", "GUARD", "ENGINE", "ENCODER", "LOCK", "CAN_MESSAGE_TYPE", "TIME",
 }

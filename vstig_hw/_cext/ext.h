@@ -14,6 +14,7 @@
  *   Seat       parts.c    vstig_hw.gateway.parts.Seat
  *   Relay      parts.c    vstig_hw.gateway.parts.RawRelay
  *   Path       path.c     vstig_hw.gateway.node.Node's delivery  (and the transports' reads)
+ *   UdpPeers   peers.c    vstig_hw.transports.mavlink.UdpPeers   (a udpin link's peers)
  *   RosterTally roster.c  vstig_hw.gateway.roster.Roster's take and refuse
  *
  * The index of the twins, by file, is vstig_hw/_vstig.pyi's docstring.
@@ -55,7 +56,9 @@ typedef struct {
     PyObject *reader_thread, *failure, *wake, *retry_at, *sleep_until, *wake_on_arrival, *set;
     /* vstig_hw.transports.base.CompiledHandle, and the transports that give one */
     PyObject *fd, *fresh, *preamble, *device, *outage, *compiled_handle, *counters, *failed, *channel,
-        *note_error_frame, *api, *quiet_after, *holds, *note_report;
+        *note_error_frame, *api, *quiet_after, *holds, *note_report, *peers, *beat;
+    /* a MAVLink UDP transport's counters */
+    PyObject *rx_datagrams, *tx_refused, *tx_no_peer, *tx_busy, *tx_dropped;
     /* a SocketCAN bus (socketcan_drops.DropCountingBus) and its socket */
     PyObject *socket, *fileno, *read_elsewhere, *poll_counts, *note_kernel_drops;
     /* Link, LinkWriter, the fair share's lines, Guard, Stigmergy, the Encoder, the Node's lock */

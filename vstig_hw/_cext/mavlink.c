@@ -163,16 +163,39 @@ size_t vx_mav_feed(vx_mav_rx_t *m, const uint8_t *data, size_t len, vstig_msg_t 
     return n;
 }
 
-int vx_mav_harvest(vx_mav_rx_t *m, PyObject *drops) {
+size_t vx_mav_cut(vstig_mavlink_rx_t *cutter, uint8_t *data, size_t len, uint16_t *unit_len) {
+    size_t i, n = 0, at = 0;
+    for (i = 0; i <= len; i++) {
+        if (i < len ? !vstig_mavlink_feed(cutter, data[i]) : !vstig_mavlink_flush(cutter)) continue;
+        do { /* its bytes were all fed (the cutter keeps its own copy): the frames so far end at or before them */
+            uint16_t size = vstig_mavlink_frame_len(cutter);
+            memmove(data + at, vstig_mavlink_frame(cutter), size);
+            unit_len[n++] = size;
+            at += size;
+        } while (vstig_mavlink_next(cutter));
+    }
+    return n;
+}
+
+/* The reasons counted, each added to counters[prefix + its name], and cleared. */
+static int harvest(uint16_t drops[VSTIG_MAVLINK_DROP_REASONS], PyObject *counters, const char *prefix) {
     int reason;
     for (reason = 0; reason < (int)VSTIG_MAVLINK_DROP_REASONS; reason++) {
-        uint16_t count = m->rx.drops[reason];
+        uint16_t count = drops[reason];
+        char named[64];
         PyObject *name;
         if (count == 0) continue;
-        m->rx.drops[reason] = 0;
-        if ((name = vx_name(DROP_NAMES[reason])) == NULL || vx_count(drops, name, count) < 0) return -1;
+        drops[reason] = 0;
+        PyOS_snprintf(named, sizeof named, "%s%s", prefix, DROP_NAMES[reason]);
+        if ((name = vx_name(named)) == NULL || vx_count(counters, name, count) < 0) return -1;
     }
     return 0;
+}
+
+int vx_mav_harvest(vx_mav_rx_t *m, PyObject *drops) { return harvest(m->rx.drops, drops, ""); }
+
+int vx_mav_harvest_device(vstig_mavlink_rx_t *cutter, PyObject *counters) {
+    return harvest(cutter->drops, counters, "drop_");
 }
 
 /* ---- sending --------------------------------------------------------------------------- */

@@ -41,6 +41,12 @@ size_t vx_mav_feed(vx_mav_rx_t *m, const uint8_t *data, size_t len, vstig_msg_t 
                    unsigned long long *sender);
 /* Adds the reasons counted to the framing's drops; -1 on failure. */
 int vx_mav_harvest(vx_mav_rx_t *m, PyObject *drops);
+/* A mavlink transport's cutting of one whole datagram (MavlinkStreamReader's feed, then flush): its frames moved to
+ * data's start, back to back, their sizes into unit_len (room for len / 8 + 1); how many. */
+size_t vx_mav_cut(vstig_mavlink_rx_t *cutter, uint8_t *data, size_t len, uint16_t *unit_len);
+/* What the cutting counted (noise, incompat_flags, crc, truncated) added to a transport's counters as
+ * drop_<reason>; -1 on failure. */
+int vx_mav_harvest_device(vstig_mavlink_rx_t *cutter, PyObject *counters);
 
 /* 0, or -1 with ValueError (sysid, compid, target, link id, key). */
 int vx_mav_tx_init(vx_mav_tx_t *m, int sysid, int compid, int target, PyObject *key, int link_id);

@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "path.h"
+#include "peers.h"
 #include "roster.h"
 
 vx_python_t vx_py;
@@ -21,6 +22,7 @@ vx_names_t vx_n;
 #define DEVICE_TRANSPORT "vstig_hw.transports.base:DeviceTransport"
 #define CAN_TRANSPORT "vstig_hw.transports.can:CanTransport"
 #define XBEE_TRANSPORT "vstig_hw.transports.xbee:XBeeTransport"
+#define MAVLINK_UDP "vstig_hw.transports.mavlink:MavlinkUdpTransport"
 #define SOCKETCAN_BUS "vstig_hw.transports.socketcan_drops:KernelDropCountingBus"
 #define LINK "vstig_hw.links.link:Link"
 #define WRITER "vstig_hw.gateway.writer:LinkWriter"
@@ -46,18 +48,21 @@ static const struct {
     {&vx_n.drop_overflow, "drop_overflow", NULL}, {&vx_n.not_echoed, "not_echoed", NULL},
     {&vx_n.drop_write_error, "drop_write_error", NULL}, {&vx_n.drop_intake, "drop_intake", NULL},
     {&vx_n.unsent_at_close, "unsent_at_close", NULL}, {&vx_n.drop_jump, "drop_jump", NULL},
-    {&vx_n.dropped_at_stop, "dropped_at_stop", NULL},
+    {&vx_n.dropped_at_stop, "dropped_at_stop", NULL}, {&vx_n.rx_datagrams, "rx_datagrams", NULL},
+    {&vx_n.tx_refused, "tx_refused", NULL}, {&vx_n.tx_no_peer, "tx_no_peer", NULL}, {&vx_n.tx_busy, "tx_busy", NULL},
+    {&vx_n.tx_dropped, "tx_dropped", NULL},
     {&vx_n.reader_thread, "reader_thread", DELIVERY_STATE}, {&vx_n.failure, "failure", DELIVERY_STATE},
     {&vx_n.wake, "wake", DELIVERY_STATE}, {&vx_n.retry_at, "retry_at", DELIVERY_STATE},
     {&vx_n.sleep_until, "sleep_until", DELIVERY_STATE}, {&vx_n.wake_on_arrival, "wake_on_arrival", DELIVERY_STATE},
     {&vx_n.set, "set", WAKEUP},
     {&vx_n.fd, "fd", HANDLE}, {&vx_n.fresh, "fresh", HANDLE}, {&vx_n.preamble, "preamble", HANDLE},
-    {&vx_n.device, "device", HANDLE}, {&vx_n.outage, "outage", HANDLE},
+    {&vx_n.device, "device", HANDLE}, {&vx_n.outage, "outage", HANDLE}, {&vx_n.peers, "peers", HANDLE},
     {&vx_n.compiled_handle, "compiled_handle", DEVICE_TRANSPORT}, {&vx_n.counters, "counters", DEVICE_TRANSPORT},
     {&vx_n.failed, "failed", DEVICE_TRANSPORT},
     {&vx_n.channel, "channel", CAN_TRANSPORT}, {&vx_n.note_error_frame, "note_error_frame", CAN_TRANSPORT},
     {&vx_n.api, "api", XBEE_TRANSPORT}, {&vx_n.quiet_after, "quiet_after", XBEE_TRANSPORT},
     {&vx_n.holds, "holds", XBEE_TRANSPORT}, {&vx_n.note_report, "note_report", XBEE_TRANSPORT},
+    {&vx_n.beat, "beat", MAVLINK_UDP},
     {&vx_n.fileno, "fileno", SOCKETCAN_BUS}, {&vx_n.read_elsewhere, "read_elsewhere", SOCKETCAN_BUS},
     {&vx_n.poll_counts, "poll_counts", SOCKETCAN_BUS}, {&vx_n.note_kernel_drops, "note_kernel_drops", SOCKETCAN_BUS},
     {&vx_n.name, "name", LINK}, {&vx_n.counters, "counters", LINK}, {&vx_n.transport, "transport", LINK},
@@ -304,7 +309,8 @@ PyMODINIT_FUNC PyInit__vstig(void) {
         add_type(module, &vx_WindowType, "Window") < 0 || add_type(module, &vx_OutletType, "Outlet") < 0 ||
         add_type(module, &vx_SeatType, "Seat") < 0 || add_type(module, &vx_RelayType, "Relay") < 0 ||
         add_type(module, &vx_PathType, "Path") < 0 ||
-        add_type(module, &vx_RosterTallyType, "RosterTally") < 0)
+        add_type(module, &vx_RosterTallyType, "RosterTally") < 0 ||
+        add_type(module, &vx_UdpPeersType, "UdpPeers") < 0)
         goto fail;
     if (PyModule_AddIntConstant(module, "KEYS", VSTIG_KEYS) < 0) goto fail;
     if ((declared = declared_names()) == NULL || PyModule_AddObject(module, "DECLARED", declared) < 0) {

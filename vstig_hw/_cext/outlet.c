@@ -1,8 +1,8 @@
 /*
  * Outlet: vstig_hw.gateway.outlet.Outlet in C, one link's way out (its window, its share of sources, its writer).
  *
- * Reference: vstig_hw/gateway/outlet.py vstig_hw/transports/serial.py vstig_hw/transports/can.py (held equal by
- *   tests/native; the index of the twins: vstig_hw/_vstig.pyi).
+ * Reference: vstig_hw/gateway/outlet.py vstig_hw/transports/serial.py vstig_hw/transports/can.py
+ *   vstig_hw/transports/mavlink.py (held equal by tests/native; the index of the twins: vstig_hw/_vstig.pyi).
  *
  * What Outlet does, done the same way: a push while nothing waits is held as it came and goes out at the next
  * flush if the window and the writer take it all; otherwise it waits in the fair share's lines, which stay the
@@ -10,12 +10,13 @@
  * a backlog lasts. The window is a Window (window.c); the writer stays the link's LinkWriter.
  *
  * What is new is how a batch reaches the device while the writer holds nothing (`writer.idle`): a serial port's
- * non-blocking fd or a SocketCAN socket is written here, in C, with the transport's own counters, exactly as its
- * write_nowait would; whatever the device does not take at once (a full buffer, an error) goes to the writer,
+ * non-blocking fd, a SocketCAN socket or a MAVLink UDP socket (unpaced, unsigned) is written here, in C, with the
+ * transport's own counters, exactly as its write_nowait would; whatever the device does not take at once (a full buffer, an error) goes to the writer,
  * whose write_nowait meets the same condition and handles it as it always does (the rest waits; a lost device
  * is counted and reopened by the transport).
  */
 #include "outlet.h"
+#include "peers.h"
 
 #include <errno.h>
 #include <string.h>
@@ -255,6 +256,77 @@ done:
     if (frames != stack) PyMem_Free(frames);
     return status;
 }
+/* The TUNNELs of a batch straight to a MAVLink UDP socket, one datagram (MavlinkUdpTransport.write_nowait: `_send`,
+ * to the router of a connected udpout socket or to each live peer of a udpin one); 1 done (or handed to the
+ * writer), 0 not tried, -1 error. A send that fails at once goes to the writer, whose write_nowait meets the same
+ * and handles it; one that fails after others went is counted as `_send` counts it (tx_busy, or the socket lost). */
+static int write_udp(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
+    vx_port_t *p = &o->port;
+    vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
+    uint8_t stack[VX_MAV_TX_ROOM(64)], *buf = stack;
+    size_t len, room = vx_tx_room(tx, n);
+    PyObject *peers, *rest;
+    Py_ssize_t targets, i, sent = 0, refused = 0;
+    int fd = serial_fd(p), status = 1, failed = 0;
+    if (fd < -1) return -1;
+    if (fd < 0) return 0; /* the transport reopens it: its write_nowait knows how */
+    if ((peers = PyObject_GetAttr(p->handle, vx_n.peers)) == NULL) return -1;
+    if (peers != Py_None && !PyObject_TypeCheck(peers, &vx_UdpPeersType)) {
+        Py_DECREF(peers); /* peers the C cannot read: the transport's own write sends */
+        return 0;
+    }
+    targets = peers == Py_None ? 1 : vx_peers_live((vx_peers_t *)peers, vx_monotonic());
+    if (targets == 0) { /* udpin: nobody has spoken to us lately */
+        Py_DECREF(peers);
+        return vx_count(p->counters, vx_n.tx_no_peer, 1) < 0 || vx_count(o->counters, vx_n.out, (Py_ssize_t)n) < 0
+               ? -1 : 1;
+    }
+    if (room > sizeof stack && (buf = PyMem_Malloc(room)) == NULL) {
+        Py_DECREF(peers);
+        PyErr_NoMemory();
+        return -1;
+    }
+    len = vx_tx_bytes(tx, msgs, n, buf);
+    for (i = 0; i < targets; i++) {
+        const vx_peer_t *peer = peers == Py_None ? NULL : &((vx_peers_t *)peers)->peer[i];
+        ssize_t r = peer == NULL ? send(fd, buf, len, MSG_DONTWAIT)
+                                 : sendto(fd, buf, len, MSG_DONTWAIT, (const struct sockaddr *)&peer->addr, peer->len);
+        if (r >= 0) sent++;
+        else if (errno == ECONNREFUSED) refused++; /* nobody there (an ICMP answer): the others still get it */
+        else {
+            failed = errno;
+            break;
+        }
+    }
+    Py_DECREF(peers);
+    if (failed && sent == 0 && refused == 0) { /* the first send failed: the writer's write_nowait handles it */
+        rest = Py_BuildValue("[y#]", (const char *)buf, (Py_ssize_t)len);
+        status = rest == NULL || writer_submit(o, rest, (Py_ssize_t)n) < 0 ? -1 : 1;
+        Py_XDECREF(rest);
+        goto done;
+    }
+    if ((refused && vx_count(p->counters, vx_n.tx_refused, refused) < 0) ||
+        (sent && (vx_count(p->counters, vx_n.tx, 1) < 0 ||
+                  vx_count(p->counters, vx_n.tx_bytes, sent * (Py_ssize_t)len) < 0)) ||
+        vx_count(o->counters, vx_n.out, (Py_ssize_t)n) < 0)
+        goto error;
+    if (failed == EAGAIN || failed == EWOULDBLOCK || failed == ENOBUFS) {
+        if (vx_count(p->counters, vx_n.tx_busy, 1) < 0) goto error;
+    } else if (failed) { /* the socket failed: as DeviceTransport.write, the transport loses it */
+        PyObject *done = vx_call(p->transport, vx_n.failed, "(s)", strerror(failed));
+        if (done == NULL || vx_count(p->counters, vx_n.tx_dropped, 1) < 0) {
+            Py_XDECREF(done);
+            goto error;
+        }
+        Py_DECREF(done);
+    }
+    goto done;
+error:
+    status = -1;
+done:
+    if (buf != stack) PyMem_Free(buf);
+    return status;
+}
 #endif
 
 /* Outlet._hand: `n` messages handed to the writer, or straight to the device when the writer was idle as the
@@ -265,7 +337,9 @@ static int hand(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n, int idle) {
     o->handed += n;
 #ifndef _WIN32
     if (o->port.kind != VX_PORT_PYTHON && idle) {
-        done = o->port.kind == VX_PORT_SERIAL ? write_serial(o, msgs, n) : write_socketcan(o, msgs, n);
+        done = o->port.kind == VX_PORT_SERIAL ? write_serial(o, msgs, n)
+               : o->port.kind == VX_PORT_UDP  ? write_udp(o, msgs, n)
+                                              : write_socketcan(o, msgs, n);
         if (done < 0) return -1;
     }
 #else
@@ -483,8 +557,9 @@ static PyObject *Outlet_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
         goto fail;
     if (strcmp(port, "serial") == 0) self->port.kind = VX_PORT_SERIAL;
     else if (strcmp(port, "socketcan") == 0) self->port.kind = VX_PORT_SOCKETCAN;
+    else if (strcmp(port, "udp") == 0) self->port.kind = VX_PORT_UDP;
     else if (strcmp(port, "python") != 0) {
-        PyErr_Format(PyExc_ValueError, "port must be serial, socketcan or python, got %s", port);
+        PyErr_Format(PyExc_ValueError, "port must be serial, socketcan, udp or python, got %s", port);
         goto fail;
     }
     if (self->port.kind != VX_PORT_PYTHON && self->encoder == NULL) {

@@ -4,12 +4,12 @@
  *
  * Reference: vstig_hw/gateway/delivery.py vstig_hw/gateway/outbound.py vstig_hw/gateway/delivery_state.py
  *   vstig_hw/transports/serial.py
- *   vstig_hw/transports/can.py vstig_hw/transports/xbee.py (held equal by tests/native; the index of the twins:
- *   vstig_hw/_vstig.pyi).
+ *   vstig_hw/transports/can.py vstig_hw/transports/xbee.py vstig_hw/transports/mavlink.py (held equal by
+ *   tests/native; the index of the twins: vstig_hw/_vstig.pyi).
  *
- * `pump(index, timeout)` reads a link's device itself where it has an fd (a serial port, a SocketCAN socket:
- * the GIL is released while it waits), and hands what it read on; `deliver(index, t, units)` takes what a
- * transport's own read returned. Either way, while no listener wants each unit or every `Heard` (`unit`,
+ * `pump(index, timeout)` reads a link's device itself where it has an fd (a serial port, a SocketCAN socket, a
+ * MAVLink UDP socket: the GIL is released while it waits), and hands what it read on; `deliver(index, t, units)`
+ * takes what a transport's own read returned. Either way, while no listener wants each unit or every `Heard` (`unit`,
  * `heard`) and the Node's lock is free, the whole batch is done here: decode (the link's Receiver), the engine's
  * intake per source, the guard (telling the `refused` listeners), the `messages` listeners, the part (Seat or
  * Relay; a Seat tells the `change` listeners), the engine's outbox onto the outlets, and the outlets' sends
@@ -24,6 +24,7 @@
  * decides what a stop hands on and what it counts.
  */
 #include "path.h"
+#include "peers.h"
 #include "roster.h"
 
 #include <errno.h>
@@ -39,6 +40,8 @@
 #define READ_SIZE 65536 /* bytes one serial read takes at most (SerialTransport's _READ_SIZE) */
 #define DRAIN_LIMIT 512 /* CAN frames one read takes after the first (CanTransport's _DRAIN_LIMIT) */
 #define POLL_COUNTS_S 1.0 /* how often a SocketCAN bus's own drop counts are polled (socketcan_drops) */
+#define DATAGRAMS_PER_READ 64 /* datagrams one UDP read takes at most (MavlinkUdpTransport's _DATAGRAMS_PER_READ) */
+#define DATAGRAM 65535        /* bytes a datagram read takes at most (its _DATAGRAM) */
 
 static PyObject *CAN_MESSAGE;
 
@@ -621,6 +624,34 @@ static int xbee_unit(vx_link_t *link, size_t *n, size_t *at) {
     return 0;
 }
 
+/* n > 0 units a device read gave (whole frames, back to back in `data`, each unit_len[i] bytes), counted as its
+ * transport's read counts them and delivered: here if it can be, else as bytes to the Python delivery. */
+static int deliver_units(vx_path_t *p, Py_ssize_t index, const uint8_t *data, const uint16_t *unit_len,
+                         Py_ssize_t n) {
+    vx_batch_t batch;
+    Py_ssize_t i, at;
+    double t;
+    int done;
+    if (vx_count(p->links[index].tcounters, vx_n.rx, n) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred()))
+        return -1;
+    batch.kind = 3;
+    batch.data = data;
+    batch.unit_len = unit_len;
+    batch.len = (size_t)n;
+    done = deliver_fast(p, index, t, &batch, NULL);
+    if (done == 0) {
+        PyObject *units = PyList_New(n);
+        for (i = 0, at = 0; units != NULL && i < n; at += unit_len[i++]) {
+            PyObject *unit = PyBytes_FromStringAndSize((const char *)data + at, unit_len[i]);
+            if (unit == NULL) Py_CLEAR(units);
+            else PyList_SET_ITEM(units, i, unit);
+        }
+        done = units == NULL ? -1 : deliver_slow(p, index, t, units);
+        Py_XDECREF(units);
+    }
+    return done < 0 ? -1 : 0;
+}
+
 /* The units (frames) that len bytes complete, or that the line going quiet (`quiet`) gives; -1 with an exception. */
 static Py_ssize_t xbee_cut(vx_link_t *link, const uint8_t *data, size_t len, int quiet) {
     vstig_xbee_rx_t *rx = link->stream;
@@ -644,12 +675,11 @@ static Py_ssize_t xbee_cut(vx_link_t *link, const uint8_t *data, size_t len, int
 static PyObject *pump_xbee(vx_path_t *p, Py_ssize_t index, double timeout) {
     vx_link_t *link = &p->links[index];
     PyObject *fd_obj;
-    Py_ssize_t n, i, at;
+    Py_ssize_t n;
     long fd;
     ssize_t got = 0;
     int ready;
-    double t, now;
-    vx_batch_t batch;
+    double now;
     if (link->stream == NULL) {
         link->stream = PyMem_Malloc(sizeof *link->stream);
         link->units = PyMem_Malloc(XBEE_UNITS_ROOM);
@@ -684,25 +714,165 @@ static PyObject *pump_xbee(vx_path_t *p, Py_ssize_t index, double timeout) {
     }
     if (n < 0 || vx_harvest_device_drops(&link->stream->drops, link->tcounters) < 0) return NULL;
     if (n == 0) return PyLong_FromSsize_t(got);
-    if (vx_count(link->tcounters, vx_n.rx, n) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred())) return NULL;
-    batch.kind = 3;
-    batch.data = link->units;
-    batch.unit_len = link->unit_len;
-    batch.len = (size_t)n;
-    ready = deliver_fast(p, index, t, &batch, NULL);
-    if (ready < 0) return NULL;
-    if (ready == 0) {
-        PyObject *units = PyList_New(n);
-        for (i = 0, at = 0; units != NULL && i < n; at += link->unit_len[i++]) {
-            PyObject *unit = PyBytes_FromStringAndSize((const char *)link->units + at, link->unit_len[i]);
-            if (unit == NULL) Py_CLEAR(units);
-            else PyList_SET_ITEM(units, i, unit);
-        }
-        ready = units == NULL ? -1 : deliver_slow(p, index, t, units);
-        Py_XDECREF(units);
-        if (ready < 0) return NULL;
-    }
+    if (deliver_units(p, index, link->units, link->unit_len, n) < 0) return NULL;
     return PyLong_FromSsize_t(got);
+}
+
+/* A UDP read: up to DATAGRAMS_PER_READ datagrams, each in its own DATAGRAM bytes of `room` (only the pages a
+ * datagram fills are ever touched), with their sources; then the frames cut from them, back to back in `room`. */
+struct vx_udp {
+    struct mmsghdr header[DATAGRAMS_PER_READ];
+    struct iovec io[DATAGRAMS_PER_READ];
+    struct sockaddr_storage from[DATAGRAMS_PER_READ];
+    uint8_t *room;
+    uint16_t *unit_len; /* the frames' sizes */
+    size_t lens;        /* room in unit_len */
+    vstig_mavlink_rx_t cutter; /* a datagram that is not one frame: cut as the transport's reader cuts it */
+};
+
+static vx_udp_t *udp_new(void) {
+    vx_udp_t *udp = PyMem_Calloc(1, sizeof *udp);
+    int i;
+    if (udp != NULL && (udp->room = PyMem_Malloc((size_t)DATAGRAMS_PER_READ * DATAGRAM)) == NULL) {
+        PyMem_Free(udp);
+        udp = NULL;
+    }
+    if (udp == NULL) {
+        PyErr_NoMemory();
+        return NULL;
+    }
+    for (i = 0; i < DATAGRAMS_PER_READ; i++) {
+        udp->io[i].iov_base = udp->room + (size_t)i * DATAGRAM;
+        udp->io[i].iov_len = DATAGRAM;
+        udp->header[i].msg_hdr.msg_iov = &udp->io[i];
+        udp->header[i].msg_hdr.msg_iovlen = 1;
+        udp->header[i].msg_hdr.msg_name = &udp->from[i];
+    }
+    vstig_mavlink_rx_init(&udp->cutter);
+    return udp;
+}
+
+static void udp_free(vx_udp_t *udp) {
+    if (udp == NULL) return;
+    PyMem_Free(udp->room);
+    PyMem_Free(udp->unit_len);
+    PyMem_Free(udp);
+}
+
+/* The datagrams waiting (without the GIL): how many; *refused: ICMP answers met (nobody at an address we sent to);
+ * *failed: the errno of a failure the transport must hear of, else 0. */
+static int udp_receive(vx_udp_t *udp, int fd, int *refused, int *failed) {
+    int got = 0, r, i;
+    *refused = *failed = 0;
+    Py_BEGIN_ALLOW_THREADS
+    while (got + *refused < DATAGRAMS_PER_READ) {
+        int want = DATAGRAMS_PER_READ - got - *refused;
+        for (i = got; i < got + want; i++) udp->header[i].msg_hdr.msg_namelen = sizeof udp->from[i];
+        r = recvmmsg(fd, &udp->header[got], (unsigned int)want, MSG_DONTWAIT, NULL);
+        if (r > 0) {
+            got += r;
+            if (r < want) break; /* all that had come */
+        } else if (r < 0 && errno == ECONNREFUSED) {
+            (*refused)++;
+        } else {
+            if (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) *failed = errno;
+            break;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    return got;
+}
+
+/* MavlinkUdpTransport's _one_frame: exactly one MAVLink 2 frame by its header (the framing checks its crc). */
+static int one_frame(const uint8_t *data, size_t len) {
+    return len > 12u && data[0] == VSTIG_MAVLINK_STX && !(data[2] & 0xFEu) &&
+           len == 12u + data[1] + (data[2] ? VSTIG_MAVLINK_SIGNATURE : 0u);
+}
+
+/* A read's datagrams as units, back to back at udp->room (MavlinkUdpTransport._read_device): a datagram that is one
+ * frame as it is, any other cut into its frames; each source noted in `peers` (udpin). How many, or -1. */
+static Py_ssize_t udp_units(vx_link_t *link, vx_udp_t *udp, int got, PyObject *peers, double now) {
+    size_t at = 0, n = 0, bytes = 0;
+    int k;
+    for (k = 0; k < got; k++) {
+        uint8_t *data = udp->room + (size_t)k * DATAGRAM;
+        size_t len = udp->header[k].msg_len, cut;
+        bytes += len;
+        if (peers != Py_None)
+            vx_peers_heard((vx_peers_t *)peers, (const struct sockaddr *)&udp->from[k],
+                           udp->header[k].msg_hdr.msg_namelen, now);
+        if (n + len / 8u + 1u > udp->lens) { /* the most frames a datagram can hold: 8 bytes each (MAVLink 1) */
+            size_t lens = (n + len / 8u + 1u) * 2u;
+            uint16_t *grown = PyMem_Realloc(udp->unit_len, lens * sizeof *grown);
+            if (grown == NULL) {
+                PyErr_NoMemory();
+                return -1;
+            }
+            udp->unit_len = grown;
+            udp->lens = lens;
+        }
+        if (one_frame(data, len)) {
+            udp->unit_len[n++] = (uint16_t)len;
+        } else {
+            cut = vx_mav_cut(&udp->cutter, data, len, udp->unit_len + n);
+            for (len = 0; cut > 0; cut--) len += udp->unit_len[n++];
+        }
+        memmove(udp->room + at, data, len);
+        at += len;
+    }
+    if (vx_count(link->tcounters, vx_n.rx_bytes, (Py_ssize_t)bytes) < 0 ||
+        vx_count(link->tcounters, vx_n.rx_datagrams, got) < 0 || vx_mav_harvest_device(&udp->cutter, link->tcounters) < 0)
+        return -1;
+    return (Py_ssize_t)n;
+}
+
+/* MavlinkUdpTransport's read, here: its HEARTBEAT when the transport says one is due (`beat`, on this delivery's
+ * timer), then the datagrams that came (recvmmsg), their sources into the link's peers (udpin: its CompiledHandle's
+ * UdpPeers), their frames delivered and counted as its read counts them. NULL result: the transport's own read
+ * takes this turn (no socket now, or it failed: the transport knows how to tell and reopen). */
+static PyObject *pump_udp(vx_path_t *p, Py_ssize_t index, double timeout) {
+    vx_link_t *link = &p->links[index];
+    PyObject *fd_obj, *peers;
+    Py_ssize_t n;
+    long fd;
+    int got, refused, failed, ready;
+    double now;
+    if (link->udp == NULL && (link->udp = udp_new()) == NULL) return NULL;
+    if ((fd_obj = PyObject_GetAttr(link->handle, vx_n.fd)) == NULL) return NULL;
+    fd = fd_obj == Py_None ? -1 : PyLong_AsLong(fd_obj);
+    Py_DECREF(fd_obj);
+    if (fd < 0) return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
+    now = seconds_now();
+    if (now >= link->next_beat) {
+        PyObject *wait = PyObject_CallMethodNoArgs(link->transport, vx_n.beat);
+        double seconds = wait == NULL ? -1.0 : PyFloat_AsDouble(wait);
+        Py_XDECREF(wait);
+        if (seconds == -1.0 && PyErr_Occurred()) return NULL;
+        link->next_beat = now + seconds;
+    }
+    if (link->next_beat - now < timeout) timeout = link->next_beat > now ? link->next_beat - now : 0.0;
+    ready = wait_readable((int)fd, timeout);
+    if (ready == 0 || (ready < 0 && errno == EINTR)) return PyLong_FromLong(0);
+    if (ready < 0) return Py_NewRef(Py_None);
+    got = udp_receive(link->udp, (int)fd, &refused, &failed);
+    if (failed == EBADF) return Py_NewRef(Py_None); /* closed under us: the transport already knows */
+    if (refused && vx_count(link->tcounters, vx_n.tx_refused, refused) < 0) return NULL;
+    if (failed) { /* the socket told its error to us alone: the transport must hear it */
+        PyObject *done = vx_call(link->transport, vx_n.failed, "(s)", strerror(failed));
+        if (done == NULL) return NULL;
+        Py_DECREF(done);
+    }
+    if (got == 0) return PyLong_FromLong(0);
+    if ((peers = PyObject_GetAttr(link->handle, vx_n.peers)) == NULL) return NULL;
+    if (peers != Py_None && !PyObject_TypeCheck(peers, &vx_UdpPeersType)) {
+        PyErr_Format(PyExc_TypeError, "link %R is read in C: its peers must be a compiled UdpPeers", link->name);
+        Py_DECREF(peers);
+        return NULL;
+    }
+    n = udp_units(link, link->udp, got, peers, seconds_now());
+    Py_DECREF(peers);
+    if (n < 0 || (n > 0 && deliver_units(p, index, link->udp->room, link->udp->unit_len, n) < 0)) return NULL;
+    return PyLong_FromLong(got);
 }
 
 /* A SocketCAN frame as python-can's capture_message reads it (the flags, the ID's width, an FD frame's size). */
@@ -1011,6 +1181,9 @@ static void Path_dealloc(vx_path_t *self) {
         PyMem_Free(self->links[i].stream);
         PyMem_Free(self->links[i].units);
         PyMem_Free(self->links[i].unit_len);
+#ifndef _WIN32
+        udp_free(self->links[i].udp);
+#endif
     }
     PyMem_Free(self->links);
     PyMem_Free(self->msgs);
@@ -1051,6 +1224,8 @@ static PyObject *Path_pump_at(vx_path_t *self, Py_ssize_t index, double timeout)
         return pump_socketcan(self, index, timeout);
     case VX_READ_XBEE:
         return pump_xbee(self, index, timeout);
+    case VX_READ_UDP:
+        return pump_udp(self, index, timeout);
     default:
         break;
     }

@@ -8,6 +8,9 @@
 #define VX_READ_SERIAL 1u    /* the serial port's fd is read here */
 #define VX_READ_SOCKETCAN 2u /* the SocketCAN socket is read here */
 #define VX_READ_XBEE 3u      /* an XBee module's serial fd is read and cut into frames here */
+#define VX_READ_UDP 4u       /* a MAVLink UDP socket is read here (recvmmsg), a udpin link's sources noted */
+
+typedef struct vx_udp vx_udp_t; /* path.c: a UDP read's datagrams, their sources, the frames cut from them */
 
 typedef struct {
     uint8_t reads;           /* VX_READ_* */
@@ -23,6 +26,8 @@ typedef struct {
     uint16_t *unit_len;      /* and their sizes */
     double last_byte, quiet; /* XBee: when a byte last came; a frame still arriving after `quiet` s never will */
     uint8_t escaped;         /* XBee: API mode 2 */
+    vx_udp_t *udp;           /* MAVLink over UDP: what one read takes */
+    double next_beat;        /* MAVLink over UDP: when the transport's `beat` is next due (monotonic seconds) */
 } vx_link_t;
 
 typedef struct {

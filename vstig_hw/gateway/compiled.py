@@ -18,10 +18,13 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   or a SocketCAN bus are read by it (`pump`) and their writes go straight to the
   device while its writer is idle. An XBee link is read as its transport reads it:
   its module's bytes cut into frames (libvstig's), the module's own reports handed
-  to the transport, one unit a frame. A mavlink link (serial or UDP) is read by its
-  transport's Python reader, which cuts frames and keeps heartbeats and peers; the
-  batch it hands over is decoded and delivered here, and its outlet encodes in C
-  and hands the TUNNELs to its writer (the transport paces them to the air).
+  to the transport, one unit a frame. A mavlink UDP link's socket is read by it too
+  (recvmmsg: each datagram's source into the link's peers, a compiled `UdpPeers`, a
+  datagram that is not one frame cut as the transport cuts it), the transport's
+  HEARTBEAT sent when its `beat` says, on the delivery's timer; while its writer is
+  idle its outlet sends the TUNNELs to the socket itself (to the router, or to each
+  live peer) unless the link is paced (`air_rate=`) or signed: those, and a mavlink
+  serial radio, go through the transport's Python (its token bucket, `in_order`).
 
 Everything else (zenoh, dialects, XbeeMav's packets, the overhead controller,
 blabbermouth...) takes the Python path through the same parts. What decides which links the
@@ -33,6 +36,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -46,6 +50,8 @@ from ..framing.xbee import XBeeApi2Framing, XBeeFraming
 from ..links.link import Heard, Link
 from ..native import native
 from ..tagged import AuthPolicy
+from ..transports.base import CompiledHandle
+from ..transports.mavlink import MavlinkUdpTransport
 from ..transports.serial import SerialTransport
 from ..transports.xbee import XBeeTransport
 from .delivery_state import DeliveryState
@@ -67,7 +73,7 @@ __all__ = ["Compiled", "compiled_for"]
 MAX_EXPIRY_TICKS = 254  # epuck4 partials the compiled receiver can age (libvstig counts ticks in a byte)
 MAX_LEARN = 2_097_151.0  # seconds of `learn` the compiled guard can count (2^31 of its 1/1024 s units)
 # How the compiled delivery reads a link (path.h's VX_READ_*; tests/native compares them)
-READS_PYTHON, READS_SERIAL, READS_SOCKETCAN, READS_XBEE = 0, 1, 2, 3
+READS_PYTHON, READS_SERIAL, READS_SOCKETCAN, READS_XBEE, READS_UDP = 0, 1, 2, 3, 4
 
 
 def _is(obj: object, module: str, name: str) -> bool:
@@ -152,9 +158,11 @@ def encoder_for(link: Link[Any]) -> Encoder | None:
 
 def reads_for(link: Link[Any]) -> int:
     """How the compiled delivery reads the link: READS_SERIAL a serial port's fd, READS_SOCKETCAN a SocketCAN
-    socket, READS_XBEE an XBee module's serial fd (cut into frames as its transport cuts them), READS_PYTHON
-    through its transport's own read."""
+    socket, READS_XBEE an XBee module's serial fd (cut into frames as its transport cuts them), READS_UDP a MAVLink
+    UDP socket, READS_PYTHON through its transport's own read."""
     transport = link.transport
+    if type(transport) is MavlinkUdpTransport:
+        return READS_UDP  # while the socket is open; pump hands an outage back
     if type(transport) is SerialTransport:
         return READS_SERIAL  # while the port has an fd (a device or a pty); pump hands socket:// and outages back
     if type(transport) is XBeeTransport:
@@ -166,7 +174,25 @@ def reads_for(link: Link[Any]) -> int:
 
 def port_for(link: Link[Any]) -> str:
     """Where the compiled outlet writes while the link's writer is idle: the device itself, or the writer."""
-    return ("python", "serial", "socketcan", "serial")[reads_for(link)]  # an XBee module's writes: a serial port's
+    reads, transport = reads_for(link), link.transport
+    if type(transport) is MavlinkUdpTransport and not transport.writes_as_made:
+        return "python"  # paced to an air rate, or signed: the transport's own write keeps the bucket and the order
+    return ("python", "serial", "socketcan", "serial", "udp")[reads]  # an XBee module's writes: a serial port's
+
+
+def compile_peers(handle: CompiledHandle[Any]) -> None:
+    """A udpin link read in C keeps its peers in C (the delivery notes each datagram's source without Python):
+    the transport's UdpPeers becomes its compiled twin (a Node builds it before its links open; peers a link heard
+    before then are kept, heard now)."""
+    assert native is not None
+    peers = handle.peers
+    if peers is None or type(peers) is native.UdpPeers:
+        return
+    twin = native.UdpPeers(peers.most, peers.timeout)
+    now = time.monotonic()
+    for address in peers.live(now):
+        twin.heard(address, now)
+    handle.peers = twin
 
 
 def jump_guard(guard: Guard | None) -> Guard | None:
@@ -245,6 +271,10 @@ class Compiled:
         per read."""
         reads = [reads_for(link) if receiver is not None else READS_PYTHON
                  for link, receiver in zip(links, receivers, strict=True)]
+        for link, how in zip(links, reads, strict=True):
+            handle = link.transport.compiled_handle()
+            if how == READS_UDP and handle is not None:
+                compile_peers(handle)
         can = sys.modules.get("can")  # loaded if a link is CAN: the frames the delivery hands Python are its Messages
         path: Path = self.native.Path(state, lock, deliver, links, receivers, reads, part, guard, outlets,
                                       listeners=listeners, told=told, heard=Heard, delivered=delivered,

@@ -141,17 +141,21 @@ class CompiledHandle(Generic[Device]):
     reaches them by these declared names only (`vstig_hw._vstig.DECLARED`, checked by tests/native).
 
     * `device`: the open device (None: none now); `outage`: from a loss until the device is back;
-    * `fd`: a serial port's non-blocking file descriptor, where it has one (None: pyserial's own calls);
-    * `fresh`: the port was (re)opened and nothing written since: `preamble` goes ahead of the next write.
+    * `fd`: a serial port's (or a MAVLink UDP socket's) non-blocking file descriptor, where it has one (None:
+      pyserial's own calls);
+    * `fresh`: the port was (re)opened and nothing written since: `preamble` goes ahead of the next write;
+    * `peers`: a udpin socket's peers, the addresses its sends go to (transports.mavlink.UdpPeers, or its C twin
+      once the compiled path reads the link); None elsewhere.
     """
 
-    __slots__ = ("device", "fd", "fresh", "outage", "preamble")
+    __slots__ = ("device", "fd", "fresh", "outage", "peers", "preamble")
 
     device: Device | None
     outage: bool
     fd: int | None
     fresh: bool
     preamble: bytes
+    peers: Any
 
     def __init__(self, preamble: bytes = b"") -> None:
         self.device = None
@@ -159,6 +163,7 @@ class CompiledHandle(Generic[Device]):
         self.fd = None
         self.fresh = False
         self.preamble = preamble
+        self.peers = None
 
 
 class Backoff:

@@ -1,5 +1,9 @@
 """MAVLink transports: a telemetry radio's UART, or UDP as the MAVLink world routes it (udpin, udpout).
 
+C twin: vstig_hw/_cext/path.c vstig_hw/_cext/outlet.c vstig_hw/_cext/peers.c (the compiled delivery reads a UDP
+link's socket itself, its outlet sends to it, and a udpin link's peers are a `UdpPeers` in C; held equal by
+tests/native/test_native_mavlink_udp.py).
+
 Whatever the device, a unit is one MAVLink frame exactly as on the wire (framing/mavlink.py's reader cuts the
 bytes), so captures hold whole frames and the framing knows each frame's sender. What is not a frame is counted
 under `drop_<reason>` (`drop_noise`, `drop_crc`, `drop_incompat_flags`, `drop_truncated`) and never handed on.
@@ -17,9 +21,11 @@ Both kinds also
   gateway's outlet, shared fairly among its sources, as on any slow device.
 
 `udpin` binds the address it is given (a loopback one unless asked otherwise) and sends to every address a
-datagram came from in the last `PEER_TIMEOUT` seconds, at most `MAX_PEERS` (the most recently heard): MAVLink's
-own udpin answers the last sender alone, which one stray datagram would divert. `udpout` sends to the router's
-address and hears only it (a connected socket). Neither routes: what it hears goes to the gateway alone.
+datagram came from in the last `PEER_TIMEOUT` seconds, at most `MAX_PEERS` (the most recently heard: `UdpPeers`):
+MAVLink's own udpin answers the last sender alone, which one stray datagram would divert. `udpout` sends to the
+router's address and hears only it (a connected socket). Neither routes: what it hears goes to the gateway alone.
+Its `CompiledHandle` holds the socket's fd and the peers, so the compiled delivery can read and send in C; its
+HEARTBEATs then go out when the delivery's timer calls `beat`.
 """
 
 from __future__ import annotations
@@ -37,13 +43,15 @@ from .base import DeviceTransport, TransportError
 from .serial import SerialTransport
 
 __all__ = ["AIR_SHARE", "HEARTBEAT_PERIOD", "MAX_PEERS", "PEER_TIMEOUT", "AirBudget", "MavlinkSerialTransport",
-           "MavlinkUdpTransport"]
+           "MavlinkUdpTransport", "UdpPeers"]
 
 HEARTBEAT_PERIOD = 1.0  # seconds between HEARTBEATs, MAVLink's usual rate
 AIR_SHARE = 0.5  # of a radio's air rate a link uses at most
 MAX_PEERS = 8  # addresses a udpin link sends to at most
 PEER_TIMEOUT = 10.0  # seconds a udpin link keeps sending to an address it no longer hears from
-_DATAGRAM = 65535
+_DATAGRAM = 65535  # bytes a datagram read takes at most
+_DATAGRAMS_PER_READ = 64  # datagrams one read takes at most
+Address = tuple[Any, ...]  # a socket address as the socket module gives it: (host, port[, flowinfo, scope_id])
 
 
 class AirBudget:
@@ -79,6 +87,33 @@ class AirBudget:
         return max(0.0, (min(size, self.burst) - self._refill()) / self.rate)
 
 
+class UdpPeers:
+    """The addresses a udpin link sends to: each heard from within `timeout` seconds, at most `most` of them (the
+    least recently heard is forgotten first), in the order last heard."""
+
+    def __init__(self, most: int = MAX_PEERS, timeout: float = PEER_TIMEOUT) -> None:
+        self.most, self.timeout = most, timeout
+        self._until: dict[Address, float] = {}  # kept in the order last heard
+
+    def __len__(self) -> int:
+        """Addresses held, those past their time too until `live` lets them go."""
+        return len(self._until)
+
+    def heard(self, address: Address, now: float) -> None:
+        until = self._until
+        until.pop(address, None)
+        until[address] = now + self.timeout  # re-inserted: the order is the order last heard
+        if len(until) > self.most:
+            del until[next(iter(until))]
+
+    def live(self, now: float) -> list[Address]:
+        """The addresses heard from within `timeout` of `now` (the others let go), the least recently heard first."""
+        until = self._until
+        for address in [address for address, deadline in until.items() if deadline < now]:
+            del until[address]
+        return list(until)
+
+
 def _one_frame(data: bytes) -> bool:
     """Whether `data` is exactly one MAVLink 2 frame by its header (its crc not checked)."""
     return len(data) > 12 and data[0] == 0xFD and not data[2] & 0xFE and \
@@ -99,6 +134,7 @@ class _Mavlink:
         self._next_beat = 0.0
         self._reader = MavlinkStreamReader(self.counters, prefix="drop_")
         self._stamp = stamp or (lambda unit: unit)
+        self._stamps = stamp  # None: nothing to keep in signing order (`writes_as_made`)
         self._writing = threading.Lock()  # one write at a time, each unit stamped as it goes (see the module)
         self._tail: bytes | None = None  # what a write left of a unit the port took in part: it goes next, as is
 
@@ -204,7 +240,7 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
             raise ValueError(f"a MAVLink UDP link is udpin or udpout, got {mode!r}")
         super().__init__(name or f"{mode}:{address[0]}:{address[1]}", (0.1, 2.0))
         self.mode, self.address = mode, address
-        self.peers: dict[tuple[str, int], float] = {} if mode == "udpin" else {address: float("inf")}
+        self._live.peers = UdpPeers() if mode == "udpin" else None  # udpout: the connected socket's one address
         self.listening = (f"udp/{address[0]}:{address[1]}",) if mode == "udpin" else ()
         self._mavlink_init(heartbeat, air_rate, stamp)
 
@@ -230,18 +266,47 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
             raise TransportError(f"MAVLink {self.mode}:{self.address[0]}:{self.address[1]}: "
                                  f"{exc.strerror or exc}") from None
         sock.setblocking(False)
+        self._live.fd = sock.fileno()
         return sock
 
     def _close_device(self, device: socket.socket) -> None:
+        self._live.fd = None
         device.close()
 
+    @property
+    def peers(self) -> UdpPeers | None:
+        """Whom a udpin link sends to (the compiled path's own table, once it reads the link); None: udpout."""
+        peers: UdpPeers | None = self._live.peers
+        return peers
+
+    @property
+    def writes_as_made(self) -> bool:
+        """A unit may go to the socket as it was made, written by whoever holds it (the compiled outlet): no air
+        budget to charge and no signing order to keep (`stamp`) on this link."""
+        return self.budget is None and self._stamps is None
+
+    def _heard_any(self) -> bool:
+        peers = self._live.peers
+        return peers is None or len(peers) > 0
+
+    def beat(self) -> float:
+        """Send the HEARTBEAT if one is due, as a read does (a udpin link once it heard a peer); the seconds until the
+        next is due. The compiled delivery reads the socket itself and calls this when its timer says so."""
+        device = self._live.device
+        if self.heartbeat is None:
+            return HEARTBEAT_PERIOD
+        if device is not None and self._heard_any():
+            self._beat(lambda beat: self._send(device, beat))
+        return max(0.0, self._next_beat - time.monotonic())
+
     def _read_device(self, device: socket.socket, timeout: float) -> list[bytes]:
-        if self.peers:
+        if self._heard_any():
             self._beat(lambda beat: self._send(device, beat))
         if not select.select([device], [], [], min(timeout, HEARTBEAT_PERIOD))[0]:
             return []
         frames: list[bytes] = []
-        for _ in range(64):  # what has come, a bounded number of datagrams per read
+        peers = self._live.peers
+        for _ in range(_DATAGRAMS_PER_READ):  # what has come, a bounded number of datagrams per read
             try:
                 data, source = device.recvfrom(_DATAGRAM)
             except (BlockingIOError, InterruptedError):
@@ -251,8 +316,8 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
                 continue
             self.counters["rx_bytes"] += len(data)
             self.counters["rx_datagrams"] += 1
-            if self.mode == "udpin":
-                self._heard_from(source)
+            if peers is not None:
+                peers.heard(source, time.monotonic())
             if _one_frame(data):
                 frames.append(data)  # the common datagram: one whole frame (its crc is the framing's to check)
             else:
@@ -262,24 +327,16 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
     def _write_device(self, device: socket.socket, unit: bytes) -> None:
         self._send(device, unit)
 
-    def _heard_from(self, source: tuple[str, int]) -> None:
-        peers = self.peers
-        peers.pop(source, None)
-        peers[source] = time.monotonic() + PEER_TIMEOUT  # re-inserted: the order is the order last heard
-        if len(peers) > MAX_PEERS:
-            del peers[next(iter(peers))]
-
     def _send(self, device: socket.socket, unit: bytes) -> None:
-        now = time.monotonic()
-        for peer in [peer for peer, until in list(self.peers.items()) if until < now]:
-            del self.peers[peer]
-        if not self.peers:
+        peers = self._live.peers
+        targets: list[Address | None] = [None] if peers is None else list(peers.live(time.monotonic()))
+        if not targets:
             self.counters["tx_no_peer"] += 1  # udpin: nobody has spoken to us lately
             return
         sent = False
-        for peer in list(self.peers):
+        for peer in targets:
             try:
-                if self.mode == "udpout":
+                if peer is None:  # udpout: the connected socket's address
                     device.send(unit)
                 else:
                     device.sendto(unit, peer)
