@@ -102,6 +102,7 @@ def test_close_from_a_listener_hands_over_what_the_other_readers_read_and_does_n
         node.close()
         robot_a.shutdown()
         robot_b.shutdown()
-    assert heard == [Message(Op.PUT, 99, 1, 1, 7), *sent]
+    read = node.stats()["b"]["rx"]  # b's reader may end a read after a frame that just arrived (CanTransport)
+    assert read >= 1 and heard == [Message(Op.PUT, 99, 1, 1, 7), *sent[:read]]
     assert took and took[0] < 1.0
-    assert node.stats()["b"]["in"] == 3 and not node.stats()["b"]["dropped_at_stop"]
+    assert node.stats()["b"]["in"] == read and not node.stats()["b"]["dropped_at_stop"]

@@ -1,5 +1,21 @@
 """Who a Node tells what it does (`Node.listen`): the listeners by kind, kept where both deliveries read them.
 
+What each kind is told:
+
+* `unit(link, t, unit)`: every unit a link read, before it is decoded (a recorder);
+* `heard(Heard)`: every message that passed the guard, in the order heard;
+* `refused(Heard, reason)`: every message the guard refused, with its drop counter's name;
+* `messages(link_name, t, sender, messages)`: what one unit carried past the guard, one call
+  per unit and no `Heard` built (cheaper than `heard` on a busy gateway);
+* `change(key, old, new, link_name, sender)`: our table's entry changed (`link_name` None:
+  our own put); the engine tells changes only while someone listens;
+* `tick(node)`: every control period, on the loop's thread (not while a stop drains);
+* `delivered(t)`: a batch read at wall-clock time `t` was handled and what it caused handed to
+  the links (written, or queued to a slow link's writer): the relay latency;
+* `closed()`: once, after the Node closed (every frame read handed over, the links closed).
+
+All but `closed` run under the Node's lock on the thread that did the work (a reader's, the loop's, a caller's).
+
 The listeners are held one tuple per kind, replaced (never changed) by `add` and
 `remove`: a delivery reads them without a copy, and a listener may cancel itself
 while they are gone through. The compiled delivery (`Path`) reads the same
@@ -21,8 +37,8 @@ from .parts import ChangeListener, Seat
 if TYPE_CHECKING:
     from .node import Node
 
-__all__ = ["ClosedListener", "DeliveredListener", "HeardListener", "Listeners", "Listening", "MessagesListener",
-           "RefusedListener", "TickListener", "UnitListener"]
+__all__ = ["ChangeListener", "ClosedListener", "DeliveredListener", "HeardListener", "Listeners", "Listening",
+           "MessagesListener", "RefusedListener", "TickListener", "UnitListener"]
 
 UnitListener = Callable[[Link[Any], float, Any], None]
 HeardListener = Callable[[Heard], None]

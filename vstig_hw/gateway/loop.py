@@ -127,6 +127,15 @@ class Loop:
         finally:
             state.wake_on_arrival = False
 
+    def run_paused(self, until: Callable[[], bool], deadline: float, *, stoppable: bool = True) -> bool:
+        """`run` with the ticks paused (a drain); whether `until()` holds at its end."""
+        was, self.paused = self.paused, True
+        try:
+            self.run(until, deadline, stoppable=stoppable)
+            return self._holds(until)
+        finally:
+            self.paused = was
+
     def _holds(self, until: Callable[[], bool]) -> bool:
         with self._lock:
             return until()

@@ -14,7 +14,8 @@ Modes (each picks the part that handles what links heard, see `parts`):
 
 The Node is a façade over its collaborators, one job each:
 
-* `lifecycle.LinkLifecycle`: the links from open to close, and a reader thread per link;
+* `assembly.build_parts`: what it is made of (compiled or Python parts, outlets, engine, part), chosen once;
+* `lifecycle.LinkLifecycle`: the links from open to close, a reader thread per link, the loop's thread, the stop;
 * `delivery.Delivery`: what a read returned, handled and sent on, on the reader's thread (the compiled one or
   the Python one, chosen once when the Node is built);
 * `outbound.Outbound`: the engine's outbox onto each link's outlet, in the order they flush;
@@ -27,22 +28,13 @@ One way to own it, for every command and the Python API: `open()` (or `with node
 the loop on the Node's own thread; callers then use `put`/`get`/`ask`/`probe`/`entry`/`entries`/`stats` from
 any thread, `submit(fn)` (a Future: `fn` runs on the loop's thread with the Node to itself), `listen(...)`,
 `drain(timeout)`, `wait_closed(timeout)` and `close(drain=)`. Nobody else drives the loop. A listener or rule
-that raises on the Node's threads closes it, naming why (`SwarmClosed`, and `failure`).
-
-A stop delivers or counts. `close` pauses the ticks (no refresh, no asks), stops
-the readers and hands every batch they already read to the part and the
-listeners; a transport that hands over anything later (a read that outlived the
-stop, a device's callback in flight) has its messages counted as
-`dropped_at_stop`, never handled half-way. Then what the budget held back goes
-out (`drain`, at most `drain` seconds, at the budget's pace), the devices get the
-rest of that time to take what the writers hold, what is left is counted
-(`unsent_at_close`), and the links close.
+that raises on the Node's threads closes it, naming why (`SwarmClosed`, and `failure`). A stop delivers or
+counts (`lifecycle`).
 """
 
 from __future__ import annotations
 
 import concurrent.futures
-import logging
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -54,40 +46,25 @@ from ..engine import ConflictResolver, Entry, Stigmergy
 from ..links.link import Link
 from ..timestamps import TS_NONE
 from ..wire import Message, Op
+from . import listeners as on
 from .assembly import Mode, build_parts
 from .delivery import Delivery
 from .delivery_state import DeliveryState
 from .guard import Guard
 from .latency import favour_latency
-from .lifecycle import LinkLifecycle
-from .listeners import (
-    ClosedListener,
-    DeliveredListener,
-    HeardListener,
-    Listeners,
-    Listening,
-    MessagesListener,
-    RefusedListener,
-    TickListener,
-    UnitListener,
-)
+from .lifecycle import CLOSE_DRAIN, LinkLifecycle, SwarmClosed
+from .listeners import Listeners, Listening
 from .loop import Loop, settle
 from .outbound import Outbound
-from .parts import ChangeListener, Seat
+from .parts import Seat
 
 __all__ = ["CLOSE_DRAIN", "DEFAULT_BUDGET", "DEFAULT_PERIOD", "ENGINE_STATS", "Listening", "Mode", "Node",
            "SwarmClosed", "favour_latency"]
 
 DEFAULT_PERIOD = 0.1  # the paper's control step
 DEFAULT_BUDGET = 64  # messages per link per tick: ~8 kB/s of cobs8, within a 115200-baud radio
-CLOSE_DRAIN = 1.0  # seconds `close` gives what is held back and what the devices hold, by default
 
-log = logging.getLogger(__name__)
 T = TypeVar("T")
-
-
-class SwarmClosed(RuntimeError):
-    """The swarm was closed (or its gateway stopped): no call reaches it any more."""
 
 
 class Node:
@@ -99,7 +76,6 @@ class Node:
         if not self.links:
             raise ValueError("a node needs at least one link")
         self.mode, self.period, self.robot_id = mode, period, robot_id
-        self.label = f"the gateway on {', '.join(link.name for link in self.links)}"  # what errors call it
         self._lock = threading.RLock()  # whoever works on the Node holds it: a reader thread, the loop, a caller
         self._state = DeliveryState()  # its `wake` is the loop's one token (a call, a window or a device's room)
         self._listeners = Listeners(self._lock)
@@ -112,60 +88,51 @@ class Node:
         self._outbound = Outbound(self.outlets, self.seat, self._state)
         self._delivery = Delivery(self.links, self.part, self.guard, self.signing, self._listeners, self._outbound,
                                   self._state, self._lock, parts.compiled)
-        self._lifecycle = LinkLifecycle(self.links, self._delivery)
         self._loop = Loop(self._lock, self._state, period, self._tick, self._outbound.spread)
-        self.failure: BaseException | None = None  # what broke the Node's loop, which closed it (None: nothing)
-        self._closed_because: str | None = None  # why no call gets in any more (None: open for calls)
-        self._shut = False  # the links were closed (or are being closed)
-        self._shutting = threading.Lock()
-        self._finished = threading.Event()  # the stop is over: every link closed, about to tell `closed` listeners
-        self._close_drain = CLOSE_DRAIN
+        self._lifecycle = LinkLifecycle(f"the gateway on {', '.join(link.name for link in self.links)}", self.links,
+                                        self._delivery, self._outbound, self._loop, self._listeners, self._lock,
+                                        self._drain_until)
 
-    # -- lifetime --------------------------------------------------------------
+    # -- lifetime (`lifecycle`) -------------------------------------------------
     def open(self) -> None:
         """Open every link, start reading and start the loop on a thread of the Node's own until `close`; on
         failure, close what was opened and re-raise. Once per Node."""
-        if self._loop.started or self._shut:
-            raise RuntimeError(f"{self.label} was opened once already")
-        try:
-            self._lifecycle.open()
-        except BaseException:
-            self.close(drain=0.0)
-            raise
-        self._lifecycle.start_reading()
-        self._loop.start(f"vstig-gateway-{self.robot_id}", self._ended)
+        self._lifecycle.open(f"vstig-gateway-{self.robot_id}")
 
     def close(self, drain: float = CLOSE_DRAIN) -> None:
         """Stop: ticks pause, every frame already read is handled (later ones counted), what is held back goes
-        out within `drain` seconds, the links close. Safe twice and from any thread.
-
-        From the Node's own threads (a listener, a submitted call) it asks the loop to stop and returns: the
-        loop's thread then closes. From another thread it waits until the Node closed.
-        """
-        self._close_drain = drain
-        loop = self._loop
-        if loop.running:
-            loop.request_stop()
-            if not self.on_node_thread():
-                loop.join()
-            return
-        self._shutdown(0.0 if self.on_node_thread() else drain)  # never opened: nothing to drain
+        out within `drain` seconds, the links close. Safe twice and from any thread: from the Node's own threads
+        (a listener, a submitted call) it asks the loop to stop and returns, from another it waits for the end."""
+        self._lifecycle.close(drain, self.on_node_thread())
 
     def wait_closed(self, timeout: float | None = None) -> bool:
         """Wait until the Node closed (by `close`, or by a failure on its threads: see `failure`) or `timeout`
         seconds passed; whether it closed."""
-        return self._finished.wait(timeout)
+        return self._lifecycle.wait_closed(timeout)
+
+    @property
+    def failure(self) -> BaseException | None:
+        """What broke the Node's loop, which closed it (None: nothing)."""
+        return self._lifecycle.failure
 
     @property
     def closed(self) -> bool:
         """Whether calls are refused: the Node closed, began closing, or its loop thread failed."""
-        return self._closed_because is not None
+        return self._lifecycle.closed_because is not None
 
     def check_open(self) -> None:
         """SwarmClosed naming why, once calls are refused (see `closed`)."""
-        because = self._closed_because
-        if because is not None:
-            raise SwarmClosed(f"{self.label} is closed: {because}")
+        if self._lifecycle.closed_because is not None:
+            raise self._lifecycle.closed_error()
+
+    @property
+    def label(self) -> str:
+        """What errors call this node ("... is closed: why")."""
+        return self._lifecycle.label
+
+    @label.setter
+    def label(self, label: str) -> None:
+        self._lifecycle.label = label
 
     def __enter__(self) -> Node:
         self.open()
@@ -173,42 +140,6 @@ class Node:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-    def _ended(self, failure: BaseException | None) -> None:
-        """On the loop's thread once it returned: a failure closes the Node naming it (`failure`, for whoever
-        reports it: the command raises it, the Python API logs it); then the stop."""
-        if failure is not None:
-            with self._lock:
-                self.failure = failure
-                if self._closed_because is None:
-                    self._closed_because = f"its gateway stopped: {type(failure).__name__}: {failure}"
-        self._shutdown(self._close_drain)
-
-    def _shutdown(self, drain: float) -> None:
-        """The stop, once (see the module docstring): delivers or counts, drains, closes, tells `closed`."""
-        with self._shutting:
-            if self._shut:
-                return
-            self._shut = True
-        deadline = time.monotonic() + drain
-        with self._lock:
-            if self._closed_because is None:
-                self._closed_because = "it was closed"
-            self._loop.paused = True
-        self._lifecycle.stop_reading()
-        with self._lock:  # what the readers read is handled; whatever comes later is counted (`Delivery.deliver`)
-            self._delivery.stop_taking(self.label)
-        self._loop.fail_calls(self._closed_error)
-        if self._lifecycle.opened and self.outlets and self._loop.on_thread():
-            self._drain_until(deadline, stoppable=False)
-        self._outbound.close(deadline)
-        self._lifecycle.close()
-        self._finished.set()
-        for listener in self._listeners.closed:
-            try:
-                listener()
-            except Exception:
-                log.exception("a closed listener of %s failed", self.label)
 
     # -- the robot's program (ENGINE mode) --------------------------------------
     # Any thread may call these: they take the Node's lock themselves.
@@ -272,27 +203,13 @@ class Node:
     # -- other threads and listeners ------------------------------------------------
     # Whoever works on the Node holds its lock (an RLock nobody holds while waiting): a reader thread with a
     # batch, the loop, a caller of put/get/ask. Listeners run under it, on whichever thread did the work.
-    def listen(self, *, unit: UnitListener | None = None, heard: HeardListener | None = None,
-               refused: RefusedListener | None = None, messages: MessagesListener | None = None,
-               change: ChangeListener | None = None, tick: TickListener | None = None,
-               delivered: DeliveredListener | None = None, closed: ClosedListener | None = None) -> Listening:
-        """Call these as the Node works, until the returned handle's `cancel()`; safe from any thread.
-
-        * `unit(link, t, unit)`: every unit a link read, before it is decoded (a recorder);
-        * `heard(Heard)`: every message that passed the guard, in the order heard;
-        * `refused(Heard, reason)`: every message the guard refused, with its drop counter's name;
-        * `messages(link_name, t, sender, messages)`: what one unit carried past the guard, one call
-          per unit and no `Heard` built (cheaper than `heard` on a busy gateway);
-        * `change(key, old, new, link_name, sender)`: our table's entry changed (`link_name` None:
-          our own put); the engine tells changes only while someone listens;
-        * `tick(node)`: every control period, on the loop's thread (not while a stop drains);
-        * `delivered(t)`: a batch read at wall-clock time `t` was handled and what it caused handed to
-          the links (written, or queued to a slow link's writer): the relay latency;
-        * `closed()`: once, after the Node closed (every frame read handed over, the links closed).
-
-        All but `closed` run under the Node's lock on the thread that did the work: quick, and
-        never waiting for the loop (`on_node_thread` tells a listener it runs there).
-        """
+    def listen(self, *, unit: on.UnitListener | None = None, heard: on.HeardListener | None = None,
+               refused: on.RefusedListener | None = None, messages: on.MessagesListener | None = None,
+               change: on.ChangeListener | None = None, tick: on.TickListener | None = None,
+               delivered: on.DeliveredListener | None = None, closed: on.ClosedListener | None = None) -> Listening:
+        """Call these as the Node works, until the returned handle's `cancel()`; safe from any thread. What each
+        is told, and when: the `listeners` module. All but `closed` run under the Node's lock on the thread that did
+        the work: quick, and never waiting for the loop (`on_node_thread` tells a listener it runs there)."""
         listening = Listening(self._listeners, unit, heard, refused, messages, change, tick, delivered, closed)
         self._listeners.add(listening)
         return listening
@@ -310,17 +227,14 @@ class Node:
         Node that closes first fails it with SwarmClosed.
         """
         future: concurrent.futures.Future[T] = concurrent.futures.Future()
-        if self.on_node_thread() or not (self._loop.running or self._shut):
+        if self.on_node_thread() or not (self._loop.running or self._lifecycle.shut):
             with self._lock:
                 settle(future, call)
             return future
         self._loop.call_soon(future, call)
-        if self._shut:  # closed meanwhile: nobody will run it
-            self._loop.fail_calls(self._closed_error)
+        if self._lifecycle.shut:  # closed meanwhile: nobody will run it
+            self._loop.fail_calls(self._lifecycle.closed_error)
         return future
-
-    def _closed_error(self) -> SwarmClosed:
-        return SwarmClosed(f"{self.label} is closed: {self._closed_because}")
 
     def drain(self, timeout: float) -> bool:
         """Send what is held back now (budget windows, the devices' queues), pausing the ticks; True once it
@@ -341,17 +255,10 @@ class Node:
         except (SwarmClosed, concurrent.futures.TimeoutError):
             return False
 
-    def _drain_until(self, deadline: float, *, stoppable: bool = True) -> bool:
+    def _drain_until(self, deadline: float, stoppable: bool = True) -> bool:
         """On the loop's thread: run the loop, ticks paused, until what the outlets hold now has left."""
-        loop, outbound = self._loop, self._outbound
-        loop.paused = True
-        try:
-            marks = outbound.marks()
-            loop.run(until=lambda: outbound.drained(marks), deadline=deadline, stoppable=stoppable)
-            with self._lock:
-                return outbound.drained(marks)
-        finally:
-            loop.paused = self._shut
+        marks = self._outbound.marks()
+        return self._loop.run_paused(lambda: self._outbound.drained(marks), deadline, stoppable=stoppable)
 
     def _tick(self) -> None:
         """Every period, on the loop's thread under the lock: the links' framings, the part, the tick listeners."""
