@@ -81,6 +81,27 @@ PyObject *vx_call(PyObject *obj, PyObject *name, const char *format, ...);
 /* counters[name] += n on a Counters (a dict subclass); -1 with an exception set on failure. */
 int vx_count(PyObject *counters, PyObject *name, Py_ssize_t n);
 
+/* A declared slot of one Python class (`__slots__`), read and written at its offset in the object rather than by
+ * a name lookup per access (what PyObject_GetAttr would find: the class's member descriptor). `type` is the class
+ * it was resolved on; an object of any other type, or a name that is no object slot there, takes GetAttr/SetAttr. */
+typedef struct {
+    PyTypeObject *type; /* borrowed: the resolved object keeps it alive */
+    Py_ssize_t offset;  /* 0: not a slot, use the name */
+} vx_slot_t;
+
+/* Resolves `name` on obj's class (always succeeds: an unresolved slot falls back to the name). */
+void vx_slot_resolve(vx_slot_t *slot, PyObject *obj, PyObject *name);
+/* obj.<name> (new reference), or NULL with an exception. */
+PyObject *vx_slot_get(const vx_slot_t *slot, PyObject *obj, PyObject *name);
+/* obj.<name> = value; 0, or -1 with an exception. */
+int vx_slot_set(const vx_slot_t *slot, PyObject *obj, PyObject *name, PyObject *value);
+
+/* time.time() and time.monotonic() as Python reads them (the Node compares what we set with them): on Linux the
+ * same clock_gettime clocks CPython's pytime.c reads, without a call into Python; elsewhere those very calls. -1.0
+ * with an exception on failure. */
+double vx_time_time(void);
+double vx_time_monotonic(void);
+
 /* A Message of msg's fields (new reference), built as tuple.__new__(Message, words) is. */
 PyObject *vx_message(const vstig_msg_t *msg);
 /* An Entry (new reference). */

@@ -7,6 +7,10 @@
 
 #include <stdarg.h>
 #include <string.h>
+#include <structmember.h>
+#ifdef __linux__
+#include <time.h>
+#endif
 
 #include "path.h"
 #include "peers.h"
@@ -140,19 +144,89 @@ PyObject *vx_name(const char *name) {
 
 int vx_count(PyObject *counters, PyObject *name, Py_ssize_t n) {
     PyObject *old, *sum, *add;
+    Py_ssize_t was = -1;
     int status;
     if (n == 0) return 0; /* Counters compare missing names as 0 */
     old = PyDict_GetItemWithError(counters, name);
     if (old == NULL && PyErr_Occurred()) return -1;
-    add = PyLong_FromSsize_t(n);
-    if (add == NULL) return -1;
-    sum = old == NULL ? Py_NewRef(add) : PyNumber_Add(old, add);
-    Py_DECREF(add);
+    if (old != NULL && PyLong_CheckExact(old) && (was = PyLong_AsSsize_t(old)) == -1 && PyErr_Occurred())
+        PyErr_Clear(); /* beyond a Py_ssize_t: PyNumber_Add below */
+    if (old == NULL || (n > 0 && was >= 0 && was <= PY_SSIZE_T_MAX - n)) { /* the common case: no int object more */
+        sum = PyLong_FromSsize_t(old == NULL ? n : was + n);
+    } else {
+        add = PyLong_FromSsize_t(n);
+        if (add == NULL) return -1;
+        sum = PyNumber_Add(old, add);
+        Py_DECREF(add);
+    }
     if (sum == NULL) return -1;
     status = PyDict_SetItem(counters, name, sum);
     Py_DECREF(sum);
     return status;
 }
+
+void vx_slot_resolve(vx_slot_t *slot, PyObject *obj, PyObject *name) {
+    PyObject *descr = PyObject_GetAttr((PyObject *)Py_TYPE(obj), name); /* a slot: the class's member descriptor */
+    slot->type = NULL;
+    slot->offset = 0;
+    if (descr == NULL) {
+        PyErr_Clear(); /* no such attribute on the class: GetAttr then tells the name */
+        return;
+    }
+    if (Py_IS_TYPE(descr, &PyMemberDescr_Type) && ((PyMemberDescrObject *)descr)->d_member->type == T_OBJECT_EX &&
+        !(((PyMemberDescrObject *)descr)->d_member->flags & READONLY)) {
+        slot->type = (PyTypeObject *)Py_NewRef((PyObject *)Py_TYPE(obj)); /* a class: held for the process's life */
+        slot->offset = ((PyMemberDescrObject *)descr)->d_member->offset;
+    }
+    Py_DECREF(descr);
+}
+
+PyObject *vx_slot_get(const vx_slot_t *slot, PyObject *obj, PyObject *name) {
+    PyObject *value;
+    if (slot->offset == 0 || Py_TYPE(obj) != slot->type) return PyObject_GetAttr(obj, name);
+    value = *(PyObject **)((char *)obj + slot->offset);
+    return value == NULL ? PyObject_GetAttr(obj, name) : Py_NewRef(value); /* unset: GetAttr raises as Python does */
+}
+
+int vx_slot_set(const vx_slot_t *slot, PyObject *obj, PyObject *name, PyObject *value) {
+    PyObject **field, *old;
+    if (slot->offset == 0 || Py_TYPE(obj) != slot->type) return PyObject_SetAttr(obj, name, value);
+    field = (PyObject **)((char *)obj + slot->offset);
+    old = *field;
+    *field = Py_NewRef(value);
+    Py_XDECREF(old);
+    return 0;
+}
+
+#ifdef __linux__
+static double clock_seconds(clockid_t clock) {
+    struct timespec now;
+    if (clock_gettime(clock, &now) != 0) {
+        PyErr_SetFromErrno(PyExc_OSError);
+        return -1.0;
+    }
+    return (double)now.tv_sec + (double)now.tv_nsec * 1e-9; /* as pytime.c's _PyTime_AsSecondsDouble rounds */
+}
+
+double vx_time_time(void) { return clock_seconds(CLOCK_REALTIME); }
+
+double vx_time_monotonic(void) { return clock_seconds(CLOCK_MONOTONIC); }
+#else
+static double python_clock(PyObject *name) {
+    PyObject *time_module = PyImport_ImportModule("time"), *now;
+    double seconds;
+    if (time_module == NULL) return -1.0;
+    now = PyObject_CallMethodNoArgs(time_module, name);
+    Py_DECREF(time_module);
+    seconds = now == NULL ? -1.0 : PyFloat_AsDouble(now);
+    Py_XDECREF(now);
+    return seconds;
+}
+
+double vx_time_time(void) { return python_clock(vx_n.time); }
+
+double vx_time_monotonic(void) { return python_clock(vx_n.monotonic); }
+#endif
 
 static PyObject *small_tuple(PyTypeObject *type, Py_ssize_t n, const long *fields) {
     /* what tuple.__new__(type, fields) builds, without the intermediate tuple */

@@ -93,7 +93,7 @@ static int submit_through_writer(vx_outlet_t *o, const vstig_msg_t *msgs, size_t
 #ifndef _WIN32
 /* A serial transport's open fd (its CompiledHandle's), or -1 when it has none now (lost, or no fd at all). */
 static int serial_fd(vx_port_t *p) {
-    PyObject *fd = PyObject_GetAttr(p->handle, vx_n.fd);
+    PyObject *fd = vx_slot_get(&p->fd_slot, p->handle, vx_n.fd);
     long value;
     if (fd == NULL) return -2;
     value = fd == Py_None ? -1 : PyLong_AsLong(fd);
@@ -117,7 +117,7 @@ static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         PyErr_NoMemory();
         return -1;
     }
-    fresh = PyObject_GetAttr(p->handle, vx_n.fresh);
+    fresh = vx_slot_get(&p->fresh_slot, p->handle, vx_n.fresh);
     if (fresh == NULL) goto error;
     if (PyObject_IsTrue(fresh) == 1) { /* the first write since the port opened: the preamble goes first */
         PyObject *preamble = PyObject_GetAttr(p->handle, vx_n.preamble);
@@ -130,7 +130,7 @@ static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         at = (size_t)PyBytes_GET_SIZE(preamble);
         memcpy(buf, PyBytes_AS_STRING(preamble), at);
         Py_DECREF(preamble);
-        if (PyObject_SetAttr(p->handle, vx_n.fresh, Py_False) < 0) {
+        if (vx_slot_set(&p->fresh_slot, p->handle, vx_n.fresh, Py_False) < 0) {
             Py_DECREF(fresh);
             goto error;
         }
@@ -575,6 +575,8 @@ static PyObject *Outlet_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
         PyErr_SetString(PyExc_TypeError, "writing straight to a device needs its transport's compiled handle");
         goto fail;
     }
+    vx_slot_resolve(&self->port.fd_slot, self->port.handle, vx_n.fd);
+    vx_slot_resolve(&self->port.fresh_slot, self->port.handle, vx_n.fresh);
     return (PyObject *)self;
 fail:
     Py_DECREF(self);

@@ -45,19 +45,10 @@
 
 static PyObject *CAN_MESSAGE;
 
-static PyObject *TIME_TIME, *TIME_MONOTONIC; /* Python's own clocks: the Node compares what we set with them */
+/* time.time() and time.monotonic() as the Python delivery reads them (ext.h; -1.0 with an exception on failure). */
+static double wall_clock(void) { return vx_time_time(); }
 
-/* time.time() or time.monotonic(), as the Python delivery reads them (-1.0 with an exception on failure). */
-static double clock_of(PyObject *clock) {
-    PyObject *now = PyObject_CallNoArgs(clock);
-    double seconds = now == NULL ? -1.0 : PyFloat_AsDouble(now);
-    Py_XDECREF(now);
-    return seconds;
-}
-
-static double wall_clock(void) { return clock_of(TIME_TIME); }
-
-static double monotonic(void) { return clock_of(TIME_MONOTONIC); }
+static double monotonic(void) { return vx_time_monotonic(); }
 
 /* ---- one batch: _arrive ---------------------------------------------------------------- */
 
@@ -317,7 +308,7 @@ static int spread(vx_path_t *p, Py_ssize_t heard_on, double now, int *held_back,
     *held_back = any;
     *when_back = retry;
     value = any ? PyFloat_FromDouble(retry) : Py_NewRef(Py_None);
-    if (value == NULL || PyObject_SetAttr(p->state, vx_n.retry_at, value) < 0) status = -1;
+    if (value == NULL || vx_slot_set(&p->retry_at, p->state, vx_n.retry_at, value) < 0) status = -1;
     Py_XDECREF(value);
     return status;
 }
@@ -455,25 +446,25 @@ static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
     int taking_now, status, held_back = 0, python;
     double sleep_until = 0.0, retry = 0.0;
     if (!p->fast || p->stopping || p->links[index].receiver == NULL || listened(p)) return 0;
-    got = PyObject_CallMethodOneArg(p->lock, vx_n.acquire, Py_False);
+    got = PyObject_CallOneArg(p->acquire, Py_False);
     if (got == NULL) return -1;
     status = PyObject_IsTrue(got);
     Py_DECREF(got);
     if (status <= 0) return status;
     taking_now = !p->stopping; /* a stop under way: the Python delivery knows what to hand on and count */
     if (taking_now <= 0) {
-        got = PyObject_CallMethodNoArgs(p->lock, vx_n.release);
+        got = PyObject_CallNoArgs(p->release);
         Py_XDECREF(got);
         return taking_now < 0 || got == NULL ? -1 : 0;
     }
     /* this batch's listeners told here; Python code of the user's may ask whether it runs on the Node's thread */
     python = told_now(p, &told) < 0 ? -1 : calls_python(p, &told);
     ident = python > 0 ? thread_ident() : NULL;
-    if (python < 0 || (python && (ident == NULL || PyObject_SetAttr(p->state, vx_n.reader_thread, ident) < 0))) {
+    if (python < 0 || (python && (ident == NULL || vx_slot_set(&p->reader_thread, p->state, vx_n.reader_thread, ident) < 0))) {
         Py_XDECREF(ident);
         Py_XDECREF(told.messages);
         Py_XDECREF(told.refused);
-        got = PyObject_CallMethodNoArgs(p->lock, vx_n.release);
+        got = PyObject_CallNoArgs(p->release);
         Py_XDECREF(got);
         return -1;
     }
@@ -489,20 +480,20 @@ static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
     if (status < 0) fail(p);
     if (python) {
         ident = PyLong_FromLong(0);
-        if (ident != NULL) (void)PyObject_SetAttr(p->state, vx_n.reader_thread, ident);
+        if (ident != NULL) (void)vx_slot_set(&p->reader_thread, p->state, vx_n.reader_thread, ident);
         Py_XDECREF(ident);
     }
-    got = PyObject_CallMethodNoArgs(p->lock, vx_n.release);
+    got = PyObject_CallNoArgs(p->release);
     if (got == NULL) return -1;
     Py_DECREF(got);
     if (status < 0) return 1; /* handled: the failure reaches `run` */
     /* the loop is woken only when it must look: `run` has an `until`, or a window holds messages back sooner than
      * it would look by itself (read after spread set retry_at; the loop sets sleep_until before reading it) */
-    wake_on = PyObject_GetAttr(p->state, vx_n.wake_on_arrival);
+    wake_on = vx_slot_get(&p->wake_on_arrival, p->state, vx_n.wake_on_arrival);
     status = wake_on == NULL ? -1 : PyObject_IsTrue(wake_on);
     Py_XDECREF(wake_on);
     if (status == 0 && held_back) {
-        sleep = PyObject_GetAttr(p->state, vx_n.sleep_until);
+        sleep = vx_slot_get(&p->sleep_until, p->state, vx_n.sleep_until);
         if (sleep == NULL) status = -1;
         else {
             sleep_until = PyFloat_AsDouble(sleep);
@@ -572,7 +563,7 @@ static int read_serial(vx_link_t *link, int fd, double timeout, ssize_t *got) {
  * own read takes this turn (no fd now, or the device failed: it knows how to tell and reopen). */
 static PyObject *pump_serial(vx_path_t *p, Py_ssize_t index, double timeout) {
     vx_link_t *link = &p->links[index];
-    PyObject *fd_obj = PyObject_GetAttr(link->handle, vx_n.fd);
+    PyObject *fd_obj = vx_slot_get(&link->handle_fd, link->handle, vx_n.fd);
     long fd;
     ssize_t got;
     int ready;
@@ -1015,18 +1006,6 @@ static PyObject *pump_socketcan(vx_path_t *p, Py_ssize_t index, double timeout) 
 
 /* ---- the Python type ------------------------------------------------------------------------ */
 
-/* Python's own clocks, once (the Node compares what we set with them). */
-static int intern(void) {
-    PyObject *time_module;
-    if (TIME_TIME != NULL) return 0;
-    time_module = PyImport_ImportModule("time");
-    if (time_module == NULL) return -1;
-    TIME_TIME = PyObject_GetAttr(time_module, vx_n.time);
-    TIME_MONOTONIC = PyObject_GetAttr(time_module, vx_n.monotonic);
-    Py_DECREF(time_module);
-    return TIME_TIME == NULL || TIME_MONOTONIC == NULL ? -1 : 0;
-}
-
 /* An XBee transport's API mode and quiet time (`api`, `quiet_after`); 0, or -1 with an exception. */
 static int xbee_settings(vx_link_t *link) {
     PyObject *api = PyObject_GetAttr(link->transport, vx_n.api),
@@ -1047,8 +1026,7 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
         *told = NULL, *heard = Py_None, *delivered = NULL, *can_message = Py_None;
     vx_path_t *self;
     Py_ssize_t i;
-    if (intern() < 0 ||
-        !PyArg_ParseTupleAndKeywords(args, kwds, "OOOO!O!O!OOO!|$O!O!OO!O", kwlist, &state, &lock, &deliver,
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OOOO!O!O!OOO!|$O!O!OO!O", kwlist, &state, &lock, &deliver,
                                      &PyList_Type, &links, &PyList_Type, &receivers, &PyList_Type, &reads, &part,
                                      &guard, &PyList_Type, &outlets, &PyList_Type, &listeners, &PyList_Type,
                                      &told, &heard, &PyList_Type, &delivered, &can_message))
@@ -1072,6 +1050,16 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     if (self == NULL) return NULL;
     self->state = Py_NewRef(state);
     self->lock = Py_NewRef(lock);
+    self->acquire = PyObject_GetAttr(lock, vx_n.acquire);
+    self->release = self->acquire == NULL ? NULL : PyObject_GetAttr(lock, vx_n.release);
+    if (self->release == NULL) {
+        Py_DECREF(self);
+        return NULL;
+    }
+    vx_slot_resolve(&self->reader_thread, state, vx_n.reader_thread);
+    vx_slot_resolve(&self->wake_on_arrival, state, vx_n.wake_on_arrival);
+    vx_slot_resolve(&self->sleep_until, state, vx_n.sleep_until);
+    vx_slot_resolve(&self->retry_at, state, vx_n.retry_at);
     self->deliver = Py_NewRef(deliver);
     self->part = Py_NewRef(part);
     self->guard = Py_NewRef(guard);
@@ -1113,6 +1101,7 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
                        : PyObject_CallMethodNoArgs(link->transport, vx_n.compiled_handle);
         if (link->handle == Py_None && link->reads != VX_READ_PYTHON && !PyErr_Occurred())
             PyErr_Format(PyExc_TypeError, "link %R's transport gives no compiled handle to read it by", link->name);
+        if (link->handle != NULL && link->handle != Py_None) vx_slot_resolve(&link->handle_fd, link->handle, vx_n.fd);
         if (link->name == NULL || link->counters == NULL || link->tcounters == NULL || PyErr_Occurred()) {
             Py_DECREF(self);
             return NULL;
@@ -1129,6 +1118,8 @@ static int Path_traverse(vx_path_t *self, visitproc visit, void *arg) {
     Py_ssize_t i;
     Py_VISIT(self->state);
     Py_VISIT(self->lock);
+    Py_VISIT(self->acquire);
+    Py_VISIT(self->release);
     Py_VISIT(self->deliver);
     Py_VISIT(self->part);
     Py_VISIT(self->guard);
@@ -1150,6 +1141,8 @@ static int Path_clear(vx_path_t *self) {
     Py_ssize_t i;
     Py_CLEAR(self->state);
     Py_CLEAR(self->lock);
+    Py_CLEAR(self->acquire);
+    Py_CLEAR(self->release);
     Py_CLEAR(self->deliver);
     Py_CLEAR(self->part);
     Py_CLEAR(self->guard);

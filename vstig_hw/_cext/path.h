@@ -17,6 +17,7 @@ typedef struct {
     vx_receiver_t *receiver; /* its framing in C, or NULL: this link's units take the Python path */
     PyObject *link, *name, *counters, *transport, *tcounters;
     PyObject *handle;        /* a device read here: transport.compiled_handle() (CompiledHandle), else None */
+    vx_slot_t handle_fd;     /* its `fd` slot */
     PyObject *device;        /* SocketCAN: the bus `fd` belongs to */
     int fd;
     double polled;           /* SocketCAN: when the bus's own drop counts were last polled */
@@ -34,6 +35,8 @@ typedef struct {
     PyObject_HEAD
     PyObject *state;    /* the Node's DeliveryState (vstig_hw/gateway/delivery_state.py): what it shares with us */
     PyObject *lock;     /* its lock */
+    PyObject *acquire, *release; /* the lock's methods, bound once (one Python call less per batch each) */
+    vx_slot_t reader_thread, wake_on_arrival, sleep_until, retry_at; /* the state's slots we touch per batch */
     PyObject *deliver;  /* its Python delivery (Node._deliver): the slow path */
     PyObject *part;     /* Seat, Relay, or None */
     PyObject *guard;    /* JumpGuard, a Python Guard, or None */
