@@ -68,6 +68,8 @@ typedef struct {
     /* a refused message as told (vstig_hw.links.link.Heard) */
     PyObject *message, *t, *sender;
     PyObject *arbitration_id, *is_extended_id, *is_fd, *is_remote_frame, *is_error_frame, *data, *time, *monotonic;
+    /* a python-can bus (can.BusABC), written by its own send */
+    PyObject *send;
 } vx_names_t;
 
 extern vx_names_t vx_n;

@@ -37,6 +37,7 @@ vx_names_t vx_n;
 #define ENCODER "vstig_hw._vstig:Encoder"
 #define LOCK "_thread:RLock"
 #define CAN_MESSAGE_TYPE "can.message:Message"
+#define CAN_BUS "can.bus:BusABC"
 #define TIME "time"
 #define HEARD "vstig_hw.links.link:Heard"
 
@@ -84,7 +85,7 @@ static const struct {
     {&vx_n.arbitration_id, "arbitration_id", CAN_MESSAGE_TYPE}, {&vx_n.is_extended_id, "is_extended_id",
     CAN_MESSAGE_TYPE}, {&vx_n.is_fd, "is_fd", CAN_MESSAGE_TYPE}, {&vx_n.is_remote_frame, "is_remote_frame",
     CAN_MESSAGE_TYPE}, {&vx_n.is_error_frame, "is_error_frame", CAN_MESSAGE_TYPE},
-    {&vx_n.data, "data", CAN_MESSAGE_TYPE},
+    {&vx_n.data, "data", CAN_MESSAGE_TYPE}, {&vx_n.send, "send", CAN_BUS},
     {&vx_n.message, "message", HEARD}, {&vx_n.t, "t", HEARD}, {&vx_n.sender, "sender", HEARD},
     {&vx_n.time, "time", TIME}, {&vx_n.monotonic, "monotonic", TIME},
 };

@@ -90,6 +90,87 @@ static int submit_through_writer(vx_outlet_t *o, const vstig_msg_t *msgs, size_t
     return status;
 }
 
+/* `sent` of a batch's `count` CAN frames went to the bus (carrying `sent_messages` of its `n`): counted as the
+ * transport's write_nowait counts them; the frames after them, as can.Messages, go to the writer, whose
+ * write_nowait meets what the bus did not take here (busy, gone) and handles it as it always does. 0, or -1. */
+static int sent_and_rest(vx_outlet_t *o, const vx_tx_t *tx, const vstig_can_frame_t *frames, size_t sent,
+                         size_t count, size_t n, size_t sent_messages) {
+    PyObject *rest;
+    size_t k;
+    int status;
+    if (sent && (vx_count(o->port.counters, vx_n.tx, (Py_ssize_t)sent) < 0 ||
+                 vx_count(o->counters, vx_n.out, (Py_ssize_t)sent_messages) < 0))
+        return -1;
+    if (sent == count) return 0;
+    rest = PyList_New((Py_ssize_t)(count - sent));
+    for (k = sent; rest != NULL && k < count; k++) {
+        PyObject *unit = vx_frame_unit(tx, &frames[k]);
+        if (unit == NULL) Py_CLEAR(rest);
+        else PyList_SET_ITEM(rest, (Py_ssize_t)(k - sent), unit);
+    }
+    status = rest == NULL ? -1 : writer_submit(o, rest, (Py_ssize_t)(n - sent_messages));
+    Py_XDECREF(rest);
+    return status;
+}
+
+/* Whether the transport holds its bus now with no outage to end (a reopened bus's first write is its own: it ends
+ * the outage): the bus (new reference), None when it does not, NULL with an exception. */
+static PyObject *live_bus(vx_port_t *p) {
+    PyObject *device = PyObject_GetAttr(p->handle, vx_n.device), *outage;
+    int recovering;
+    if (device == NULL || device == Py_None) return device;
+    outage = PyObject_GetAttr(p->handle, vx_n.outage);
+    recovering = outage == NULL ? -1 : PyObject_IsTrue(outage);
+    Py_XDECREF(outage);
+    if (recovering == 0) return device;
+    Py_DECREF(device);
+    return recovering < 0 ? NULL : Py_NewRef(Py_None);
+}
+
+/* The batch's frames to a python-can bus by its own send(unit, 0.0), as CanTransport.write_nowait sends them (an
+ * interface whose send cannot block: `_send`, then `_sent`'s count); from the first frame the bus does not take,
+ * the rest goes to the writer. 1 done (or handed to the writer), 0 not tried (no bus now), -1 error. */
+static int write_pythoncan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
+    const vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
+    vstig_can_frame_t stack[64], *frames = stack;
+    size_t count, i = 0, base, extra, sent_messages = 0;
+    PyObject *bus = live_bus(&o->port), *zero = NULL;
+    int status = 1;
+    if (bus == NULL || bus == Py_None) {
+        Py_XDECREF(bus);
+        return bus == NULL ? -1 : 0;
+    }
+    if ((n > 64 && (frames = PyMem_Malloc(n * sizeof *frames)) == NULL) || (zero = PyFloat_FromDouble(0.0)) == NULL) {
+        if (frames == NULL) PyErr_NoMemory();
+        goto error;
+    }
+    count = vx_tx_frames(tx, msgs, n, frames);
+    base = n / count;
+    extra = n % count; /* LinkWriter.submit's spread: unit i carries base + (i < extra) */
+    for (; i < count; i++) {
+        PyObject *unit = vx_frame_unit(tx, &frames[i]), *done;
+        if (unit == NULL) goto error;
+        done = PyObject_CallMethodObjArgs(bus, vx_n.send, unit, zero, NULL);
+        Py_DECREF(unit);
+        if (done == NULL) {
+            if (!PyErr_ExceptionMatches(PyExc_Exception)) goto error;
+            PyErr_Clear(); /* busy, or gone: the writer's write_nowait meets it again */
+            break;
+        }
+        Py_DECREF(done);
+        sent_messages += base + (i < extra);
+    }
+    if (sent_and_rest(o, tx, frames, i, count, n, sent_messages) < 0) goto error;
+    goto done;
+error:
+    status = -1;
+done:
+    Py_DECREF(bus);
+    Py_XDECREF(zero);
+    if (frames != stack && frames != NULL) PyMem_Free(frames);
+    return status;
+}
+
 #ifndef _WIN32
 /* A serial transport's open fd (its CompiledHandle's), or -1 when it has none now (lost, or no fd at all). */
 static int serial_fd(vx_port_t *p) {
@@ -216,7 +297,6 @@ static int write_socketcan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     vstig_can_frame_t stack[64], *frames = stack;
     size_t count, i, base, extra, sent_messages = 0;
     uint8_t raw[72];
-    PyObject *rest;
     int fd = vx_socketcan_fd(p->handle, &p->device, &p->fd, 0), status = 1;
     if (fd < -1) return -1;
     if (fd < 0) return 0;
@@ -232,23 +312,8 @@ static int write_socketcan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         if (send(fd, raw, size, MSG_DONTWAIT) != (ssize_t)size) break;
         sent_messages += base + (i < extra);
     }
-    if (i && (vx_count(p->counters, vx_n.tx, (Py_ssize_t)i) < 0 ||
-              vx_count(o->counters, vx_n.out, (Py_ssize_t)sent_messages) < 0))
-        goto error;
-    if (i < count) { /* busy, or an error: the rest through the writer, whose write_nowait handles either */
-        size_t k;
-        rest = PyList_New((Py_ssize_t)(count - i));
-        for (k = i; rest != NULL && k < count; k++) {
-            PyObject *unit = vx_frame_unit(tx, &frames[k]);
-            if (unit == NULL) Py_CLEAR(rest);
-            else PyList_SET_ITEM(rest, (Py_ssize_t)(k - i), unit);
-        }
-        if (rest == NULL || writer_submit(o, rest, (Py_ssize_t)(n - sent_messages)) < 0) {
-            Py_XDECREF(rest);
-            goto error;
-        }
-        Py_DECREF(rest);
-    }
+    /* the rest (busy, or an error) through the writer, whose write_nowait handles either */
+    if (sent_and_rest(o, tx, frames, i, count, n, sent_messages) < 0) goto error;
     goto done;
 error:
     status = -1;
@@ -335,6 +400,10 @@ static int hand(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n, int idle) {
     int done = 0;
     if (n == 0) return 0;
     o->handed += n;
+    if (o->port.kind == VX_PORT_PYTHONCAN) { /* python-can's own send: on every platform */
+        if (idle && (done = write_pythoncan(o, msgs, n)) < 0) return -1;
+        return done ? 0 : submit_through_writer(o, msgs, n);
+    }
 #ifndef _WIN32
     if (o->port.kind != VX_PORT_PYTHON && idle) {
         done = o->port.kind == VX_PORT_SERIAL ? write_serial(o, msgs, n)
@@ -557,6 +626,7 @@ static PyObject *Outlet_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
         goto fail;
     if (strcmp(port, "serial") == 0) self->port.kind = VX_PORT_SERIAL;
     else if (strcmp(port, "socketcan") == 0) self->port.kind = VX_PORT_SOCKETCAN;
+    else if (strcmp(port, "pythoncan") == 0) self->port.kind = VX_PORT_PYTHONCAN;
     else if (strcmp(port, "udp") == 0) self->port.kind = VX_PORT_UDP;
     else if (strcmp(port, "python") != 0) {
         PyErr_Format(PyExc_ValueError, "port must be serial, socketcan, udp or python, got %s", port);

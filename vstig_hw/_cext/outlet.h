@@ -12,6 +12,7 @@
 #define VX_PORT_PYTHON 0u    /* through the link's writer (units from the encoder, or Link.units_of) */
 #define VX_PORT_SERIAL 1u    /* straight to a serial transport's non-blocking fd */
 #define VX_PORT_SOCKETCAN 2u /* straight to a SocketCAN bus's raw socket */
+#define VX_PORT_PYTHONCAN 4u /* a python-can bus's own send(unit, 0.0): interfaces whose send cannot block */
 #define VX_PORT_UDP 3u       /* straight to a MAVLink UDP socket: its router (udpout) or its peers (udpin) */
 
 typedef struct {

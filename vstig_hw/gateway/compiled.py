@@ -174,6 +174,10 @@ def reads_for(link: Link[Any]) -> int:
 
 def port_for(link: Link[Any]) -> str:
     """Where the compiled outlet writes while the link's writer is idle: the device itself, or the writer."""
+    transport: Any = link.transport
+    if reads_for(link) == READS_PYTHON and _is(transport, "vstig_hw.transports.can", "CanTransport") and \
+            transport.sends_at_once:
+        return "pythoncan"  # python-can's own send(unit, 0.0), called by the outlet (the bus: the transport's handle)
     reads, transport = reads_for(link), link.transport
     if type(transport) is MavlinkUdpTransport and not transport.writes_as_made:
         return "python"  # paced to an air rate, or signed: the transport's own write keeps the bucket and the order

@@ -156,9 +156,15 @@ class CanTransport(DeviceTransport[can.Message, can.BusABC]):
         """Send, waiting up to `send_timeout` for room in the TX queue; a frame still not taken is dropped."""
         self._send(device, unit, self.send_timeout, drop_when_busy=True)
 
+    @property
+    def sends_at_once(self) -> bool:
+        """Whether the bus's send(unit, 0.0) returns at once (a full queue raises), so the gateway's loop may call
+        it: `write_nowait` does, and so do the compiled outlets while the link's writer is idle (outlet.c)."""
+        return self.interface in _NONBLOCKING_SEND
+
     def write_nowait(self, unit: can.Message) -> can.Message | None:
         """Send only if the TX queue has room now (interfaces whose send cannot block); else the frame, to wait."""
-        if self.interface not in _NONBLOCKING_SEND:
+        if not self.sends_at_once:
             return unit
         device = self._live.device
         if device is None:
