@@ -474,7 +474,7 @@ class GuardChoice:
 
 def _names_senders(link: Link[Any]) -> bool:
     """Whether the link can say who sent a unit: its framing reads it from the unit (CAN IDs)."""
-    return link.framing.names_senders
+    return link.names_senders
 
 
 def guard_options(fn: Callable[..., Any]) -> Callable[..., Any]:

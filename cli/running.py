@@ -307,7 +307,7 @@ def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, dur
 
 def _readiness(node: Node) -> str:
     """The STATUS= of READY=1: the links, and those still waiting for their device (a router not up yet)."""
-    waiting = [link.name for link in node.links if not link.transport.connected]
+    waiting = [link.name for link in node.links if not link.connected]
     line = f"running on {', '.join(link.name for link in node.links)}"
     return f"{line}; waiting for {', '.join(waiting)}" if waiting else line
 

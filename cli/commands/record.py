@@ -127,12 +127,12 @@ def command(links: tuple[LinkSpec, ...], output: str | None, overwrite: bool, ap
             else:
                 source.counters["drop_before_file"] += 1
             return
-        record = Record(t, source.name, source.framing.capture_name, unit)
+        record = Record(t, source.name, source.capture_name, unit)
         for kept in passing.units(record) if keep else (record,):
             captures[0].write(kept)
 
     # Zenoh links measure their peers' clocks: the capture keeps whose clock it is and the offsets (clock_notes).
-    clocks = [clock for link in node.links if (clock := link.transport.clock) is not None]
+    clocks = [clock for link in node.links if (clock := link.clock) is not None]
 
     def flush(_: Node) -> None:  # every tick: what a kill leaves behind is at most one tick's frames
         if captures:

@@ -31,12 +31,11 @@ def _sender(link: Link[Any], deployment: str | None) -> Any:
     frames we sent, for CAN the default ID scheme a CAN capture is read with); otherwise re-encode its messages.
     """
     decoder = Decoder(default_framings(deployment=deployment))
-    framing = link.framing
 
     def send(record: Record) -> None:
-        unit = framing.replay_unit(record.unit, record.framing, record.direction)
+        unit = link.replay_unit(record.unit, record.framing, record.direction)
         if unit is not None:
-            link.transport.write(unit)
+            link.write(unit)
             link.counters["out_units"] += 1
             return
         for decoded in decoder.decode(record):

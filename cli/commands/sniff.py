@@ -156,13 +156,13 @@ def command(links: tuple[LinkSpec, ...], jsonl: bool, robots: bool, value_type: 
 
         # The same row as `decode --format jsonl` (can_id on CAN links only, sender where the medium names one),
         # and `refused`: the drop counter a guarded bridge would count it under, or null.
-        framings = {link.name: link.framing for link in node.links}
+        by_name = {link.name: link for link in node.links}
 
         def emit(heard: Heard, reason: str | None) -> None:
             m = heard.message
             row: dict[str, Any] = {"t": round(heard.t, 6), "link": heard.link}
-            framing = framings.get(heard.link)
-            can_id = None if framing is None or heard.sender is None else framing.can_id(m.op, heard.sender)
+            link = by_name.get(heard.link)
+            can_id = None if link is None or heard.sender is None else link.can_id(m.op, heard.sender)
             if can_id is not None:
                 row["can_id"] = can_id
             row.update(op=m.op.name, key=m.key, value=from_raw(m.value, value_type), timestamp=m.timestamp,

@@ -129,7 +129,7 @@ class GatewayCollector:
         node = self.node
         stats = node.stats()  # one consistent view of the counters: the Node takes them under its lock
         keys = node.engine.size() if node.engine is not None else None
-        up = {link.name: link.transport.connected for link in node.links}
+        up = {link.name: link.connected for link in node.links}
         buckets, total = self.latency.buckets(), self.latency.total
         clocks = _clock_estimates(node)
         events = CounterMetricFamily("vstig_link_events", "Every counter of every link: units and messages moved, "
@@ -211,7 +211,7 @@ def _clock_estimates(node: Node) -> dict[tuple[str, str], ClockOffset]:
     """Per peer clock and proof (empty: unproved), the tightest estimate any of the node's Zenoh links has."""
     best: dict[tuple[str, str], ClockOffset] = {}
     for link in node.links:
-        clock = link.transport.clock
+        clock = link.clock
         for trip in clock.estimates() if clock is not None else ():
             key = (trip.peer, trip.proof or "")
             if key not in best or trip.error < best[key].error:

@@ -37,7 +37,7 @@ __all__ = ["Recording", "link_medium"]
 
 def link_medium(link: Link[Any]) -> str:
     """The capture medium of a link's units: can, zenoh or serial (bytes)."""
-    return link.framing.capture_medium
+    return link.capture_medium
 
 
 class Recording:
@@ -104,7 +104,7 @@ class Recording:
         self.stop()
 
     def _write(self, source: Link[Any], t: float, unit: Any, direction: str = "rx") -> None:
-        framing = source.framing.capture_name
+        framing = source.capture_name
         with self._writing:
             if not self.stopped:  # stopped from a listener in the middle of a batch
                 self._capture.write(Record(t, source.name, framing, unit, direction))

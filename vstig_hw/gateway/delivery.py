@@ -68,6 +68,8 @@ class Delivery:
         self.path = None if compiled is None else compiled.path(
             state, lock, self.deliver, links, receivers, part, guard, outbound.outlets, listeners.path_wants,
             listeners.path_told, listeners.path_delivered)
+        # which of a link's peers sent a unit, asked only where the medium says more than the sender (zenoh)
+        self._source_of = [link.source_of if link.names_sources else None for link in links]
         self.take: Deliver = self.deliver if self.path is None else self._deliver_compiled
         self.stopping = False  # the readers are stopping: a batch that cannot get the lock is left for the closer
         self._taking = True  # batches are handled; False once a stop handed over what was read (later: counted)
@@ -150,7 +152,7 @@ class Delivery:
         guard = self.guard
         listeners = self.listeners
         on_unit, on_heard, on_messages = listeners.unit, listeners.heard, listeners.messages
-        source_of = link.source_of if link.framing.names_sources else None  # one call less a unit where it says none
+        source_of = self._source_of[index]
         admit = self._admit
         signing = self.signing
         heard_count = 0

@@ -94,7 +94,7 @@ class LinkReaders:
                 self._stop.wait(ERROR_BACKOFF)
 
     def _read_once(self, index: int, link: Link[Any]) -> None:
-        units = link.transport.read(READ_TIMEOUT)
+        units = link.read(READ_TIMEOUT)
         if units:
             self.deliver(index, time.time(), units)
 

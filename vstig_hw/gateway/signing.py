@@ -122,14 +122,17 @@ class Signing:
         """Link `link`'s decoding: its framing's messages (its compiled `receiver`'s, which then decodes for both
         deliveries and checks by the link's policy on the compiled one), each one's record kept until the next unit."""
         unit_records = self._unit
+        feed_tagged: Callable[[Any], list[tuple[Message, Tagged | None]]]
         if receiver is not None:
             receiver.check_tags(list(AuthPolicy).index(link.auth), functools.partial(self.refuse, link))
             feed = receiver.feed_tagged
 
-            def feed_tagged(unit: Any) -> list[tuple[Message, Tagged | None]]:
+            def compiled_feed_tagged(unit: Any) -> list[tuple[Message, Tagged | None]]:
                 return [(msg, None if proof is None else Tagged(msg, *proof)) for msg, proof in feed(unit)]
+
+            feed_tagged = compiled_feed_tagged
         else:
-            feed_tagged = link.framing.feed_tagged
+            feed_tagged = link.feed_tagged
 
         def decode(unit: Any) -> list[Message]:
             unit_records.clear()
@@ -144,7 +147,7 @@ class Signing:
     def record_of(self, link: Link[Any]) -> Callable[[Message], Tagged | None] | None:
         """What link `link`'s outlet sends each message with: its entry's record, on a link that carries tags and
         checks them (None: messages go untagged)."""
-        if self.engine is None or link.auth is AuthPolicy.OFF or not link.framing.carries_tags:
+        if self.engine is None or link.auth is AuthPolicy.OFF or not link.carries_tags:
             return None
         return self.engine.record_of
 

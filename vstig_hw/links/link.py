@@ -12,8 +12,8 @@ from ..auth import Tagged
 from ..counters import Counters
 from ..framing.base import Framing
 from ..tagged import AuthPolicy
-from ..transports.base import Transport
-from ..wire import Message
+from ..transports.base import PeerClock, Transport
+from ..wire import Message, Op
 
 Unit = TypeVar("Unit")
 
@@ -31,11 +31,17 @@ class Heard:
 class Link(Generic[Unit]):
     """One transport plus one framing: what the gateway and replay read, decode and write through.
 
-    The gateway never reaches past a Link into its framing or transport: it reads
-    (`read`, or the device's callback via `deliver_to`), decodes (`decode`), names
-    senders (`sender_of`, `source_of`) and writes (`units_of`, `write_nowait`,
-    `write`) through these, which are the framing's and transport's own methods
-    bound once here, so they cost no call of their own on the hot path.
+    The gateway, the Python API and the CLI never reach past a Link into its framing or
+    transport: they read (`read`, or the device's callback via `deliver_to`), decode
+    (`decode`), name senders (`sender_of`, `source_of`) and write (`units_of`,
+    `write_nowait`, `write`) through these, which are the framing's and transport's own
+    methods bound once here, so they cost no call of their own on the hot path; and they
+    ask what else the medium knows through the properties and methods below. Two places
+    reach past it by design, and only they: the compiled path's choice of its Receiver,
+    Encoder and read (gateway/compiled.py: the C twin is built from the framing's
+    parameters and reads the transport's declared CompiledHandle), and the ROS 2 part
+    (gateway/ros2.py: it publishes through the ROS 2 transport and stamps its framing).
+    tests/unit/test_link_boundary.py holds every other module of gateway/, api/ and cli/ to it.
 
     `one_domain`: every node on the medium hears every frame any of them sends (a CAN bus, a
     blabbermouth relay), so an engine gateway does not echo an entry back onto the link it came
@@ -69,6 +75,8 @@ class Link(Generic[Unit]):
         self.decode: Callable[[Unit], list[Message]] = self._undecodable if framing.transmit_only else framing.feed
         self.sender_of: Callable[[Unit], int | None] = framing.sender_of  # where the medium names senders
         self.source_of: Callable[[Unit], str | None] = framing.source_of  # who really sent it, where that is more
+        # The messages a unit completes, each with its record where it carries a tag (`carries_tags`).
+        self.feed_tagged: Callable[[Unit], list[tuple[Message, Tagged | None]]] = framing.feed_tagged
 
     @property
     def transmit_only(self) -> bool:
@@ -89,6 +97,50 @@ class Link(Generic[Unit]):
     def unreached(self) -> str | None:
         """Where the link was told to connect and reaches nobody now (a zenoh link's connect=), or None."""
         return self.transport.unreached
+
+    # -- what the medium knows, asked through the link (the framing's and the transport's declarations) --------
+    @property
+    def connected(self) -> bool:
+        """Whether the device is there now."""
+        return self.transport.connected
+
+    @property
+    def clock(self) -> PeerClock | None:
+        """What measures the peers' clocks over the device (Zenoh's round trips), where it can."""
+        return self.transport.clock
+
+    @property
+    def names_senders(self) -> bool:
+        """Whether `sender_of` reads who transmitted a unit from the unit itself."""
+        return self.framing.names_senders
+
+    @property
+    def names_sources(self) -> bool:
+        """Whether `source_of` says more than the sender a unit claims (a zenoh session)."""
+        return self.framing.names_sources
+
+    @property
+    def carries_tags(self) -> bool:
+        """Whether the medium has room for a message's epoch and tag (SPEC.md 10.5)."""
+        return self.framing.carries_tags
+
+    @property
+    def capture_medium(self) -> str:
+        """The capture format its units go into without .mcap (a key of capture.records.WRITERS)."""
+        return self.framing.capture_medium
+
+    @property
+    def capture_name(self) -> str:
+        """The framing name its units' records carry in a capture."""
+        return self.framing.capture_name
+
+    def replay_unit(self, unit: Unit, recorded_as: str, direction: str) -> Unit | None:
+        """A recorded unit as replay writes it as is onto this link (`Framing.replay_unit`); None: re-encode."""
+        return self.framing.replay_unit(unit, recorded_as, direction)
+
+    def can_id(self, op: Op, sender: int) -> int | None:
+        """The arbitration ID a message of `op` from `sender` goes in, on a medium with IDs; None otherwise."""
+        return self.framing.can_id(op, sender)
 
     def open(self) -> None:
         """Open the device; a link already open stays as it is (a Link object may be handed over open)."""
