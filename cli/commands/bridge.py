@@ -126,11 +126,10 @@ def command(links: tuple[LinkSpec, ...], robot_id: int | None, tick: float, budg
     favour_latency()
 
     def status() -> None:
-        line = node.summary()
         for warning in take_warnings(firewall) + take_warnings(node.signing):
             click.echo(f"\r\x1b[K{warning}" if live else warning, err=True)
-        if live:
-            click.echo(f"\r\x1b[K{line}", nl=False, err=True)
+        if live:  # the line only where it is drawn: a service's log gets none, and its gateway builds none
+            click.echo(f"\r\x1b[K{node.summary()}", nl=False, err=True)
 
     with (stop_on_signals() as stop, live_view(node, foxglove, larger_value_wins=larger, viewers=foxglove_viewers),
           metrics_served(node, metrics), opened(node, stop)):
