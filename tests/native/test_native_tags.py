@@ -1,7 +1,9 @@
 """The compiled Engine given the swarm key against SignedEngine, its Python reference (vstig_hw/_cext/tags.c):
 random streams of honest tagged writes across the timestamp wrap, forgeries, replays, untagged writes, empty GETs
 and the node's own puts, under every policy, checked as `Signing.check` checks them and then received, give the
-same outcomes, tables, drained messages, records and counts."""
+same outcomes, tables, drained messages, records and counts; and the whole compiled delivery (records decoded
+from cobs8 and CAN FD units, checked by each link's policy, sent with each entry's record) against the Python
+Node on such streams."""
 
 from __future__ import annotations
 
@@ -9,12 +11,19 @@ import random
 from types import ModuleType
 from typing import Any
 
+import pytest
+import test_native_gateway as gateway_twins  # its Node harness, not its tests
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vstig_hw.auth import SwarmKeys, Tagged
+from vstig_hw.framing import make_serial_framing
+from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.gateway import assembly as assembly_module
 from vstig_hw.gateway.compiled import Compiled
+from vstig_hw.gateway.node import Node
 from vstig_hw.gateway.signing import SignedEngine
+from vstig_hw.links.link import Link
 from vstig_hw.tagged import AuthPolicy
 from vstig_hw.timestamps import next_timestamp
 from vstig_hw.wire import Message, Op
@@ -123,3 +132,89 @@ def test_the_twin_keeps_proofs_a_replay_loses_and_refuses_a_stranger_policy(comp
         assert "policy must be one of" in str(error)
     else:
         raise AssertionError("a policy that is not AuthPolicy's was taken")
+
+
+# -- the whole compiled delivery against the Python Node ------------------------------------------------------------
+
+# (name, framing, policy): records decoded in C (cobs8, CAN FD) under each policy
+SIGNED_LINKS = [("radio", "cobs8", AuthPolicy.REQUIRE), ("bus", "canfd", AuthPolicy.PREFER),
+                ("plain", "cobs8", AuthPolicy.OFF)]
+
+
+def _signed_node(compiled: bool, refused: list[tuple[str, Message, str]]) -> Node:
+    links = []
+    for name, kind, policy in SIGNED_LINKS:
+        framing: Any = CanFraming(CanIdScheme(), sender=9, fd=True) if kind == "canfd" else make_serial_framing(kind)
+        link = Link(name, gateway_twins.MemoryTransport(name), framing, one_domain=kind == "canfd")
+        link.auth = policy
+        links.append(link)
+    with pytest.MonkeyPatch.context() as patch:
+        if not compiled:
+            patch.setattr(assembly_module, "compiled_for", lambda relays, links: None)
+        node = Node(links, 9, period=1.0, budget=None, swarm_keys=SwarmKeys(MASTER))
+    assert (node._delivery.path is not None) == compiled
+    node.listen(refused=lambda heard, reason: refused.append((heard.link, heard.message, reason)))
+    return node
+
+
+def _units(rng: random.Random, kind: str, sent: list[tuple[Message, Tagged | None]]) -> list[Any]:
+    """What a robot's radio or CAN node sends: each message as a record or untagged (cobs8 cut anywhere)."""
+    if kind == "canfd":
+        robot = CanFraming(CanIdScheme(), sender=rng.choice([3, 4]), fd=True)
+        return [frame for msg, record in sent
+                for frame in (robot.encode_tagged([record]) if record is not None else robot.encode(msg))]
+    framing = make_serial_framing(kind)
+    stream = b"".join(b"".join(framing.encode_tagged([record]) if record is not None else framing.encode(msg))
+                      for msg, record in sent)
+    cuts = sorted(rng.sample(range(1, len(stream)), min(2, len(stream) - 1))) if len(stream) > 1 else []
+    return [stream[a:b] for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True)]
+
+
+def _stream(seed: int, keys: SwarmKeys, steps: int) -> list[tuple[Any, ...]]:
+    """("heard", link, units' seed, [(message, record or None)]) and ("put", key, value), from `traffic`."""
+    rng = random.Random(seed)
+    script: list[tuple[Any, ...]] = []
+    for call in traffic(seed, keys, steps):
+        if call[0] == "put":
+            script.append(call)
+        elif call[0] == "recv":
+            script.append(("heard", rng.randrange(len(SIGNED_LINKS)), rng.randrange(2**32), [call[2:]]))
+        elif script and script[-1][0] == "heard":  # a drain: the messages since the last one in one unit
+            script[-1] = (*script[-1][:3], script[-1][3] * rng.choice([1, 1, 2]))  # sometimes a copy of it too
+    return script
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32), steps=st.integers(20, 200))
+def test_the_compiled_delivery_with_tags_equals_the_python_node(compiled: ModuleType, seed: int, steps: int) -> None:
+    """Random tagged, forged, replayed and untagged streams on links that require, prefer and ignore tags: the same
+    table, counters, refusals (told and counted by writer) and bytes out."""
+    keys = SwarmKeys(MASTER)
+    told: tuple[list[tuple[str, Message, str]], list[tuple[str, Message, str]]] = ([], [])
+    nodes = [_signed_node(False, told[0]), _signed_node(True, told[1])]
+    try:
+        for step in _stream(seed, keys, steps):
+            for node in nodes:
+                now = 1.0
+                with node._lock:
+                    if step[0] == "put":
+                        assert node.seat is not None
+                        node.seat.put(step[1], step[2])
+                        node._outbound.spread(now)
+                    else:
+                        index, units = step[1], _units(random.Random(step[2]), SIGNED_LINKS[step[1]][1], step[3])
+                        path = node._delivery.path
+                        if path is None or not path.deliver(index, 1_700_000_000.0, units, now):
+                            node._delivery.arrive(index, 1_700_000_000.0, units)
+                            node._outbound.spread(now, 1 << index)
+                gateway_twins._settled(node)
+            pure, c = (gateway_twins._state(node) for node in nodes)
+            assert c == pure, step
+            assert told[1] == told[0], step
+            assert nodes[1].signing is not None and nodes[0].signing is not None
+            assert nodes[1].signing.refused == nodes[0].signing.refused, step
+        signings = [node.signing for node in nodes]
+        assert signings[0] is not None and signings[1] is not None and signings[1].warnings == signings[0].warnings
+    finally:
+        for node in nodes:
+            gateway_twins._close(node)
