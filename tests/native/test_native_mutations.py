@@ -16,11 +16,13 @@ from types import ModuleType
 import pytest
 import test_native_gateway as gateway_twins  # modules, not their tests: pytest would collect those here again
 import test_native_roster as roster_twins
+import test_native_tags as tags_twins
 import test_native_twins as engine_twins
 
 import vstig_hw.engine as engine_module
 import vstig_hw.gateway.outlet as outlet_module
 import vstig_hw.gateway.roster as roster_module
+import vstig_hw.tagged as tagged_module
 from vstig_hw.timestamps import is_newer
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -52,6 +54,13 @@ def test_a_python_roster_whose_usual_gap_moves_faster_is_caught(compiled: Module
     monkeypatch.setattr(roster_module, "_GAP_WEIGHT", 0.5)
     with pytest.raises((AssertionError, ExceptionGroup)):
         roster_twins.test_the_tally_folded_in_equals_the_python_roster(compiled=compiled)
+
+
+def test_a_python_tagged_engine_that_orders_by_timestamp_alone_is_caught(compiled: ModuleType,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(tagged_module, "tagged_newer", lambda epoch, ts, than_epoch, than_ts: is_newer(ts, than_ts))
+    with pytest.raises((AssertionError, ExceptionGroup)):
+        tags_twins.test_the_compiled_delivery_with_tags_equals_the_python_node(compiled=compiled)
 
 
 def _run_a_native_test(**env: str) -> subprocess.CompletedProcess[str]:
