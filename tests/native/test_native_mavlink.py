@@ -14,6 +14,7 @@ from typing import Any
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from vstig_hw.auth import Tagged
 from vstig_hw.counters import Counters
 from vstig_hw.framing.mavlink import (
     NEW_STREAM_WINDOW,
@@ -54,8 +55,11 @@ def hostile_units(seed: int, keyed: bool, count: int) -> list[bytes]:
     units: list[bytes] = []
     for _ in range(count):
         kind = rng.random()
-        if kind < 0.35:
+        if kind < 0.27:
             unit = sender.encode_batch(_messages(rng, rng.randrange(1, 17)))[0]
+        elif kind < 0.35:  # tagged TUNNELs (SPEC.md 10.5): both take their messages, without the tags
+            unit = sender.encode_tagged([Tagged(m, rng.randrange(3), rng.randbytes(8))
+                                         for m in _messages(rng, rng.randrange(1, 7))])[0]
         elif kind < 0.55:  # signed streams of several senders, time going forward, back or far back
             stamp += rng.choice((1, 5, 1000, -3, -NEW_STREAM_WINDOW - 10))
             unit = _signed_tunnel(rng, max(stamp, 0), FORGED_KEY if rng.random() < 0.1 else KEY)

@@ -13,8 +13,8 @@ CRC_EXTRA byte (147 for TUNNEL, 50 for HEARTBEAT). A payload's trailing zero byt
 byte is). TUNNEL's payload, in wire order: payload_type (u16 LE), target_system, target_component,
 payload_length, payload[128]. Ours: payload_type `PAYLOAD_TYPE`, payload = up to 16 messages back to back; or
 payload_type `PAYLOAD_TYPE_TAGGED`, payload = up to 6 authenticated messages (20-byte records, SPEC.md 10.5).
-The compiled twin carries no tags: it drops a tagged TUNNEL as `other_payload_type` (a gateway with the swarm key
-runs in Python).
+`feed` takes a tagged TUNNEL's messages without their tags (a link with auth off), and so does the compiled twin
+(libvstig's vstig_mavlink_messages); `feed_tagged` gives their records.
 
 The signature is the first 6 bytes of SHA-256(key | the frame from the 0xFD through the crc | link id |
 timestamp); the timestamp counts 10 microseconds since 2015-01-01 00:00 UTC. With a key, a frame that is not
