@@ -56,6 +56,20 @@ def test_a_python_roster_whose_usual_gap_moves_faster_is_caught(compiled: Module
         roster_twins.test_the_tally_folded_in_equals_the_python_roster(compiled=compiled)
 
 
+def test_a_python_roster_whose_rate_moves_faster_is_caught(compiled: ModuleType,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(roster_module, "RATE_WINDOW", 0.5)  # the tally keeps the rates: the sweep's C half
+    with pytest.raises((AssertionError, ExceptionGroup)):
+        roster_twins.test_the_tally_folded_in_equals_the_python_roster(compiled=compiled)
+
+
+def test_a_python_roster_quiet_after_fewer_usual_gaps_is_caught(compiled: ModuleType,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(roster_module, "QUIET_PERIODS", 2)  # the tally's `due` still judges with 3
+    with pytest.raises((AssertionError, ExceptionGroup)):
+        roster_twins.test_the_tally_folded_in_equals_the_python_roster(compiled=compiled)
+
+
 def test_a_python_tagged_engine_that_orders_by_timestamp_alone_is_caught(compiled: ModuleType,
                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(tagged_module, "tagged_newer", lambda epoch, ts, than_epoch, than_ts: is_newer(ts, than_ts))

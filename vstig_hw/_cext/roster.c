@@ -1,9 +1,11 @@
 /*
  * RosterTally: the per-message half of vstig_hw.gateway.roster.Roster in C (`take` and `refuse`: who was heard,
  * when, on which link, what it wrote and asked, the keys it showed older than the newest), so that a compiled
- * Path keeps the roster with no Python per message. The Roster folds it in (`fold`) each tick and on every read;
- * states, their changes, rates and every view stay the Roster's. The same rules and float operations in the same
- * order as Roster.take: the same tallies.
+ * Path keeps the roster with no Python per message; and the sweep's per-tick half (`due`: the rates, and whether a
+ * robot's state would change), so that a tick with nothing to tell (`tick`, a Node's tick listener) runs no Python.
+ * The Roster folds the tally in (`fold`) on a sweep with something to tell and on every read; states (it `mark`s
+ * each change here), their changes and every view stay the Roster's. The same rules and float operations in the same
+ * order as Roster.take and Roster._judge: the same tallies, rates and states.
  *
  * Reference: vstig_hw/gateway/roster.py (held equal by tests/native; the index of the twins: vstig_hw/_vstig.pyi).
  */
@@ -11,18 +13,26 @@
 
 #include <math.h>
 #include <string.h>
+#include <time.h>
 
 #define GAP_WEIGHT 0.25 /* Roster's _GAP_WEIGHT: how fast a robot's usual gap follows its latest one */
+#define QUIET_PERIODS 3 /* Roster's QUIET_PERIODS: quiet once silent for this many of its own usual gaps too */
+#define RATE_WINDOW 1.0 /* Roster's RATE_WINDOW: seconds, the time constant of the recent message rate */
 #define FREE_SLOT (-1)
+
+enum { ALIVE, QUIET, GONE }; /* a robot's state, as the Roster's STATE_ORDER numbers them */
 
 typedef struct {
     unsigned long long who;
-    unsigned long long seq; /* when it was added: the Roster's dict order, which breaks an eviction's tie */
     double first, last, gap;
     double revived;         /* when first heard since the last fold (NaN: not heard since) */
+    uint64_t revived_links; /* its links then (what Roster.take tells a return with) */
+    double rate;            /* messages per second, recent (Roster._judge's) */
     long long messages, writes, gets, refused;
+    long long counted;      /* `messages` at the last advance of the rates */
     uint64_t links;         /* a bit per link name (the tally's `names`) */
     uint8_t named, gone, used, fresh;
+    uint8_t state;          /* the Roster's state of it (`mark`): ALIVE until it says otherwise */
     uint8_t nbehind;
     uint16_t behind_key[VX_ROSTER_BEHIND_KEYS];
     double behind_since[VX_ROSTER_BEHIND_KEYS];
@@ -35,13 +45,16 @@ struct vx_tally {
     int32_t *table;          /* who -> place, open addressing (linear probing), `mask + 1` slots */
     size_t mask;
     int32_t *spare;          /* places free, a stack */
+    int32_t *live;           /* the places in use, in the order added (the Roster's dict order): what a tick walks */
     Py_ssize_t nspare, count, ngone;
+    double quiet_after, gone_after; /* the Roster's thresholds */
+    double swept;            /* when the rates were last advanced (NaN: never) */
+    PyObject *on_due;        /* the Roster's sweep(now): what a tick calls when a state would change */
     uint8_t *dirty;          /* per place: listed in `touched` since the last fold */
     int32_t *touched;
     Py_ssize_t ntouched;
     unsigned long long *evicted; /* robots forgotten since the last fold (at most max_robots: only gone ones are) */
     Py_ssize_t nevicted;
-    unsigned long long seq;
     long long untracked, behind_untracked, unattributed;
     int counted;             /* one of those three moved since the last fold */
     PyObject *names;         /* list of link names, a bit each */
@@ -92,13 +105,16 @@ static void unlink_who(vx_tally_t *t, unsigned long long who) {
 static int evict_gone(vx_tally_t *t) {
     robot_t *oldest = NULL;
     Py_ssize_t i;
+    Py_ssize_t at = 0;
     if (!t->ngone) return 0;
-    for (i = 0; i < t->max_robots; i++) {
-        robot_t *r = &t->robots[i];
-        if (r->used && r->gone &&
-            (oldest == NULL || r->last < oldest->last || (r->last == oldest->last && r->seq < oldest->seq)))
+    for (i = 0; i < t->count; i++) { /* in the order added: the first added of equals is kept */
+        robot_t *r = &t->robots[t->live[i]];
+        if (r->gone && (oldest == NULL || r->last < oldest->last)) {
             oldest = r;
+            at = i;
+        }
     }
+    memmove(&t->live[at], &t->live[at + 1], (size_t)(t->count - at - 1) * sizeof *t->live);
     unlink_who(t, oldest->who);
     oldest->used = 0;
     t->spare[t->nspare++] = (int32_t)(oldest - t->robots);
@@ -122,14 +138,13 @@ static robot_t *add(vx_tally_t *t, unsigned long long who, int named, double whe
     r = &t->robots[place];
     memset(r, 0, sizeof *r);
     r->who = who;
-    r->seq = t->seq++;
     r->named = (uint8_t)named;
     r->used = r->fresh = 1;
     r->first = r->last = when;
     r->revived = NAN;
     for (i = slot_of(t, who); t->table[i] != FREE_SLOT; i = (i + 1) & t->mask) {}
     t->table[i] = place;
-    t->count++;
+    t->live[t->count++] = place;
     touch(t, r);
     return r;
 }
@@ -165,7 +180,10 @@ static void heard(vx_tally_t *t, robot_t *r, uint64_t bit, double when) {
         r->gone = 0;
         t->ngone--;
     }
-    if (isnan(r->revived)) r->revived = when;
+    if (isnan(r->revived)) {
+        r->revived = when;
+        r->revived_links = r->links;
+    }
     touch(t, r);
 }
 
@@ -263,16 +281,58 @@ void vx_tally_refuse(vx_tally_t *t, double when, int named, unsigned long long s
     touch(t, r);
 }
 
+/* Roster._judge's state for `r` at `now`. */
+static int judged(const vx_tally_t *t, const robot_t *r, double now) {
+    double silent = now - r->last;
+    if (silent > t->gone_after) return GONE;
+    if (silent > t->quiet_after && silent > QUIET_PERIODS * r->gap) return QUIET;
+    return ALIVE;
+}
+
+/* The rates as of `now` (Roster._judge's, for every robot: a fold carries the ones that moved); 1 if a sweep at
+ * `now` has something to tell (a robot whose state would change, or one heard again since the Roster last saw it
+ * quiet or gone), else 0. A second call at the same `now` moves no rate. */
+static int advance(vx_tally_t *t, double now) {
+    double dt = now - t->swept, smoothing = dt > 0 ? 1.0 - exp(-dt / RATE_WINDOW) : 0.0;
+    int due = 0;
+    Py_ssize_t i;
+    for (i = 0; i < t->count; i++) {
+        robot_t *r = &t->robots[t->live[i]];
+        if (smoothing != 0.0) {
+            double rate = r->rate + ((double)(r->messages - r->counted) / dt - r->rate) * smoothing;
+            r->counted = r->messages;
+            if (rate != r->rate) {
+                r->rate = rate;
+                touch(t, r);
+            }
+        }
+        if (!due) due = (r->state != ALIVE && !isnan(r->revived)) || judged(t, r, now) != r->state;
+    }
+    if (!(dt <= 0)) t->swept = now;
+    return due;
+}
+
 /* ---- the Python interface ---------------------------------------------------------------- */
 
 static PyObject *Tally_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
-    static char *kwlist[] = {"max_robots", NULL};
+    static char *kwlist[] = {"max_robots", "quiet_after", "gone_after", "on_due", NULL};
     Py_ssize_t max_robots, i;
     size_t slots = 2;
+    double quiet_after, gone_after;
+    PyObject *on_due;
     vx_tally_t *self;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "n", kwlist, &max_robots)) return NULL;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "nddO", kwlist, &max_robots, &quiet_after, &gone_after, &on_due))
+        return NULL;
     if (max_robots < 1 || max_robots > (1 << 24))
         return PyErr_Format(PyExc_ValueError, "max_robots must be in 1..%d, got %zd", 1 << 24, max_robots);
+    if (!(quiet_after > 0 && gone_after > quiet_after && isfinite(gone_after))) {
+        char text[128];
+        PyOS_snprintf(text, sizeof text, "quiet_after (%g s) must be positive and below gone_after (%g s), finite",
+                      quiet_after, gone_after);
+        PyErr_SetString(PyExc_ValueError, text);
+        return NULL;
+    }
+    if (!PyCallable_Check(on_due)) return PyErr_Format(PyExc_TypeError, "on_due must be callable, got %R", on_due);
     while (slots < 2 * (size_t)max_robots) slots *= 2;
     self = (vx_tally_t *)type->tp_alloc(type, 0);
     if (self == NULL) return NULL;
@@ -281,12 +341,17 @@ static PyObject *Tally_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     self->robots = PyMem_Calloc((size_t)max_robots, sizeof *self->robots);
     self->table = PyMem_Malloc(slots * sizeof *self->table);
     self->spare = PyMem_Malloc((size_t)max_robots * sizeof *self->spare);
+    self->live = PyMem_Malloc((size_t)max_robots * sizeof *self->live);
+    self->quiet_after = quiet_after;
+    self->gone_after = gone_after;
+    self->swept = NAN;
+    self->on_due = Py_NewRef(on_due);
     self->dirty = PyMem_Calloc((size_t)max_robots, 1);
     self->touched = PyMem_Malloc((size_t)max_robots * sizeof *self->touched);
     self->evicted = PyMem_Malloc((size_t)max_robots * sizeof *self->evicted);
     self->names = PyList_New(0);
-    if (self->robots == NULL || self->table == NULL || self->spare == NULL || self->dirty == NULL ||
-        self->touched == NULL || self->evicted == NULL || self->names == NULL) {
+    if (self->robots == NULL || self->table == NULL || self->spare == NULL || self->live == NULL ||
+        self->dirty == NULL || self->touched == NULL || self->evicted == NULL || self->names == NULL) {
         Py_DECREF(self);
         return PyErr_NoMemory();
     }
@@ -296,10 +361,24 @@ static PyObject *Tally_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
     return (PyObject *)self;
 }
 
+/* The tally holds the Roster's sweep, the Roster the tally: a cycle the collector breaks. */
+static int Tally_traverse(vx_tally_t *self, visitproc visit, void *arg) {
+    Py_VISIT(self->on_due);
+    return 0;
+}
+
+static int Tally_clear(vx_tally_t *self) {
+    Py_CLEAR(self->on_due);
+    return 0;
+}
+
 static void Tally_dealloc(vx_tally_t *self) {
+    PyObject_GC_UnTrack(self);
+    Tally_clear(self);
     PyMem_Free(self->robots);
     PyMem_Free(self->table);
     PyMem_Free(self->spare);
+    PyMem_Free(self->live);
     PyMem_Free(self->dirty);
     PyMem_Free(self->touched);
     PyMem_Free(self->evicted);
@@ -361,33 +440,70 @@ static PyObject *Tally_call(vx_tally_t *self, PyObject *args, PyObject *kwds) {
 
 static PyObject *Tally_mark(vx_tally_t *self, PyObject *args) {
     unsigned long long who;
-    int gone;
+    int state, gone;
     robot_t *r;
-    if (!PyArg_ParseTuple(args, "Kp", &who, &gone)) return NULL;
-    if ((r = find(self, who)) != NULL && r->gone != gone) {
+    if (!PyArg_ParseTuple(args, "Ki", &who, &state)) return NULL;
+    if (state < ALIVE || state > GONE) return PyErr_Format(PyExc_ValueError, "state must be 0..2, got %d", state);
+    if ((r = find(self, who)) == NULL) Py_RETURN_NONE;
+    r->state = (uint8_t)state;
+    gone = state == GONE;
+    if (r->gone != gone) { /* only gone robots make room */
         r->gone = (uint8_t)gone;
         self->ngone += gone ? 1 : -1;
     }
     Py_RETURN_NONE;
 }
 
-static PyObject *record_of(const vx_tally_t *t, robot_t *r) {
-    PyObject *links = PyList_New(0), *behind = PyTuple_New(r->nbehind), *record = NULL;
+static double now_of(PyObject *obj) {
+    double now = PyFloat_AsDouble(obj);
+    if (now == -1.0 && PyErr_Occurred()) return NAN;
+    if (isnan(now)) PyErr_Format(PyExc_ValueError, "now must be a time in seconds, got %R", obj);
+    return now;
+}
+
+static PyObject *Tally_due(vx_tally_t *self, PyObject *now_obj) {
+    double now = now_of(now_obj);
+    if (isnan(now)) return NULL;
+    return PyBool_FromLong(advance(self, now));
+}
+
+/* A Node's tick listener: the wall clock (time.time's, as the readers stamp what they read), the rates, and the
+ * Roster's sweep only when it has something to tell. */
+static PyObject *Tally_tick(vx_tally_t *self, PyObject *node) {
+    struct timespec ts;
+    double now;
+    (void)node;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    now = (double)((long long)ts.tv_sec * 1000000000LL + ts.tv_nsec) / 1e9;
+    if (!advance(self, now)) Py_RETURN_NONE;
+    return PyObject_CallFunction(self->on_due, "d", now);
+}
+
+/* The names of the links of bit set `links`, a list. */
+static PyObject *links_of(const vx_tally_t *t, uint64_t links) {
+    PyObject *names = PyList_New(0);
     int i;
-    for (i = 0; links != NULL && i < VX_ROSTER_LINKS; i++) {
-        if ((r->links >> i & 1u) && PyList_Append(links, PyList_GET_ITEM(t->names, i)) < 0) Py_CLEAR(links);
+    for (i = 0; names != NULL && i < VX_ROSTER_LINKS; i++) {
+        if ((links >> i & 1u) && PyList_Append(names, PyList_GET_ITEM(t->names, i)) < 0) Py_CLEAR(names);
     }
+    return names;
+}
+
+static PyObject *record_of(const vx_tally_t *t, robot_t *r) {
+    PyObject *links = links_of(t, r->links), *behind = PyTuple_New(r->nbehind), *record = NULL;
+    int i;
     for (i = 0; behind != NULL && i < r->nbehind; i++) {
         PyObject *pair = Py_BuildValue("(Hd)", r->behind_key[i], r->behind_since[i]);
         if (pair == NULL) Py_CLEAR(behind);
         else PyTuple_SET_ITEM(behind, i, pair);
     }
     if (links != NULL && behind != NULL) {
-        PyObject *revived = isnan(r->revived) ? Py_NewRef(Py_None) : PyFloat_FromDouble(r->revived);
+        PyObject *revived = isnan(r->revived) ? Py_NewRef(Py_None)
+                                              : Py_BuildValue("(dN)", r->revived, links_of(t, r->revived_links));
         if (revived != NULL)
-            record = Py_BuildValue("(KNNdddLLLLNNN)", r->who, PyBool_FromLong(r->named), PyBool_FromLong(r->fresh),
-                                   r->first, r->last, r->gap, r->messages, r->writes, r->gets, r->refused, links,
-                                   revived, behind);
+            record = Py_BuildValue("(KNNddddLLLLNNN)", r->who, PyBool_FromLong(r->named), PyBool_FromLong(r->fresh),
+                                   r->first, r->last, r->gap, r->rate, r->messages, r->writes, r->gets, r->refused,
+                                   links, revived, behind);
         links = behind = NULL; /* stolen (N), or revived failed: freed below */
     }
     Py_XDECREF(links);
@@ -435,11 +551,16 @@ static PyObject *Tally_fold(vx_tally_t *self, PyObject *unused) {
 static PyMethodDef Tally_methods[] = {
     {"take", (PyCFunction)(void (*)(void))Tally_take, METH_FASTCALL,
      "take(link, t, sender, messages): what one unit carried past the guard (Roster.take; a `messages` listener)."},
-    {"mark", (PyCFunction)Tally_mark, METH_VARARGS, "mark(robot, gone): the Roster's state of `robot` is gone or not."},
+    {"mark", (PyCFunction)Tally_mark, METH_VARARGS,
+     "mark(robot, state): the Roster's state of `robot` is now `state` (its STATE_ORDER: 0 alive, 1 quiet, 2 gone)."},
+    {"due", (PyCFunction)Tally_due, METH_O,
+     "due(now) -> bool: the rates advanced to `now`; whether a sweep at `now` has a state change to tell."},
+    {"tick", (PyCFunction)Tally_tick, METH_O,
+     "tick(node): a Node's tick listener: `due` at the wall clock, and the Roster's sweep only if it is."},
     {"fold", (PyCFunction)Tally_fold, METH_NOARGS,
      "(records, evicted, untracked, behind_untracked, unattributed): every robot changed since the last fold, as "
-     "(robot, named, fresh, first, last, gap, messages, writes, gets, refused, links, revived, behind); None if "
-     "nothing changed."},
+     "(robot, named, fresh, first, last, gap, rate, messages, writes, gets, refused, links, revived, behind), "
+     "revived: None or (when first heard since the last fold, its links then); None if nothing changed."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -452,10 +573,13 @@ vx_tally_t *vx_tally_of_take(PyObject *listener) {
 PyTypeObject vx_RosterTallyType = {
     PyVarObject_HEAD_INIT(NULL, 0)
     .tp_name = "vstig_hw._vstig.RosterTally",
-    .tp_doc = "RosterTally(max_robots): Roster.take and Roster.refuse in C; `take` is a `messages` listener, the "
-              "tally itself a `refused` one.",
+    .tp_doc = "RosterTally(max_robots, quiet_after, gone_after, on_due): Roster.take, Roster.refuse and the rates "
+              "and state judging of Roster.sweep in C; `take` is a `messages` listener, the tally itself a `refused` "
+              "one, `tick` a `tick` one that calls on_due(now) (the Roster's sweep) only when a state would change.",
     .tp_basicsize = sizeof(vx_tally_t),
-    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_HAVE_GC,
+    .tp_traverse = (traverseproc)Tally_traverse,
+    .tp_clear = (inquiry)Tally_clear,
     .tp_new = Tally_new,
     .tp_dealloc = (destructor)Tally_dealloc,
     .tp_call = (ternaryfunc)Tally_call,

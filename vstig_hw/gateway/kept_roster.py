@@ -8,8 +8,10 @@ roster's clock, every control period). Views read `snapshot()` from any thread, 
 
 Where the data path is compiled (not `VSTIG_PURE=1`), the roster takes messages and refusals
 through a `RosterTally` (vstig_hw/_cext/roster.c): a compiled Path feeds it with no Python
-per message, and the roster folds it in each tick and on every read; a robot heard again is
-then told alive on the thread that folded (the tick's, or a view's).
+per message, and the tally's own tick listener keeps the rates and runs the roster's sweep
+only when a robot's state changes (a quiet tick runs no Python); the roster folds it in then
+and on every read, and a robot heard again is told alive on the thread that folded (the
+tick's, or a view's).
 """
 
 from __future__ import annotations
@@ -34,9 +36,9 @@ class KeptRoster:
     def __init__(self, node: Node, roster: Roster) -> None:
         self.roster = roster
         if native is not None and not roster.tallied and len(roster) == 0:
-            roster.use_tally(native.RosterTally(roster.max_robots))
+            roster.use_tally(native.RosterTally)
         messages, refused = roster.listeners()
-        self.listening = node.listen(messages=messages, refused=refused, tick=self._sweep)
+        self.listening = node.listen(messages=messages, refused=refused, tick=roster.tally_tick() or self._sweep)
         _KEPT[node] = self
 
     @staticmethod

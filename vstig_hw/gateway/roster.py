@@ -1,6 +1,6 @@
 """Who is in the swarm: per robot, where and when it was heard, what it wrote and asked, and its state.
 
-C twin: vstig_hw/_cext/roster.c (`RosterTally`: `take` and `refuse` in C, folded in by `fold`).
+C twin: vstig_hw/_cext/roster.c (`RosterTally`: `take`, `refuse` and the sweep's rates and state judging in C).
 
 Pure bookkeeping, sans-I/O: a gateway feeds it what passed its guard (`take`, the
 signature of the Node's `messages` listener: one call per unit, no `Heard` built),
@@ -29,9 +29,12 @@ Bounded: at most `max_robots` robots (default 4,096); a new one past that takes 
 keeps at most MAX_BEHIND_KEYS keys it lags on (more: `behind_untracked`).
 
 Compiled (`use_tally`): the per-message half, `take` and `refuse`, is a `RosterTally`'s,
-which a compiled Path feeds with no Python per message; the roster folds what it tallied in
-(`fold`) at every sweep and every read, then keeps states, rates and views as here. A robot
-heard again after going quiet or gone is told alive at the fold, with the time it was heard.
+which a compiled Path feeds with no Python per message; so are the rates and the judging of
+states: a sweep runs Python only when a robot's state changes (the tally's `due`), and the
+tally's `tick` is a Node's tick listener that calls `sweep` only then. The roster folds what it
+tallied in (`fold`) at such a sweep and every read, then keeps states, changes and views as
+here. A robot heard again after going quiet or gone is told alive at the fold, with the time
+it was heard.
 """
 
 from __future__ import annotations
@@ -69,7 +72,7 @@ class RobotState(enum.Enum):
     GONE = "gone"
 
 
-STATE_ORDER = {RobotState.ALIVE: 0, RobotState.QUIET: 1, RobotState.GONE: 2}  # how views sort
+STATE_ORDER = {RobotState.ALIVE: 0, RobotState.QUIET: 1, RobotState.GONE: 2}  # how views sort, a tally counts
 _ALIVE = RobotState.ALIVE
 
 
@@ -137,8 +140,15 @@ class Tally(Protocol):
 
     def take(self, link: str, t: float, sender: int | None, messages: list[Message], /) -> None: ...
     def __call__(self, heard: Heard, reason: str) -> None: ...
-    def mark(self, robot: int, gone: bool, /) -> None: ...
+    def mark(self, robot: int, state: int, /) -> None: ...
+    def due(self, now: float, /) -> bool: ...
+    def tick(self, node: object, /) -> None: ...
     def fold(self) -> tuple[list[tuple[Any, ...]], list[int], int, int, int] | None: ...
+
+
+# A tally's type: made with (max_robots, quiet_after, gone_after, on_due: the roster's sweep).
+TallyKind = Callable[[int, float, float, Callable[[float], None]], Tally]
+TickListener = Callable[[Any], None]
 
 
 class Roster:
@@ -170,11 +180,12 @@ class Roster:
         self._folding = threading.RLock()  # one fold or sweep at a time (the Node's thread, a view's)
 
     # -- how it is fed ---------------------------------------------------------------------
-    def use_tally(self, tally: Tally) -> None:
-        """Take messages and refusals through `tally` (a RosterTally of `max_robots`), before any is fed."""
+    def use_tally(self, kind: TallyKind) -> None:
+        """Take messages and refusals, and keep rates and judge states, through a tally of `kind` (RosterTally)
+        made for this roster, before it is fed."""
         if self._robots or self._tally is not None:
             raise ValueError("a roster takes a tally before it is fed, once")
-        self._tally = tally
+        self._tally = kind(self.max_robots, self.quiet_after, self.gone_after, self.sweep)
 
     @property
     def tallied(self) -> bool:
@@ -187,6 +198,11 @@ class Roster:
         if self._tally is None:
             return self.take, self.refuse
         return self._tally.take, self._tally
+
+    def tally_tick(self) -> TickListener | None:
+        """Its tally's tick (a Node's `tick` listener in C: the wall clock, the rates, and `sweep` only when a state
+        changes); None without a tally."""
+        return None if self._tally is None else self._tally.tick
 
     def fold(self) -> None:
         """What the tally took since the last fold, into the robots (no-op without a tally)."""
@@ -203,15 +219,15 @@ class Roster:
                 forgotten = robots.pop(who, None)
                 if forgotten is not None and forgotten.state is RobotState.GONE:
                     self._gone -= 1
-            for (who, named, fresh, first, last, gap, messages, writes, gets, refused, links, revived,
+            for (who, named, fresh, first, last, gap, rate, messages, writes, gets, refused, links, revived,
                  behind) in records:
                 robot = robots.get(who)
                 if robot is None or fresh:
                     robot = robots[who] = _Robot(who, named, first)
-                robot.last, robot.gap, robot.messages, robot.writes = last, gap, messages, writes
+                robot.last, robot.gap, robot.rate, robot.messages, robot.writes = last, gap, rate, messages, writes
                 robot.gets, robot.refused, robot.links, robot.behind_since = gets, refused, set(links), dict(behind)
                 if revived is not None and robot.state is not _ALIVE:
-                    self._change(robot, _ALIVE, revived)
+                    self._change(robot, _ALIVE, *revived)  # when it was heard again, and where it had been heard
 
     # -- what the gateway heard: the hot path ---------------------------------------------
     # Per unit: one dict lookup and a few attributes; per message: its op and one timestamp compared with the
@@ -333,12 +349,16 @@ class Roster:
     def sweep(self, now: float) -> None:
         """The time is `now` (the gateway's clock, as `take`'s): rates, states, and who is behind."""
         with self._folding:  # a view's fold tells no return between this sweep's reading and its changes
+            tally = self._tally
+            if tally is not None and not tally.due(now):  # it moved the rates on; no state changes
+                return
             self.fold()
             self._judge(now)
 
     def _judge(self, now: float) -> None:
         dt = now - self._swept
-        smoothing = 1.0 - math.exp(-dt / RATE_WINDOW) if dt > 0 else 0.0  # nan on the first sweep: no rate yet
+        rates = self._tally is None  # else the tally's `due` keeps them
+        smoothing = 1.0 - math.exp(-dt / RATE_WINDOW) if rates and dt > 0 else 0.0  # nan on the first sweep: no rate
         for robot in list(self._robots.values()):
             if smoothing:
                 heard = robot.messages - robot.counted
@@ -356,13 +376,13 @@ class Roster:
         if not dt <= 0:  # (nan on the first sweep)
             self._swept = now
 
-    def _change(self, robot: _Robot, state: RobotState, t: float) -> None:
+    def _change(self, robot: _Robot, state: RobotState, t: float, heard_on: list[str] | None = None) -> None:
         old, robot.state = robot.state, state
         self._gone += (state is RobotState.GONE) - (old is RobotState.GONE)
-        if self._tally is not None and (state is RobotState.GONE) != (old is RobotState.GONE):
-            self._tally.mark(robot.who, state is RobotState.GONE)  # only gone robots make room
+        if self._tally is not None:
+            self._tally.mark(robot.who, STATE_ORDER[state])  # what its `due` judges against; only gone ones make room
         self.changes[f"{old.value}->{state.value}"] += 1
-        links = tuple(sorted(robot.links))
+        links = tuple(sorted(robot.links if heard_on is None else heard_on))
         log.info("robot %d (%s on %s): %s -> %s", robot.who, "sender" if robot.named else "writer",
                  ", ".join(links), old.value, state.value)
         change = StateChange(robot.who, old, state, t, links)
