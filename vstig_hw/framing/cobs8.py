@@ -2,7 +2,8 @@
 20-byte record: message, epoch, tag; 24 bytes on the wire, SPEC.md 10.5) told apart by its length.
 
 C twin: vstig_hw/_cext/framing.c (Receiver, Encoder); held equal by tests/native (index: vstig_hw/_vstig.pyi).
-The twin carries no tags: it drops a tagged frame as `bad_length` (a gateway with an auth link runs in Python).
+The twin decodes records too (their messages, and the records where the link checks tags), and sends them
+(`Encoder.send_tags`).
 
 The default for UART radios that carry whole messages (Kilobot/marXbot style
 bridges, generic serial radios).

@@ -1,16 +1,19 @@
 """A gateway that holds the swarm key (SPEC.md 10.6): tags checked by each link's policy, entries kept with their
 writers' proofs, and every message sent with its entry's proof on the links that carry tags.
 
-C twin: vstig_hw/_cext/tags.c (the engine, over libvstig's vstig_tagged); held equal by tests/native.
+C twin: vstig_hw/_cext/tags.c (the engine, and the check of a unit the compiled delivery decoded, over libvstig's
+vstig_tagged); held equal by tests/native/test_native_tags.py.
 
-The Node builds a `Signing` when given the swarm key, and then runs in Python (the compiled data path carries no
-tags). Each link's units decode with their records (`decoder`); `check` refuses, before the guard, what the link's
-policy refuses: an untagged message on an `auth=require` link (`drop_untagged`), a tag that does not check out
-on a `require` or `prefer` link (`drop_bad_tag`), counted on the link and by claimed writer, told to the Node's
-`refused` listeners (sniff's refused column, the roster) and logged once per writer and episode. The engine is a
-`SignedEngine`: the engine with a `TaggedStigmergy` beside it, so it orders tagged entries by (epoch, timestamp)
-and keeps each entry's proof; `record_of` gives the outlets every message's proof again (`Link.record_of`), and a
-link that requires tags never carries an entry without one (`held_unverified`).
+The Node builds a `Signing` when given the swarm key. Each link's units decode with their records (`decoder`: its
+framing's, or its compiled Receiver's); `check` refuses, before the guard, what the link's policy refuses: an
+untagged message on an `auth=require` link (`drop_untagged`), a tag that does not check out on a `require` or
+`prefer` link (`drop_bad_tag`); `refuse` counts each on the link and by claimed writer, tells the Node's `refused`
+listeners (sniff's refused column, the roster) and logs once per writer and episode (the compiled delivery checks
+in C and calls it for each refusal). The engine is a `SignedEngine` (or its compiled twin): the engine with a
+`TaggedStigmergy` beside it, so it orders tagged entries by (epoch, timestamp) and keeps each entry's proof, taken
+from the records of the unit's messages that passed; `record_of` gives the outlets every message's proof again
+(`Link.record_of`, or the compiled Encoder's `send_tags`), and a link that requires tags never carries an entry
+without one (`held_unverified`).
 """
 
 from __future__ import annotations
