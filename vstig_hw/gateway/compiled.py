@@ -24,12 +24,18 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   HEARTBEAT sent when its `beat` says, on the delivery's timer; while its writer is
   idle its outlet sends the TUNNELs to the socket itself (to the router, or to each
   live peer) unless the link is paced (`air_rate=`) or signed: those, and a mavlink
-  serial radio, go through the transport's Python (its token bucket, `in_order`).
+  serial radio, go through the transport's Python (its token bucket, `in_order`);
+* with the swarm key, `Engine(swarm_key=)` for `SignedEngine` (tags.c): cobs8 and
+  CAN FD records are decoded by the Receiver and checked by the link's policy in
+  the delivery, and an outlet that sends tags has its Encoder put each entry's
+  record in (`send_tags`) and writes through the link's writer. A link that checks
+  tags the C does not decode (XBee batches, MAVLink's tagged TUNNELs) keeps the
+  whole Node in Python (`checks_tags_for`).
 
 Everything else (zenoh, dialects, XbeeMav's packets, the overhead controller,
 blabbermouth...) takes the Python path through the same parts. What decides which links the
 compiled path reads and writes is here, in one place: `receiver_for`,
-`encoder_for`, `reads_for`, `port_for`.
+`encoder_for`, `reads_for`, `port_for`, `checks_tags_for`, `sends_tags`.
 """
 
 from __future__ import annotations
