@@ -258,19 +258,22 @@ class Ros2Node:
         self._refilled = now
         taken: list[list[Any]] = []
         garbage = 0
-        for subscription, valid in zip(self.writes, (message_of_cdr, tagged_of_cdr), strict=True):
-            while self._tokens >= 1.0:  # the tokens are both topics': untagged writes first
-                with subscription.handle:  # rclpy's executor takes a sample this way (Subscription.handle)
-                    sample = subscription.handle.take_message(subscription.msg_type, True)
-                if sample is None:
-                    break
-                self._tokens -= 1.0  # garbage costs its taking too: a garbage flood is bounded as any other
-                payload, info = sample
-                source = self._writer_of(info)
-                if valid(payload) is None:  # refused here, not shipped to the gateway's data path
-                    garbage += 1
-                else:
-                    taken.append([payload.hex(), source])
+        # One sample from each write topic in turn while tokens last: a flood on one leaves the other its half.
+        waiting = list(zip(self.writes, (message_of_cdr, tagged_of_cdr), strict=True))
+        while waiting and self._tokens >= 1.0:
+            subscription, valid = waiting.pop(0)
+            with subscription.handle:  # rclpy's executor takes a sample this way (Subscription.handle)
+                sample = subscription.handle.take_message(subscription.msg_type, True)
+            if sample is None:
+                continue  # empty: not asked again this time
+            waiting.append((subscription, valid))
+            self._tokens -= 1.0  # garbage costs its taking too: a garbage flood is bounded as any other
+            payload, info = sample
+            source = self._writer_of(info)
+            if valid(payload) is None:  # refused here, not shipped to the gateway's data path
+                garbage += 1
+            else:
+                taken.append([payload.hex(), source])
         if garbage:
             self._count("drop_bad_cdr", garbage)
         if taken:
