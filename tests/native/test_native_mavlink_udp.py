@@ -18,32 +18,17 @@ from types import ModuleType
 from typing import Any
 
 import pytest
-import test_native_mavlink as mavlink_twins  # a module of helpers, not its tests
+import test_native_mavlink as mavlink_twins  # modules of helpers, not their tests
+from test_native_xbee import RecordingGuard
 
 from vstig_hw import Message
-from vstig_hw.counters import Counters
 from vstig_hw.framing.mavlink import MavlinkFraming, Signing
-from vstig_hw.gateway.guard import Guard
 from vstig_hw.gateway.node import Mode, Node
 from vstig_hw.links.link import Link
 from vstig_hw.transports.mavlink import MAX_PEERS, MavlinkUdpTransport, UdpPeers
 
 KEY = mavlink_twins.KEY
 SOURCES = MAX_PEERS + 2  # more drones than a udpin link keeps peers
-
-
-class RecordingGuard(Guard):
-    """Passes everything (a rate no link reaches keeps it Python on either path); notes each unit's sender and
-    messages."""
-
-    def __init__(self) -> None:
-        super().__init__(max_jump=None, rate=1e9)
-        self.asked: list[tuple[int | None, list[Message]]] = []
-
-    def filter(self, link: str, sender: int | None, messages: list[Message], t: float, counters: Counters,
-               source: str | None = None) -> list[Message]:
-        self.asked.append((sender, list(messages)))
-        return super().filter(link, sender, messages, t, counters, source)
 
 
 def _link(mode: str, address: tuple[str, int], keyed: bool, name: str) -> tuple[Link[bytes], MavlinkUdpTransport]:
