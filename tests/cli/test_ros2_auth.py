@@ -87,3 +87,33 @@ def test_a_ros2_writer_with_its_key_is_taken_forgeries_are_refused_and_entries_r
     assert (counted.get("drop_bad_tag"), counted.get("drop_untagged")) == (1, 1), counted
     assert "refusing writes whose tag does not check out claiming robot 9" in stderr, stderr[-2000:]
     assert robot.value(6) == 68  # neither forgery was ever held: the honest later write is
+
+
+def test_a_flood_on_write_leaves_signed_writes_on_write_tagged_their_share(lab: Callable[..., Lab],
+                                                                         tmp_path: Path) -> None:
+    """The node takes the two write topics in turn within write_rate: a peer flooding `write` (untagged, refused)
+    does not hold a signed writer's writes back until the flood ends."""
+    key_file = tmp_path / "swarm.key"
+    key_file.write_text(MASTER.hex() + "\n", encoding="ascii")
+    key_file.chmod(0o600)
+    keys = range(20, 30)
+    robot = SigningRobot(7, watch=keys)
+    run = lab([robot], "--swarm-key", str(key_file), ros2="ros2:lab?auth=require&write_rate=100")
+    flooder, writer = run.peer(), run.peer()
+
+    def write(key: int) -> None:
+        msg = Message(Op.PUT, key, key, 1, 9)
+        writer.send(f"write_tagged 0 {key} {key} 1 9 0 {tag(9, msg)}")
+
+    wait_for(lambda: robot.value(20) == 20, 40, step=lambda: (write(20), run.step(), time.sleep(0.2)))
+    flooder.send("flood 8")
+    time.sleep(1.0)  # the flood under way: its samples take every token the write topic is given
+    for key in keys[1:]:
+        write(key)
+    run.run_until(lambda: all(robot.value(key) == key for key in keys) or bool(flooder.records("flooded")), 30)
+    held = [key for key in keys if robot.value(key) == key]
+    flooding = not flooder.records("flooded")
+    run.run_until(lambda: bool(flooder.records("flooded")), 30)
+    stderr = run.close()
+    assert held == list(keys) and flooding, (held, flooder.records("flooded"))  # all in, while the flood went on
+    assert counters(stderr, "ros2-lab")["drop_untagged"] > 100, stderr[-2000:]  # the flood, refused
