@@ -42,6 +42,7 @@ class Loop:
         self._next_tick = 0.0
         self._calls: collections.deque[Call] = collections.deque()  # submit's: run under the lock, on the loop
         self._stop = threading.Event()  # `request_stop` asked the running loop to return
+        self._waiters: list[tuple[Callable[[], bool], threading.Event]] = []  # `wait_until`'s, told at each step
         self._thread: threading.Thread | None = None
         self._ident = 0  # the loop thread's ident while it lives (0: none)
 
@@ -76,7 +77,10 @@ class Loop:
                 failure = error
             ended(failure)
         finally:
-            self._ident = 0
+            with self._lock:
+                self._ident = 0
+                for _until, told in self._waiters:  # nobody will look for them any more
+                    told.set()
 
     def on_thread(self) -> bool:
         return threading.get_ident() == self._ident
@@ -114,7 +118,7 @@ class Loop:
         lock after every batch a link delivers, and at every step) or the monotonic `deadline` passes."""
         state = self._state
         stopping = self._stop
-        state.wake_on_arrival = until is not None
+        state.wake_on_arrival = until is not None or bool(self._waiters)
         try:
             while not (stoppable and stopping.is_set()) and not (until is not None and self._holds(until)):
                 now = time.monotonic()
@@ -125,7 +129,25 @@ class Loop:
                     wait = min(wait, deadline - now)
                 self._step(max(0.0, min(wait, MAX_WAIT)))
         finally:
-            state.wake_on_arrival = False
+            state.wake_on_arrival = bool(self._waiters)
+
+    def wait_until(self, until: Callable[[], bool], timeout: float) -> bool:
+        """From another thread while the loop runs: wait until `until()` holds (looked at under the lock after
+        every batch and every step, as `run`'s) or `timeout` seconds pass, or the loop ends; whether it holds."""
+        waiter = (until, threading.Event())
+        with self._lock:
+            self._waiters.append(waiter)
+            self._state.wake_on_arrival = True
+            if not self.running:  # ended meanwhile: nobody will look
+                waiter[1].set()
+        self._state.wake.set()
+        try:
+            waiter[1].wait(timeout)
+        finally:
+            with self._lock:
+                self._waiters.remove(waiter)
+                self._state.wake_on_arrival = bool(self._waiters)
+        return self._holds(until)
 
     def run_paused(self, until: Callable[[], bool], deadline: float, *, stoppable: bool = True) -> bool:
         """`run` with the ticks paused (a drain); whether `until()` holds at its end."""
@@ -164,6 +186,9 @@ class Loop:
                 self._next_tick = max(self._next_tick + self.period, now)  # no catch-up burst after a stall
                 self._tick()
             self._spread(now)
+            for until, told in self._waiters:
+                if until():
+                    told.set()
 
 
 def settle(future: concurrent.futures.Future[T], call: Callable[[], T]) -> None:

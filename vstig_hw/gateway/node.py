@@ -244,16 +244,17 @@ class Node:
         when what was held back at the start has left, whatever the budget, so a swarm that keeps talking
         cannot hold it up (a stop stops the readers first: see `close`).
         """
-        deadline = time.monotonic() + timeout
         if self._loop.on_thread():
-            return self._drain_until(deadline)
-        if not self._loop.running or self.on_node_thread():  # no loop to run it (a reader thread must not wait)
-            with self._lock:
-                return self._outbound.drained(self._outbound.marks())
+            return self._drain_until(time.monotonic() + timeout)
+        with self._lock:
+            marks = self._outbound.marks()
+        if not self._loop.running or self.on_node_thread():  # no loop to send it (a reader thread must not wait)
+            return self._outbound.drained(marks)
+        self._loop.paused = True
         try:
-            return self.submit(lambda: self._drain_until(deadline)).result(max(0.0, deadline - time.monotonic()) + 1)
-        except (SwarmClosed, concurrent.futures.TimeoutError):
-            return False
+            return self._loop.wait_until(lambda: self._outbound.drained(marks), timeout)
+        finally:
+            self._loop.paused = self._lifecycle.shut
 
     def _drain_until(self, deadline: float, stoppable: bool = True) -> bool:
         """On the loop's thread: run the loop, ticks paused, until what the outlets hold now has left."""
