@@ -358,7 +358,7 @@ static int arrive_batch(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
     return status;
 }
 
-/* A listener or rule raised on a reader thread: `run` raises it on the loop's thread (Node._deliver's rule). */
+/* A listener or rule raised on a reader thread: the loop raises it on its thread (Delivery.deliver's rule). */
 static void fail(vx_path_t *p) {
     PyObject *type, *value, *tb, *failure, *wake, *done;
     PyErr_Fetch(&type, &value, &tb);
@@ -420,7 +420,7 @@ static int listened(const vx_path_t *p) {
     return 0;
 }
 
-/* The Node's `delivered` listeners, told of a batch handled (Node._deliver does so after _spread). */
+/* The Node's `delivered` listeners, told of a batch handled (Delivery.deliver tells them after the spread). */
 static int tell_delivered(const vx_path_t *p, double t) {
     Py_ssize_t i;
     PyObject *when;
@@ -486,8 +486,8 @@ static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
     got = PyObject_CallNoArgs(p->release);
     if (got == NULL) return -1;
     Py_DECREF(got);
-    if (status < 0) return 1; /* handled: the failure reaches `run` */
-    /* the loop is woken only when it must look: `run` has an `until`, or a window holds messages back sooner than
+    if (status < 0) return 1; /* handled: the failure reaches the loop */
+    /* the loop is woken only when it must look: it has a predicate (a drain), or a window holds messages back sooner than
      * it would look by itself (read after spread set retry_at; the loop sets sleep_until before reading it) */
     wake_on = vx_slot_get(&p->wake_on_arrival, p->state, vx_n.wake_on_arrival);
     status = wake_on == NULL ? -1 : PyObject_IsTrue(wake_on);
@@ -511,7 +511,7 @@ static int deliver_fast(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
     return status < 0 ? -1 : 1;
 }
 
-/* The Python delivery (Node._deliver) for units as Python objects. */
+/* The Python delivery (Delivery.deliver) for units as Python objects. */
 static int deliver_slow(vx_path_t *p, Py_ssize_t index, double t, PyObject *units) {
     PyObject *done = PyObject_CallFunction(p->deliver, "ndO", index, t, units);
     Py_XDECREF(done);
@@ -1189,7 +1189,7 @@ static int link_index(vx_path_t *self, Py_ssize_t index) {
     return -1;
 }
 
-/* deliver(index, t, units, now=None) -> True when delivered here; False: the caller delivers it (Node._deliver).
+/* deliver(index, t, units, now=None) -> True when delivered here; False: the caller delivers it (Delivery.deliver).
  * `now`: the monotonic time the outlets send at (default: the clock's; the differential test gives its own). */
 static PyObject *Path_deliver(vx_path_t *self, PyObject *args) {
     Py_ssize_t index;

@@ -37,7 +37,7 @@ typedef struct {
     PyObject *lock;     /* its lock */
     PyObject *acquire, *release; /* the lock's methods, bound once (one Python call less per batch each) */
     vx_slot_t reader_thread, wake_on_arrival, sleep_until, retry_at; /* the state's slots we touch per batch */
-    PyObject *deliver;  /* its Python delivery (Node._deliver): the slow path */
+    PyObject *deliver;  /* its Python delivery (Delivery.deliver): the slow path */
     PyObject *part;     /* Seat, Relay, or None */
     PyObject *guard;    /* JumpGuard, a Python Guard, or None */
     PyObject *outlets;  /* list of Outlet (none: a listener) */

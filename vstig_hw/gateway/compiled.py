@@ -14,7 +14,7 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   (API mode 1 or 2, our 8-byte messages) or MAVLink (TUNNELs, the signature and
   replay checks with the replay table): its decoding lives there for the Node's
   life, whichever side delivers a batch;
-* `Path`, the delivery (Node._deliver): one call per read. Links on a serial port
+* `Path`, the delivery (`delivery.Delivery.deliver`): one call per read. Links on a serial port
   or a SocketCAN bus are read by it (`pump`) and their writes go straight to the
   device while its writer is idle. An XBee link is read as its transport reads it:
   its module's bytes cut into frames (libvstig's), the module's own reports handed
