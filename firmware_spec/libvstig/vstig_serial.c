@@ -1,6 +1,8 @@
 /* vstig_serial: the serial frame and its framings. See vstig_serial.h and SPEC.md 6.0 to 6.4. */
 #include "vstig_serial.h"
 
+#include <string.h>
+
 /* ---- serial frame -------------------------------------------------------- */
 
 uint8_t vstig_frame_encode(const uint8_t *payload, uint8_t len, uint8_t *out) {
@@ -78,6 +80,26 @@ uint8_t vstig_deframer_feed_either(vstig_deframer_t *d, uint8_t byte, uint8_t wa
         return 0;
     }
     return (uint8_t)(n - 2);
+}
+
+size_t vstig_deframer_feed_run(vstig_deframer_t *d, const uint8_t *data, size_t len, uint8_t want, uint8_t also,
+                               uint8_t *size) {
+    const uint8_t *end = (const uint8_t *)memchr(data, 0, len);
+    size_t run = end == NULL ? len : (size_t)(end - data); /* the frame's bytes before its 0x00 */
+    *size = 0;
+    if (!d->discarding) {
+        if (run > (size_t)(VSTIG_FRAME_MAX - d->len)) { /* a byte met a full buffer: overlong, as feed_either */
+            vstig_drops_count(&d->drops, VSTIG_DROP_OVERLONG);
+            d->discarding = 1;
+            d->len = 0;
+        } else {
+            memcpy(d->buf + d->len, data, run);
+            d->len = (uint8_t)(d->len + run);
+        }
+    }
+    if (end == NULL) return len;
+    *size = vstig_deframer_feed_either(d, 0, want, also);
+    return run + 1;
 }
 
 /* ---- cobs8 --------------------------------------------------------------- */

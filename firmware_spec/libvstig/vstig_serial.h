@@ -38,6 +38,11 @@ uint8_t vstig_deframer_feed(vstig_deframer_t *d, uint8_t byte, uint8_t want);
 /* The same for a receiver of two payload sizes (cobs8 with authenticated messages, SPEC.md 10.5): the size of
  * the payload accepted (`want` or `also`), or 0. */
 uint8_t vstig_deframer_feed_either(vstig_deframer_t *d, uint8_t byte, uint8_t want, uint8_t also);
+/* vstig_deframer_feed_either over data[0..len) up to and including its first 0x00 (the end of a frame), as that
+ * many calls of it would do, without a call per byte: returns how many bytes it took, and in *size what the
+ * call for the last of them would have returned (0 when no frame ended there, or the frame was dropped). */
+size_t vstig_deframer_feed_run(vstig_deframer_t *d, const uint8_t *data, size_t len, uint8_t want, uint8_t also,
+                               uint8_t *size);
 
 /* ---- cobs8: one message per serial frame (SPEC.md section 6.1) ----------- */
 #define VSTIG_COBS8_FRAME_SIZE 12u

@@ -45,7 +45,8 @@ uint16_t vstig_ts_steps(uint16_t newer, uint16_t older) {
 
 /* ---- CRCs ---------------------------------------------------------------- */
 
-uint16_t vstig_crc16_update(uint16_t crc, uint8_t byte) {
+/* Static, so vstig_crc16's loop inlines it: a shared library's exported function is called per byte. */
+static uint16_t crc16_step(uint16_t crc, uint8_t byte) {
     /* Reflected poly 0x8408 processed a byte at a time: the same shift/xor identity
      * avr-libc documents for _crc_ccitt_update. */
     uint8_t x = (uint8_t)(byte ^ (uint8_t)(crc & 0xFFu));
@@ -53,9 +54,11 @@ uint16_t vstig_crc16_update(uint16_t crc, uint8_t byte) {
     return (uint16_t)((((uint16_t)x << 8) | (crc >> 8)) ^ (uint8_t)(x >> 4) ^ ((uint16_t)x << 3));
 }
 
+uint16_t vstig_crc16_update(uint16_t crc, uint8_t byte) { return crc16_step(crc, byte); }
+
 uint16_t vstig_crc16(const uint8_t *data, size_t len) {
     uint16_t crc = VSTIG_CRC16_INIT;
-    while (len--) crc = vstig_crc16_update(crc, *data++);
+    while (len--) crc = crc16_step(crc, *data++);
     return crc;
 }
 

@@ -50,9 +50,10 @@ static int can_scheme(vstig_can_t *can, int extended, PyObject *base, int stigme
 /* cobs8: a frame's payload is a message, or a record (SPEC.md 10.5), kept where the link checks tags */
 static size_t cobs8_bytes(vx_rx_t *rx, const uint8_t *data, size_t len, size_t *used, vstig_msg_t *out, size_t max) {
     vstig_deframer_t *d = &rx->serial.deframer;
-    size_t i, n = 0;
-    for (i = 0; i < len && n < max; i++) {
-        uint8_t size = vstig_deframer_feed_either(d, data[i], VSTIG_MESSAGE_SIZE, VSTIG_RECORD_SIZE);
+    size_t i = 0, n = 0;
+    while (i < len && n < max) { /* a frame at a time (feed_run), not a call per byte */
+        uint8_t size;
+        i += vstig_deframer_feed_run(d, data + i, len - i, VSTIG_MESSAGE_SIZE, VSTIG_RECORD_SIZE, &size);
         if (size == 0) continue;
         vstig_msg_decode(d->buf, &out[n]);
         if (size == VSTIG_RECORD_SIZE && rx->policy != VSTIG_AUTH_OFF)
