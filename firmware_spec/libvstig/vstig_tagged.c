@@ -116,13 +116,18 @@ static uint8_t older(vstig_tagged_t *t, uint16_t key, uint32_t epoch, const vsti
 int vstig_tagged_check(vstig_tagged_t *t, vstig_auth_policy_t policy, const vstig_msg_t *msg, const uint32_t *epoch,
                        const uint8_t *tag) {
     vstig_entry_t heard;
+    const vstig_proof_t *held;
     uint8_t expected[VSTIG_TAG_SIZE], diff = 0, i;
     if (msg->timestamp == VSTIG_TS_NONE) return 0; /* an empty GET shows no entry: nothing to prove */
     if (tag != NULL && epoch != NULL && policy != VSTIG_AUTH_OFF) {
         heard.value = msg->value;
         heard.timestamp = msg->timestamp;
         heard.robot = msg->robot;
-        writer_tag(t, msg->key, &heard, *epoch, expected);
+        held = find(t, msg->key);
+        if (held && held->kind == VSTIG_PROOF_TAGGED && held->epoch == *epoch && same_entry(&held->entry, &heard))
+            memcpy(expected, held->tag, VSTIG_TAG_SIZE); /* a re-broadcast of the entry held: its tag, checked then */
+        else
+            writer_tag(t, msg->key, &heard, *epoch, expected);
         for (i = 0; i < VSTIG_TAG_SIZE; i++) diff |= (uint8_t)(expected[i] ^ tag[i]);
         if (diff) {
             t->refused_bad_tag++;

@@ -7,8 +7,9 @@
  *
  * RAM: 21 bytes per key on an AVR beside the engine's table (vstig_proof_t), and 32 for the prepared master.
  * Each message checked costs three BLAKE2s compressions (the writer's key, its key block, the tag), or one for a
- * writer whose prepared key is cached (VSTIG_WRITER_KEYS places, 0 by default; a gateway keeps 1024). Proofs are
- * found as the engine finds its entries (open addressing: with 32768 places, one comparison).
+ * writer whose prepared key is cached (VSTIG_WRITER_KEYS places, 0 by default; a gateway keeps 1024), and none for
+ * a re-broadcast of the entry held (the same entry, epoch and tag as its proof: checked when it was kept). Proofs
+ * are found as the engine finds its entries (open addressing: with 32768 places, one comparison).
  */
 #ifndef VSTIG_TAGGED_H
 #define VSTIG_TAGGED_H
@@ -72,7 +73,8 @@ int vstig_tagged_put(vstig_tagged_t *t, uint16_t key, uint16_t value);
 int vstig_tagged_receive(vstig_tagged_t *t, vstig_auth_policy_t policy, const vstig_msg_t *msg,
                          const uint32_t *epoch, const uint8_t *tag);
 /* vstig_tagged_receive in two steps, for a node that refuses before its guard and intake: the check by policy
- * and tag (0 when the message passes, else the refusal, counted), then the receive of a message that passed. */
+ * and tag (0 when the message passes, else the refusal, counted), then the receive of a message that passed (its
+ * record is kept as a checked proof: never apply one that was not checked). */
 int vstig_tagged_check(vstig_tagged_t *t, vstig_auth_policy_t policy, const vstig_msg_t *msg, const uint32_t *epoch,
                        const uint8_t *tag);
 int vstig_tagged_apply(vstig_tagged_t *t, vstig_auth_policy_t policy, const vstig_msg_t *msg, const uint32_t *epoch,
