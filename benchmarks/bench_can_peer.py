@@ -43,7 +43,10 @@ from .registry import Result, benchmark
 RELAYS = ("can.bridge", "api")
 ROUNDS = 3
 COUNT, RATE_HZ = 6000, 2000  # the CPU runs: 3 s of a busy bus each
-COUNT_GRIND, RATE_GRIND_HZ = 600, 100  # under callgrind (~50x slower), each frame alone
+# Under callgrind (~50x slower, one thread at a time) a steady pace would queue frames behind a reader that waits
+# its turn, and a relay that drains its queue would count fewer instructions a frame than it spends at full speed:
+# there each frame is sent once the one before it arrived (RATE 0: lockstep), so every relay reads one at a time.
+COUNT_GRIND, RATE_GRIND_HZ = 600, 0
 _SENDER = 5
 _PROBE = 0x7FFF
 _REPO = Path(__file__).resolve().parents[1]
@@ -121,8 +124,9 @@ def _start_relay(relay: str, a: str, b: str) -> Callable[[], None]:
 
 
 def child(relay: str, count: int, rate_hz: float) -> None:
-    """One relay's run in this process: prints `ready` once it relays, waits for a line, runs, prints the
-    figures (JSON), waits for a line, stops (the parent reads callgrind's counts at the two waits)."""
+    """One relay's run in this process: prints `ready` once it relays, waits for a line, runs `count` frames at
+    `rate_hz` (0: each once the one before arrived), prints the figures (JSON), waits for a line, stops (the
+    parent reads callgrind's counts at the two waits)."""
     stamp = time.monotonic_ns()
     a, b = f"bench-peer-a-{stamp}", f"bench-peer-b-{stamp}"
     arrivals = _Arrivals(b)
@@ -145,9 +149,13 @@ def child(relay: str, count: int, rate_hz: float) -> None:
         switches0, own_switches0 = _process_switches(), _thread_switches(me) + _thread_switches(arrivals.tid)
         start = time.perf_counter()
         for key, frame in enumerate(frames):
-            delay = start + key / rate_hz - time.perf_counter()
-            if delay > 0:
-                time.sleep(delay)
+            if rate_hz > 0:
+                delay = start + key / rate_hz - time.perf_counter()
+                if delay > 0:
+                    time.sleep(delay)
+            elif key:  # lockstep: once the frame before arrived
+                while key - 1 not in arrivals.keys:
+                    time.sleep(0.0005)
             sender.send(frame)
         end = time.monotonic() + 30
         while len(arrivals.keys - {_PROBE}) < count and time.monotonic() < end:
@@ -181,7 +189,7 @@ def run_one(relay: str, *, grind: bool = False, env: dict[str, str] | None = Non
     argv = [sys.executable, "-m", "benchmarks.bench_can_peer", relay, str(count), str(rate_hz)]
     with tempfile.TemporaryDirectory(prefix="vstig-bench-can-peer-") as tmp:
         if grind:
-            argv = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={tmp}/callgrind.%p", *argv]
+            argv = ["valgrind", "-q", "--tool=callgrind", f"--callgrind-out-file={tmp}/callgrind.%p", *argv]
         process = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=_REPO,
                                    env={**os.environ, **(env or {})})
         assert process.stdin is not None and process.stdout is not None

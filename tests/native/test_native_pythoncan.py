@@ -11,6 +11,8 @@ from types import ModuleType
 from typing import Any
 
 import can
+import pytest
+from can.interfaces.virtual import VirtualBus
 
 from vstig_hw import Message, Op
 from vstig_hw.gateway import Node
@@ -76,3 +78,59 @@ def test_a_bus_that_refuses_a_frame_hands_it_and_the_rest_to_the_writer_as_the_p
     assert (link_c, bus_c) == (link_p, bus_p)
     assert bus_c["tx"] + bus_c["tx_dropped"] == _KEYS and bus_c["lost"] == 1
     assert (len(handed_c), len(handed_p)) == (_KEYS - 1, _KEYS)  # the C sent the first; the writer had the rest
+
+
+def _stats_after(pure: bool, frames: list[can.Message], until: str) -> tuple[dict[str, int], dict[str, int]]:
+    """`frames` onto bus a of an engine Node on a and b, until a's transport counts `until`: (a's link counters, a's
+    transport counters)."""
+    a, b = _channel(), _channel()
+    sender = can.Bus(interface="virtual", channel=a)
+    node = Node([can_link("virtual", a, robot_id=200, kernel_filter=False), can_link("virtual", b, robot_id=200)],
+                200, budget=None, pure=pure)  # no filter: the error frame reaches the link
+    try:
+        node.open()
+        for frame in frames:
+            sender.send(frame)
+        transport: Any = node.links[0].transport
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and not transport.counters[until]:
+            time.sleep(0.01)
+        time.sleep(0.1)  # what else the read took is counted too
+        return dict(node.links[0].counters), dict(transport.counters)
+    finally:
+        node.close(drain=0.0)
+        sender.shutdown()
+
+
+def test_the_delivery_reads_the_bus_as_the_transport_does_error_frames_too(compiled: ModuleType) -> None:
+    frames = [_put(1), can.Message(arbitration_id=0x20000004, is_error_frame=True, data=bytes(8)), _put(2)]
+    link, bus = _stats_after(pure=False, frames=frames, until="bus_errors")
+    assert (link, bus) == _stats_after(pure=True, frames=frames, until="bus_errors")
+    assert bus["bus_errors"] == 1 and bus["rx"] == 3 and link["in"] == 2
+
+
+class _BusOff(VirtualBus):
+    """A virtual bus that says it is off the bus, as a PCAN or Kvaser adapter's `state` does."""
+
+    @property
+    def state(self) -> can.BusState:
+        return can.BusState.ERROR
+
+
+@pytest.mark.parametrize("pure", [False, True])
+def test_a_bus_that_says_it_is_off_is_lost_while_the_delivery_reads_it(compiled: ModuleType, pure: bool) -> None:
+    # the delivery reading in C hands the transport's own read a turn every second: its look at the bus's state
+    a = _channel()
+    node = Node([can_link("virtual", a, robot_id=200), can_link("virtual", _channel(), robot_id=200)], 200,
+                budget=None, pure=pure)
+    try:
+        node.open()
+        time.sleep(0.3)  # the read's first look at the state was taken: the next is a turn the delivery hands over
+        transport: Any = node.links[0].transport
+        transport.bus.__class__ = _BusOff
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and not transport.counters["bus_off"]:
+            time.sleep(0.01)
+        assert transport.counters["bus_off"] >= 1 and transport.counters["lost"] >= 1
+    finally:
+        node.close(drain=0.0)

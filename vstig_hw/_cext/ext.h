@@ -68,8 +68,8 @@ typedef struct {
     /* a refused message as told (vstig_hw.links.link.Heard) */
     PyObject *message, *t, *sender;
     PyObject *arbitration_id, *is_extended_id, *is_fd, *is_remote_frame, *is_error_frame, *data, *time, *monotonic;
-    /* a python-can bus (can.BusABC), written by its own send */
-    PyObject *send;
+    /* a python-can bus (can.BusABC), read and written by its own recv and send; a frame's time */
+    PyObject *send, *recv, *timestamp;
 } vx_names_t;
 
 extern vx_names_t vx_n;
@@ -82,6 +82,10 @@ PyObject *vx_call(PyObject *obj, PyObject *name, const char *format, ...);
 
 /* counters[name] += n on a Counters (a dict subclass); -1 with an exception set on failure. */
 int vx_count(PyObject *counters, PyObject *name, Py_ssize_t n);
+
+/* A CompiledHandle's device while the transport holds it with no outage to end (a reopened device's first call is
+ * the transport's own: it ends the outage): new reference; None when not; NULL with an exception. */
+PyObject *vx_live_device(PyObject *handle);
 
 /* A declared slot of one Python class (`__slots__`), read and written at its offset in the object rather than by
  * a name lookup per access (what PyObject_GetAttr would find: the class's member descriptor). `type` is the class

@@ -85,7 +85,8 @@ static const struct {
     {&vx_n.arbitration_id, "arbitration_id", CAN_MESSAGE_TYPE}, {&vx_n.is_extended_id, "is_extended_id",
     CAN_MESSAGE_TYPE}, {&vx_n.is_fd, "is_fd", CAN_MESSAGE_TYPE}, {&vx_n.is_remote_frame, "is_remote_frame",
     CAN_MESSAGE_TYPE}, {&vx_n.is_error_frame, "is_error_frame", CAN_MESSAGE_TYPE},
-    {&vx_n.data, "data", CAN_MESSAGE_TYPE}, {&vx_n.send, "send", CAN_BUS},
+    {&vx_n.data, "data", CAN_MESSAGE_TYPE}, {&vx_n.timestamp, "timestamp", CAN_MESSAGE_TYPE},
+    {&vx_n.send, "send", CAN_BUS}, {&vx_n.recv, "recv", CAN_BUS},
     {&vx_n.message, "message", HEARD}, {&vx_n.t, "t", HEARD}, {&vx_n.sender, "sender", HEARD},
     {&vx_n.time, "time", TIME}, {&vx_n.monotonic, "monotonic", TIME},
 };
@@ -113,6 +114,18 @@ static PyObject *declared_names(void) {
         Py_XDECREF(grown);
     }
     return declared;
+}
+
+PyObject *vx_live_device(PyObject *handle) {
+    PyObject *device = PyObject_GetAttr(handle, vx_n.device), *outage;
+    int recovering;
+    if (device == NULL || device == Py_None) return device;
+    outage = PyObject_GetAttr(handle, vx_n.outage);
+    recovering = outage == NULL ? -1 : PyObject_IsTrue(outage);
+    Py_XDECREF(outage);
+    if (recovering == 0) return device;
+    Py_DECREF(device);
+    return recovering < 0 ? NULL : Py_NewRef(Py_None);
 }
 
 PyObject *vx_call(PyObject *obj, PyObject *name, const char *format, ...) {

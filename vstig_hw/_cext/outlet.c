@@ -113,28 +113,15 @@ static int sent_and_rest(vx_outlet_t *o, const vx_tx_t *tx, const vstig_can_fram
     return status;
 }
 
-/* Whether the transport holds its bus now with no outage to end (a reopened bus's first write is its own: it ends
- * the outage): the bus (new reference), None when it does not, NULL with an exception. */
-static PyObject *live_bus(vx_port_t *p) {
-    PyObject *device = PyObject_GetAttr(p->handle, vx_n.device), *outage;
-    int recovering;
-    if (device == NULL || device == Py_None) return device;
-    outage = PyObject_GetAttr(p->handle, vx_n.outage);
-    recovering = outage == NULL ? -1 : PyObject_IsTrue(outage);
-    Py_XDECREF(outage);
-    if (recovering == 0) return device;
-    Py_DECREF(device);
-    return recovering < 0 ? NULL : Py_NewRef(Py_None);
-}
-
 /* The batch's frames to a python-can bus by its own send(unit, 0.0), as CanTransport.write_nowait sends them (an
  * interface whose send cannot block: `_send`, then `_sent`'s count); from the first frame the bus does not take,
- * the rest goes to the writer. 1 done (or handed to the writer), 0 not tried (no bus now), -1 error. */
+ * the rest goes to the writer. 1 done (or handed to the writer), 0 not tried (no bus now, or an outage to end),
+ * -1 error. */
 static int write_pythoncan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     const vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
     vstig_can_frame_t stack[64], *frames = stack;
     size_t count, i = 0, base, extra, sent_messages = 0;
-    PyObject *bus = live_bus(&o->port), *zero = NULL;
+    PyObject *bus = vx_live_device(o->port.handle), *zero = NULL;
     int status = 1;
     if (bus == NULL || bus == Py_None) {
         Py_XDECREF(bus);

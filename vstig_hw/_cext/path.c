@@ -40,6 +40,8 @@
 #define READ_SIZE 65536 /* bytes one serial read takes at most (SerialTransport's _READ_SIZE) */
 #define DRAIN_LIMIT 512 /* CAN frames one read takes after the first (CanTransport's _DRAIN_LIMIT) */
 #define POLL_COUNTS_S 1.0 /* how often a SocketCAN bus's own drop counts are polled (socketcan_drops) */
+#define STATE_POLL_S 1.0  /* how often a python-can bus's read is the transport's (CanTransport's _STATE_POLL_S) */
+#define ALONE_S 0.001     /* a frame read within this of its timestamp ends the read (CanTransport's _ALONE_S) */
 #define DATAGRAMS_PER_READ 64 /* datagrams one UDP read takes at most (MavlinkUdpTransport's _DATAGRAMS_PER_READ) */
 #define DATAGRAM 65535        /* bytes a datagram read takes at most (its _DATAGRAM) */
 
@@ -1004,6 +1006,83 @@ static PyObject *pump_socketcan(vx_path_t *p, Py_ssize_t index, double timeout) 
 }
 #endif
 
+/* One frame a python-can bus's recv returned, into `units`, as CanTransport._read_device takes it (an error frame
+ * to the transport's own look): 1 when the bus may hold more (the frame waited longer than ALONE_S), 0 when the
+ * read ends there, -1 with an exception. */
+static int took_frame(vx_link_t *link, PyObject *units, PyObject *frame) {
+    PyObject *flag, *stamp;
+    double age;
+    int error;
+    if (PyList_Append(units, frame) < 0 || (flag = PyObject_GetAttr(frame, vx_n.is_error_frame)) == NULL) return -1;
+    error = PyObject_IsTrue(flag);
+    Py_DECREF(flag);
+    if (error < 0) return -1;
+    if (error) {
+        PyObject *done = PyObject_CallMethodOneArg(link->transport, vx_n.note_error_frame, frame), *device;
+        if (done == NULL) return -1;
+        Py_DECREF(done);
+        if ((device = PyObject_GetAttr(link->handle, vx_n.device)) == NULL) return -1;
+        Py_DECREF(device);
+        if (device == Py_None) return 0; /* the transport lost the bus (bus-off) */
+    }
+    if (PyList_GET_SIZE(units) > DRAIN_LIMIT) return 0;
+    if ((stamp = PyObject_GetAttr(frame, vx_n.timestamp)) == NULL) return -1;
+    age = wall_clock() - PyFloat_AsDouble(stamp);
+    Py_DECREF(stamp);
+    return PyErr_Occurred() ? -1 : age >= ALONE_S;
+}
+
+/* CanTransport's read of a python-can bus that is not SocketCAN (slcan, PCAN, Kvaser, Vector, virtual...), here:
+ * the bus's own recv(timeout), then recv(0) while the frame read had waited (took_frame), the batch delivered with
+ * no Python of ours around it. The transport's own read takes the turn (None) while it holds no bus or an outage
+ * to end, every STATE_POLL_S (its look at the bus's state), and once python-can raised (after what was read before
+ * is delivered): it meets the same, and handles it as its own. */
+static PyObject *pump_pythoncan(vx_path_t *p, Py_ssize_t index, double timeout) {
+    vx_link_t *link = &p->links[index];
+    PyObject *bus, *units = NULL, *wait = NULL, *zero = NULL, *frame, *result = NULL;
+    Py_ssize_t n;
+    double now, t;
+    vx_batch_t batch;
+    int handled, failed;
+    if (!p->fast) return Py_NewRef(Py_None); /* a listener wants each unit: the transport's read, Python's delivery */
+    if ((now = monotonic()) == -1.0 && PyErr_Occurred()) return NULL;
+    if (now - link->polled >= STATE_POLL_S) {
+        link->polled = now;
+        return Py_NewRef(Py_None);
+    }
+    if ((bus = vx_live_device(link->handle)) == NULL || bus == Py_None) return bus;
+    if ((units = PyList_New(0)) == NULL || (wait = PyFloat_FromDouble(timeout)) == NULL ||
+        (zero = PyFloat_FromDouble(0.0)) == NULL)
+        goto done;
+    frame = PyObject_CallMethodOneArg(bus, vx_n.recv, wait);
+    while (frame != NULL && frame != Py_None) {
+        int more = took_frame(link, units, frame);
+        Py_DECREF(frame);
+        if (more < 0) goto done;
+        frame = more ? PyObject_CallMethodOneArg(bus, vx_n.recv, zero) : Py_NewRef(Py_None);
+    }
+    if ((failed = frame == NULL)) { /* the transport's read meets it next, and handles it */
+        if (!PyErr_ExceptionMatches(PyExc_Exception)) goto done;
+        PyErr_Clear();
+    } else {
+        Py_DECREF(frame);
+    }
+    if ((n = PyList_GET_SIZE(units)) > 0) {
+        if (vx_count(link->tcounters, vx_n.rx, n) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred())) goto done;
+        batch.kind = 0;
+        batch.units = units;
+        handled = deliver_fast(p, index, t, &batch, NULL);
+        if (handled < 0 || (handled == 0 && deliver_slow(p, index, t, units) < 0)) goto done;
+    }
+    result = failed ? Py_NewRef(Py_None) : PyLong_FromSsize_t(n);
+done:
+    Py_DECREF(bus);
+    Py_XDECREF(units);
+    Py_XDECREF(wait);
+    Py_XDECREF(zero);
+    return result;
+}
+
 /* ---- the Python type ------------------------------------------------------------------------ */
 
 /* An XBee transport's API mode and quiet time (`api`, `quiet_after`); 0, or -1 with an exception. */
@@ -1209,6 +1288,7 @@ static PyObject *Path_deliver(vx_path_t *self, PyObject *args) {
 }
 
 static PyObject *Path_pump_at(vx_path_t *self, Py_ssize_t index, double timeout) {
+    if (self->links[index].reads == VX_READ_PYTHONCAN) return pump_pythoncan(self, index, timeout); /* everywhere */
 #ifndef _WIN32
     switch (self->links[index].reads) {
     case VX_READ_SERIAL:

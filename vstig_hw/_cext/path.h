@@ -9,6 +9,7 @@
 #define VX_READ_SOCKETCAN 2u /* the SocketCAN socket is read here */
 #define VX_READ_XBEE 3u      /* an XBee module's serial fd is read and cut into frames here */
 #define VX_READ_UDP 4u       /* a MAVLink UDP socket is read here (recvmmsg), a udpin link's sources noted */
+#define VX_READ_PYTHONCAN 5u /* a python-can bus that is not SocketCAN: its own recv, called here */
 
 typedef struct vx_udp vx_udp_t; /* path.c: a UDP read's datagrams, their sources, the frames cut from them */
 
@@ -20,7 +21,8 @@ typedef struct {
     vx_slot_t handle_fd;     /* its `fd` slot */
     PyObject *device;        /* SocketCAN: the bus `fd` belongs to */
     int fd;
-    double polled;           /* SocketCAN: when the bus's own drop counts were last polled */
+    double polled;           /* SocketCAN: when the bus's own drop counts were last polled; python-can: when the
+                              * transport's read last had a turn (its look at the bus's state) */
     uint8_t *buf;            /* serial: a read's bytes (each link's reader thread reads into its own) */
     vstig_xbee_rx_t *stream; /* XBee: the transport's cutting of its module's bytes into frames */
     uint8_t *units;          /* XBee: the frames one read completed, as on the wire, back to back */

@@ -24,7 +24,11 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   HEARTBEAT sent when its `beat` says, on the delivery's timer; while its writer is
   idle its outlet sends the TUNNELs to the socket itself (to the router, or to each
   live peer) unless the link is paced (`air_rate=`) or signed: those, and a mavlink
-  serial radio, go through the transport's Python (its token bucket, `in_order`);
+  serial radio, go through the transport's Python (its token bucket, `in_order`).
+  A CAN link on any other python-can interface (slcan, PCAN, Kvaser, Vector,
+  virtual) is read by it through the bus's own recv, and while its writer is idle
+  its outlet sends by the bus's own send(unit, 0.0) where that cannot block
+  (`CanTransport.sends_at_once`): python-can's calls, no Python of ours between;
 * with the swarm key, `Engine(swarm_key=)` for `SignedEngine` (tags.c): cobs8 and
   CAN FD records are decoded by the Receiver and checked by the link's policy in
   the delivery, and an outlet that sends tags has its Encoder put each entry's
@@ -79,7 +83,7 @@ __all__ = ["Compiled", "compiled_for"]
 MAX_EXPIRY_TICKS = 254  # epuck4 partials the compiled receiver can age (libvstig counts ticks in a byte)
 MAX_LEARN = 2_097_151.0  # seconds of `learn` the compiled guard can count (2^31 of its 1/1024 s units)
 # How the compiled delivery reads a link (path.h's VX_READ_*; tests/native compares them)
-READS_PYTHON, READS_SERIAL, READS_SOCKETCAN, READS_XBEE, READS_UDP = 0, 1, 2, 3, 4
+READS_PYTHON, READS_SERIAL, READS_SOCKETCAN, READS_XBEE, READS_UDP, READS_PYTHONCAN = 0, 1, 2, 3, 4, 5
 
 
 def _is(obj: object, module: str, name: str) -> bool:
@@ -165,7 +169,8 @@ def encoder_for(link: Link[Any]) -> Encoder | None:
 def reads_for(link: Link[Any]) -> int:
     """How the compiled delivery reads the link: READS_SERIAL a serial port's fd, READS_SOCKETCAN a SocketCAN
     socket, READS_XBEE an XBee module's serial fd (cut into frames as its transport cuts them), READS_UDP a MAVLink
-    UDP socket, READS_PYTHON through its transport's own read."""
+    UDP socket, READS_PYTHONCAN any other python-can bus (its own recv, called by the delivery), READS_PYTHON through
+    its transport's own read."""
     transport = link.transport
     if type(transport) is MavlinkUdpTransport:
         return READS_UDP  # while the socket is open; pump hands an outage back
@@ -173,18 +178,17 @@ def reads_for(link: Link[Any]) -> int:
         return READS_SERIAL  # while the port has an fd (a device or a pty); pump hands socket:// and outages back
     if type(transport) is XBeeTransport:
         return READS_XBEE  # likewise, and while the transport holds nothing it read at open
-    if _is(transport, "vstig_hw.transports.can", "CanTransport") and getattr(transport, "interface", "") == "socketcan":
-        return READS_SOCKETCAN
+    if _is(transport, "vstig_hw.transports.can", "CanTransport"):  # pump hands outages and python-can's errors back
+        return READS_SOCKETCAN if getattr(transport, "interface", "") == "socketcan" else READS_PYTHONCAN
     return READS_PYTHON
 
 
 def port_for(link: Link[Any]) -> str:
     """Where the compiled outlet writes while the link's writer is idle: the device itself, or the writer."""
-    transport: Any = link.transport
-    if reads_for(link) == READS_PYTHON and _is(transport, "vstig_hw.transports.can", "CanTransport") and \
-            transport.sends_at_once:
-        return "pythoncan"  # python-can's own send(unit, 0.0), called by the outlet (the bus: the transport's handle)
     reads, transport = reads_for(link), link.transport
+    if reads == READS_PYTHONCAN:  # python-can's own send(unit, 0.0), called by the outlet (the handle's bus)
+        can_transport: Any = transport  # a CanTransport (its module imports python-can: not imported here)
+        return "pythoncan" if can_transport.sends_at_once else "python"
     if type(transport) is MavlinkUdpTransport and not transport.writes_as_made:
         return "python"  # paced to an air rate, or signed: the transport's own write keeps the bucket and the order
     return ("python", "serial", "socketcan", "serial", "udp")[reads]  # an XBee module's writes: a serial port's

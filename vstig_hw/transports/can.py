@@ -1,7 +1,7 @@
 """CanTransport: a python-can bus that survives its adapter vanishing, and waits on no adapter.
 
-C twin: vstig_hw/_cext/path.c (a SocketCAN read), vstig_hw/_cext/outlet.c (its write_nowait); held equal by
-tests/native (index: vstig_hw/_vstig.pyi).
+C twin: vstig_hw/_cext/path.c (its read: a SocketCAN socket's, or any other bus's recv), vstig_hw/_cext/outlet.c
+(its write_nowait: a SocketCAN socket's, or the bus's send); held equal by tests/native (index: vstig_hw/_vstig.pyi).
 
 Any python-can interface works unchanged (socketcan, pcan, kvaser, virtual,
 udp_multicast, socketcand...): interface, channel, bitrate and any other
