@@ -88,6 +88,7 @@ class Encoder:
     per_frame: int
     seq: int  # MAVLink: the next frame's sequence, and the last signing timestamp sent (the framing shares them)
     timestamp: int
+    written: int  # MAVLink: the newest signing timestamp the link wrote (the framing's in_order, the outlet's sends)
     def __init__(self, framing: str, *, kilobot_type: int = 0x56, extended: bool = False, base: int | None = None,
                  stigmergy: int = 0, sender: int = 0, fd: bool = False, brs: bool = True,
                  frame_type: Any = None, escaped: bool = False, dest: int = 0xFFFF, sysid: int = 1,

@@ -23,6 +23,7 @@ from test_native_xbee import RecordingGuard
 
 from vstig_hw import Message
 from vstig_hw.framing.mavlink import MavlinkFraming, Signing
+from vstig_hw.gateway.compiled import port_for
 from vstig_hw.gateway.node import Mode, Node
 from vstig_hw.links.link import Link
 from vstig_hw.transports.mavlink import MAX_PEERS, MavlinkUdpTransport, UdpPeers
@@ -99,10 +100,9 @@ def _datagrams(seed: int, keyed: bool) -> list[bytes]:
     return [datagram for datagram in datagrams if datagram]
 
 
-def _heard(sock: socket.socket) -> dict[Any, Counter[Message]]:
+def _heard(sock: socket.socket, reader: MavlinkFraming) -> dict[Any, Counter[Message]]:
     """The messages of the broadcast TUNNELs that reached `sock`, by the address they came from (HEARTBEATs and the
-    rest left aside)."""
-    reader = MavlinkFraming(9, 1)
+    rest left aside); `reader` checks signatures and timestamps where it has the key."""
     sock.setblocking(False)
     heard: dict[Any, Counter[Message]] = {}
     while True:
@@ -113,8 +113,8 @@ def _heard(sock: socket.socket) -> dict[Any, Counter[Message]]:
         heard.setdefault(source, Counter()).update(reader.feed(data))
 
 
-def _up_to(router: socket.socket) -> Counter[Message]:
-    return sum(_heard(router).values(), Counter())
+def _up_to(router: socket.socket, reader: MavlinkFraming) -> Counter[Message]:
+    return sum(_heard(router, reader).values(), Counter())
 
 
 def _received(transport: MavlinkUdpTransport) -> dict[str, int]:
@@ -131,8 +131,10 @@ def test_the_compiled_udp_read_and_send_equal_the_transports(compiled: ModuleTyp
         for side in sides:
             side.node.open()
         assert type(fast.drones.peers) is compiled.UdpPeers and type(pure.drones.peers) is UdpPeers  # read in C
+        assert [port_for(link) for link in fast.node.links] == ["udp", "udp"]  # and written in C, signed or not
         sent = 0
         up: list[Counter[Message]] = [Counter(), Counter()]  # what the drones sent went up to each router
+        readers = [MavlinkFraming(9, 1, signing=Signing(KEY) if keyed else None) for _ in sides]  # the routers'
         datagrams = _datagrams(rng.randrange(1 << 30), keyed)
         at = 0
         while at < len(datagrams):  # bursts from one drone or several, read in one recvmmsg or more
@@ -145,8 +147,8 @@ def test_the_compiled_udp_read_and_send_equal_the_transports(compiled: ModuleTyp
             sent += len(burst)
             _wait("a node did not read what the drones sent",
                   lambda sent=sent: all(side.drones.counters["rx_datagrams"] >= sent for side in sides))
-            for side, heard in zip(sides, up, strict=True):  # read as it comes: a socket's buffer holds ~150
-                heard.update(_up_to(side.router))
+            for side, heard, reader in zip(sides, up, readers, strict=True):  # as it comes: a buffer holds ~150
+                heard.update(_up_to(side.router, reader))
         ahead = mavlink_twins.T0 + 3600  # a signing clock past the drones' (theirs is T0 on)
         batch = mavlink_twins._messages(rng, 20)
         for side in sides:  # the router's turn: what it sends goes to the live peers of the udpin link
@@ -167,13 +169,15 @@ def test_the_compiled_udp_read_and_send_equal_the_transports(compiled: ModuleTyp
         # unsigned TUNNELs of another payload_type are refused before their type is looked at when keyed
         assert {"mavlink1", "crc", "drop_noise"} | ({"unsigned", "signature", "replay"} if keyed
                                                     else {"other_payload_type"}) <= reasons
-        for side, heard in zip(sides, up, strict=True):
-            heard.update(_up_to(side.router))
+        for side, heard, reader in zip(sides, up, readers, strict=True):
+            heard.update(_up_to(side.router, reader))
         assert up[1] == up[0] and up[0].total() > 50
+        # every frame either side sent (TUNNELs, HEARTBEATs) was taken: signed, and in timestamp order
+        assert [set(reader.drops) for reader in readers] == [{"other_message"}, {"other_message"}]
         assert pure.drones.peers is not None
         live = set(pure.drones.peers.live(time.monotonic()))
         for drone in drones:  # the router's 20 messages from each side's udpin link, to its live peers alone
-            by_source = _heard(drone)
+            by_source = _heard(drone, MavlinkFraming(9, 1))
             want = Counter(batch) if drone.getsockname() in live else Counter()
             assert [by_source.get(side.into, Counter()) for side in sides] == [want, want], drone.getsockname()
     finally:

@@ -56,7 +56,7 @@ typedef struct {
     PyObject *reader_thread, *failure, *wake, *retry_at, *sleep_until, *wake_on_arrival, *set;
     /* vstig_hw.transports.base.CompiledHandle, and the transports that give one */
     PyObject *fd, *fresh, *preamble, *device, *outage, *compiled_handle, *counters, *failed, *channel,
-        *note_error_frame, *api, *quiet_after, *holds, *note_report, *peers, *beat;
+        *note_error_frame, *api, *quiet_after, *holds, *note_report, *peers, *writing, *beat;
     /* a MAVLink UDP transport's counters */
     PyObject *rx_datagrams, *tx_refused, *tx_no_peer, *tx_busy, *tx_dropped;
     /* a SocketCAN bus (socketcan_drops.DropCountingBus) and its socket */

@@ -768,6 +768,8 @@ static PyMemberDef Encoder_members[] = {
     {"report", T_UBYTE, offsetof(vx_encoder_t, tx.xbee.report), 0,
      "XBee: the next frame asks for a Transmit Status (1)."},
     {"seq", T_UBYTE, offsetof(vx_encoder_t, tx.mav.tx.seq), 0, "MAVLink: the next frame's sequence number."},
+    {"written", T_LONGLONG, offsetof(vx_encoder_t, tx.mav.written), 0,
+     "MAVLink: the newest signing timestamp the link wrote (the framing's in_order and the outlet's sends)."},
     {NULL, 0, 0, 0, NULL},
 };
 

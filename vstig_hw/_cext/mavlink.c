@@ -213,6 +213,13 @@ int vx_mav_tx_init(vx_mav_tx_t *m, int sysid, int compid, int target, PyObject *
     return 0;
 }
 
+long long vx_mav_tx_timestamp(const vx_mav_tx_t *m) {
+    long long stamp = 0;
+    int i;
+    for (i = 6; i-- > 0;) stamp = stamp << 8 | m->tx.timestamp[i];
+    return stamp;
+}
+
 void vx_mav_tx_clock(vx_mav_tx_t *m) {
     struct timespec now;
     long long stamp, last = 0;
@@ -220,7 +227,7 @@ void vx_mav_tx_clock(vx_mav_tx_t *m) {
     if (m->tx.key == NULL || clock_gettime(CLOCK_REALTIME, &now) != 0) return;
     /* signing_timestamp(time.time()): 10 us units since 2015 */
     stamp = ((long long)now.tv_sec - VX_EPOCH_2015) * 100000ll + now.tv_nsec / 10000l;
-    for (i = 6; i-- > 0;) last = last << 8 | m->tx.timestamp[i];
+    last = vx_mav_tx_timestamp(m);
     if (stamp - 1 <= last) return; /* frame_out takes last + 1 */
     for (i = 0; i < 6; i++) m->tx.timestamp[i] = (uint8_t)((stamp - 1) >> (8 * i));
 }

@@ -30,6 +30,7 @@ typedef struct {
 typedef struct {
     vstig_mavlink_tx_t tx;
     uint8_t key[VSTIG_MAVLINK_KEY_SIZE]; /* tx.key points here when signing */
+    long long written; /* the newest signing timestamp the link wrote (MavlinkFraming.in_order's mark, once shared) */
 } vx_mav_tx_t;
 
 /* 0, or -1 with ValueError naming what is wrong (sysid, compid, key). */
@@ -52,6 +53,8 @@ int vx_mav_harvest_device(vstig_mavlink_rx_t *cutter, PyObject *counters);
 int vx_mav_tx_init(vx_mav_tx_t *m, int sysid, int compid, int target, PyObject *key, int link_id);
 /* Signing.next_timestamp's rule before a signed frame: the timestamp goes on from max(last + 1, the clock). */
 void vx_mav_tx_clock(vx_mav_tx_t *m);
+/* The last signing timestamp the encoder signed with (10 us units since 2015). */
+long long vx_mav_tx_timestamp(const vx_mav_tx_t *m);
 /* Room for n messages' TUNNELs. */
 #define VX_MAV_TX_ROOM(n) ((((n) + VSTIG_MAVLINK_MAX_MESSAGES - 1u) / VSTIG_MAVLINK_MAX_MESSAGES) * \
                            VSTIG_MAVLINK_FRAME_MAX)

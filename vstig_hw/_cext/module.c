@@ -62,6 +62,7 @@ static const struct {
     {&vx_n.set, "set", WAKEUP},
     {&vx_n.fd, "fd", HANDLE}, {&vx_n.fresh, "fresh", HANDLE}, {&vx_n.preamble, "preamble", HANDLE},
     {&vx_n.device, "device", HANDLE}, {&vx_n.outage, "outage", HANDLE}, {&vx_n.peers, "peers", HANDLE},
+    {&vx_n.writing, "writing", HANDLE},
     {&vx_n.compiled_handle, "compiled_handle", DEVICE_TRANSPORT}, {&vx_n.counters, "counters", DEVICE_TRANSPORT},
     {&vx_n.failed, "failed", DEVICE_TRANSPORT},
     {&vx_n.channel, "channel", CAN_TRANSPORT}, {&vx_n.note_error_frame, "note_error_frame", CAN_TRANSPORT},

@@ -10,10 +10,10 @@
  * a backlog lasts. The window is a Window (window.c); the writer stays the link's LinkWriter.
  *
  * What is new is how a batch reaches the device while the writer holds nothing (`writer.idle`): a serial port's
- * non-blocking fd, a SocketCAN socket or a MAVLink UDP socket (unpaced, unsigned) is written here, in C, with the
- * transport's own counters, exactly as its write_nowait would; whatever the device does not take at once (a full buffer, an error) goes to the writer,
- * whose write_nowait meets the same condition and handles it as it always does (the rest waits; a lost device
- * is counted and reopened by the transport).
+ * non-blocking fd, a SocketCAN socket or a MAVLink UDP socket (unpaced; a signed one under its write lock) is
+ * written here, in C, with the transport's own counters, exactly as its write_nowait would; whatever the device
+ * does not take at once (a full buffer, an error) goes to the writer, whose write_nowait meets the same condition
+ * and handles it as it always does (the rest waits; a lost device is counted and reopened by the transport).
  */
 #include "outlet.h"
 #include "peers.h"
@@ -308,18 +308,43 @@ done:
     if (frames != stack) PyMem_Free(frames);
     return status;
 }
+/* A signed link's write lock (CompiledHandle.writing) taken without waiting, into *lock (None: the link has none):
+ * 1 taken or none to take, 0 another write holds it (the writer's write_nowait waits for it), -1 error. */
+static int take_writing(vx_port_t *p, PyObject **lock) {
+    PyObject *got;
+    int taken;
+    if ((*lock = PyObject_GetAttr(p->handle, vx_n.writing)) == NULL) return -1;
+    if (*lock == Py_None) return 1;
+    got = PyObject_CallMethodOneArg(*lock, vx_n.acquire, Py_False);
+    taken = got == NULL ? -1 : PyObject_IsTrue(got);
+    Py_XDECREF(got);
+    if (taken <= 0) Py_CLEAR(*lock);
+    return taken;
+}
+
+/* The lock take_writing took, given back (and its reference); 0, or -1 with an exception. */
+static int give_writing(PyObject *lock) {
+    PyObject *done = lock == Py_None ? Py_NewRef(Py_None) : PyObject_CallMethodNoArgs(lock, vx_n.release);
+    Py_DECREF(lock);
+    Py_XDECREF(done);
+    return done == NULL ? -1 : 0;
+}
+
 /* The TUNNELs of a batch straight to a MAVLink UDP socket, one datagram (MavlinkUdpTransport.write_nowait: `_send`,
  * to the router of a connected udpout socket or to each live peer of a udpin one); 1 done (or handed to the
  * writer), 0 not tried, -1 error. A send that fails at once goes to the writer, whose write_nowait meets the same
- * and handles it; one that fails after others went is counted as `_send` counts it (tx_busy, or the socket lost). */
+ * and handles it; one that fails after others went is counted as `_send` counts it (tx_busy, or the socket lost).
+ * A signed link's frames are made and sent under its write lock, the newest timestamp written then the Encoder's
+ * `written` (MavlinkFraming.in_order signs again any older frame written after them); while another write holds
+ * the lock, the batch goes to the writer. */
 static int write_udp(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     vx_port_t *p = &o->port;
     vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
     uint8_t stack[VX_MAV_TX_ROOM(64)], *buf = stack;
     size_t len, room = vx_tx_room(tx, n);
-    PyObject *peers, *rest;
+    PyObject *peers, *rest, *lock;
     Py_ssize_t targets, i, sent = 0, refused = 0;
-    int fd = serial_fd(p), status = 1, failed = 0;
+    int fd = serial_fd(p), status = 1, failed = 0, taken;
     if (fd < -1) return -1;
     if (fd < 0) return 0; /* the transport reopens it: its write_nowait knows how */
     if ((peers = PyObject_GetAttr(p->handle, vx_n.peers)) == NULL) return -1;
@@ -333,8 +358,13 @@ static int write_udp(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         return vx_count(p->counters, vx_n.tx_no_peer, 1) < 0 || vx_count(o->counters, vx_n.out, (Py_ssize_t)n) < 0
                ? -1 : 1;
     }
+    if ((taken = take_writing(p, &lock)) <= 0) {
+        Py_DECREF(peers);
+        return taken;
+    }
     if (room > sizeof stack && (buf = PyMem_Malloc(room)) == NULL) {
         Py_DECREF(peers);
+        (void)give_writing(lock);
         PyErr_NoMemory();
         return -1;
     }
@@ -351,6 +381,8 @@ static int write_udp(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         }
     }
     Py_DECREF(peers);
+    if (lock != Py_None && (sent || refused)) tx->mav.written = vx_mav_tx_timestamp(&tx->mav);
+    if (give_writing(lock) < 0) goto error;
     if (failed && sent == 0 && refused == 0) { /* the first send failed: the writer's write_nowait handles it */
         rest = Py_BuildValue("[y#]", (const char *)buf, (Py_ssize_t)len);
         status = rest == NULL || writer_submit(o, rest, (Py_ssize_t)n) < 0 ? -1 : 1;

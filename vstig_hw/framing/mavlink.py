@@ -303,7 +303,9 @@ class MavlinkFraming(SerialFraming):
         self._reader = MavlinkStreamReader(self.drops)
         self._last: tuple[bytes | None, int | None] = (None, None)
         self._twin: Any = None  # the compiled Encoder this framing sends through, once shared (`share_sending`)
-        self._written = 0  # the newest signing timestamp the link wrote (`in_order`)
+        # the newest signing timestamp the link wrote (`in_order`); once shared, the Encoder's `written`, which the
+        # compiled outlet moves on as it sends a signed link's TUNNELs itself (under the link's write lock)
+        self.written = 0
 
     def share_sending(self, twin: Any) -> None:
         """Send through the compiled Encoder `twin` from now on (it goes on from this framing's sequence and last
@@ -314,6 +316,7 @@ class MavlinkFraming(SerialFraming):
             twin.seq = self._seq
             if self.signing is not None:
                 twin.timestamp = self.signing._sent
+            twin.written = self.written
             self._twin = twin
 
     # -- sending -------------------------------------------------------------------
@@ -343,19 +346,20 @@ class MavlinkFraming(SerialFraming):
         if signing is None:
             return unit
         fixed: bytearray | None = None
+        mark = self if self._twin is None else self._twin  # where the newest timestamp written is kept
         pos = 0
         while pos + HEADER < len(unit) and unit[pos] == STX and unit[pos + 2] & SIGNED:
             end = pos + HEADER + unit[pos + 1] + 2 + SIGNATURE
             if end > len(unit):
                 break
             stamp = int.from_bytes(unit[end - 12:end - 6], "little")
-            if stamp <= self._written:
+            if stamp <= mark.written:
                 with self._lock:
-                    stamp = max(self._written + 1, self._next_timestamp(signing))
+                    stamp = max(mark.written + 1, self._next_timestamp(signing))
                 fixed = bytearray(unit) if fixed is None else fixed
                 tail = bytes((unit[end - 13],)) + stamp.to_bytes(6, "little")
                 fixed[end - 13:end] = tail + _signature(signing.key, bytes(fixed[pos:end - 13]) + tail)
-            self._written = stamp
+            mark.written = stamp
             pos = end
         return unit if fixed is None else bytes(fixed)
 

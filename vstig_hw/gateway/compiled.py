@@ -23,8 +23,9 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   datagram that is not one frame cut as the transport cuts it), the transport's
   HEARTBEAT sent when its `beat` says, on the delivery's timer; while its writer is
   idle its outlet sends the TUNNELs to the socket itself (to the router, or to each
-  live peer) unless the link is paced (`air_rate=`) or signed: those, and a mavlink
-  serial radio, go through the transport's Python (its token bucket, `in_order`).
+  live peer; a signed link's under its write lock, so frames leave in the order made)
+  unless the link is paced (`air_rate=`): that, and a mavlink serial radio, go
+  through the transport's Python (its token bucket).
   A CAN link on any other python-can interface (slcan, PCAN, Kvaser, Vector,
   virtual) is read by it through the bus's own recv, and while its writer is idle
   its outlet sends by the bus's own send(unit, 0.0) where that cannot block
@@ -190,7 +191,7 @@ def port_for(link: Link[Any]) -> str:
         can_transport: Any = transport  # a CanTransport (its module imports python-can: not imported here)
         return "pythoncan" if can_transport.sends_at_once else "python"
     if type(transport) is MavlinkUdpTransport and not transport.writes_as_made:
-        return "python"  # paced to an air rate, or signed: the transport's own write keeps the bucket and the order
+        return "python"  # paced to an air rate: the transport's own write keeps the bucket
     return ("python", "serial", "socketcan", "serial", "udp")[reads]  # an XBee module's writes: a serial port's
 
 

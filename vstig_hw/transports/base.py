@@ -145,10 +145,12 @@ class CompiledHandle(Generic[Device]):
       pyserial's own calls);
     * `fresh`: the port was (re)opened and nothing written since: `preamble` goes ahead of the next write;
     * `peers`: a udpin socket's peers, the addresses its sends go to (transports.mavlink.UdpPeers, or its C twin
-      once the compiled path reads the link); None elsewhere.
+      once the compiled path reads the link); None elsewhere;
+    * `writing`: the lock every write of the device holds while it is under way, where frames must leave in the
+      order they were made (a signed MAVLink link's); None elsewhere.
     """
 
-    __slots__ = ("device", "fd", "fresh", "outage", "peers", "preamble")
+    __slots__ = ("device", "fd", "fresh", "outage", "peers", "preamble", "writing")
 
     device: Device | None
     outage: bool
@@ -156,6 +158,7 @@ class CompiledHandle(Generic[Device]):
     fresh: bool
     preamble: bytes
     peers: Any
+    writing: Any
 
     def __init__(self, preamble: bytes = b"") -> None:
         self.device = None
@@ -164,6 +167,7 @@ class CompiledHandle(Generic[Device]):
         self.fresh = False
         self.preamble = preamble
         self.peers = None
+        self.writing = None
 
 
 class Backoff:

@@ -39,7 +39,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ..framing.mavlink import MAX_FRAME, MavlinkStreamReader
-from .base import DeviceTransport, TransportError
+from .base import CompiledHandle, DeviceTransport, TransportError
 from .serial import SerialTransport
 
 __all__ = ["AIR_SHARE", "HEARTBEAT_PERIOD", "MAX_PEERS", "PEER_TIMEOUT", "AirBudget", "MavlinkSerialTransport",
@@ -126,6 +126,7 @@ class _Mavlink:
     counters: Any
     heartbeat: Callable[[], bytes] | None
     budget: AirBudget | None
+    _live: CompiledHandle[Any]  # the device transport's
 
     def _mavlink_init(self, heartbeat: Callable[[], bytes] | None, air_rate: int | None,
                       stamp: Callable[[bytes], bytes] | None) -> None:
@@ -134,8 +135,9 @@ class _Mavlink:
         self._next_beat = 0.0
         self._reader = MavlinkStreamReader(self.counters, prefix="drop_")
         self._stamp = stamp or (lambda unit: unit)
-        self._stamps = stamp  # None: nothing to keep in signing order (`writes_as_made`)
         self._writing = threading.Lock()  # one write at a time, each unit stamped as it goes (see the module)
+        if stamp is not None:  # signed: the compiled outlet's own writes hold the lock too
+            self._live.writing = self._writing
         self._tail: bytes | None = None  # what a write left of a unit the port took in part: it goes next, as is
 
     def _in_order(self, unit: bytes) -> bytes:
@@ -281,9 +283,9 @@ class MavlinkUdpTransport(_Mavlink, DeviceTransport[bytes, socket.socket]):
 
     @property
     def writes_as_made(self) -> bool:
-        """A unit may go to the socket as it was made, written by whoever holds it (the compiled outlet): no air
-        budget to charge and no signing order to keep (`stamp`) on this link."""
-        return self.budget is None and self._stamps is None
+        """A unit may go to the socket as it was made, by whoever holds the write lock (the compiled outlet, holding
+        `CompiledHandle.writing` where the link signs): no air budget to charge on this link."""
+        return self.budget is None
 
     def _heard_any(self) -> bool:
         peers = self._live.peers
