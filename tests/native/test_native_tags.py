@@ -16,9 +16,11 @@ import test_native_gateway as gateway_twins  # its Node harness, not its tests
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vstig_hw.auth import SwarmKeys, Tagged
+from vstig_hw.auth import SwarmKeys, Tagged, encode_batch
+from vstig_hw.counters import Counters
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
+from vstig_hw.framing.xbee import XBeeFraming, api_frame, receive_packet
 from vstig_hw.gateway import assembly as assembly_module
 from vstig_hw.gateway.compiled import Compiled
 from vstig_hw.gateway.node import Node
@@ -26,7 +28,7 @@ from vstig_hw.gateway.signing import SignedEngine
 from vstig_hw.links.link import Link
 from vstig_hw.tagged import AuthPolicy
 from vstig_hw.timestamps import next_timestamp
-from vstig_hw.wire import Message, Op
+from vstig_hw.wire import Message, Op, encode
 
 MASTER = bytes(range(0xA0, 0xC0))
 NODE = 200
@@ -218,3 +220,43 @@ def test_the_compiled_delivery_with_tags_equals_the_python_node(compiled: Module
     finally:
         for node in nodes:
             gateway_twins._close(node)
+
+
+# -- XBee: tagged batches (0xA1 and records) in Receive Packets -------------------------------------------------
+
+def _xbee_rf(rng: random.Random, keys: SwarmKeys) -> bytes:
+    """RF data: untagged messages, a tagged batch (some forged), or a batch of a wrong length (bad_length)."""
+    msgs = [Message(Op.PUT, rng.randrange(8), rng.randrange(1 << 16), rng.randrange(1, 1 << 16), rng.choice(WRITERS))
+            for _ in range(rng.randint(1, 3))]
+    roll = rng.random()
+    if roll < 0.3:
+        return b"".join(encode(m) for m in msgs)
+    records = [keys.tag(m, rng.randrange(3)) for m in msgs]
+    if roll < 0.45:
+        records[0] = Tagged(records[0].message, records[0].epoch, bytes(8))
+    batch = encode_batch(records)
+    return batch[:-rng.randint(1, 19)] if roll > 0.9 else batch
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32), auth=st.sampled_from(list(AuthPolicy)))
+def test_the_xbee_receiver_reads_tagged_batches_as_the_framing(compiled: ModuleType, seed: int,
+                                                               auth: AuthPolicy) -> None:
+    """Receive Packets of messages, of tagged batches (SPEC.md 10.5) and of batches cut short, one or several a unit:
+    `feed` gives the same messages and sender (a batch's without their tags), `feed_tagged` the same records on a
+    link that checks tags, and the drops are the same."""
+    rng, keys = random.Random(seed), SwarmKeys(MASTER)
+    python, drops = XBeeFraming(), Counters()
+    c = compiled.Receiver("xbee", drops)
+    c.check_tags(list(AuthPolicy).index(auth), lambda *refused: None)
+    for _ in range(20):
+        unit = b"".join(api_frame(receive_packet(rng.choice([0x0013A20040A1B2C3, 0x7E]), _xbee_rf(rng, keys)))
+                        for _ in range(rng.randint(1, 3)))
+        if rng.random() < 0.5:
+            heard = python.feed(unit)
+            assert (c.feed(unit), c.sender if heard else None) == (heard, python.sender_of(unit) if heard else None)
+        else:
+            pairs = python.feed_tagged(unit)
+            got = [(msg, None if proof is None else Tagged(msg, *proof)) for msg, proof in c.feed_tagged(unit)]
+            assert got == (pairs if auth is not AuthPolicy.OFF else [(msg, None) for msg, _ in pairs])
+    assert drops == python.drops

@@ -45,6 +45,7 @@ MIRRORED = {
     ("roster.h", "VX_ROSTER_LINKS"): "vstig_hw.links.assemble:MAX_LINKS",
     ("roster.h", "VX_ROSTER_BEHIND_KEYS"): "vstig_hw.gateway.roster:MAX_BEHIND_KEYS",
     ("roster.c", "GAP_WEIGHT"): "vstig_hw.gateway.roster:_GAP_WEIGHT",
+    ("tags.h", "VX_BATCH_MARKER"): "vstig_hw.auth:BATCH_MARKER",
     ("roster.c", "QUIET_PERIODS"): "vstig_hw.gateway.roster:QUIET_PERIODS",
     ("roster.c", "RATE_WINDOW"): "vstig_hw.gateway.roster:RATE_WINDOW",
 }

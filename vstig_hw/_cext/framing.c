@@ -76,11 +76,34 @@ void vx_rx_unit_done(vx_rx_t *rx) {
 }
 
 /* One whole frame the XBee receiver cut: its messages at out[n..], the sender noted. */
+/* A Receive Packet or Transmit Request whose RF data is a tagged batch (SPEC.md 10.5: VX_BATCH_MARKER and N >= 1
+ * records; never 8*N bytes): its messages at out, their records kept where the link checks tags; 0 for any other
+ * frame (vstig_xbee_messages' then, a batch of another length dropped there as bad_length). */
+static uint8_t xbee_batch(vx_rx_t *rx, const uint8_t *data, uint16_t len, vstig_msg_t *out, uint8_t source[8],
+                          uint8_t *has_source) {
+    uint16_t header = data[0] == VSTIG_XBEE_RECEIVE_PACKET ? VSTIG_XBEE_RX_HEADER : VSTIG_XBEE_TX_HEADER, rf, at;
+    uint8_t n = 0, i;
+    if ((data[0] != VSTIG_XBEE_RECEIVE_PACKET && data[0] != VSTIG_XBEE_TRANSMIT_REQUEST) || len < header)
+        return 0;
+    rf = (uint16_t)(len - header);
+    if (rf < 1u + VSTIG_RECORD_SIZE || data[header] != VX_BATCH_MARKER || (rf - 1u) % VSTIG_RECORD_SIZE != 0)
+        return 0;
+    for (at = (uint16_t)(header + 1u); at < len; at = (uint16_t)(at + VSTIG_RECORD_SIZE), n++) {
+        vstig_msg_decode(data + at, &out[n]);
+        if (rx->policy != VSTIG_AUTH_OFF) vx_records_add(&rx->records, &out[n], data + at + 8, rx->emitted + n);
+    }
+    *has_source = data[0] == VSTIG_XBEE_RECEIVE_PACKET;
+    for (i = 0; *has_source && i < 8u; i++) source[i] = data[1 + i];
+    return n;
+}
+
 static size_t xbee_frame(vx_rx_t *rx, vstig_msg_t *out) {
-    uint8_t source[8], has_source, n = 0, i;
-    if (vstig_xbee_messages(vstig_xbee_frame_data(&rx->xbee), vstig_xbee_frame_len(&rx->xbee), out, &n, source,
-                            &has_source, &rx->xbee.drops) == VSTIG_XBEE_REPORT)
+    const uint8_t *data = vstig_xbee_frame_data(&rx->xbee);
+    uint16_t len = vstig_xbee_frame_len(&rx->xbee);
+    uint8_t source[8], has_source = 0, n = xbee_batch(rx, data, len, out, source, &has_source), i;
+    if (n == 0 && vstig_xbee_messages(data, len, out, &n, source, &has_source, &rx->xbee.drops) == VSTIG_XBEE_REPORT)
         vstig_drops_count(&rx->xbee.drops, VSTIG_DROP_UNKNOWN_TYPE); /* the transport keeps the module's reports */
+    rx->emitted += n;
     if (n && has_source && !rx->has_sender) {
         rx->has_sender = 1;
         rx->sender = 0;

@@ -4,6 +4,8 @@
 
 #include "ext.h"
 
+#define VX_BATCH_MARKER 161u /* 0xA1, the first byte of N records where untagged messages would be 8*N bytes (XBee) */
+
 /* One authenticated message as a unit carried it (vstig_hw.auth.Tagged), and its message's place in the unit. */
 typedef struct {
     vstig_msg_t msg;

@@ -34,8 +34,9 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   CAN FD records are decoded by the Receiver and checked by the link's policy in
   the delivery, and an outlet that sends tags has its Encoder put each entry's
   record in (`send_tags`) and writes through the link's writer. A link that checks
-  tags the C does not decode (XBee batches, MAVLink's tagged TUNNELs) keeps the
-  whole Node in Python (`checks_tags_for`).
+  tags the C does not send (XBee's tagged batches: decoded in C, on links with
+  auth off too; MAVLink's tagged TUNNELs) keeps the whole Node in Python
+  (`checks_tags_for`).
 
 Everything else (zenoh, dialects, XbeeMav's packets, the overhead controller,
 blabbermouth...) takes the Python path through the same parts. What decides which links the
@@ -310,7 +311,8 @@ def checks_tags_for(link: Link[Any]) -> bool:
     """Whether the compiled path can check and send the link's tags as its framing does: a link with auth off, one
     whose framing stays Python (zenoh, ROS 2...: the Python delivery checks it, the compiled engine keeps the
     proofs), one whose framing carries no tags (nothing to check), or cobs8 and CAN, whose records the compiled
-    Receiver decodes (XBee batches and MAVLink's tagged TUNNELs are Python's only: such a Node runs in Python)."""
+    Receiver decodes and Encoder sends (XBee's tagged batches are decoded in C but not sent, MAVLink's tagged
+    TUNNELs are Python's only: a Node with such a link that checks tags runs in Python)."""
     kind = framing_of(link)
     return link.auth is AuthPolicy.OFF or kind is None or kind in ("cobs8", "can") or not link.framing.carries_tags
 
