@@ -16,7 +16,8 @@ alternated (can.bridge, api, can.bridge, api...) and the median of each:
 * context switches: likewise, voluntary and involuntary;
 * instructions, under callgrind (`callgrind_control -e Ir`, every thread but the
   sender's and the receiver's, read once the relay relays and again after the run),
-  which a loaded machine cannot move.
+  which a loaded machine cannot move; and those of the thread that relays alone (the
+  others wake by the second: under callgrind, ~50x slower, they weigh 50x more a frame).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from typing import Any
 
 import can
 
+from .bench_can_relay import PROBE, Arrivals, put_frame
 from .registry import Result, benchmark
 
 RELAYS = ("can.bridge", "api")
@@ -47,17 +49,7 @@ COUNT, RATE_HZ = 6000, 2000  # the CPU runs: 3 s of a busy bus each
 # its turn, and a relay that drains its queue would count fewer instructions a frame than it spends at full speed:
 # there each frame is sent once the one before it arrived (RATE 0: lockstep), so every relay reads one at a time.
 COUNT_GRIND, RATE_GRIND_HZ = 600, 0
-_SENDER = 5
-_PROBE = 0x7FFF
 _REPO = Path(__file__).resolve().parents[1]
-
-
-def _frame(key: int) -> can.Message:
-    from vstig_hw import Message, Op
-    from vstig_hw.wire import encode
-
-    return can.Message(arbitration_id=0x600 | _SENDER, is_extended_id=False,
-                       data=encode(Message(Op.PUT, key, key & 0xFFFF, 1, _SENDER)))
 
 
 def _thread_cpu_ns(tid: int) -> int:
@@ -72,33 +64,6 @@ def _thread_switches(tid: int) -> int:
 def _process_switches() -> int:
     usage = resource.getrusage(resource.RUSAGE_SELF)
     return usage.ru_nvcsw + usage.ru_nivcsw
-
-
-class _Arrivals:
-    """A receiver on the far bus: the keys of the vstig PUTs that arrived there."""
-
-    def __init__(self, channel: str) -> None:
-        self.bus = can.Bus(interface="virtual", channel=channel)
-        self.keys: set[int] = set()
-        self.tid = 0
-        self._stop = threading.Event()
-        self._started = threading.Event()
-        self._thread = threading.Thread(target=self._read, name="bench-receiver", daemon=True)
-        self._thread.start()
-        self._started.wait()
-
-    def _read(self) -> None:
-        self.tid = threading.get_native_id()
-        self._started.set()
-        while not self._stop.is_set():
-            frame = self.bus.recv(0.05)
-            if frame is not None and frame.arbitration_id & 0x700 == 0x600 and len(frame.data) == 8:
-                self.keys.add(int.from_bytes(frame.data[:2], "big") & 0x7FFF)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join()
-        self.bus.shutdown()
 
 
 def _start_relay(relay: str, a: str, b: str) -> Callable[[], None]:
@@ -129,19 +94,13 @@ def child(relay: str, count: int, rate_hz: float) -> None:
     parent reads callgrind's counts at the two waits)."""
     stamp = time.monotonic_ns()
     a, b = f"bench-peer-a-{stamp}", f"bench-peer-b-{stamp}"
-    arrivals = _Arrivals(b)
+    arrivals = Arrivals(b, "virtual")
     sender = can.Bus(interface="virtual", channel=a)
     me = threading.get_native_id()
     stop = _start_relay(relay, a, b)
     try:
-        for _ in range(600):
-            sender.send(_frame(_PROBE))
-            time.sleep(0.1)
-            if _PROBE in arrivals.keys:
-                break
-        else:
-            raise RuntimeError(f"{relay} never relayed")
-        frames = [_frame(key) for key in range(count)]
+        arrivals.relayed(sender, relay, 0.1)
+        frames = [put_frame(key) for key in range(count)]
         time.sleep(0.5)
         print("ready", flush=True)
         sys.stdin.readline()
@@ -158,11 +117,11 @@ def child(relay: str, count: int, rate_hz: float) -> None:
                     time.sleep(0.0005)
             sender.send(frame)
         end = time.monotonic() + 30
-        while len(arrivals.keys - {_PROBE}) < count and time.monotonic() < end:
+        while len(arrivals.keys - {PROBE}) < count and time.monotonic() < end:
             time.sleep(0.01)
         cpu1, own1 = time.process_time_ns(), _thread_cpu_ns(me) + _thread_cpu_ns(arrivals.tid)
         switches1, own_switches1 = _process_switches(), _thread_switches(me) + _thread_switches(arrivals.tid)
-        delivered = len(arrivals.keys - {_PROBE})
+        delivered = len(arrivals.keys - {PROBE})
         print(json.dumps({"cpu_us": ((cpu1 - cpu0) - (own1 - own0)) / 1e3 / count,
                           "switches": ((switches1 - switches0) - (own_switches1 - own_switches0)) / count,
                           "delivered": delivered / count}), flush=True)
@@ -173,14 +132,15 @@ def child(relay: str, count: int, rate_hz: float) -> None:
         sender.shutdown()
 
 
-def _instructions(pid: int, skip: int = 2) -> int:
-    """Instructions callgrind counted so far in `pid`, every thread's but the first `skip` (sender, receiver)."""
+def _instructions(pid: int, skip: int = 2) -> dict[int, int]:
+    """Instructions callgrind counted so far in `pid`, by thread, every thread's but the first `skip` (sender,
+    receiver)."""
     shown = subprocess.run(["callgrind_control", "-e", "Ir", str(pid)], capture_output=True, text=True,
                            timeout=120, check=True).stdout
     threads = re.findall(r"^\s*Th\s+(\d+)\s+([\d,]+)\s*$", shown, flags=re.M)
     if not threads:
         raise RuntimeError(f"callgrind_control showed no Ir for {pid}: {shown}")
-    return sum(int(count.replace(",", "")) for number, count in threads if int(number) > skip)
+    return {int(number): int(count.replace(",", "")) for number, count in threads if int(number) > skip}
 
 
 def run_one(relay: str, *, grind: bool = False, env: dict[str, str] | None = None) -> dict[str, float]:
@@ -196,12 +156,14 @@ def run_one(relay: str, *, grind: bool = False, env: dict[str, str] | None = Non
         try:
             if process.stdout.readline().strip() != "ready":
                 raise RuntimeError(f"{relay}: the child did not start relaying")
-            before = _instructions(process.pid) if grind else 0
+            before = _instructions(process.pid) if grind else {}
             process.stdin.write("go\n")
             process.stdin.flush()
             figures: dict[str, float] = json.loads(process.stdout.readline())
-            if grind:
-                figures["instructions"] = (_instructions(process.pid) - before) / count
+            if grind:  # every thread of the relay's, and the one that relays (the rest wait: per second, not frame)
+                spent = [n - before.get(thread, 0) for thread, n in _instructions(process.pid).items()]
+                figures["instructions"] = sum(spent) / count
+                figures["relaying_thread_instructions"] = max(spent) / count
             process.stdin.write("stop\n")
             process.stdin.flush()
             process.wait(120)
@@ -247,6 +209,9 @@ def api_relay_against_can_bridge() -> Iterator[Result]:
     grind = alternated(1, grind=True)
     yield Result("can_peer.api_instructions_per_msg", _median(grind["api"], "instructions"), "instr",
                  "can.bridge instr/msg", _median(grind["can.bridge"], "instructions"))
+    yield Result("can_peer.api_relaying_thread_instructions_per_msg",
+                 _median(grind["api"], "relaying_thread_instructions"), "instr", "can.bridge's instr/msg",
+                 _median(grind["can.bridge"], "relaying_thread_instructions"))
 
 
 def _print(runs: dict[str, list[dict[str, Any]]]) -> None:

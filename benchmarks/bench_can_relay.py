@@ -42,7 +42,7 @@ RATE_HZ = 100  # slow enough for a relay under callgrind (~50x slower) in a gues
 _REPO = Path(__file__).resolve().parents[1]
 _SENDER = 5
 _CHANNELS = ("vcan0", "vcan1")
-_PROBE = 0x7FFF
+PROBE = 0x7FFF
 
 
 def _relays() -> dict[str, tuple[list[str], dict[str, str]]]:
@@ -62,26 +62,41 @@ def _relays() -> dict[str, tuple[list[str], dict[str, str]]]:
     }
 
 
-def _frame(key: int) -> can.Message:
+def put_frame(key: int) -> can.Message:
+    """A vstig PUT of `key` from sender 5 (distinct keys: an engine relays every one)."""
     return can.Message(arbitration_id=0x600 | _SENDER, is_extended_id=False,
                        data=encode(Message(Op.PUT, key, key & 0xFFFF, 1, _SENDER)))
 
 
-class _Arrivals:
-    """A receiver on the far bus: the keys of the vstig PUTs that arrived there (any sender)."""
+class Arrivals:
+    """A receiver on the far bus: the keys of the vstig PUTs that arrived there (any sender); `tid`: its thread's."""
 
-    def __init__(self, channel: str) -> None:
-        self.bus = can.Bus(interface="socketcan", channel=channel)
+    def __init__(self, channel: str, interface: str = "socketcan") -> None:
+        self.bus = can.Bus(interface=interface, channel=channel)
         self.keys: set[int] = set()
+        self.tid = 0
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._started = threading.Event()
+        self._thread = threading.Thread(target=self._read, name="bench-receiver", daemon=True)
         self._thread.start()
+        self._started.wait()
 
     def _read(self) -> None:
+        self.tid = threading.get_native_id()
+        self._started.set()
         while not self._stop.is_set():
             frame = self.bus.recv(0.05)
             if frame is not None and frame.arbitration_id & 0x700 == 0x600 and len(frame.data) == 8:
                 self.keys.add(int.from_bytes(frame.data[:2], "big") & 0x7FFF)
+
+    def relayed(self, sender: can.BusABC, relay: str, pause: float) -> None:
+        """Send probes every `pause` seconds (600 at most) until one arrives: the relay between relays."""
+        for _ in range(600):
+            sender.send(put_frame(PROBE))
+            time.sleep(pause)
+            if PROBE in self.keys:
+                return
+        raise RuntimeError(f"{relay} never relayed")
 
     def close(self) -> None:
         self._stop.set()
@@ -102,18 +117,12 @@ def _instructions(pid: int) -> int:
 def _relay_run(argv: list[str], env: dict[str, str], out: Path) -> tuple[float, int]:
     """(instructions per message, delivered) of one relay from vcan0 to vcan1, under callgrind."""
     sender = can.Bus(interface="socketcan", channel=_CHANNELS[0])
-    arrivals = _Arrivals(_CHANNELS[1])
+    arrivals = Arrivals(_CHANNELS[1])
     callgrind = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out / 'callgrind.%p'}"]
     process = subprocess.Popen([*callgrind, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                env={**os.environ, **env})
     try:
-        for _ in range(600):  # until it relays (a Python start under callgrind in a guest takes a while)
-            sender.send(_frame(_PROBE))
-            time.sleep(0.5)
-            if _PROBE in arrivals.keys:
-                break
-        else:
-            raise RuntimeError(f"{argv[:3]} never relayed")
+        arrivals.relayed(sender, " ".join(argv[:3]), 0.5)  # a Python start under callgrind in a guest takes a while
         time.sleep(1.0)  # the probes still on their way
         before = _instructions(process.pid)
         start = time.perf_counter()
@@ -121,9 +130,9 @@ def _relay_run(argv: list[str], env: dict[str, str], out: Path) -> tuple[float, 
             delay = start + key / RATE_HZ - time.perf_counter()
             if delay > 0:
                 time.sleep(delay)
-            sender.send(_frame(key))
+            sender.send(put_frame(key))
         end = time.monotonic() + 60
-        while len(arrivals.keys - {_PROBE}) < COUNT and time.monotonic() < end:
+        while len(arrivals.keys - {PROBE}) < COUNT and time.monotonic() < end:
             time.sleep(0.1)
         after = _instructions(process.pid)
     finally:
@@ -131,7 +140,7 @@ def _relay_run(argv: list[str], env: dict[str, str], out: Path) -> tuple[float, 
         process.wait(120)
         arrivals.close()
         sender.shutdown()
-    return (after - before) / COUNT, len(arrivals.keys - {_PROBE})
+    return (after - before) / COUNT, len(arrivals.keys - {PROBE})
 
 
 def guest(out: Path) -> None:
