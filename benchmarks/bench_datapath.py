@@ -43,7 +43,10 @@ VSTIG = str(Path(sys.executable).with_name("vstig"))
 _TICK = os.sysconf("SC_CLK_TCK")
 RATE_HZ = 2000
 COUNT = 10_000  # 5 s at RATE_HZ: enough CPU ticks (10 ms each) for a figure per message
-ROUNDS = 2  # the pty relays' CPU: each relay's least of this many runs, the runs alternating
+ROUNDS = 3  # the pty relays' CPU: each relay's median of this many runs, the runs alternating
+# Messages a relay takes per read: one per write (a radio's regime: the relay reads each as it comes), or ten at a
+# time (a burst); both at RATE_HZ messages a second.
+PER_READ = (1, 10)
 
 
 class _Pty:
@@ -92,6 +95,12 @@ class _Arrivals:
 def _frames(count: int) -> list[bytes]:
     cobs8 = make_serial_framing("cobs8")
     return [cobs8.encode(Message(Op.PUT, i, i, 1, 7))[0] for i in range(count)]
+
+
+def _writes(count: int, per_read: int) -> list[bytes]:
+    """`count` messages' frames, `per_read` of them a write (each write one read of the relay's)."""
+    frames = _frames(count)
+    return [b"".join(frames[i:i + per_read]) for i in range(0, count, per_read)]
 
 
 def _paced(write: Callable[[bytes], object], frames: list[bytes], rate_hz: int = RATE_HZ) -> list[float]:
@@ -239,18 +248,19 @@ def _relaying(argv: Callable[[str, str], list[str]], echo_back: bool, env: dict[
         b.close()
 
 
-def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool,
-               env: dict[str, str] | None = None) -> tuple[float, float, tuple[float, ...], int]:
+def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool, env: dict[str, str] | None = None,
+               per_read: int = 1) -> tuple[float, float, tuple[float, ...], int]:
     """(CPU s per message, switches per message, (p50, p90, p99) delay s, delivered) of a process relaying pty A ->
-    pty B."""
+    pty B, offered COUNT messages at RATE_HZ, `per_read` a write (the delays: one per message of a one-per-read run)."""
     with _relaying(argv, echo_back, env) as (pid, a, out):
-        frames = _frames(COUNT)
+        writes = _writes(COUNT, per_read)
         cpu0, sw0 = _usage(pid)
-        sent = _paced(lambda f: os.write(a.master, f), frames)
+        sent = _paced(lambda w: os.write(a.master, w), writes, rate_hz=RATE_HZ // per_read)
         out.wait(COUNT + 1)
         cpu1, sw1 = _usage(pid)
-    delays = _delays(out, sent)
-    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, _quantiles(delays), len(delays)
+    delays = _delays(out, sent) if per_read == 1 else []
+    delivered = len(delays) if per_read == 1 else sum(1 for i in range(COUNT) if i in out.arrived)
+    return (cpu1 - cpu0) / COUNT, (sw1 - sw0) / COUNT, _quantiles(delays), delivered
 
 
 def _raw(a: str, b: str) -> list[str]:
@@ -279,17 +289,37 @@ _RELAYS: dict[str, Relay] = {
 }
 
 
+# The relays measured again at ten messages per read (the pure ones and the floor only at one: they tell the
+# compiled path's gain, which a burst does not change).
+_TEN_PER_READ = ("bare", "raw", "engine")
+
+Run = tuple[float, float, tuple[float, ...], int]
+
+
+def _median_run(runs: list[Run]) -> Run:
+    """The run of median CPU (of an odd count; the upper one of an even count)."""
+    return sorted(runs, key=lambda run: run[0])[len(runs) // 2]
+
+
 @benchmark("datapath")
 def relay_cost() -> Iterator[Result]:
-    """Every relay, the bare hop included, runs ROUNDS times, round after round; each keeps the run with its least
-    CPU (a shared VM's load moves one run of the bare hop by half: 10 to 17 us a message)."""
-    runs: dict[str, tuple[float, float, tuple[float, ...], int]] = {}
+    """Every relay, the bare hop included, runs ROUNDS times at one message per read and the compiled ones and the
+    bare hop at ten, round after round (one run of each in turn); each keeps its run of median CPU (a shared VM's
+    load moves one run of the bare hop by half: 10 to 17 us a message)."""
+    rounds: dict[tuple[str, int], list[Run]] = {}
     for _ in range(ROUNDS):
-        for name, relay in _RELAYS.items():
-            run = _relay_run(*relay)
-            if name not in runs or run[0] < runs[name][0]:
-                runs[name] = run
+        for per_read in PER_READ:
+            for name, relay in _RELAYS.items():
+                if per_read == 1 or name in _TEN_PER_READ:
+                    rounds.setdefault((name, per_read), []).append(_relay_run(*relay, per_read=per_read))
+    runs = {name: _median_run(rounds[name, 1]) for name in _RELAYS}
     bare, floor = runs["bare"], runs["floor"]
+    bare_ten = _median_run(rounds["bare", 10])
+    for name in _TEN_PER_READ[1:]:
+        ten = _median_run(rounds[name, 10])
+        yield Result(f"datapath.relay_{name}_ten_per_read_cpu_per_msg", ten[0] * 1e6, "us",
+                     "bare pty hop CPU/msg, ten per read", bare_ten[0] * 1e6)
+        yield Result(f"datapath.relay_{name}_ten_per_read_delivered", ten[3] / COUNT * 100, "%", "offered", 100.0)
     for name, run in ((name, runs[name]) for name in ("raw", "raw_pure", "engine", "engine_pure")):
         yield Result(f"datapath.relay_{name}_cpu_per_msg", run[0] * 1e6, "us", "bare pty hop CPU/msg", bare[0] * 1e6)
         yield Result(f"datapath.relay_{name}_switches_per_msg", run[1], "switches", "bare pty hop switches/msg",
@@ -306,13 +336,13 @@ def relay_cost() -> Iterator[Result]:
                  bare[0] * 1e6)
 
 
-def _instructions(name: str, count: int, workdir: Path, relay: Relay | None = None) -> int:
+def _instructions(name: str, count: int, workdir: Path, relay: Relay | None = None, per_read: int = 1) -> int:
     """User-space instructions (callgrind's Ir) relay `name` (of _RELAYS, unless `relay` gives its argv, echo and
-    environment) executed in all, having relayed `count` messages."""
-    out_file = workdir / f"{name}.{count}.callgrind"
+    environment) executed in all, having relayed `count` messages, `per_read` a write."""
+    out_file = workdir / f"{name}.{count}.{per_read}.callgrind"
     callgrind = ("valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}")
     with _relaying(*(relay or _RELAYS[name]), prefix=callgrind) as (_pid, a, out):  # (valgrind passes the env on)
-        _paced(lambda f: os.write(a.master, f), _frames(count), rate_hz=INSTRUCTIONS_RATE_HZ)
+        _paced(lambda w: os.write(a.master, w), _writes(count, per_read), rate_hz=INSTRUCTIONS_RATE_HZ // per_read)
         out.wait(count + 1, seconds=60)
     if len(out.arrived) < count + 1:
         raise RuntimeError(f"{name} under callgrind relayed {len(out.arrived) - 1} of {count} messages")
@@ -330,10 +360,10 @@ def _totals(out_file: Path) -> int:
 INSTRUCTIONS_RATE_HZ = 200  # slow enough for an engine under callgrind (~50x slower) to take each message alone
 
 
-def instructions_per_msg(label: str, relays: Mapping[str, Relay]) -> dict[str, float] | None:
-    """User-space instructions per relayed message of each relay, in order (callgrind): a run of 2,500 messages
-    less one of 500, so start-up and imports cancel out. None, said on stderr under `label`, without valgrind; a
-    RuntimeError naming the relay when one does not relay."""
+def instructions_per_msg(label: str, relays: Mapping[str, Relay], per_read: int = 1) -> dict[str, float] | None:
+    """User-space instructions per relayed message of each relay, in order (callgrind), `per_read` messages a
+    write: a run of 2,500 messages less one of 500, so start-up and imports cancel out. None, said on stderr under
+    `label`, without valgrind; a RuntimeError naming the relay when one does not relay."""
     if shutil.which("valgrind") is None:
         print(f"{label}: needs valgrind (apt-get install valgrind)", file=sys.stderr)
         return None
@@ -341,7 +371,7 @@ def instructions_per_msg(label: str, relays: Mapping[str, Relay]) -> dict[str, f
     with tempfile.TemporaryDirectory(prefix="vstig-bench-") as tmp:
         for name, relay in relays.items():
             try:
-                few, many = (_instructions(name, count, Path(tmp), relay) for count in (500, 2500))
+                few, many = (_instructions(name, count, Path(tmp), relay, per_read) for count in (500, 2500))
             except RuntimeError as error:
                 raise RuntimeError(f"{name}: {error}") from error
             per_msg[name] = (many - few) / 2000
@@ -363,6 +393,12 @@ def relay_instructions() -> Iterator[Result]:
                      "Python cobs8 relay without a Node instr/msg", per_msg["floor"])
         yield Result(f"datapath.relay_{name}_instructions_compiled_vs_pure", per_msg[name], "instr",
                      "the pure-Python path instr/msg", per_msg[f"{name}_pure"])
+    ten = instructions_per_msg("datapath.relay_instructions", {name: _RELAYS[name] for name in _TEN_PER_READ},
+                               per_read=10)
+    assert ten is not None  # valgrind was there a moment ago
+    for name in _TEN_PER_READ[1:]:
+        yield Result(f"datapath.relay_{name}_ten_per_read_instructions_per_msg", ten[name], "instr",
+                     "bare pty hop instr/msg, ten per read", ten["bare"])
 
 
 def _healthy_delay(deaf: bool) -> tuple[float, int]:
