@@ -313,7 +313,7 @@ done:
 static int take_writing(vx_port_t *p, PyObject **lock) {
     PyObject *got;
     int taken;
-    if ((*lock = PyObject_GetAttr(p->handle, vx_n.writing)) == NULL) return -1;
+    if ((*lock = vx_slot_get(&p->writing_slot, p->handle, vx_n.writing)) == NULL) return -1;
     if (*lock == Py_None) return 1;
     got = PyObject_CallMethodOneArg(*lock, vx_n.acquire, Py_False);
     taken = got == NULL ? -1 : PyObject_IsTrue(got);
@@ -347,7 +347,7 @@ static int write_udp(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     int fd = serial_fd(p), status = 1, failed = 0, taken;
     if (fd < -1) return -1;
     if (fd < 0) return 0; /* the transport reopens it: its write_nowait knows how */
-    if ((peers = PyObject_GetAttr(p->handle, vx_n.peers)) == NULL) return -1;
+    if ((peers = vx_slot_get(&p->peers_slot, p->handle, vx_n.peers)) == NULL) return -1;
     if (peers != Py_None && !PyObject_TypeCheck(peers, &vx_UdpPeersType)) {
         Py_DECREF(peers); /* peers the C cannot read: the transport's own write sends */
         return 0;
@@ -666,6 +666,8 @@ static PyObject *Outlet_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
     }
     vx_slot_resolve(&self->port.fd_slot, self->port.handle, vx_n.fd);
     vx_slot_resolve(&self->port.fresh_slot, self->port.handle, vx_n.fresh);
+    vx_slot_resolve(&self->port.peers_slot, self->port.handle, vx_n.peers);
+    vx_slot_resolve(&self->port.writing_slot, self->port.handle, vx_n.writing);
     return (PyObject *)self;
 fail:
     Py_DECREF(self);

@@ -20,7 +20,7 @@ typedef struct {
     PyObject *transport; /* the link's transport */
     PyObject *counters;  /* its counters */
     PyObject *handle;    /* a device written here: transport.compiled_handle() (CompiledHandle), else None */
-    vx_slot_t fd_slot, fresh_slot; /* its `fd` and `fresh` slots */
+    vx_slot_t fd_slot, fresh_slot, peers_slot, writing_slot; /* its `fd`, `fresh`, `peers` and `writing` slots */
     PyObject *device;    /* SocketCAN: the bus `fd` was read from */
     int fd;
 } vx_port_t;

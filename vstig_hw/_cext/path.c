@@ -831,7 +831,7 @@ static PyObject *pump_udp(vx_path_t *p, Py_ssize_t index, double timeout) {
     int got, refused, failed, ready;
     double now;
     if (link->udp == NULL && (link->udp = udp_new()) == NULL) return NULL;
-    if ((fd_obj = PyObject_GetAttr(link->handle, vx_n.fd)) == NULL) return NULL;
+    if ((fd_obj = vx_slot_get(&link->handle_fd, link->handle, vx_n.fd)) == NULL) return NULL;
     fd = fd_obj == Py_None ? -1 : PyLong_AsLong(fd_obj);
     Py_DECREF(fd_obj);
     if (fd < 0) return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
@@ -856,7 +856,7 @@ static PyObject *pump_udp(vx_path_t *p, Py_ssize_t index, double timeout) {
         Py_DECREF(done);
     }
     if (got == 0) return PyLong_FromLong(0);
-    if ((peers = PyObject_GetAttr(link->handle, vx_n.peers)) == NULL) return NULL;
+    if ((peers = vx_slot_get(&link->handle_peers, link->handle, vx_n.peers)) == NULL) return NULL;
     if (peers != Py_None && !PyObject_TypeCheck(peers, &vx_UdpPeersType)) {
         PyErr_Format(PyExc_TypeError, "link %R is read in C: its peers must be a compiled UdpPeers", link->name);
         Py_DECREF(peers);
@@ -1180,7 +1180,10 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
                        : PyObject_CallMethodNoArgs(link->transport, vx_n.compiled_handle);
         if (link->handle == Py_None && link->reads != VX_READ_PYTHON && !PyErr_Occurred())
             PyErr_Format(PyExc_TypeError, "link %R's transport gives no compiled handle to read it by", link->name);
-        if (link->handle != NULL && link->handle != Py_None) vx_slot_resolve(&link->handle_fd, link->handle, vx_n.fd);
+        if (link->handle != NULL && link->handle != Py_None) {
+            vx_slot_resolve(&link->handle_fd, link->handle, vx_n.fd);
+            vx_slot_resolve(&link->handle_peers, link->handle, vx_n.peers);
+        }
         if (link->name == NULL || link->counters == NULL || link->tcounters == NULL || PyErr_Occurred()) {
             Py_DECREF(self);
             return NULL;

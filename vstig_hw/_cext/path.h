@@ -19,6 +19,7 @@ typedef struct {
     PyObject *link, *name, *counters, *transport, *tcounters;
     PyObject *handle;        /* a device read here: transport.compiled_handle() (CompiledHandle), else None */
     vx_slot_t handle_fd;     /* its `fd` slot */
+    vx_slot_t handle_peers;  /* its `peers` slot (MAVLink over UDP) */
     PyObject *device;        /* SocketCAN: the bus `fd` belongs to */
     int fd;
     double polled;           /* SocketCAN: when the bus's own drop counts were last polled; python-can: when the
