@@ -53,8 +53,10 @@ _ALONE_S = 0.001
 _STATE_POLL_S = 1.0  # how often to ask interfaces that report it (pcan, kvaser...) for bus-off
 # Send failures that mean "the bus is busy", not "the device is gone".
 _TRANSIENT_ERRNOS = frozenset({errno.ENOBUFS, errno.EAGAIN})
-# Interfaces whose send(timeout=0) returns at once (queue full: an error), so the gateway's loop may call it.
-_NONBLOCKING_SEND = frozenset({"socketcan", "virtual", "slcan"})
+# Interfaces whose send(timeout=0) returns at once (queue full: an error), so the gateway's loop may call it: ours
+# and python-can 4.6's own, read from its source for the vendor drivers (PCAN's Write ignores the timeout, Kvaser's
+# canWrite waits only for a timeout that is not 0, Vector's xlCanTransmit queues): not tried on their hardware.
+_NONBLOCKING_SEND = frozenset({"socketcan", "virtual", "slcan", "pcan", "kvaser", "vector"})
 
 
 class CanTransport(DeviceTransport[can.Message, can.BusABC]):
