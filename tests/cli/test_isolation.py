@@ -16,17 +16,27 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
+import pytest
 from peers import Listener, PtyPeer, start_vstig, stop, wait_for
 from ports import free_port
 
 from vstig_hw import Message, Op, encode
+from vstig_hw.auth import SwarmKeys
 from vstig_hw.framing import make_serial_framing
 
 RATE_HZ = 500
 COUNT = 3000  # 6 s of traffic
 PROBE_KEY = 32767
+MASTER = bytes(range(0x40, 0x60))
+COBS8 = make_serial_framing("cobs8")
+
+
+def _frame(msg: Message, tagged: bool) -> bytes:
+    """The cobs8 frame robot 7 sends: the message alone, or its record under the swarm's keys (SPEC.md 10.5)."""
+    return COBS8.encode_tagged([SwarmKeys(MASTER).tag(msg, 0)])[0] if tagged else COBS8.encode(msg)[0]
 
 
 def _fill(radio: PtyPeer) -> None:
@@ -62,10 +72,9 @@ def _paced(count: int, send: Callable[[int], object]) -> list[float]:
     return sent
 
 
-def _send_paced(radio: PtyPeer, count: int) -> list[float]:
+def _send_paced(radio: PtyPeer, count: int, tagged: bool = False) -> list[float]:
     """Message i (key i, a new entry) written to the radio at start + i / RATE_HZ; the times written."""
-    cobs8 = make_serial_framing("cobs8")
-    frames = [cobs8.encode(Message(Op.PUT, i, i, 1, 7))[0] for i in range(count)]
+    frames = [_frame(Message(Op.PUT, i, i, 1, 7), tagged) for i in range(count)]
     return _paced(count, lambda i: radio.write(frames[i]))
 
 
@@ -98,12 +107,11 @@ class ZenohBridge:
         return err
 
 
-def _await_bridge(into: PtyPeer, out: Listener) -> None:
+def _await_bridge(into: PtyPeer, out: Listener, tagged: bool = False) -> None:
     """Until a probe written on one radio comes out of the other: the bridge is up."""
-    cobs8 = make_serial_framing("cobs8")
     stamp = iter(range(1, 60_000))
     wait_for(lambda: PROBE_KEY in out.arrived, 30,
-             step=lambda: (into.write(cobs8.encode(Message(Op.PUT, PROBE_KEY, 1, next(stamp), 7))[0]),
+             step=lambda: (into.write(_frame(Message(Op.PUT, PROBE_KEY, 1, next(stamp), 7), tagged)),
                            time.sleep(0.1)))
 
 
@@ -111,18 +119,27 @@ def _delays(sent: list[float], out: Listener) -> list[float]:
     return sorted(out.arrived[i] - sent[i] for i in range(len(sent)) if i in out.arrived)
 
 
-def test_a_radio_nobody_reads_delays_no_other_link() -> None:
+@pytest.mark.parametrize("auth", ["off", "require"])
+def test_a_radio_nobody_reads_delays_no_other_link(auth: str, tmp_path: Path) -> None:
+    """With auth=require every unit is a record (SPEC.md 10.5), and the bridge writes them as it writes untagged
+    ones: straight to the radio, the rest of what it does not take to that link's bounded queue."""
     source, healthy, deaf = PtyPeer(), PtyPeer(), PtyPeer()
     _fill(deaf)
     names = [os.path.basename(radio.path) for radio in (source, healthy, deaf)]
-    bridge = start_vstig("bridge", *(f"serial:{radio.path}?framing=cobs8" for radio in (source, healthy, deaf)),
-                         "--robot-id", "200", "--budget", "2000", "--no-refresh")
+    tagged = auth == "require"
+    key_file = tmp_path / "swarm.key"
+    key_file.write_text(MASTER.hex() + "\n", encoding="ascii")
+    key_file.chmod(0o600)
+    bridge = start_vstig("bridge", *(f"serial:{radio.path}?framing=cobs8&auth={auth}"
+                                     for radio in (source, healthy, deaf)),
+                         "--robot-id", "200", "--budget", "2000", "--no-refresh",
+                         *(("--swarm-key", str(key_file)) if tagged else ()))
     echo = Listener(source)  # the source radio hears the gateway's re-broadcasts: it reads them
     out = Listener(healthy)
     try:
-        _await_bridge(source, out)
+        _await_bridge(source, out, tagged)
         rss_before = _rss_kb(bridge.pid)
-        sent = _send_paced(source, COUNT)
+        sent = _send_paced(source, COUNT, tagged)
         wait_for(lambda: len(out.arrived) > COUNT, 10, step=lambda: time.sleep(0.1))
         rss_after = _rss_kb(bridge.pid)
     finally:

@@ -7,10 +7,17 @@ Node on such streams."""
 
 from __future__ import annotations
 
+import os
 import random
+import time
+import tty
+from collections.abc import Iterator
+from contextlib import contextmanager
+from functools import partial
 from types import ModuleType
 from typing import Any
 
+import can
 import pytest
 import test_native_gateway as gateway_twins  # its Node harness, not its tests
 from hypothesis import given, settings
@@ -25,6 +32,7 @@ from vstig_hw.gateway import assembly as assembly_module
 from vstig_hw.gateway.compiled import Compiled
 from vstig_hw.gateway.node import Node
 from vstig_hw.gateway.signing import SignedEngine
+from vstig_hw.links import parse
 from vstig_hw.links.link import Link
 from vstig_hw.tagged import AuthPolicy
 from vstig_hw.timestamps import next_timestamp
@@ -260,3 +268,113 @@ def test_the_xbee_receiver_reads_tagged_batches_as_the_framing(compiled: ModuleT
             got = [(msg, None if proof is None else Tagged(msg, *proof)) for msg, proof in c.feed_tagged(unit)]
             assert got == (pairs if auth is not AuthPolicy.OFF else [(msg, None) for msg, _ in pairs])
     assert drops == python.drops
+
+
+# -- the same on real devices: ptys and python-can buses, tagged units written straight from C ----------------------
+
+def _far_end_bytes(fd: int) -> bytes:
+    """What a pty's far end holds now."""
+    got = b""
+    while True:
+        try:
+            chunk = os.read(fd, 65536)
+        except BlockingIOError:
+            return got
+        got += chunk
+
+
+@contextmanager
+def _device_node(compiled: bool, refused: list[tuple[str, Message, str]]) -> Iterator[tuple[Node, list[Any]]]:
+    """A Node with the swarm key over SIGNED_LINKS on real devices (cobs8 on ptys, CAN FD on a python-can virtual
+    bus), its links open and its loop not started (the test hands it units); with each device's far end."""
+    fds: list[int] = []
+    far: list[Any] = []
+    links = []
+    try:
+        for name, kind, policy in SIGNED_LINKS:
+            if kind == "canfd":
+                channel = f"tags-{os.getpid()}-{compiled}-{name}"
+                spec = f"can:virtual:{channel}?fd=1"
+                far.append(can.Bus(interface="virtual", channel=channel, fd=True))
+            else:
+                master, slave = os.openpty()
+                fds += [master, slave]
+                for fd in (master, slave):
+                    tty.setraw(fd)
+                os.set_blocking(master, False)
+                spec = f"serial:{os.ttyname(slave)}?framing=cobs8"
+                far.append(master)
+            links.append(parse(spec).build(name, robot_id=9))
+            links[-1].auth = policy
+        with pytest.MonkeyPatch.context() as patch:
+            if not compiled:
+                patch.setattr(assembly_module, "compiled_for", lambda relays, links: None)
+            node = Node(links, 9, period=1.0, budget=None, swarm_keys=SwarmKeys(MASTER))
+        assert (node._delivery.path is not None) == compiled
+        node.listen(refused=lambda heard, reason: refused.append((heard.link, heard.message, reason)))
+        for link in links:
+            link.open()
+        yield node, far
+    finally:
+        for link in links:
+            link.close()
+        for end in far:
+            if isinstance(end, can.BusABC):
+                end.shutdown()
+        for fd in fds:
+            os.close(fd)
+
+
+def _received(far: list[Any], into: list[list[Any]]) -> None:
+    """What each far end got since the last call, added to `into`: a pty's bytes (one bytes object, the stream so
+    far), a bus's frames as (ID, data)."""
+    for end, got in zip(far, into, strict=True):
+        if isinstance(end, can.BusABC):
+            got.extend((f.arbitration_id, bytes(f.data)) for f in iter(partial(end.recv, 0), None))
+        else:
+            got[:] = [b"".join([*got, _far_end_bytes(end)])]
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 2**32), steps=st.integers(20, 120))
+def test_tagged_units_written_straight_to_ptys_and_buses_equal_the_python_nodes(compiled: ModuleType, seed: int,
+                                                                                steps: int) -> None:
+    """The same streams through real ptys and a python-can bus: the compiled Node's outlets write each batch (its
+    records, the untagged ones, what a link that requires tags holds back) to the device themselves, its writers
+    never handed a unit, and every device's far end gets the bytes and frames the Python Node's writers send."""
+    keys = SwarmKeys(MASTER)
+    told: tuple[list[tuple[str, Message, str]], list[tuple[str, Message, str]]] = ([], [])
+    handed: list[str] = []
+    with _device_node(False, told[0]) as (pure, pure_far), _device_node(True, told[1]) as (c, c_far):
+        nodes, fars = (pure, c), (pure_far, c_far)
+        for outlet in c.outlets:  # the writer is Python: a unit handed to it is a wake-up the C write should spare
+            outlet.writer.submit = lambda units, count, name=outlet.link.name: handed.append(name)  # type: ignore
+        got: tuple[list[list[Any]], list[list[Any]]] = ([[] for _ in SIGNED_LINKS], [[] for _ in SIGNED_LINKS])
+        for step in _stream(seed, keys, steps):
+            for node, far, into in zip(nodes, fars, got, strict=True):
+                with node._lock:
+                    if step[0] == "put":
+                        assert node.seat is not None
+                        node.seat.put(step[1], step[2])
+                        node._outbound.spread(1.0)
+                    else:
+                        units = _units(random.Random(step[2]), SIGNED_LINKS[step[1]][1], step[3])
+                        path = node._delivery.path
+                        if path is None or not path.deliver(step[1], 1_700_000_000.0, units, 1.0):
+                            node._delivery.arrive(step[1], 1_700_000_000.0, units)
+                            node._outbound.spread(1.0, 1 << step[1])
+                _received(far, into)
+            assert c.stats() == pure.stats(), step
+            assert c.engine is not None and pure.engine is not None
+            assert list(c.engine.entries()) == list(pure.engine.entries()), step
+            assert told[1] == told[0], step
+        pure_got, c_got = got
+        deadline = time.monotonic() + 5  # a pty's far end may see the last bytes a moment after the write
+        while c_got != pure_got and time.monotonic() < deadline:
+            for far, into in zip(fars, got, strict=True):
+                _received(far, into)
+            time.sleep(0.01)
+    assert handed == []
+    assert c_got == pure_got
+    radio = make_serial_framing("cobs8").feed_tagged(c_got[0][0])  # a link that requires tags: every one tagged
+    assert all(record is not None and keys.verify(record) for _, record in radio)

@@ -661,8 +661,6 @@ static PyObject *Encoder_heartbeat(vx_encoder_t *self, PyObject *unused) {
     return PyBytes_FromStringAndSize((const char *)out, vstig_mavlink_heartbeat(&self->tx.mav.tx, out));
 }
 
-/* encode_batch(messages) -> units: one bytes object for a byte stream (as Link.units_of joins them), or the
- * CAN frames as can.Message */
 /* A record's 20 bytes (SPEC.md 10.3): its message, epoch and tag. */
 static void record_bytes(const vx_record_t *record, uint8_t out[VSTIG_RECORD_SIZE]) {
     vstig_msg_encode(&record->msg, out);
@@ -673,54 +671,46 @@ static void record_bytes(const vx_record_t *record, uint8_t out[VSTIG_RECORD_SIZ
     memcpy(out + 12, record->tag, VSTIG_TAG_SIZE);
 }
 
-/* Link.units_of with records (Link._tagged_units): each message with its entry's record first, one unit each
- * (cobs8 frames joined as a byte stream's units are); those without a proof untagged after them, or held back
- * (counted held_unverified) on a link that requires tags. msgs is reordered: the untagged ones first. */
-static PyObject *tagged_units(vx_tx_t *tx, vstig_msg_t *msgs, size_t n) {
+/* Link._tagged_units in wire form: each message with its entry's record first (a cobs8 frame, or one CAN FD frame
+ * under its message's op: CanFraming.encode_tagged), then those without a proof untagged, packed as usual; on a link
+ * that requires tags these are held back (counted held_unverified). */
+static Py_ssize_t tagged_wire(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out,
+                              vstig_can_frame_t *frames) {
     const vstig_tagged_t *tagged = &((vx_engine_t *)tx->tag_engine)->tags->tagged;
-    vx_record_t *records = PyMem_Malloc((n ? n : 1u) * sizeof *records);
-    vstig_can_frame_t *frames = tx->kind == VX_CAN ? PyMem_Malloc((n ? n : 1u) * sizeof *frames) : NULL;
-    uint8_t *bytes = tx->kind == VX_CAN ? NULL : PyMem_Malloc(vx_tx_room(tx, n) + 1u);
+    vstig_msg_t stack[64], *plain = n <= 64 ? stack : PyMem_Malloc(n * sizeof *plain);
+    vx_record_t record;
     uint8_t payload[VSTIG_RECORD_SIZE];
-    size_t i, r = 0, plain = 0, held = 0, count = 0, w = 0;
-    PyObject *units = NULL;
-    if (records == NULL || (tx->kind == VX_CAN ? frames == NULL : bytes == NULL)) {
+    size_t i, count = 0, kept = 0, held = 0;
+    if (plain == NULL) {
         PyErr_NoMemory();
-        goto done;
+        return -1;
     }
     for (i = 0; i < n; i++) {
-        if (vstig_tagged_record(tagged, &msgs[i], &records[r].epoch, records[r].tag)) records[r++].msg = msgs[i];
-        else if (tx->tag_require) held++;
-        else msgs[plain++] = msgs[i];
-    }
-    if (held && vx_count(tx->tag_counters, vx_name("held_unverified"), (Py_ssize_t)held) < 0) goto done;
-    for (i = 0; i < r; i++) {
-        record_bytes(&records[i], payload);
-        if (tx->kind == VX_CAN) { /* one FD frame of the record under its message's op (CanFraming.encode_tagged) */
-            (void)vstig_can_encode(&tx->can, &records[i].msg, 1, &frames[count]);
+        if (!vstig_tagged_record(tagged, &msgs[i], &record.epoch, record.tag)) {
+            if (tx->tag_require) held++;
+            else plain[kept++] = msgs[i];
+            continue;
+        }
+        record.msg = msgs[i];
+        record_bytes(&record, payload);
+        if (tx->kind == VX_CAN) {
+            (void)vstig_can_encode(&tx->can, &record.msg, 1, &frames[count]);
             memcpy(frames[count].data, payload, VSTIG_RECORD_SIZE);
             frames[count++].len = VSTIG_RECORD_SIZE;
         } else {
-            w += vstig_frame_encode(payload, VSTIG_RECORD_SIZE, bytes + w);
+            count += vstig_frame_encode(payload, VSTIG_RECORD_SIZE, out + count);
         }
     }
-    if (tx->kind == VX_CAN) {
-        count += vx_tx_frames(tx, msgs, plain, frames + count);
-        units = PyList_New((Py_ssize_t)count);
-        for (i = 0; units != NULL && i < count; i++) {
-            PyObject *unit = vx_frame_unit(tx, &frames[i]);
-            if (unit == NULL) Py_CLEAR(units);
-            else PyList_SET_ITEM(units, (Py_ssize_t)i, unit);
-        }
-    } else {
-        w += vx_tx_bytes(tx, msgs, plain, bytes + w);
-        units = w == 0 ? PyList_New(0) : Py_BuildValue("[y#]", (const char *)bytes, (Py_ssize_t)w);
-    }
-done:
-    PyMem_Free(records);
-    PyMem_Free(frames);
-    PyMem_Free(bytes);
-    return units;
+    count += tx->kind == VX_CAN ? vx_tx_frames(tx, plain, kept, frames + count)
+                                : vx_tx_bytes(tx, plain, kept, out + count);
+    if (plain != stack) PyMem_Free(plain);
+    if (held && vx_count(tx->tag_counters, vx_name("held_unverified"), (Py_ssize_t)held) < 0) return -1;
+    return (Py_ssize_t)count;
+}
+
+Py_ssize_t vx_tx_wire(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out, vstig_can_frame_t *frames) {
+    if (tx->tag_engine != NULL) return tagged_wire(tx, msgs, n, out, frames);
+    return (Py_ssize_t)(tx->kind == VX_CAN ? vx_tx_frames(tx, msgs, n, frames) : vx_tx_bytes(tx, msgs, n, out));
 }
 
 /* send_tags(engine, require, counters): from now on each message goes with its entry's record from `engine` (an
@@ -743,38 +733,33 @@ static PyObject *Encoder_send_tags(vx_encoder_t *self, PyObject *args) {
     Py_RETURN_NONE;
 }
 
+/* encode_batch(messages) -> units: one bytes object for a byte stream (as Link.units_of joins them), or the
+ * CAN frames as can.Message */
 static PyObject *Encoder_encode_batch(vx_encoder_t *self, PyObject *messages) {
-    size_t n, i, count;
+    size_t n;
+    Py_ssize_t count = -1, i;
     vstig_msg_t *msgs = vx_msgs_of(messages, &n);
+    uint8_t *bytes = NULL;
+    vstig_can_frame_t *frames = NULL;
     PyObject *units = NULL;
     if (msgs == NULL) return NULL;
-    if (self->tx.tag_engine != NULL) {
-        units = tagged_units(&self->tx, msgs, n);
-    } else if (self->tx.kind != VX_CAN) {
-        uint8_t *bytes = PyMem_Malloc(vx_tx_room(&self->tx, n) + 1u);
-        if (bytes == NULL) {
-            PyErr_NoMemory();
-        } else {
-            size_t len = vx_tx_bytes(&self->tx, msgs, n, bytes);
-            units = n == 0 ? PyList_New(0) : Py_BuildValue("[y#]", (const char *)bytes, (Py_ssize_t)len);
-            PyMem_Free(bytes);
-        }
-    } else {
-        vstig_can_frame_t *frames = PyMem_Malloc((n ? n : 1u) * sizeof *frames);
-        if (frames == NULL) {
-            PyErr_NoMemory();
-        } else {
-            count = vx_tx_frames(&self->tx, msgs, n, frames);
-            units = PyList_New((Py_ssize_t)count);
-            for (i = 0; units != NULL && i < count; i++) {
-                PyObject *unit = vx_frame_unit(&self->tx, &frames[i]);
-                if (unit == NULL) Py_CLEAR(units);
-                else PyList_SET_ITEM(units, (Py_ssize_t)i, unit);
-            }
-            PyMem_Free(frames);
+    if (self->tx.kind == VX_CAN) frames = PyMem_Malloc((n ? n : 1u) * sizeof *frames);
+    else bytes = PyMem_Malloc(vx_tx_room(&self->tx, n) + 1u);
+    if (frames == NULL && bytes == NULL) {
+        PyErr_NoMemory();
+    } else if ((count = vx_tx_wire(&self->tx, msgs, n, bytes, frames)) >= 0 && bytes != NULL) {
+        units = count == 0 ? PyList_New(0) : Py_BuildValue("[y#]", (const char *)bytes, count);
+    } else if (count >= 0) {
+        units = PyList_New(count);
+        for (i = 0; units != NULL && i < count; i++) {
+            PyObject *unit = vx_frame_unit(&self->tx, &frames[i]);
+            if (unit == NULL) Py_CLEAR(units);
+            else PyList_SET_ITEM(units, i, unit);
         }
     }
     PyMem_Free(msgs);
+    PyMem_Free(bytes);
+    PyMem_Free(frames);
     return units;
 }
 

@@ -85,6 +85,11 @@ size_t vx_tx_room(const vx_tx_t *tx, size_t n);
 size_t vx_tx_bytes(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out);
 /* The CAN frames of n messages into frames (room for n); how many. */
 size_t vx_tx_frames(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, vstig_can_frame_t *frames);
+/* The wire form of n messages as the link's writer gets it (Link.units_of): serial bytes into out (room for
+ * vx_tx_room(tx, n)), or CAN frames into frames (room for n); how many bytes or frames. A link that sends tags
+ * (`send_tags`) sends each message with its entry's record, and holds back, counted, what it may not send (so
+ * fewer, or none); -1 with an exception. */
+Py_ssize_t vx_tx_wire(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out, vstig_can_frame_t *frames);
 /* A frame as a can.Message, for Python's writer (new reference). */
 PyObject *vx_frame_unit(const vx_tx_t *tx, const vstig_can_frame_t *frame);
 

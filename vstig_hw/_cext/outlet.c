@@ -118,9 +118,10 @@ static int sent_and_rest(vx_outlet_t *o, const vx_tx_t *tx, const vstig_can_fram
  * the rest goes to the writer. 1 done (or handed to the writer), 0 not tried (no bus now, or an outage to end),
  * -1 error. */
 static int write_pythoncan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
-    const vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
+    vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
     vstig_can_frame_t stack[64], *frames = stack;
     size_t count, i = 0, base, extra, sent_messages = 0;
+    Py_ssize_t made;
     PyObject *bus = vx_live_device(o->port.handle), *zero = NULL;
     int status = 1;
     if (bus == NULL || bus == Py_None) {
@@ -131,7 +132,11 @@ static int write_pythoncan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         if (frames == NULL) PyErr_NoMemory();
         goto error;
     }
-    count = vx_tx_frames(tx, msgs, n, frames);
+    if ((made = vx_tx_wire(tx, msgs, n, NULL, frames)) <= 0) { /* none: all held back (no tag), as no units */
+        if (made < 0) goto error;
+        goto done;
+    }
+    count = (size_t)made;
     base = n / count;
     extra = n % count; /* LinkWriter.submit's spread: unit i carries base + (i < extra) */
     for (; i < count; i++) {
@@ -170,13 +175,16 @@ static int serial_fd(vx_port_t *p) {
     return (int)value;
 }
 
+#define PREAMBLE_MAX 16u /* a serial transport's preamble: the wire bytes are made after room for it */
+
 /* The batch's wire bytes straight to the serial fd; 1 done (or handed to the writer), 0 not tried, -1 error. */
 static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     vx_port_t *p = &o->port;
     vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
     PyObject *fresh, *rest;
-    uint8_t stack[64 * VX_SERIAL_MAX_BYTES + 16], *buf = stack;
-    size_t len, at = 0, room = vx_tx_room(tx, n) + 16;
+    uint8_t stack[64 * VX_SERIAL_MAX_BYTES + PREAMBLE_MAX], *buf = stack, *start;
+    size_t len, at = 0, room = vx_tx_room(tx, n) + PREAMBLE_MAX;
+    Py_ssize_t made;
     ssize_t written;
     int fd = serial_fd(p), status = 1;
     if (fd < -1) return -1;
@@ -185,18 +193,22 @@ static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         PyErr_NoMemory();
         return -1;
     }
+    if ((made = vx_tx_wire(tx, msgs, n, buf + PREAMBLE_MAX, NULL)) <= 0) { /* none: all held back, as no units */
+        if (made < 0) goto error;
+        goto done;
+    }
     fresh = vx_slot_get(&p->fresh_slot, p->handle, vx_n.fresh);
     if (fresh == NULL) goto error;
     if (PyObject_IsTrue(fresh) == 1) { /* the first write since the port opened: the preamble goes first */
         PyObject *preamble = PyObject_GetAttr(p->handle, vx_n.preamble);
-        if (preamble == NULL || !PyBytes_Check(preamble) || PyBytes_GET_SIZE(preamble) > 16) {
+        if (preamble == NULL || !PyBytes_Check(preamble) || PyBytes_GET_SIZE(preamble) > PREAMBLE_MAX) {
             Py_XDECREF(preamble);
             Py_DECREF(fresh);
             if (!PyErr_Occurred()) PyErr_SetString(PyExc_TypeError, "a serial preamble is at most 16 bytes");
             goto error;
         }
         at = (size_t)PyBytes_GET_SIZE(preamble);
-        memcpy(buf, PyBytes_AS_STRING(preamble), at);
+        memcpy(buf + PREAMBLE_MAX - at, PyBytes_AS_STRING(preamble), at);
         Py_DECREF(preamble);
         if (vx_slot_set(&p->fresh_slot, p->handle, vx_n.fresh, Py_False) < 0) {
             Py_DECREF(fresh);
@@ -204,8 +216,9 @@ static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         }
     }
     Py_DECREF(fresh);
-    len = at + vx_tx_bytes(tx, msgs, n, buf + at);
-    written = write(fd, buf, len);
+    start = buf + PREAMBLE_MAX - at;
+    len = at + (size_t)made;
+    written = write(fd, start, len);
     if (written == (ssize_t)len) { /* SerialTransport._write_fd's success, then LinkWriter.submit's */
         if (vx_count(p->counters, vx_n.tx, 1) < 0 || vx_count(p->counters, vx_n.tx_bytes, (Py_ssize_t)len) < 0 ||
             vx_count(o->counters, vx_n.out, (Py_ssize_t)n) < 0)
@@ -214,7 +227,7 @@ static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     }
     if (written > 0 && vx_count(p->counters, vx_n.tx_bytes, written) < 0) goto error;
     if (written < 0) written = 0; /* full, or an error its write_nowait will meet and handle */
-    rest = Py_BuildValue("[y#]", (const char *)buf + written, (Py_ssize_t)(len - (size_t)written));
+    rest = Py_BuildValue("[y#]", (const char *)start + written, (Py_ssize_t)(len - (size_t)written));
     if (rest == NULL || writer_submit(o, rest, (Py_ssize_t)n) < 0) {
         Py_XDECREF(rest);
         goto error;
@@ -280,9 +293,10 @@ static size_t pack_frame(const vstig_can_frame_t *f, uint8_t out[72]) {
 /* The batch's frames straight to the socket; 1 done (or handed to the writer), 0 not tried, -1 error. */
 static int write_socketcan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     vx_port_t *p = &o->port;
-    const vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
+    vx_tx_t *tx = &((vx_encoder_t *)o->encoder)->tx;
     vstig_can_frame_t stack[64], *frames = stack;
     size_t count, i, base, extra, sent_messages = 0;
+    Py_ssize_t made;
     uint8_t raw[72];
     int fd = vx_socketcan_fd(p->handle, &p->device, &p->fd, 0), status = 1;
     if (fd < -1) return -1;
@@ -291,7 +305,11 @@ static int write_socketcan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         PyErr_NoMemory();
         return -1;
     }
-    count = vx_tx_frames(tx, msgs, n, frames);
+    if ((made = vx_tx_wire(tx, msgs, n, NULL, frames)) <= 0) { /* none: all held back (no tag), as no units */
+        if (made < 0) goto error;
+        goto done;
+    }
+    count = (size_t)made;
     base = n / count;
     extra = n % count; /* LinkWriter.submit's spread: unit i carries base + (i < extra) */
     for (i = 0; i < count; i++) {

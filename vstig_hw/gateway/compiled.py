@@ -33,7 +33,8 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
 * with the swarm key, `Engine(swarm_key=)` for `SignedEngine` (tags.c): cobs8 and
   CAN FD records are decoded by the Receiver and checked by the link's policy in
   the delivery, and an outlet that sends tags has its Encoder put each entry's
-  record in (`send_tags`) and writes through the link's writer. A link that checks
+  record in (`send_tags`) and writes as an untagged one does (straight to a serial
+  port, a SocketCAN socket or a python-can bus while its writer is idle). A link that checks
   tags the C does not send (XBee's tagged batches: decoded in C, on links with
   auth off too; MAVLink's tagged TUNNELs) keeps the whole Node in Python
   (`checks_tags_for`).
@@ -246,9 +247,8 @@ class Compiled:
         queue = FairFifo(RAW_QUEUE_LIMIT) if keep_all else FairQueue()
         encoder = encoder_for(link)
         port = port_for(link) if encoder is not None else "python"
-        if encoder is not None and sends_tags(link):  # its records from the engine (`signed_engine`), via its writer
+        if encoder is not None and sends_tags(link):  # its records from the engine (`signed_engine`)
             self._sending_tags.append((encoder, link))
-            port = "python"
         outlet: Outlet = CompiledOutlet(link, writer, self.native.Window(budget, period), queue,
                                         keep_all=keep_all, encoder=encoder, port=port)
         return outlet
@@ -318,6 +318,6 @@ def checks_tags_for(link: Link[Any]) -> bool:
 
 
 def sends_tags(link: Link[Any]) -> bool:
-    """Whether the link's outlet sends records (a link that checks tags and has room for them): its units are then
-    made by `Link.units_of` (each message's record from the engine), not by a compiled Encoder."""
+    """Whether the link's outlet sends records (a link that checks tags and has room for them): its Encoder then
+    puts each message's record from the engine in (`Encoder.send_tags`), written as an untagged outlet's units are."""
     return link.auth is not AuthPolicy.OFF and bool(link.framing.carries_tags)
