@@ -10,8 +10,7 @@ Both relays are `vstig bridge` engine processes (robot 200) at the same pace and
 
 CPU from the bridge process's CPU-time clock, the median of three interleaved rounds; the goal is a MAVLink
 relay within 1.3x the cobs8 relay's CPU per message, both on the compiled data path (a mavlink UDP link's socket is
-read and written by it, see DECISIONS.md; the engine also echoes each message to the udpin link's peers, which a
-pty radio, one broadcast domain, is spared). The same
+read and written by it, see DECISIONS.md; both engines re-broadcast each message onto the link it came from). The same
 MAVLink relay on the Python path (VSTIG_PURE=1) shows what the compiled path saves. pymavlink's parse: CPU per
 message of `MAVLink.parse_buffer` over the same TUNNELs, one by one (what a pymavlink-based relay would spend on
 reading alone).
