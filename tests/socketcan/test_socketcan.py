@@ -437,3 +437,45 @@ def test_bridge_says_once_per_unplug_that_the_interface_is_lost_and_once_that_it
     assert sum("CAN device back" in line for line in lines) == 2, lines
     (counters,) = [line for line in lines if line.startswith("vcan5: ")]
     assert " lost=2 " in f" {counters} " and " reconnects=2 " in f" {counters} ", counters
+
+
+def test_a_gateway_writes_records_straight_to_the_socket_on_a_link_that_requires_tags() -> None:
+    """auth=require on CAN FD (SPEC.md 10.5, 10.6): a robot's honest record is stored, its forged copy refused; the
+    gateway's own write and its answer to a GET leave as 20-byte records from the compiled outlet itself (its writer
+    never handed a frame), each verified with the writers' keys by a peer on the bus."""
+    from vstig_hw.auth import SwarmKeys, Tagged
+    from vstig_hw.gateway import Node
+    from vstig_hw.links.assemble import assemble_links
+
+    keys = SwarmKeys(bytes(range(0x20, 0x40)))
+    robot = CanFraming(CanIdScheme(), sender=5, fd=True)
+    honest = keys.tag(Message(Op.PUT, 1, 77, 3, 5), 0)
+    forged = Tagged(Message(Op.PUT, 2, 66, 3, 5), 0, bytes(8))
+    links = assemble_links([f"can:socketcan:{FD}?fd=1&auth=require"], 200)
+    handed: list[int] = []
+    with can.Bus(interface="socketcan", channel=FD, fd=True) as peer, \
+            Node(links, 200, budget=None, swarm_keys=keys) as node:
+        assert node.compiled
+        for outlet in node.outlets:
+            submit = outlet.writer.submit
+            outlet.writer.submit = lambda units, count, submit=submit: (handed.append(count), submit(units, count))
+        for frame in robot.encode_tagged([honest, forged]):
+            peer.send(frame)
+        deadline = time.monotonic() + DEADLINE_S
+        while node.entry(1) is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        node.put(3, 9)
+        for frame in robot.encode(Message(Op.GET, 1, 0, 0, 5)):
+            peer.send(frame)
+        heard: list[Tagged | None] = []
+        listener = CanFraming(CanIdScheme(), sender=6, fd=True)
+        while len(heard) < 2 and time.monotonic() < deadline:
+            frame = peer.recv(0.2)
+            if frame is not None and listener.sender_of(frame) == 200:  # sent by the gateway
+                heard += [record for _, record in listener.feed_tagged(frame)]
+        stored = (node.entry(1), node.entry(2))
+        refused = node.stats()[links[0].name]["drop_bad_tag"]
+    assert stored[0] is not None and stored[1] is None and refused == 1
+    assert handed == []
+    assert [record is not None and keys.verify(record) for record in heard] == [True, True]
+    assert sorted((r.message.key, r.message.robot) for r in heard if r is not None) == [(1, 5), (3, 200)]
