@@ -117,6 +117,18 @@ static uint8_t crc_extra_of(uint32_t msgid, uint8_t *extra) {
     return 1;
 }
 
+uint8_t vstig_mavlink_whole(const uint8_t *data, uint16_t len) {
+    uint8_t extra;
+    uint16_t at;
+    if (len <= VSTIG_MAVLINK_HEADER + 2u || data[0] != VSTIG_MAVLINK_STX ||
+        (data[2] & (uint8_t)~VSTIG_MAVLINK_SIGNED) ||
+        len != VSTIG_MAVLINK_HEADER + data[1] + 2u + ((data[2] & VSTIG_MAVLINK_SIGNED) ? VSTIG_MAVLINK_SIGNATURE : 0u))
+        return 0;
+    if (!crc_extra_of((uint32_t)data[7] | (uint32_t)data[8] << 8 | (uint32_t)data[9] << 16, &extra)) return 1;
+    at = (uint16_t)(VSTIG_MAVLINK_HEADER + data[1]);
+    return vstig_mavlink_crc(data + 1, (uint16_t)(at - 1u), extra) == (uint16_t)(data[at] | data[at + 1u] << 8);
+}
+
 /* ---- sending -------------------------------------------------------------- */
 void vstig_mavlink_tx_init(vstig_mavlink_tx_t *tx, uint8_t sysid, uint8_t compid, const uint8_t *key) {
     memset(tx, 0, sizeof *tx);

@@ -69,6 +69,11 @@ uint16_t vstig_mavlink_crc(const uint8_t *data, uint16_t len, uint8_t crc_extra)
 void vstig_mavlink_sign(const uint8_t key[VSTIG_MAVLINK_KEY_SIZE], const uint8_t *frame, uint16_t len,
                         uint8_t out[6]);
 
+/* 1 if `data` is exactly one whole MAVLink 2 frame whose crc holds (where its message's CRC_EXTRA is known): what
+ * the receiver would cut from it alone, with nothing counted (a UDP datagram's usual content), so it may be taken
+ * as it is, without feeding it byte by byte. */
+uint8_t vstig_mavlink_whole(const uint8_t *data, uint16_t len);
+
 /* ---- sending -------------------------------------------------------------- */
 typedef struct {
     uint8_t sysid, compid, target_system, target_component;

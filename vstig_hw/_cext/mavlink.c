@@ -129,9 +129,8 @@ void vx_mav_rx_free(vx_mav_rx_t *m) {
 }
 
 /* MavlinkFraming._messages: one whole frame's messages at out, or none and the reason counted. */
-static uint8_t frame_messages(vx_mav_rx_t *m, vstig_msg_t *out, uint8_t *has_sender, unsigned long long *sender) {
-    const uint8_t *frame = vstig_mavlink_frame(&m->rx);
-    uint16_t len = vstig_mavlink_frame_len(&m->rx);
+static uint8_t frame_messages(vx_mav_rx_t *m, const uint8_t *frame, uint16_t len, vstig_msg_t *out,
+                              uint8_t *has_sender, unsigned long long *sender) {
     uint8_t link_id, stamp[6], sysid, compid, n, i;
     long long when = 0;
     if (!vstig_mavlink_check(&m->rx, frame, len, m->keyed ? m->key : NULL)) return 0;
@@ -155,9 +154,12 @@ size_t vx_mav_feed(vx_mav_rx_t *m, const uint8_t *data, size_t len, vstig_msg_t 
                    unsigned long long *sender) {
     size_t i, n = 0;
     *has_sender = 0;
+    if (len <= 0xFFFFu && vstig_mavlink_whole(data, (uint16_t)len)) /* the common unit (MavlinkFraming._frames') */
+        return frame_messages(m, data, (uint16_t)len, out, has_sender, sender);
     for (i = 0; i <= len; i++) {
         if (i < len ? !vstig_mavlink_feed(&m->rx, data[i]) : !vstig_mavlink_flush(&m->rx)) continue;
-        do n += frame_messages(m, out + n, has_sender, sender);
+        do n += frame_messages(m, vstig_mavlink_frame(&m->rx), vstig_mavlink_frame_len(&m->rx), out + n, has_sender,
+                               sender);
         while (vstig_mavlink_next(&m->rx));
     }
     return n;

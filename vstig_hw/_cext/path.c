@@ -814,7 +814,8 @@ static Py_ssize_t udp_units(vx_link_t *link, vx_udp_t *udp, int got, PyObject *p
         at += len;
     }
     if (vx_count(link->tcounters, vx_n.rx_bytes, (Py_ssize_t)bytes) < 0 ||
-        vx_count(link->tcounters, vx_n.rx_datagrams, got) < 0 || vx_mav_harvest_device(&udp->cutter, link->tcounters) < 0)
+        vx_count(link->tcounters, vx_n.rx_datagrams, got) < 0 ||
+        vx_mav_harvest_device(&udp->cutter, link->tcounters) < 0)
         return -1;
     return (Py_ssize_t)n;
 }
