@@ -30,8 +30,8 @@ NOT_OURS = {
     # Zenoh configuration keys and an endpoint
     "transport/link/rx/max_message_size", "transport/shared_memory/enabled", "transport/unicast/max_sessions",
     "tcp/0.0.0.0",
-    # a ROS 2 message type, and the libraries a ROS 2 wheel brings
-    "vstig_msgs/Robots", "site-packages/ros_*.libs",
+    # the libraries a ROS 2 wheel brings
+    "site-packages/ros_*.libs",
 }
 
 
@@ -56,6 +56,9 @@ def repository_files() -> set[str]:
 def spellings(word: str) -> list[str]:
     """The paths a word may mean: braces expanded (`vstig_wire.{h,c}`), a module's attribute dropped."""
     word = re.sub(r":\d+(-\d+)?$", "", word.split("::")[0])  # path:line, path::test
+    ros_type = re.fullmatch(r"vstig_msgs/(?:msg/|srv/)?(\w+)", word)
+    if ros_type:  # a ROS 2 type of ours names its interface file
+        return [f"vstig_hw/ros2msgs/*/{ros_type[1]}.idl"]
     braces = re.fullmatch(r"(.*)\{([^}]*)\}(.*)", word)
     words = [braces[1] + part + braces[3] for part in braces[2].split(",")] if braces else [word]
     return [w for word in words for w in (word, re.sub(r"\.[A-Za-z_]\w*$", ".py", word))]
