@@ -7,12 +7,18 @@
   delivery as its reader thread hands it): thread CPU per message with both links auth=require and the swarm key,
   against auth off, on the compiled path (the gateway's usual) and on the Python one; and with tags checked on the
   way in only (the check's own cost: a tagged CAN FD relay also sends a frame a message, SPEC.md 10.5).
+* A robot radio lab's relay: `vstig bridge` (engine mode, compiled path) between two cobs8 ptys, both links
+  auth=require with the swarm key against auth off, at one message a read (2,000 messages/s, one a write: the radio
+  regime) and at ten: the process's CPU per message (rounds alternated, medians) and callgrind instructions per
+  message, in one run. Unlike CAN FD, a tagged cobs8 frame carries one record where an untagged one carries one
+  message: the frames per message are the same, only the bytes (24 against 12) and the tag's work differ.
 * libvstig on a simulated ATmega328P (simavr, avr-gcc -Os): cycles per tag and per tag check, against one
   cobs8 frame of one message; flash and static RAM of vstig_auth, against the chip's.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -21,19 +27,21 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import can
 
 from vstig_hw import Stigmergy
 from vstig_hw.auth import SwarmKeys
+from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
 from vstig_hw.gateway import Node
 from vstig_hw.links.assemble import assemble_links
 from vstig_hw.tagged import AuthPolicy, TaggedStigmergy
 from vstig_hw.wire import Message, Op
 
+from .bench_datapath import COUNT, VSTIG, Frame, _median_run, _relay_run, cobs8_frame, instructions_per_msg
 from .bench_wire import realistic_mix
 from .registry import Result, benchmark, rate
 
@@ -95,6 +103,61 @@ def _relay_us(policy_in: str, policy_out: str, units: list[list[can.Message]], k
     if relayed < len(units):  # the figure is a relay's only if every write went through
         raise AssertionError(f"auth={policy_in}/{policy_out}: {relayed} of {len(units)} writes relayed: {stats}")
     return spent
+
+
+@contextlib.contextmanager
+def _key_file(master: bytes) -> Iterator[Path]:
+    """The swarm key in a file of mode 0600, as `--swarm-key` takes it."""
+    with tempfile.TemporaryDirectory(prefix="vstig-bench-auth-") as tmp:
+        path = Path(tmp) / "swarm.key"
+        path.write_text(master.hex() + "\n", encoding="ascii")
+        path.chmod(0o600)
+        yield path
+
+
+def _pty_bridge(policy: str, key_file: Path) -> Callable[[str, str], list[str]]:
+    """`vstig bridge` of two cobs8 ptys in engine mode (as bench_datapath's engine relay), both links `policy`."""
+    key = ("--swarm-key", str(key_file)) if policy != "off" else ()
+    return lambda a, b: [VSTIG, "bridge", f"serial:{a}?framing=cobs8&auth={policy}",
+                         f"serial:{b}?framing=cobs8&auth={policy}", "--robot-id", "200", "--budget", "2000",
+                         "--no-refresh", *key]
+
+
+def _tagged_frame(keys: SwarmKeys) -> Frame:
+    """Robot 7's cobs8 frame of a message's record (SPEC.md 10.5), tagged with its key."""
+    cobs8 = make_serial_framing("cobs8")
+    return lambda msg: cobs8.encode_tagged([keys.tag(msg, 0)])[0]
+
+
+PTY_ROUNDS = 3
+
+
+@benchmark("auth")
+def pty_relay_require_vs_off() -> Iterator[Result]:
+    """A cobs8 pty -> pty bridge with both links auth=require against auth off, at one and at ten messages a read:
+    CPU per message (PTY_ROUNDS rounds, each relay once a round in turn, each keeping its run of median CPU) and
+    instructions per message (callgrind). Every message must reach the far pty."""
+    keys = SwarmKeys(_MASTER)
+    frames = {"off": cobs8_frame, "require": _tagged_frame(keys)}
+    with _key_file(_MASTER) as key_file:
+        relays = {policy: (_pty_bridge(policy, key_file), True, {}) for policy in frames}
+        runs: dict[tuple[str, int], list[tuple[float, float, tuple[float, ...], int]]] = {}
+        for _ in range(PTY_ROUNDS):
+            for per_read in (1, 10):
+                for policy, relay in relays.items():
+                    run = _relay_run(*relay, per_read=per_read, frame=frames[policy])
+                    if run[3] < COUNT:
+                        raise AssertionError(f"auth={policy}, {per_read} a read: {run[3]} of {COUNT} relayed")
+                    runs.setdefault((policy, per_read), []).append(run)
+        for per_read, label in ((1, ""), (10, "_ten_per_read")):
+            off, require = (_median_run(runs[policy, per_read])[0] * 1e6 for policy in ("off", "require"))
+            yield Result(f"auth.pty_relay_cpu_require_vs_off{label}", require, "us", "auth off CPU/msg", off)
+        for per_read, label in ((1, ""), (10, "_ten_per_read")):
+            per_msg = instructions_per_msg("auth.pty_relay_instructions", relays, per_read, frames)
+            if per_msg is None:
+                return
+            yield Result(f"auth.pty_relay_instructions_require_vs_off{label}", per_msg["require"], "instr",
+                         "auth off instr/msg", per_msg["off"])
 
 
 @benchmark("auth")

@@ -92,14 +92,22 @@ class _Arrivals:
         self._thread.join()
 
 
-def _frames(count: int) -> list[bytes]:
-    cobs8 = make_serial_framing("cobs8")
-    return [cobs8.encode(Message(Op.PUT, i, i, 1, 7))[0] for i in range(count)]
+def cobs8_frame(msg: Message) -> bytes:
+    """The cobs8 frame a robot sends for `msg` (untagged)."""
+    return make_serial_framing("cobs8").encode(msg)[0]
 
 
-def _writes(count: int, per_read: int) -> list[bytes]:
+# What a robot sends for a message: its cobs8 frame (a relay's probe and the messages it is offered)
+Frame = Callable[[Message], bytes]
+
+
+def _frames(count: int, frame: Frame = cobs8_frame) -> list[bytes]:
+    return [frame(Message(Op.PUT, i, i, 1, 7)) for i in range(count)]
+
+
+def _writes(count: int, per_read: int, frame: Frame = cobs8_frame) -> list[bytes]:
     """`count` messages' frames, `per_read` of them a write (each write one read of the relay's)."""
-    frames = _frames(count)
+    frames = _frames(count, frame)
     return [b"".join(frames[i:i + per_read]) for i in range(0, count, per_read)]
 
 
@@ -204,13 +212,13 @@ while True:
 """
 
 
-def _await(into: _Pty, out: _Arrivals, probe_key: int = 32767, seconds: float = 30.0) -> None:
-    cobs8 = make_serial_framing("cobs8")
+def _await(into: _Pty, out: _Arrivals, probe_key: int = 32767, seconds: float = 30.0,
+           frame: Frame = cobs8_frame) -> None:
     end = time.monotonic() + seconds
     stamp = 0
     while time.monotonic() < end:
         stamp += 1
-        os.write(into.master, cobs8.encode(Message(Op.PUT, probe_key, 1, stamp, 7))[0])
+        os.write(into.master, frame(Message(Op.PUT, probe_key, 1, stamp, 7)))
         time.sleep(0.1)
         if probe_key in out.arrived:
             return
@@ -219,7 +227,7 @@ def _await(into: _Pty, out: _Arrivals, probe_key: int = 32767, seconds: float = 
 
 @contextlib.contextmanager
 def _relaying(argv: Callable[[str, str], list[str]], echo_back: bool, env: dict[str, str] | None = None,
-              prefix: tuple[str, ...] = ()) -> Iterator[tuple[int, _Pty, _Arrivals]]:
+              prefix: tuple[str, ...] = (), frame: Frame = cobs8_frame) -> Iterator[tuple[int, _Pty, _Arrivals]]:
     """Start a relay from a new pty A to a new pty B (`argv(A, B)`, after `prefix`, `env` added to its
     environment) and wait until it relays.
 
@@ -236,7 +244,7 @@ def _relaying(argv: Callable[[str, str], list[str]], echo_back: bool, env: dict[
     out = _Arrivals(b)
     echo = _Arrivals(a, record=False) if echo_back else None  # an engine re-broadcasts onto A too: read it
     try:
-        _await(a, out, seconds=150.0 if prefix else 30.0)  # under callgrind a busy VM takes a while to start it
+        _await(a, out, seconds=150.0 if prefix else 30.0, frame=frame)  # a busy VM starts callgrind slowly
         yield process.pid, a, out
     finally:
         process.terminate()  # (callgrind writes its totals as the process exits)
@@ -249,11 +257,12 @@ def _relaying(argv: Callable[[str, str], list[str]], echo_back: bool, env: dict[
 
 
 def _relay_run(argv: Callable[[str, str], list[str]], echo_back: bool, env: dict[str, str] | None = None,
-               per_read: int = 1) -> tuple[float, float, tuple[float, ...], int]:
+               per_read: int = 1, frame: Frame = cobs8_frame) -> tuple[float, float, tuple[float, ...], int]:
     """(CPU s per message, switches per message, (p50, p90, p99) delay s, delivered) of a process relaying pty A ->
-    pty B, offered COUNT messages at RATE_HZ, `per_read` a write (the delays: one per message of a one-per-read run)."""
-    with _relaying(argv, echo_back, env) as (pid, a, out):
-        writes = _writes(COUNT, per_read)
+    pty B, offered COUNT messages at RATE_HZ, `per_read` a write (the delays: one per message of a one-per-read run),
+    each message as `frame` makes it."""
+    with _relaying(argv, echo_back, env, frame=frame) as (pid, a, out):
+        writes = _writes(COUNT, per_read, frame)
         cpu0, sw0 = _usage(pid)
         sent = _paced(lambda w: os.write(a.master, w), writes, rate_hz=RATE_HZ // per_read)
         out.wait(COUNT + 1)
@@ -336,13 +345,15 @@ def relay_cost() -> Iterator[Result]:
                  bare[0] * 1e6)
 
 
-def _instructions(name: str, count: int, workdir: Path, relay: Relay | None = None, per_read: int = 1) -> int:
+def _instructions(name: str, count: int, workdir: Path, relay: Relay | None = None, per_read: int = 1,
+                  frame: Frame = cobs8_frame) -> int:
     """User-space instructions (callgrind's Ir) relay `name` (of _RELAYS, unless `relay` gives its argv, echo and
-    environment) executed in all, having relayed `count` messages, `per_read` a write."""
+    environment) executed in all, having relayed `count` messages, `per_read` a write, each as `frame` makes it."""
     out_file = workdir / f"{name}.{count}.{per_read}.callgrind"
     callgrind = ("valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}")
-    with _relaying(*(relay or _RELAYS[name]), prefix=callgrind) as (_pid, a, out):  # (valgrind passes the env on)
-        _paced(lambda w: os.write(a.master, w), _writes(count, per_read), rate_hz=INSTRUCTIONS_RATE_HZ // per_read)
+    with _relaying(*(relay or _RELAYS[name]), prefix=callgrind, frame=frame) as (_pid, a, out):  # (env passed on)
+        _paced(lambda w: os.write(a.master, w), _writes(count, per_read, frame),
+               rate_hz=INSTRUCTIONS_RATE_HZ // per_read)
         out.wait(count + 1, seconds=60)
     if len(out.arrived) < count + 1:
         raise RuntimeError(f"{name} under callgrind relayed {len(out.arrived) - 1} of {count} messages")
@@ -360,10 +371,12 @@ def _totals(out_file: Path) -> int:
 INSTRUCTIONS_RATE_HZ = 200  # slow enough for an engine under callgrind (~50x slower) to take each message alone
 
 
-def instructions_per_msg(label: str, relays: Mapping[str, Relay], per_read: int = 1) -> dict[str, float] | None:
+def instructions_per_msg(label: str, relays: Mapping[str, Relay], per_read: int = 1,
+                         frames: Mapping[str, Frame] | None = None) -> dict[str, float] | None:
     """User-space instructions per relayed message of each relay, in order (callgrind), `per_read` messages a
-    write: a run of 2,500 messages less one of 500, so start-up and imports cancel out. None, said on stderr under
-    `label`, without valgrind; a RuntimeError naming the relay when one does not relay."""
+    write (each as `frames` says for that relay, else untagged): a run of 2,500 messages less one of 500, so start-up
+    and imports cancel out. None, said on stderr under `label`, without valgrind; a RuntimeError naming the relay
+    when one does not relay."""
     if shutil.which("valgrind") is None:
         print(f"{label}: needs valgrind (apt-get install valgrind)", file=sys.stderr)
         return None
@@ -371,7 +384,8 @@ def instructions_per_msg(label: str, relays: Mapping[str, Relay], per_read: int 
     with tempfile.TemporaryDirectory(prefix="vstig-bench-") as tmp:
         for name, relay in relays.items():
             try:
-                few, many = (_instructions(name, count, Path(tmp), relay, per_read) for count in (500, 2500))
+                frame = (frames or {}).get(name, cobs8_frame)
+                few, many = (_instructions(name, count, Path(tmp), relay, per_read, frame) for count in (500, 2500))
             except RuntimeError as error:
                 raise RuntimeError(f"{name}: {error}") from error
             per_msg[name] = (many - few) / 2000
