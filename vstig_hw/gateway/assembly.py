@@ -21,6 +21,19 @@ __all__ = ["Mode", "NodeParts", "build_parts"]
 
 
 class Mode(enum.Enum):
+    """What a Node is; each picks the part that handles what links heard (see `parts`).
+
+    * ENGINE: the Node is a robot (a `Seat`). What any link hears goes into its
+      engine; what the engine queues goes out on every link (its own queue per link,
+      see `outlet`). Data crosses media because the protocol re-broadcasts what is new
+      and answers stale GETs, not because the gateway relays.
+    * RAW: a transparent bridge (a `RawRelay`). Every message heard on one link is
+      re-encoded in each other link's framing and sent as is: no engine, no merging.
+    * LISTEN: a sniffer or recorder. Nothing is ever written to any link. With
+      `count_outcomes` a `Seat` with no outlets still judges everything, so `stats()`
+      tells what the traffic would do to a robot (sniff shows it).
+    """
+
     ENGINE = "engine"
     RAW = "raw"
     LISTEN = "listen"

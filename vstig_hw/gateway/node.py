@@ -1,18 +1,7 @@
 """The PC's seat in the swarm: one engine attached to any number of links, owning its threads.
 
-Modes (each picks the part that handles what links heard, see `parts`):
-
-* ENGINE: the Node is a robot (a `Seat`). What any link hears goes into its
-  engine; what the engine queues goes out on every link (its own queue per link,
-  see `outlet`). Data crosses media because the protocol re-broadcasts what is new
-  and answers stale GETs, not because the gateway relays.
-* RAW: a transparent bridge (a `RawRelay`). Every message heard on one link is
-  re-encoded in each other link's framing and sent as is: no engine, no merging.
-* LISTEN: a sniffer or recorder. Nothing is ever written to any link. With
-  `count_outcomes` a `Seat` with no outlets still judges everything, so `stats()`
-  tells what the traffic would do to a robot (sniff shows it).
-
-The Node is a façade over its collaborators, one job each:
+Its `Mode` (ENGINE a robot, RAW a transparent bridge, LISTEN a sniffer or recorder: see `assembly.Mode`) picks
+the part that handles what links heard. The Node is a façade over its collaborators, one job each:
 
 * `assembly.build_parts`: what it is made of (compiled or Python parts, outlets, engine, part), chosen once;
 * `lifecycle.LinkLifecycle`: the links from open to close, a reader thread per link, the loop's thread, the stop;
