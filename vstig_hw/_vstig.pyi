@@ -86,6 +86,7 @@ class Encoder:
     frame_id: int  # XBee: the fields an XBeeFraming sends with once it shares them (framing.xbee.Sending)
     report: int
     per_frame: int
+    records_per_frame: int
     seq: int  # MAVLink: the next frame's sequence, and the last signing timestamp sent (the framing shares them)
     timestamp: int
     written: int  # MAVLink: the newest signing timestamp the link wrote (the framing's in_order, the outlet's sends)

@@ -184,10 +184,11 @@ static size_t put(const vstig_xbee_tx_t *tx, uint8_t *out, size_t w, uint8_t byt
     return w;
 }
 
-/* One Transmit Request carrying msgs[0..n) at out; its size. */
-static size_t transmit(vstig_xbee_tx_t *tx, const vstig_msg_t *msgs, uint8_t n, uint8_t *out) {
-    uint8_t head[VSTIG_XBEE_TX_HEADER], raw[VSTIG_MESSAGE_SIZE], sum = 0, i, k;
-    uint16_t length = (uint16_t)(VSTIG_XBEE_TX_HEADER + (uint16_t)n * VSTIG_MESSAGE_SIZE);
+/* The 0x7E, the length and the Transmit Request's header of a frame of rf_len bytes of RF data, at out; the header's
+ * bytes added to *sum (the checksum's); returns the next write position. */
+static size_t transmit_head(vstig_xbee_tx_t *tx, uint16_t rf_len, uint8_t *out, uint8_t *sum) {
+    uint8_t head[VSTIG_XBEE_TX_HEADER], i;
+    uint16_t length = (uint16_t)(VSTIG_XBEE_TX_HEADER + rf_len);
     size_t w = 0;
     head[0] = VSTIG_XBEE_TRANSMIT_REQUEST;
     head[1] = 0;
@@ -205,15 +206,33 @@ static size_t transmit(vstig_xbee_tx_t *tx, const vstig_msg_t *msgs, uint8_t n, 
     w = put(tx, out, w, (uint8_t)(length >> 8));
     w = put(tx, out, w, (uint8_t)length);
     for (i = 0; i < VSTIG_XBEE_TX_HEADER; i++) {
-        sum = (uint8_t)(sum + head[i]);
+        *sum = (uint8_t)(*sum + head[i]);
         w = put(tx, out, w, head[i]);
     }
+    return w;
+}
+
+/* One Transmit Request carrying msgs[0..n) at out; its size. */
+static size_t transmit(vstig_xbee_tx_t *tx, const vstig_msg_t *msgs, uint8_t n, uint8_t *out) {
+    uint8_t raw[VSTIG_MESSAGE_SIZE], sum = 0, i, k;
+    size_t w = transmit_head(tx, (uint16_t)((uint16_t)n * VSTIG_MESSAGE_SIZE), out, &sum);
     for (k = 0; k < n; k++) {
         vstig_msg_encode(&msgs[k], raw);
         for (i = 0; i < VSTIG_MESSAGE_SIZE; i++) {
             sum = (uint8_t)(sum + raw[i]);
             w = put(tx, out, w, raw[i]);
         }
+    }
+    return put(tx, out, w, (uint8_t)(0xFFu - sum));
+}
+
+size_t vstig_xbee_transmit(vstig_xbee_tx_t *tx, const uint8_t *rf, uint16_t len, uint8_t *out) {
+    uint8_t sum = 0;
+    uint16_t i;
+    size_t w = transmit_head(tx, len, out, &sum);
+    for (i = 0; i < len; i++) {
+        sum = (uint8_t)(sum + rf[i]);
+        w = put(tx, out, w, rf[i]);
     }
     return put(tx, out, w, (uint8_t)(0xFFu - sum));
 }

@@ -109,6 +109,11 @@ void vstig_xbee_tick(vstig_xbee_tx_t *tx);
 /* The Transmit Requests for msgs[0..n), in order, each as full as per_frame allows, into out
  * (VSTIG_XBEE_TX_BYTES(n)); returns the bytes written. */
 size_t vstig_xbee_encode(vstig_xbee_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out);
+/* Bytes of a Transmit Request of len bytes of RF data, at most (escaped). */
+#define VSTIG_XBEE_TRANSMIT_BYTES(len) (1u + 2u * (2u + VSTIG_XBEE_TX_HEADER + (size_t)(len) + 1u))
+/* One Transmit Request carrying rf[0..len) as its RF data (a tagged batch, SPEC.md 10.5), into out
+ * (VSTIG_XBEE_TRANSMIT_BYTES(len)); returns the bytes written. */
+size_t vstig_xbee_transmit(vstig_xbee_tx_t *tx, const uint8_t *rf, uint16_t len, uint8_t *out);
 
 #ifdef __cplusplus
 }

@@ -27,7 +27,7 @@ from vstig_hw.auth import SwarmKeys, Tagged, encode_batch
 from vstig_hw.counters import Counters
 from vstig_hw.framing import make_serial_framing
 from vstig_hw.framing.can import CanFraming, CanIdScheme
-from vstig_hw.framing.xbee import XBeeFraming, api_frame, receive_packet
+from vstig_hw.framing.xbee import MAX_RECORDS_PER_FRAME, ModuleInfo, XBeeFraming, api_frame, receive_packet
 from vstig_hw.gateway import assembly as assembly_module
 from vstig_hw.gateway.compiled import Compiled
 from vstig_hw.gateway.node import Node
@@ -146,15 +146,17 @@ def test_the_twin_keeps_proofs_a_replay_loses_and_refuses_a_stranger_policy(comp
 
 # -- the whole compiled delivery against the Python Node ------------------------------------------------------------
 
-# (name, framing, policy): records decoded in C (cobs8, CAN FD) under each policy
+# (name, framing, policy): records decoded and sent in C (cobs8, CAN FD, XBee) under each policy
 SIGNED_LINKS = [("radio", "cobs8", AuthPolicy.REQUIRE), ("bus", "canfd", AuthPolicy.PREFER),
-                ("plain", "cobs8", AuthPolicy.OFF)]
+                ("plain", "cobs8", AuthPolicy.OFF), ("modules", "xbee", AuthPolicy.REQUIRE)]
+XBEE_NP = 41  # the module's NP: 5 messages a frame, 2 records a tagged batch (0xA1 and 40 bytes)
 
 
 def _signed_node(compiled: bool, refused: list[tuple[str, Message, str]]) -> Node:
     links = []
     for name, kind, policy in SIGNED_LINKS:
-        framing: Any = CanFraming(CanIdScheme(), sender=9, fd=True) if kind == "canfd" else make_serial_framing(kind)
+        framing: Any = (CanFraming(CanIdScheme(), sender=9, fd=True) if kind == "canfd" else
+                        XBeeFraming() if kind == "xbee" else make_serial_framing(kind))
         link = Link(name, gateway_twins.MemoryTransport(name), framing, one_domain=kind == "canfd")
         link.auth = policy
         links.append(link)
@@ -163,12 +165,17 @@ def _signed_node(compiled: bool, refused: list[tuple[str, Message, str]]) -> Nod
             patch.setattr(assembly_module, "compiled_for", lambda relays, links: None)
         node = Node(links, 9, period=1.0, budget=None, swarm_keys=SwarmKeys(MASTER))
     assert (node._delivery.path is not None) == compiled
+    links[3].framing.use_module(ModuleInfo(max_payload=XBEE_NP))  # as the module says at open, after the Node
     node.listen(refused=lambda heard, reason: refused.append((heard.link, heard.message, reason)))
     return node
 
 
 def _units(rng: random.Random, kind: str, sent: list[tuple[Message, Tagged | None]]) -> list[Any]:
-    """What a robot's radio or CAN node sends: each message as a record or untagged (cobs8 cut anywhere)."""
+    """What a robot's radio or CAN node sends: each message as a record or untagged (cobs8 cut anywhere, XBee Receive
+    Packets of a tagged batch or a message each, in one unit)."""
+    if kind == "xbee":
+        return [b"".join(api_frame(receive_packet(0x0013A20040A1B2C3, encode(msg) if record is None else
+                                                  encode_batch([record]))) for msg, record in sent)]
     if kind == "canfd":
         robot = CanFraming(CanIdScheme(), sender=rng.choice([3, 4]), fd=True)
         return [frame for msg, record in sent
@@ -272,6 +279,8 @@ def test_the_xbee_receiver_reads_tagged_batches_as_the_framing(compiled: ModuleT
 
 # -- the same on real devices: ptys and python-can buses, tagged units written straight from C ----------------------
 
+DEVICE_LINKS = SIGNED_LINKS[:3]  # cobs8 on ptys, CAN FD on a python-can bus (an XBee module is tests/xbee's)
+
 def _far_end_bytes(fd: int) -> bytes:
     """What a pty's far end holds now."""
     got = b""
@@ -285,13 +294,13 @@ def _far_end_bytes(fd: int) -> bytes:
 
 @contextmanager
 def _device_node(compiled: bool, refused: list[tuple[str, Message, str]]) -> Iterator[tuple[Node, list[Any]]]:
-    """A Node with the swarm key over SIGNED_LINKS on real devices (cobs8 on ptys, CAN FD on a python-can virtual
+    """A Node with the swarm key over DEVICE_LINKS on real devices (cobs8 on ptys, CAN FD on a python-can virtual
     bus), its links open and its loop not started (the test hands it units); with each device's far end."""
     fds: list[int] = []
     far: list[Any] = []
     links = []
     try:
-        for name, kind, policy in SIGNED_LINKS:
+        for name, kind, policy in DEVICE_LINKS:
             if kind == "canfd":
                 channel = f"tags-{os.getpid()}-{compiled}-{name}"
                 spec = f"can:virtual:{channel}?fd=1"
@@ -349,8 +358,8 @@ def test_tagged_units_written_straight_to_ptys_and_buses_equal_the_python_nodes(
         nodes, fars = (pure, c), (pure_far, c_far)
         for outlet in c.outlets:  # the writer is Python: a unit handed to it is a wake-up the C write should spare
             outlet.writer.submit = lambda units, count, name=outlet.link.name: handed.append(name)  # type: ignore
-        got: tuple[list[list[Any]], list[list[Any]]] = ([[] for _ in SIGNED_LINKS], [[] for _ in SIGNED_LINKS])
-        for step in _stream(seed, keys, steps):
+        got: tuple[list[list[Any]], list[list[Any]]] = ([[] for _ in DEVICE_LINKS], [[] for _ in DEVICE_LINKS])
+        for step in (step for step in _stream(seed, keys, steps) if step[0] == "put" or step[1] < len(DEVICE_LINKS)):
             for node, far, into in zip(nodes, fars, got, strict=True):
                 with node._lock:
                     if step[0] == "put":
@@ -378,3 +387,15 @@ def test_tagged_units_written_straight_to_ptys_and_buses_equal_the_python_nodes(
     assert c_got == pure_got
     radio = make_serial_framing("cobs8").feed_tagged(c_got[0][0])  # a link that requires tags: every one tagged
     assert all(record is not None and keys.verify(record) for _, record in radio)
+
+
+def test_an_xbee_encoder_takes_every_batch_size_the_framing_asks_and_no_more(compiled: ModuleType) -> None:
+    """The framing's records a batch (its module's NP) reach the shared Encoder, up to the most a frame's data hold;
+    one more is refused by name, never written past the Encoder's buffer."""
+    framing, encoder = XBeeFraming(), compiled.Encoder("xbee")
+    framing.share_sending(encoder)
+    for np, records in ((20, 1), (41, 2), (61, 3), (256, 12), (5000, MAX_RECORDS_PER_FRAME)):
+        framing.use_module(ModuleInfo(max_payload=np))
+        assert encoder.records_per_frame == records
+    with pytest.raises(ValueError, match=f"1..{MAX_RECORDS_PER_FRAME} records"):
+        encoder.records_per_frame = MAX_RECORDS_PER_FRAME + 1

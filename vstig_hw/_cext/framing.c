@@ -432,7 +432,9 @@ PyTypeObject vx_ReceiverType = {
 
 size_t vx_tx_room(const vx_tx_t *tx, size_t n) {
     if (tx->kind == VX_MAVLINK) return VX_MAV_TX_ROOM(n);
-    return tx->kind == VX_XBEE ? VSTIG_XBEE_TX_BYTES(n) : n * VX_SERIAL_MAX_BYTES;
+    if (tx->kind != VX_XBEE) return n * VX_SERIAL_MAX_BYTES; /* a cobs8 record's frame too (24 bytes) */
+    /* with tags: as if each message were a tagged batch of its own, beside the untagged ones' frames */
+    return VSTIG_XBEE_TX_BYTES(n) + (tx->tag_engine ? n * VSTIG_XBEE_TRANSMIT_BYTES(1u + VSTIG_RECORD_SIZE) : 0u);
 }
 
 /* MAVLink: the TUNNELs of n messages back to back, 16 to a TUNNEL (MavlinkFraming.encode_batch, joined as
@@ -587,6 +589,7 @@ static PyObject *Encoder_new(PyTypeObject *type, PyObject *args, PyObject *kwds)
     self = (vx_encoder_t *)type->tp_alloc(type, 0);
     if (self == NULL) return NULL;
     self->tx.kind = (uint8_t)kind;
+    self->tx.records_per_frame = (uint8_t)((VSTIG_XBEE_DEFAULT_MAX_PAYLOAD - 1u) / VSTIG_RECORD_SIZE);
     self->tx.kilobot_type = (uint8_t)kilobot_type;
     self->tx.frame_type = Py_NewRef(frame_type);
     if (kind == VX_CAN && unit_template(&self->tx) < 0) {
@@ -671,16 +674,17 @@ static void record_bytes(const vx_record_t *record, uint8_t out[VSTIG_RECORD_SIZ
     memcpy(out + 12, record->tag, VSTIG_TAG_SIZE);
 }
 
-/* Link._tagged_units in wire form: each message with its entry's record first (a cobs8 frame, or one CAN FD frame
- * under its message's op: CanFraming.encode_tagged), then those without a proof untagged, packed as usual; on a link
- * that requires tags these are held back (counted held_unverified). */
+/* Link._tagged_units in wire form: each message with its entry's record first (a cobs8 frame, one CAN FD frame
+ * under its message's op: CanFraming.encode_tagged, or XBee Transmit Requests of tagged batches, records_per_frame
+ * in each: XBeeFraming.encode_tagged), then those without a proof untagged, packed as usual; on a link that requires
+ * tags these are held back (counted held_unverified). */
 static Py_ssize_t tagged_wire(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out,
                               vstig_can_frame_t *frames) {
     const vstig_tagged_t *tagged = &((vx_engine_t *)tx->tag_engine)->tags->tagged;
     vstig_msg_t stack[64], *plain = n <= 64 ? stack : PyMem_Malloc(n * sizeof *plain);
     vx_record_t record;
-    uint8_t payload[VSTIG_RECORD_SIZE];
-    size_t i, count = 0, kept = 0, held = 0;
+    uint8_t payload[VSTIG_RECORD_SIZE], batch[1u + VX_XBEE_MAX_RECORDS * VSTIG_RECORD_SIZE];
+    size_t i, count = 0, kept = 0, held = 0, batched = 0;
     if (plain == NULL) {
         PyErr_NoMemory();
         return -1;
@@ -697,10 +701,20 @@ static Py_ssize_t tagged_wire(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, ui
             (void)vstig_can_encode(&tx->can, &record.msg, 1, &frames[count]);
             memcpy(frames[count].data, payload, VSTIG_RECORD_SIZE);
             frames[count++].len = VSTIG_RECORD_SIZE;
+        } else if (tx->kind == VX_XBEE) { /* the batch's marker, then its records; sent when full */
+            batch[0] = VX_BATCH_MARKER;
+            memcpy(batch + 1 + batched++ * VSTIG_RECORD_SIZE, payload, VSTIG_RECORD_SIZE);
+            if (batched == tx->records_per_frame) {
+                count += vstig_xbee_transmit(&tx->xbee, batch, (uint16_t)(1u + batched * VSTIG_RECORD_SIZE),
+                                             out + count);
+                batched = 0;
+            }
         } else {
             count += vstig_frame_encode(payload, VSTIG_RECORD_SIZE, out + count);
         }
     }
+    if (batched)
+        count += vstig_xbee_transmit(&tx->xbee, batch, (uint16_t)(1u + batched * VSTIG_RECORD_SIZE), out + count);
     count += tx->kind == VX_CAN ? vx_tx_frames(tx, plain, kept, frames + count)
                                 : vx_tx_bytes(tx, plain, kept, out + count);
     if (plain != stack) PyMem_Free(plain);
@@ -721,8 +735,9 @@ static PyObject *Encoder_send_tags(vx_encoder_t *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "O!pO!:send_tags", &vx_EngineType, &engine, &require, &PyDict_Type, &counters))
         return NULL;
     if (((vx_engine_t *)engine)->tags == NULL ||
-        !(self->tx.kind == VX_COBS8 || (self->tx.kind == VX_CAN && self->tx.can.fd))) {
-        PyErr_SetString(PyExc_ValueError, "send_tags needs an Engine given swarm_key, and a cobs8 or CAN FD encoder");
+        !(self->tx.kind == VX_COBS8 || self->tx.kind == VX_XBEE || (self->tx.kind == VX_CAN && self->tx.can.fd))) {
+        PyErr_SetString(PyExc_ValueError, "send_tags needs an Engine given swarm_key, and a cobs8, CAN FD or XBee "
+                                          "encoder");
         return NULL;
     }
     Py_INCREF(engine);
@@ -799,6 +814,24 @@ static int Encoder_set_per_frame(vx_encoder_t *self, PyObject *value, void *clos
     return 0;
 }
 
+static PyObject *Encoder_get_records_per_frame(vx_encoder_t *self, void *closure) {
+    (void)closure;
+    return PyLong_FromLong(self->tx.records_per_frame);
+}
+
+static int Encoder_set_records_per_frame(vx_encoder_t *self, PyObject *value, void *closure) {
+    long records = value == NULL ? -1 : PyLong_AsLong(value);
+    (void)closure;
+    if (records == -1 && PyErr_Occurred()) return -1;
+    if (records < 1 || records > (long)VX_XBEE_MAX_RECORDS) {
+        PyErr_Format(PyExc_ValueError, "an XBee tagged batch carries 1..%d records, got %R",
+                     (int)VX_XBEE_MAX_RECORDS, value == NULL ? Py_None : value);
+        return -1;
+    }
+    self->tx.records_per_frame = (uint8_t)records;
+    return 0;
+}
+
 /* MAVLink: the last signing timestamp sent (10 us units since 2015); the next is max(this + 1, the clock). */
 static PyObject *Encoder_get_timestamp(vx_encoder_t *self, void *closure) {
     unsigned long long stamp = 0;
@@ -826,6 +859,8 @@ static PyGetSetDef Encoder_getset[] = {
      "MAVLink: the last signing timestamp sent.", NULL},
     {"per_frame", (getter)Encoder_get_per_frame, (setter)Encoder_set_per_frame,
      "XBee: messages a frame carries (the module's NP / 8).", NULL},
+    {"records_per_frame", (getter)Encoder_get_records_per_frame, (setter)Encoder_set_records_per_frame,
+     "XBee: records a tagged batch carries ((the module's NP - 1) / 20).", NULL},
     {NULL, NULL, NULL, NULL, NULL},
 };
 

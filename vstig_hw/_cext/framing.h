@@ -41,12 +41,14 @@ typedef struct {
     uint8_t kilobot_type;
     vstig_can_t can;
     vstig_xbee_tx_t xbee; /* its frame ids and NP: the link's XBeeFraming sends with the same (`share`) */
+    uint8_t records_per_frame; /* XBee: records a tagged batch carries ((the module's NP - 1) / 20) */
     vx_mav_tx_t mav;      /* its sequence and signing timestamps: the link's MavlinkFraming sends through it */
     PyObject *frame_type; /* CAN: can.Message, for the units handed to Python */
     PyObject *unit_template;   /* CAN: a frame_type() made once, copied per unit (NULL: frame_type is called) */
     Py_ssize_t unit_slots[6];  /* where the template's class keeps the fields a frame sets (framing.c UNIT_FIELDS) */
-    /* a link that sends tags (cobs8, CAN FD: `send_tags`): the engine whose proofs go with each message, whether the
-     * link requires them (a message without one is held back, counted in `tag_counters`' held_unverified) */
+    /* a link that sends tags (cobs8, CAN FD, XBee: `send_tags`): the engine whose proofs go with each message,
+     * whether the link requires them (one without a proof is then held back, counted in `tag_counters`'
+     * held_unverified) */
     PyObject *tag_engine, *tag_counters;
     uint8_t tag_require;
 } vx_tx_t;
@@ -85,6 +87,9 @@ size_t vx_tx_room(const vx_tx_t *tx, size_t n);
 size_t vx_tx_bytes(vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, uint8_t *out);
 /* The CAN frames of n messages into frames (room for n); how many. */
 size_t vx_tx_frames(const vx_tx_t *tx, const vstig_msg_t *msgs, size_t n, vstig_can_frame_t *frames);
+/* XBee: the most records a tagged batch carries (SPEC.md 10.5: a marker and records within the frame data). */
+#define VX_XBEE_MAX_RECORDS ((VSTIG_XBEE_MAX_FRAME_DATA - VSTIG_XBEE_TX_HEADER - 1u) / VSTIG_RECORD_SIZE)
+
 /* The wire form of n messages as the link's writer gets it (Link.units_of): serial bytes into out (room for
  * vx_tx_room(tx, n)), or CAN frames into frames (room for n); how many bytes or frames. A link that sends tags
  * (`send_tags`) sends each message with its entry's record, and holds back, counted, what it may not send (so

@@ -101,6 +101,7 @@ _RX_HEADER = 12  # 0x90, source64, source16, options
 _TX_HEADER = 14  # 0x10, frame id, dest64, dest16, radius, options
 # Messages a frame carries at most, whatever NP a module claims: its frame data stay within MAX_FRAME_DATA.
 MAX_PER_FRAME = (MAX_FRAME_DATA - _TX_HEADER) // MESSAGE_SIZE
+MAX_RECORDS_PER_FRAME = (MAX_FRAME_DATA - _TX_HEADER - 1) // RECORD_SIZE  # a tagged batch: its marker, then records
 Heard = TypeVar("Heard", Message, tuple[Message, Tagged | None])  # what `feed` or `feed_tagged` gives per message
 
 
@@ -170,15 +171,17 @@ class ModuleInfo:
 
 class Sending:
     """What a link's frames carry from one to the next: the last frame id given (1..255), whether the next frame asks
-    for a report, messages a frame. The compiled data path's Encoder has the same fields; a link whose outlet sends
-    through one shares them with it (`XBeeFraming.share_sending`), so frame ids go on whichever side sends."""
+    for a report, messages a frame, records a tagged batch. The compiled data path's Encoder has the same fields; a
+    link whose outlet sends through one shares them with it (`XBeeFraming.share_sending`), so frame ids go on
+    whichever side sends."""
 
-    __slots__ = ("frame_id", "per_frame", "report")
+    __slots__ = ("frame_id", "per_frame", "records_per_frame", "report")
 
     def __init__(self) -> None:
         self.frame_id = 0
         self.report = True
         self.per_frame = DEFAULT_MAX_PAYLOAD // MESSAGE_SIZE
+        self.records_per_frame = (DEFAULT_MAX_PAYLOAD - 1) // RECORD_SIZE
 
 
 def _stuffed(wire: bytes) -> bool:
@@ -367,7 +370,7 @@ class XBeeFraming(SerialFraming):
         self.dest = dest
         self.max_payload = self.default_max_payload
         self.sending: Sending | Any = Sending()  # or the compiled Encoder's fields (`share_sending`)
-        self.sending.per_frame = self._per_frame(self.max_payload)
+        self._use_max_payload(self.max_payload)
         self._head = bytes((TRANSMIT_REQUEST, 0)) + dest.to_bytes(8, "big") + UNKNOWN_16.to_bytes(2, "big") + \
             b"\x00\x00"  # a Transmit Request's fields, frame id 0 (byte 1)
         self._reader = XBeeStreamReader(self.escaped, self.drops)
@@ -377,21 +380,25 @@ class XBeeFraming(SerialFraming):
     def per_frame(self) -> int:
         return int(self.sending.per_frame)
 
-    @staticmethod
-    def _per_frame(max_payload: int) -> int:
-        return max(1, min(max_payload // MESSAGE_SIZE, MAX_PER_FRAME))
+    def _use_max_payload(self, max_payload: int) -> None:
+        """Messages a frame and records a tagged batch (after its marker) as the RF payload holds: at least one, and
+        the frame data within MAX_FRAME_DATA."""
+        self.max_payload = max_payload
+        self.sending.per_frame = max(1, min(max_payload // MESSAGE_SIZE, MAX_PER_FRAME))
+        self.sending.records_per_frame = max(1, min((max_payload - 1) // RECORD_SIZE, MAX_RECORDS_PER_FRAME))
 
     def use_module(self, module: ModuleInfo) -> None:
         """What the module said at open: as many messages per frame as its NP holds (at least one, at most
         MAX_PER_FRAME)."""
         if module.max_payload is not None:
-            self.max_payload = module.max_payload
-            self.sending.per_frame = self._per_frame(module.max_payload)
+            self._use_max_payload(module.max_payload)
 
     def share_sending(self, twin: Any) -> None:
         """Send with `twin`'s frame ids, reports and NP from now on (the compiled Encoder of this link's outlet:
         what either sends goes on the other's count). It takes ours as they are."""
-        twin.frame_id, twin.report, twin.per_frame = self.sending.frame_id, self.sending.report, self.per_frame
+        ours = self.sending
+        twin.frame_id, twin.report, twin.per_frame = ours.frame_id, ours.report, ours.per_frame
+        twin.records_per_frame = ours.records_per_frame
         self.sending = twin
 
     # -- sending -------------------------------------------------------------------
@@ -411,7 +418,7 @@ class XBeeFraming(SerialFraming):
 
     def encode_tagged(self, records: Sequence[Tagged]) -> list[bytes]:
         """Transmit Requests of tagged batches, as many records in each as NP allows (3 in 64 bytes)."""
-        step = max(1, (min(self.max_payload, MAX_FRAME_DATA - _TX_HEADER) - 1) // RECORD_SIZE)
+        step = int(self.sending.records_per_frame)
         return [self._transmit(encode_batch(list(records[i:i + step]))) for i in range(0, len(records), step)]
 
     def _transmit(self, rf_data: bytes) -> bytes:

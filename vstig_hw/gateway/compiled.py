@@ -30,13 +30,12 @@ Node's own Python (listeners, the API, ticks, stops) works on either:
   virtual) is read by it through the bus's own recv, and while its writer is idle
   its outlet sends by the bus's own send(unit, 0.0) where that cannot block
   (`CanTransport.sends_at_once`): python-can's calls, no Python of ours between;
-* with the swarm key, `Engine(swarm_key=)` for `SignedEngine` (tags.c): cobs8 and
-  CAN FD records are decoded by the Receiver and checked by the link's policy in
+* with the swarm key, `Engine(swarm_key=)` for `SignedEngine` (tags.c): cobs8,
+  CAN FD and XBee records are decoded by the Receiver and checked by the link's policy in
   the delivery, and an outlet that sends tags has its Encoder put each entry's
   record in (`send_tags`) and writes as an untagged one does (straight to a serial
   port, a SocketCAN socket or a python-can bus while its writer is idle). A link that checks
-  tags the C does not send (XBee's tagged batches: decoded in C, on links with
-  auth off too; MAVLink's tagged TUNNELs) keeps the whole Node in Python
+  tags the C does not send (MAVLink's tagged TUNNELs) keeps the whole Node in Python
   (`checks_tags_for`).
 
 Everything else (zenoh, dialects, XbeeMav's packets, the overhead controller,
@@ -310,11 +309,12 @@ def compiled_for(relays: bool, links: Sequence[Link[Any]]) -> Compiled | None:
 def checks_tags_for(link: Link[Any]) -> bool:
     """Whether the compiled path can check and send the link's tags as its framing does: a link with auth off, one
     whose framing stays Python (zenoh, ROS 2...: the Python delivery checks it, the compiled engine keeps the
-    proofs), one whose framing carries no tags (nothing to check), or cobs8 and CAN, whose records the compiled
-    Receiver decodes and Encoder sends (XBee's tagged batches are decoded in C but not sent, MAVLink's tagged
-    TUNNELs are Python's only: a Node with such a link that checks tags runs in Python)."""
+    proofs), one whose framing carries no tags (nothing to check), or cobs8, CAN and XBee, whose records the
+    compiled Receiver decodes and Encoder sends (MAVLink's tagged TUNNELs are Python's only: a Node with such a link
+    that checks tags runs in Python)."""
     kind = framing_of(link)
-    return link.auth is AuthPolicy.OFF or kind is None or kind in ("cobs8", "can") or not link.framing.carries_tags
+    return (link.auth is AuthPolicy.OFF or kind is None or kind in ("cobs8", "can", "xbee")
+            or not link.framing.carries_tags)
 
 
 def sends_tags(link: Link[Any]) -> bool:
