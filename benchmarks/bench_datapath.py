@@ -372,11 +372,12 @@ INSTRUCTIONS_RATE_HZ = 200  # slow enough for an engine under callgrind (~50x sl
 
 
 def instructions_per_msg(label: str, relays: Mapping[str, Relay], per_read: int = 1,
-                         frames: Mapping[str, Frame] | None = None) -> dict[str, float] | None:
+                         frames: Mapping[str, Frame] | None = None, many: int = 2500) -> dict[str, float] | None:
     """User-space instructions per relayed message of each relay, in order (callgrind), `per_read` messages a
-    write (each as `frames` says for that relay, else untagged): a run of 2,500 messages less one of 500, so start-up
-    and imports cancel out. None, said on stderr under `label`, without valgrind; a RuntimeError naming the relay
-    when one does not relay."""
+    write (each as `frames` says for that relay, else untagged): a run of `many` messages less one of 500, so
+    start-up and imports cancel out (start-up itself wobbles by ~1M instructions a run: +-500 a message at 2,500, +-100
+    at 10,000). None, said on stderr under `label`, without valgrind; a RuntimeError naming the relay when one does
+    not relay."""
     if shutil.which("valgrind") is None:
         print(f"{label}: needs valgrind (apt-get install valgrind)", file=sys.stderr)
         return None
@@ -385,10 +386,10 @@ def instructions_per_msg(label: str, relays: Mapping[str, Relay], per_read: int 
         for name, relay in relays.items():
             try:
                 frame = (frames or {}).get(name, cobs8_frame)
-                few, many = (_instructions(name, count, Path(tmp), relay, per_read, frame) for count in (500, 2500))
+                few, most = (_instructions(name, count, Path(tmp), relay, per_read, frame) for count in (500, many))
             except RuntimeError as error:
                 raise RuntimeError(f"{name}: {error}") from error
-            per_msg[name] = (many - few) / 2000
+            per_msg[name] = (most - few) / (many - 500)
     return per_msg
 
 
