@@ -475,7 +475,7 @@ static PyObject *Tally_tick(vx_tally_t *self, PyObject *node) {
     (void)node;
     clock_gettime(CLOCK_REALTIME, &ts);
     now = (double)((long long)ts.tv_sec * 1000000000LL + ts.tv_nsec) / 1e9;
-    if (!advance(self, now)) Py_RETURN_NONE;
+    if (!advance(self, now) || self->on_due == NULL) Py_RETURN_NONE; /* (NULL: cleared by the collector) */
     return PyObject_CallFunction(self->on_due, "d", now);
 }
 
