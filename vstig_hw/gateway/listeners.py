@@ -28,14 +28,11 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..links.link import Heard, Link
 from ..wire import Message
 from .parts import ChangeListener, Seat
-
-if TYPE_CHECKING:
-    from .node import Node
 
 __all__ = ["ChangeListener", "ClosedListener", "DeliveredListener", "HeardListener", "Listeners", "Listening",
            "MessagesListener", "RefusedListener", "TickListener", "UnitListener"]
@@ -43,7 +40,8 @@ __all__ = ["ChangeListener", "ClosedListener", "DeliveredListener", "HeardListen
 UnitListener = Callable[[Link[Any], float, Any], None]
 HeardListener = Callable[[Heard], None]
 RefusedListener = Callable[[Heard, str], None]  # a message the guard refused, and its drop counter name
-TickListener = Callable[["Node"], None]
+# Called with the Node; typed Any here since this module sits below node.py (Node.listen names the type).
+TickListener = Callable[[Any], None]
 # What one unit carried, after the guard: link name, time heard, sender (None: the medium names none), messages.
 # Cheaper than `heard` on a busy gateway: one call per unit and no `Heard` built (the live view uses it).
 MessagesListener = Callable[[str, float, "int | None", list[Message]], None]

@@ -194,7 +194,7 @@ class Node:
     # batch, the loop, a caller of put/get/ask. Listeners run under it, on whichever thread did the work.
     def listen(self, *, unit: on.UnitListener | None = None, heard: on.HeardListener | None = None,
                refused: on.RefusedListener | None = None, messages: on.MessagesListener | None = None,
-               change: on.ChangeListener | None = None, tick: on.TickListener | None = None,
+               change: on.ChangeListener | None = None, tick: Callable[[Node], None] | None = None,
                delivered: on.DeliveredListener | None = None, closed: on.ClosedListener | None = None) -> Listening:
         """Call these as the Node works, until the returned handle's `cancel()`; safe from any thread. What each
         is told, and when: the `listeners` module. All but `closed` run under the Node's lock on the thread that did
