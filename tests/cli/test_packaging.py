@@ -64,7 +64,6 @@ def test_building_the_package_prints_no_setuptools_warning(tmp_path: Path) -> No
     (wheel,) = (tmp_path / "dist").glob("vstig_hw-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     data = {name for name in names if not name.endswith(".py") and ".dist-info/" not in name}
-    assert data == {"vstig_hw/py.typed", "vstig_hw/_vstig.pyi", "vstig_hw/transports/fastdds_loopback.xml",
-                    *(f"vstig_hw/ros2msgs/{part}.idl" for part in ("msg/Change", "msg/Entry", "msg/Message",
-                                                                      "msg/Robot", "msg/Robots", "srv/Get", "srv/Put",
-                                                                      "srv/Table"))}
+    interfaces = {path.relative_to(source).as_posix() for path in source.glob("vstig_hw/ros2msgs/*/*.idl")}
+    assert len(interfaces) >= 9  # Message, Entry, Change, Robot(s), TaggedMessage; Get, Put, Table
+    assert data == {"vstig_hw/py.typed", "vstig_hw/_vstig.pyi", "vstig_hw/transports/fastdds_loopback.xml", *interfaces}

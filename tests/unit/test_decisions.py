@@ -32,6 +32,8 @@ NOT_OURS = {
     "tcp/0.0.0.0",
     # the libraries a ROS 2 wheel brings
     "site-packages/ros_*.libs",
+    # what `mkdocs build` makes (`make docs`), not kept in the tree
+    "site/index.html",
 }
 
 
