@@ -229,6 +229,7 @@ def describe_links(node: Node) -> None:
 
 OPEN_POLL = 0.05  # seconds between two looks at the stop while links open
 STATUS_PERIOD = 0.5  # seconds between two redraws of a command's status line
+SIGNAL_NAP = 0.05  # seconds a command sleeps between two looks at its stop (see _nap_until)
 
 
 def open_unless_stopped(open_links: Callable[[], None], stop: threading.Event) -> bool:
@@ -292,7 +293,7 @@ def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, dur
         end = None if duration is None else time.monotonic() + duration
         while not stop.is_set() and (end is None or time.monotonic() < end):
             left = STATUS_PERIOD if end is None else max(0.0, end - time.monotonic())
-            if stop.wait(left if status is None else min(left, STATUS_PERIOD)):
+            if _nap_until(stop, left if status is None else min(left, STATUS_PERIOD)):
                 break
             if status is not None:
                 status()
@@ -303,6 +304,16 @@ def run_until_stopped(node: Node, stop: threading.Event, status: Any = None, dur
         if service is not None:
             service.stopping()
             service.close()
+
+
+def _nap_until(stop: threading.Event, seconds: float) -> bool:
+    """Wait `seconds` or until `stop` is set; True if it was. Short sleeps, not `stop.wait`: the signal handler's
+    `stop.set()` runs on this thread, and `Event.wait` holds the lock `set` takes at its edges, so a signal landing
+    there would wait on itself forever (a bridge that ignored SIGTERM)."""
+    end = time.monotonic() + seconds
+    while not stop.is_set() and (left := end - time.monotonic()) > 0:
+        time.sleep(min(left, SIGNAL_NAP))
+    return stop.is_set()
 
 
 def _readiness(node: Node) -> str:
