@@ -24,6 +24,7 @@ Twins (C file, its types, its Python references):
                                   vstig_hw/transports/mavlink.py
     peers.c    UdpPeers           vstig_hw/transports/mavlink.py
     roster.c   RosterTally        vstig_hw/gateway/roster.py
+    pending.c  PendingCounts      vstig_hw/counters.py
     module.c   -                  vstig_hw/native.py
 
 Constants both sides use are defined once on each side and compared by tests/native/test_native_twins_named.py
@@ -139,3 +140,8 @@ class RosterTally:  # a Tally (gateway/roster.py)
     def due(self, now: float, /) -> bool: ...
     def tick(self, node: object, /) -> None: ...
     def fold(self) -> tuple[list[tuple[Any, ...]], list[int], int, int, int] | None: ...
+
+class PendingCounts:  # counters.PendingCounts: a Counters' hot counts, folded in before any read
+    counts: dict[str, int]
+    def fold(self, counters: Counters, /) -> None: ...
+    def forget(self) -> None: ...

@@ -16,6 +16,7 @@
  *   Path       path.c     vstig_hw.gateway.node.Node's delivery  (and the transports' reads)
  *   UdpPeers   peers.c    vstig_hw.transports.mavlink.UdpPeers   (a udpin link's peers)
  *   RosterTally roster.c  vstig_hw.gateway.roster.Roster's take and refuse
+ *   PendingCounts pending.c  vstig_hw.counters.Counters's hot counts, folded in before any read
  *
  * The index of the twins, by file, is vstig_hw/_vstig.pyi's docstring.
  *
@@ -70,6 +71,8 @@ typedef struct {
     PyObject *arbitration_id, *is_extended_id, *is_fd, *is_remote_frame, *is_error_frame, *data, *time, *monotonic;
     /* a python-can bus (can.BusABC), read and written by its own recv and send; a frame's time */
     PyObject *send, *recv, *timestamp;
+    /* vstig_hw.counters.Counters: its hot counts held in C (pending.c) */
+    PyObject *pending, *keep_pending;
 } vx_names_t;
 
 extern vx_names_t vx_n;

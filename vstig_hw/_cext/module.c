@@ -13,6 +13,7 @@
 #endif
 
 #include "path.h"
+#include "pending.h"
 #include "peers.h"
 #include "roster.h"
 
@@ -40,6 +41,7 @@ vx_names_t vx_n;
 #define CAN_BUS "can.bus:BusABC"
 #define TIME "time"
 #define HEARD "vstig_hw.links.link:Heard"
+#define COUNTERS "vstig_hw.counters:Counters"
 
 /* The one list of the names the data path uses: each with the declared type it belongs to (NULL: a counter). A
  * name used on two types is listed under each. */
@@ -90,6 +92,7 @@ static const struct {
     {&vx_n.send, "send", CAN_BUS}, {&vx_n.recv, "recv", CAN_BUS},
     {&vx_n.message, "message", HEARD}, {&vx_n.t, "t", HEARD}, {&vx_n.sender, "sender", HEARD},
     {&vx_n.time, "time", TIME}, {&vx_n.monotonic, "monotonic", TIME},
+    {&vx_n.pending, "pending", COUNTERS}, {&vx_n.keep_pending, "keep_pending", COUNTERS},
 };
 
 static int intern_names(void) {
@@ -399,7 +402,8 @@ PyMODINIT_FUNC PyInit__vstig(void) {
         add_type(module, &vx_SeatType, "Seat") < 0 || add_type(module, &vx_RelayType, "Relay") < 0 ||
         add_type(module, &vx_PathType, "Path") < 0 ||
         add_type(module, &vx_RosterTallyType, "RosterTally") < 0 ||
-        add_type(module, &vx_UdpPeersType, "UdpPeers") < 0)
+        add_type(module, &vx_UdpPeersType, "UdpPeers") < 0 ||
+        add_type(module, &vx_PendingCountsType, "PendingCounts") < 0)
         goto fail;
     if (PyModule_AddIntConstant(module, "KEYS", VSTIG_KEYS) < 0) goto fail;
     if ((declared = declared_names()) == NULL || PyModule_AddObject(module, "DECLARED", declared) < 0) {

@@ -98,8 +98,8 @@ static int sent_and_rest(vx_outlet_t *o, const vx_tx_t *tx, const vstig_can_fram
     PyObject *rest;
     size_t k;
     int status;
-    if (sent && (vx_count(o->port.counters, vx_n.tx, (Py_ssize_t)sent) < 0 ||
-                 vx_count(o->counters, vx_n.out, (Py_ssize_t)sent_messages) < 0))
+    if (sent && (VX_HOT(&o->port, TX, (Py_ssize_t)sent) < 0 ||
+                 VX_HOT(o, OUT, (Py_ssize_t)sent_messages) < 0))
         return -1;
     if (sent == count) return 0;
     rest = PyList_New((Py_ssize_t)(count - sent));
@@ -220,12 +220,12 @@ static int write_serial(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     len = at + (size_t)made;
     written = write(fd, start, len);
     if (written == (ssize_t)len) { /* SerialTransport._write_fd's success, then LinkWriter.submit's */
-        if (vx_count(p->counters, vx_n.tx, 1) < 0 || vx_count(p->counters, vx_n.tx_bytes, (Py_ssize_t)len) < 0 ||
-            vx_count(o->counters, vx_n.out, (Py_ssize_t)n) < 0)
+        if (VX_HOT(p, TX, 1) < 0 || VX_HOT(p, TX_BYTES, (Py_ssize_t)len) < 0 ||
+            VX_HOT(o, OUT, (Py_ssize_t)n) < 0)
             goto error;
         goto done;
     }
-    if (written > 0 && vx_count(p->counters, vx_n.tx_bytes, written) < 0) goto error;
+    if (written > 0 && VX_HOT(p, TX_BYTES, written) < 0) goto error;
     if (written < 0) written = 0; /* full, or an error its write_nowait will meet and handle */
     rest = Py_BuildValue("[y#]", (const char *)start + written, (Py_ssize_t)(len - (size_t)written));
     if (rest == NULL || writer_submit(o, rest, (Py_ssize_t)n) < 0) {
@@ -373,7 +373,7 @@ static int write_udp(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     targets = peers == Py_None ? 1 : vx_peers_live((vx_peers_t *)peers, vx_monotonic());
     if (targets == 0) { /* udpin: nobody has spoken to us lately */
         Py_DECREF(peers);
-        return vx_count(p->counters, vx_n.tx_no_peer, 1) < 0 || vx_count(o->counters, vx_n.out, (Py_ssize_t)n) < 0
+        return vx_count(p->counters, vx_n.tx_no_peer, 1) < 0 || VX_HOT(o, OUT, (Py_ssize_t)n) < 0
                ? -1 : 1;
     }
     if ((taken = take_writing(p, &lock)) <= 0) {
@@ -408,9 +408,9 @@ static int write_udp(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
         goto done;
     }
     if ((refused && vx_count(p->counters, vx_n.tx_refused, refused) < 0) ||
-        (sent && (vx_count(p->counters, vx_n.tx, 1) < 0 ||
-                  vx_count(p->counters, vx_n.tx_bytes, sent * (Py_ssize_t)len) < 0)) ||
-        vx_count(o->counters, vx_n.out, (Py_ssize_t)n) < 0)
+        (sent && (VX_HOT(p, TX, 1) < 0 ||
+                  VX_HOT(p, TX_BYTES, sent * (Py_ssize_t)len) < 0)) ||
+        VX_HOT(o, OUT, (Py_ssize_t)n) < 0)
         goto error;
     if (failed == EAGAIN || failed == EWOULDBLOCK || failed == ENOBUFS) {
         if (vx_count(p->counters, vx_n.tx_busy, 1) < 0) goto error;
@@ -661,6 +661,9 @@ static PyObject *Outlet_new(PyTypeObject *type, PyObject *args, PyObject *kwds) 
     Py_XDECREF(hold_obj);
     if (self->counters == NULL || self->port.counters == NULL || PyErr_Occurred() || note_backlog(self) < 0)
         goto fail;
+    self->pending = vx_pending_of(self->counters);
+    self->port.pending = PyErr_Occurred() ? NULL : vx_pending_of(self->port.counters);
+    if (PyErr_Occurred()) goto fail;
     if (strcmp(port, "serial") == 0) self->port.kind = VX_PORT_SERIAL;
     else if (strcmp(port, "socketcan") == 0) self->port.kind = VX_PORT_SOCKETCAN;
     else if (strcmp(port, "pythoncan") == 0) self->port.kind = VX_PORT_PYTHONCAN;
@@ -702,6 +705,8 @@ static int Outlet_traverse(vx_outlet_t *self, visitproc visit, void *arg) {
     Py_VISIT(self->held_sub);
     Py_VISIT(self->port.transport);
     Py_VISIT(self->port.counters);
+    Py_VISIT(self->pending);
+    Py_VISIT(self->port.pending);
     Py_VISIT(self->port.device);
     Py_VISIT(self->port.handle);
     return 0;
@@ -718,6 +723,8 @@ static int Outlet_clear(vx_outlet_t *self) {
     Py_CLEAR(self->held_sub);
     Py_CLEAR(self->port.transport);
     Py_CLEAR(self->port.counters);
+    Py_CLEAR(self->pending);
+    Py_CLEAR(self->port.pending);
     Py_CLEAR(self->port.device);
     Py_CLEAR(self->port.handle);
     return 0;

@@ -4,6 +4,7 @@
 
 #include "ext.h"
 #include "framing.h"
+#include "pending.h"
 #include "window.h"
 
 #define VX_LOCAL (-1L) /* the source of this gateway's own messages (fairshare.LOCAL) */
@@ -19,6 +20,7 @@ typedef struct {
     uint8_t kind;
     PyObject *transport; /* the link's transport */
     PyObject *counters;  /* its counters */
+    vx_pending_t *pending; /* their hot counts (NULL: into the dict) */
     PyObject *handle;    /* a device written here: transport.compiled_handle() (CompiledHandle), else None */
     vx_slot_t fd_slot, fresh_slot, peers_slot, writing_slot; /* its `fd`, `fresh`, `peers` and `writing` slots */
     PyObject *device;    /* SocketCAN: the bus `fd` was read from */
@@ -28,6 +30,7 @@ typedef struct {
 typedef struct {
     PyObject_HEAD
     PyObject *link, *counters, *writer, *queue; /* the Link, its counters, its LinkWriter, the fair share's lines */
+    vx_pending_t *pending;      /* the hot counts of `counters` (NULL: into the dict) */
     vx_window_t *window;
     PyObject *encoder;          /* an Encoder, or NULL: Link.units_of */
     PyObject *not_queued;       /* the counter of a message the lines did not take */

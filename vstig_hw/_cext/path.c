@@ -356,7 +356,7 @@ static int arrive_batch(vx_path_t *p, Py_ssize_t index, double t, const vx_batch
             }
         }
     }
-    if (status == 0) status = vx_count(link->counters, vx_n.in, (Py_ssize_t)heard);
+    if (status == 0) status = VX_HOT(link, IN, (Py_ssize_t)heard);
     return status;
 }
 
@@ -578,7 +578,7 @@ static PyObject *pump_serial(vx_path_t *p, Py_ssize_t index, double timeout) {
     if ((ready = read_serial(link, (int)fd, timeout, &got)) < 0) return PyErr_Occurred() ? NULL : Py_NewRef(Py_None);
     if (ready == 0) return PyLong_FromLong(0);
     if ((t = wall_clock()) == -1.0 && PyErr_Occurred()) return NULL;
-    if (vx_count(link->tcounters, vx_n.rx_bytes, got) < 0 || vx_count(link->tcounters, vx_n.rx, 1) < 0) return NULL;
+    if (VX_HOT_T(link, RX_BYTES, got) < 0 || VX_HOT_T(link, RX, 1) < 0) return NULL;
     batch.kind = 1;
     batch.data = link->buf;
     batch.len = (size_t)got;
@@ -625,7 +625,7 @@ static int deliver_units(vx_path_t *p, Py_ssize_t index, const uint8_t *data, co
     Py_ssize_t i, at;
     double t;
     int done;
-    if (vx_count(p->links[index].tcounters, vx_n.rx, n) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred()))
+    if (VX_HOT_T(&p->links[index], RX, n) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred()))
         return -1;
     batch.kind = 3;
     batch.data = data;
@@ -702,7 +702,7 @@ static PyObject *pump_xbee(vx_path_t *p, Py_ssize_t index, double timeout) {
         n = xbee_cut(link, NULL, 0, 1);
     } else {
         link->last_byte = now;
-        if (vx_count(link->tcounters, vx_n.rx_bytes, got) < 0) return NULL;
+        if (VX_HOT_T(link, RX_BYTES, got) < 0) return NULL;
         n = xbee_cut(link, link->buf, (size_t)got, 0);
     }
     if (n < 0 || vx_harvest_device_drops(&link->stream->drops, link->tcounters) < 0) return NULL;
@@ -813,7 +813,7 @@ static Py_ssize_t udp_units(vx_link_t *link, vx_udp_t *udp, int got, PyObject *p
         memmove(udp->room + at, data, len);
         at += len;
     }
-    if (vx_count(link->tcounters, vx_n.rx_bytes, (Py_ssize_t)bytes) < 0 ||
+    if (VX_HOT_T(link, RX_BYTES, (Py_ssize_t)bytes) < 0 ||
         vx_count(link->tcounters, vx_n.rx_datagrams, got) < 0 ||
         vx_mav_harvest_device(&udp->cutter, link->tcounters) < 0)
         return -1;
@@ -971,7 +971,7 @@ static PyObject *pump_socketcan(vx_path_t *p, Py_ssize_t index, double timeout) 
     }
     if (n == 0) return PyLong_FromLong(0);
     if ((t = wall_clock()) == -1.0 && PyErr_Occurred()) return NULL;
-    if (vx_count(link->tcounters, vx_n.rx, (Py_ssize_t)n) < 0) return NULL;
+    if (VX_HOT_T(link, RX, (Py_ssize_t)n) < 0) return NULL;
     if (counted) {
         PyObject *done = vx_call(link->device, vx_n.note_kernel_drops, "(k)", (unsigned long)drops);
         if (done == NULL) return NULL;
@@ -1069,7 +1069,7 @@ static PyObject *pump_pythoncan(vx_path_t *p, Py_ssize_t index, double timeout) 
         Py_DECREF(frame);
     }
     if ((n = PyList_GET_SIZE(units)) > 0) {
-        if (vx_count(link->tcounters, vx_n.rx, n) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred())) goto done;
+        if (VX_HOT_T(link, RX, n) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred())) goto done;
         batch.kind = 0;
         batch.units = units;
         handled = deliver_fast(p, index, t, &batch, NULL);
@@ -1185,6 +1185,8 @@ static PyObject *Path_new(PyTypeObject *type, PyObject *args, PyObject *kwds) {
             vx_slot_resolve(&link->handle_fd, link->handle, vx_n.fd);
             vx_slot_resolve(&link->handle_peers, link->handle, vx_n.peers);
         }
+        if (link->counters != NULL && !PyErr_Occurred()) link->pending = vx_pending_of(link->counters);
+        if (link->tcounters != NULL && !PyErr_Occurred()) link->tpending = vx_pending_of(link->tcounters);
         if (link->name == NULL || link->counters == NULL || link->tcounters == NULL || PyErr_Occurred()) {
             Py_DECREF(self);
             return NULL;
@@ -1216,6 +1218,8 @@ static int Path_traverse(vx_path_t *self, visitproc visit, void *arg) {
         Py_VISIT(self->links[i].link);
         Py_VISIT(self->links[i].device);
         Py_VISIT(self->links[i].handle);
+        Py_VISIT(self->links[i].pending);
+        Py_VISIT(self->links[i].tpending);
     }
     return 0;
 }
@@ -1242,6 +1246,8 @@ static int Path_clear(vx_path_t *self) {
         Py_CLEAR(link->counters);
         Py_CLEAR(link->transport);
         Py_CLEAR(link->tcounters);
+        Py_CLEAR(link->pending);
+        Py_CLEAR(link->tpending);
         Py_CLEAR(link->device);
         Py_CLEAR(link->handle);
     }

@@ -3,6 +3,7 @@
 #define VSTIG_EXT_PATH_H
 
 #include "parts.h"
+#include "pending.h"
 
 #define VX_READ_PYTHON 0u    /* units come from the link's own read (transport.read), as Python objects */
 #define VX_READ_SERIAL 1u    /* the serial port's fd is read here */
@@ -17,6 +18,7 @@ typedef struct {
     uint8_t reads;           /* VX_READ_* */
     vx_receiver_t *receiver; /* its framing in C, or NULL: this link's units take the Python path */
     PyObject *link, *name, *counters, *transport, *tcounters;
+    vx_pending_t *pending, *tpending; /* the hot counts of `counters` and of `tcounters` (NULL: into the dict) */
     PyObject *handle;        /* a device read here: transport.compiled_handle() (CompiledHandle), else None */
     vx_slot_t handle_fd;     /* its `fd` slot */
     vx_slot_t handle_peers;  /* its `peers` slot (MAVLink over UDP) */
