@@ -134,3 +134,31 @@ def test_a_bus_that_says_it_is_off_is_lost_while_the_delivery_reads_it(compiled:
         assert transport.counters["bus_off"] >= 1 and transport.counters["lost"] >= 1
     finally:
         node.close(drain=0.0)
+
+
+_ID_SLOT = can.Message.__dict__["arbitration_id"]  # can.Message's own slot (its member descriptor)
+
+
+class _Renamed(can.Message):
+    """A frame whose class answers `arbitration_id` itself (a property over can.Message's slot): read by its name,
+    it is the frame it says it is; at can.Message's slot offset, the ID stored there."""
+
+    __slots__ = ()
+
+    @property
+    def arbitration_id(self) -> int:
+        return 0x605
+
+    @arbitration_id.setter
+    def arbitration_id(self, value: int) -> None:
+        _ID_SLOT.__set__(self, 0x7FF)  # the slot holds an ID no vstig frame has
+
+
+def test_frames_are_read_by_their_class_own_attributes_after_can_messages(compiled: ModuleType) -> None:
+    # the C reads a can.Message's fields at its slots' offsets (resolved on the first class met): a frame of
+    # another class, met after, is read by name, as the Python framing reads it
+    receiver = compiled.Receiver("can", {})
+    assert receiver.feed(_put(3)) == [Message(Op.PUT, 3, 3, 1, 5)]
+    renamed = _Renamed(arbitration_id=0, is_extended_id=False, data=_put(4).data)
+    assert _ID_SLOT.__get__(renamed) == 0x7FF
+    assert receiver.feed(renamed) == [Message(Op.PUT, 4, 4, 1, 5)]

@@ -100,6 +100,11 @@ typedef struct {
 
 /* Resolves `name` on obj's class (always succeeds: an unresolved slot falls back to the name). */
 void vx_slot_resolve(vx_slot_t *slot, PyObject *obj, PyObject *name);
+/* slots[i] for names[i] resolved on obj's class, for objects read through one set of slots (a handle, a frame): once
+ * the first resolves (a class met later reads by name where it is another), or on each new class until one does
+ * (`tried`: the last class tried, compared only). */
+void vx_slots_resolve_once(vx_slot_t *slots, PyObject *const *names, int n, PyObject *obj,
+                           const PyTypeObject **tried);
 /* obj.<name> (new reference), or NULL with an exception. */
 PyObject *vx_slot_get(const vx_slot_t *slot, PyObject *obj, PyObject *name);
 /* obj.<name> = value; 0, or -1 with an exception. */

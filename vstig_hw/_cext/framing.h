@@ -76,6 +76,12 @@ size_t vx_rx_whole(vx_rx_t *rx, const uint8_t *data, size_t len, vstig_msg_t *ou
 size_t vx_rx_frame(vx_rx_t *rx, const vstig_can_frame_t *frame, vstig_msg_t out[8], uint16_t *sender);
 /* The unit's records were taken (or none were wanted): the next unit starts afresh. */
 void vx_rx_unit_done(vx_rx_t *rx);
+/* The python-can Message attributes the compiled path reads (declared slots of can.Message). */
+typedef enum {
+    VX_CAN_ID, VX_CAN_EXTENDED, VX_CAN_FD, VX_CAN_REMOTE, VX_CAN_ERROR, VX_CAN_DATA, VX_CAN_TIMESTAMP, VX_CAN_FIELDS
+} vx_can_field_t;
+/* A python-can Message's attribute (new reference), or NULL with an exception. */
+PyObject *vx_can_field(PyObject *unit, vx_can_field_t field);
 /* A python-can Message's fields as a libvstig frame; -1 with an exception if it has none of them. */
 int vx_frame_of(PyObject *unit, vstig_can_frame_t *frame);
 /* Adds what libvstig counted to the Python framing's drops; -1 on failure. */

@@ -121,10 +121,14 @@ static PyObject *declared_names(void) {
 }
 
 PyObject *vx_live_device(PyObject *handle) {
-    PyObject *device = PyObject_GetAttr(handle, vx_n.device), *outage;
+    static vx_slot_t slots[2]; /* CompiledHandle's `device` and `outage` */
+    static const PyTypeObject *tried;
+    PyObject *const names[2] = {vx_n.device, vx_n.outage}, *device, *outage;
     int recovering;
+    vx_slots_resolve_once(slots, names, 2, handle, &tried);
+    device = vx_slot_get(&slots[0], handle, vx_n.device);
     if (device == NULL || device == Py_None) return device;
-    outage = PyObject_GetAttr(handle, vx_n.outage);
+    outage = vx_slot_get(&slots[1], handle, vx_n.outage);
     recovering = outage == NULL ? -1 : PyObject_IsTrue(outage);
     Py_XDECREF(outage);
     if (recovering == 0) return device;
@@ -197,6 +201,14 @@ void vx_slot_resolve(vx_slot_t *slot, PyObject *obj, PyObject *name) {
         slot->offset = ((PyMemberDescrObject *)descr)->d_member->offset;
     }
     Py_DECREF(descr);
+}
+
+void vx_slots_resolve_once(vx_slot_t *slots, PyObject *const *names, int n, PyObject *obj,
+                           const PyTypeObject **tried) {
+    int i;
+    if (slots[0].offset != 0 || Py_TYPE(obj) == *tried) return;
+    *tried = Py_TYPE(obj);
+    for (i = 0; i < n; i++) vx_slot_resolve(&slots[i], obj, names[i]);
 }
 
 PyObject *vx_slot_get(const vx_slot_t *slot, PyObject *obj, PyObject *name) {

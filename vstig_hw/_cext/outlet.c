@@ -140,9 +140,9 @@ static int write_pythoncan(vx_outlet_t *o, const vstig_msg_t *msgs, size_t n) {
     base = n / count;
     extra = n % count; /* LinkWriter.submit's spread: unit i carries base + (i < extra) */
     for (; i < count; i++) {
-        PyObject *unit = vx_frame_unit(tx, &frames[i]), *done;
+        PyObject *unit = vx_frame_unit(tx, &frames[i]), *done, *call[3] = {bus, unit, zero};
         if (unit == NULL) goto error;
-        done = PyObject_CallMethodObjArgs(bus, vx_n.send, unit, zero, NULL);
+        done = PyObject_VectorcallMethod(vx_n.send, call, 3, NULL);
         Py_DECREF(unit);
         if (done == NULL) {
             if (!PyErr_ExceptionMatches(PyExc_Exception)) goto error;

@@ -1014,7 +1014,7 @@ static int took_frame(vx_link_t *link, PyObject *units, PyObject *frame) {
     PyObject *flag, *stamp;
     double age;
     int error;
-    if (PyList_Append(units, frame) < 0 || (flag = PyObject_GetAttr(frame, vx_n.is_error_frame)) == NULL) return -1;
+    if (PyList_Append(units, frame) < 0 || (flag = vx_can_field(frame, VX_CAN_ERROR)) == NULL) return -1;
     error = PyObject_IsTrue(flag);
     Py_DECREF(flag);
     if (error < 0) return -1;
@@ -1027,7 +1027,7 @@ static int took_frame(vx_link_t *link, PyObject *units, PyObject *frame) {
         if (device == Py_None) return 0; /* the transport lost the bus (bus-off) */
     }
     if (PyList_GET_SIZE(units) > DRAIN_LIMIT) return 0;
-    if ((stamp = PyObject_GetAttr(frame, vx_n.timestamp)) == NULL) return -1;
+    if ((stamp = vx_can_field(frame, VX_CAN_TIMESTAMP)) == NULL) return -1;
     age = wall_clock() - PyFloat_AsDouble(stamp);
     Py_DECREF(stamp);
     return PyErr_Occurred() ? -1 : age >= ALONE_S;
