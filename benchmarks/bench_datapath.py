@@ -195,6 +195,11 @@ while True:
     os.write(b, os.read(a, 65536))
 """
 
+# The same hop writing what it read back onto A as well: the system calls an engine makes at one message per read
+# (a serial radio gets its PUTs back, "Which links get a PUT back"), so the engine's anchor beside the bare hop.
+_ECHOING_HOP = _BARE_HOP.replace("    os.write(b, os.read(a, 65536))",
+                                 "    heard = os.read(a, 65536)\n    os.write(b, heard)\n    os.write(a, heard)")
+
 
 # The least a Python relay of cobs8 frames does: cut and check the frames (our framing), re-encode, write.
 # Beside it, the Node's own cost (threads, guard, outlets, counters) shows apart from the framing's.
@@ -290,6 +295,7 @@ _PURE = {"VSTIG_PURE": "1"}  # the bridge's pure-Python path (vstig_hw/native.py
 # extra environment): each bridge on the compiled data path, then on the pure-Python one, alternating.
 _RELAYS: dict[str, Relay] = {
     "bare": (lambda a, b: [sys.executable, "-c", _BARE_HOP, a, b], False, {}),
+    "echoing": (lambda a, b: [sys.executable, "-c", _ECHOING_HOP, a, b], True, {}),
     "floor": (lambda a, b: [sys.executable, "-c", _FRAMING_FLOOR, a, b], False, {}),
     "raw": (_raw, False, {}),
     "raw_pure": (_raw, False, _PURE),
@@ -329,6 +335,10 @@ def relay_cost() -> Iterator[Result]:
         yield Result(f"datapath.relay_{name}_ten_per_read_cpu_per_msg", ten[0] * 1e6, "us",
                      "bare pty hop CPU/msg, ten per read", bare_ten[0] * 1e6)
         yield Result(f"datapath.relay_{name}_ten_per_read_delivered", ten[3] / COUNT * 100, "%", "offered", 100.0)
+    yield Result("datapath.relay_engine_cpu_vs_echoing_hop", runs["engine"][0] * 1e6, "us",
+                 "pty hop writing back too CPU/msg", runs["echoing"][0] * 1e6)
+    yield Result("datapath.relay_echoing_hop_cpu_per_msg", runs["echoing"][0] * 1e6, "us", "bare pty hop CPU/msg",
+                 bare[0] * 1e6)
     for name, run in ((name, runs[name]) for name in ("raw", "raw_pure", "engine", "engine_pure")):
         yield Result(f"datapath.relay_{name}_cpu_per_msg", run[0] * 1e6, "us", "bare pty hop CPU/msg", bare[0] * 1e6)
         yield Result(f"datapath.relay_{name}_switches_per_msg", run[1], "switches", "bare pty hop switches/msg",
@@ -403,6 +413,8 @@ def relay_instructions() -> Iterator[Result]:
     for name in ("floor", "raw", "raw_pure", "engine", "engine_pure"):
         yield Result(f"datapath.relay_{name}_instructions_per_msg", per_msg[name], "instr", "bare pty hop instr/msg",
                      per_msg["bare"])
+    yield Result("datapath.relay_engine_instructions_vs_echoing_hop", per_msg["engine"], "instr",
+                 "pty hop writing back too instr/msg", per_msg["echoing"])
     for name in ("raw", "engine"):
         yield Result(f"datapath.relay_{name}_instructions_vs_framing_floor", per_msg[name], "instr",
                      "Python cobs8 relay without a Node instr/msg", per_msg["floor"])
