@@ -162,3 +162,47 @@ def test_frames_are_read_by_their_class_own_attributes_after_can_messages(compil
     renamed = _Renamed(arbitration_id=0, is_extended_id=False, data=_put(4).data)
     assert _ID_SLOT.__get__(renamed) == 0x7FF
     assert receiver.feed(renamed) == [Message(Op.PUT, 4, 4, 1, 5)]
+
+
+class _Slow(VirtualBus):
+    """A virtual bus whose recv hands each frame over 2 ms after it came (an adapter's driver thread, a loaded
+    machine), and notes every recv(0) that found nothing."""
+
+    empty_polls = 0
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        frame = super().recv(timeout)
+        if frame is not None:
+            time.sleep(0.002)
+        elif timeout == 0:
+            _Slow.empty_polls += 1
+        return frame
+
+
+def test_the_delivery_reads_one_frame_a_recv_and_never_asks_an_empty_bus_again(compiled: ModuleType) -> None:
+    # a recv(0) that finds nothing costs python-can as much as one that finds a frame: the compiled read takes one
+    # frame a recv (a backlog: the next recv finds its frame at once), where the transport's own read (its turn
+    # each second) drains after a frame that waited, as its Python delivery wants whole batches
+    a, b = _channel(), _channel()
+    sender = can.Bus(interface="virtual", channel=a)
+    far = can.Bus(interface="virtual", channel=b)
+    node = Node([can_link("virtual", a, robot_id=200), can_link("virtual", b, robot_id=200)], 200, budget=None)
+    try:
+        node.open()
+        time.sleep(0.1)  # the transport's first turn (its look at the bus's state) is over: the reads are the C's
+        transport: Any = node.links[0].transport
+        transport.bus.__class__ = _Slow
+        _Slow.empty_polls = 0
+        for key in range(_KEYS):
+            sender.send(_put(key))
+            time.sleep(0.004)  # each frame alone: nothing waits behind it when it is read
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and node.links[1].counters["out"] < _KEYS:
+            time.sleep(0.01)
+        assert node.compiled and node.links[1].counters["out"] == _KEYS
+        assert len([frame for frame in iter(lambda: far.recv(0), None)]) == _KEYS
+        assert _Slow.empty_polls <= 1  # at most the transport's own turn's; a drain after each frame: one a frame
+    finally:
+        node.close(drain=0.0)
+        sender.shutdown()
+        far.shutdown()
