@@ -2,8 +2,8 @@
 
 Every framing, transport and link owns one; `sniff` and `bridge` show them. C twin: vstig_hw/_cext/pending.c.
 
-The compiled data path adds its hottest counts (in, out, tx, tx_bytes, rx, rx_bytes: up to nine a relayed
-message) to C integers beside the dict, `Counters.pending`, rather than into the dict (two lookups and an int
+The compiled data path adds its hottest counts (in, out, tx, tx_bytes, rx, rx_bytes, not_echoed: up to nine a
+relayed message) to C integers beside the dict, `Counters.pending`, rather than into the dict (two lookups and an int
 object a count): every read of a Counters folds them in first, so a reader never sees a count missing.
 """
 

@@ -23,10 +23,12 @@ from vstig_hw import Message, Op
 from vstig_hw.counters import Counters
 from vstig_hw.gateway import Mode, Node
 
+HOT = ("rx", "rx_bytes", "tx", "tx_bytes", "in", "out", "not_echoed")  # the names pending.c keeps
+
 # Each read sees the counts as one dict; a read that missed what is pending would see fewer.
 READS: dict[str, Callable[[Counters], dict[str, int]]] = {
-    "item": lambda c: {name: c[name] for name in ("rx", "rx_bytes", "tx", "tx_bytes", "in", "out")},
-    "get": lambda c: {name: c.get(name, 0) for name in ("rx", "rx_bytes", "tx", "tx_bytes", "in", "out")},
+    "item": lambda c: {name: c[name] for name in HOT},
+    "get": lambda c: {name: c.get(name, 0) for name in HOT},
     "items": lambda c: dict(c.items()),
     "keys and values": lambda c: dict(zip(list(c.keys()), list(c.values()), strict=True)),
     "iteration": lambda c: {name: dict.__getitem__(c, name) for name in list(c)},

@@ -391,7 +391,7 @@ static int push_where_due(vx_seat_t *s, const vstig_msg_t *out, size_t n, int co
             due[m++] = out[k];
         }
         Py_XDECREF(name);
-        if (vx_count(outlet->counters, vx_n.not_echoed, echoes) < 0 ||
+        if (VX_HOT(outlet, NOT_ECHOED, echoes) < 0 ||
             vx_outlet_push(outlet, due, m, s->source_link, s->source_sub) < 0)
             goto done;
     }

@@ -1,8 +1,8 @@
 /*
- * PendingCounts: the hot counts of one Counters (in, out, tx, tx_bytes, rx, rx_bytes), added by the compiled path
- * as C integers and folded into the dict by vstig_hw.counters.Counters before any read of it, so no reader ever
- * sees a count missing. A count into a dict is two lookups and an int object (~480 instructions); here it is one
- * add, and a radio relay makes nine a message.
+ * PendingCounts: the hot counts of one Counters (in, out, tx, tx_bytes, rx, rx_bytes, not_echoed), added by the
+ * compiled path as C integers and folded into the dict by vstig_hw.counters.Counters before any read of it, so no
+ * reader ever sees a count missing. A count into a dict is two lookups and an int object (~480 instructions); here
+ * it is one add, and a radio relay makes nine a message.
  *
  * Reference: vstig_hw/counters.py's Counters (the dict every count ends in; the pure path counts there straight).
  */
@@ -15,6 +15,7 @@ static PyObject **hot_name(vx_hot_t name) {
     case VX_HOT_TX: return &vx_n.tx;
     case VX_HOT_TX_BYTES: return &vx_n.tx_bytes;
     case VX_HOT_RX: return &vx_n.rx;
+    case VX_HOT_NOT_ECHOED: return &vx_n.not_echoed;
     default: return &vx_n.rx_bytes;
     }
 }

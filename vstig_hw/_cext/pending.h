@@ -5,7 +5,11 @@
 #include "ext.h"
 
 /* The counts added once or twice a message; every other name goes straight into the dict (vx_count). */
-typedef enum { VX_HOT_IN, VX_HOT_OUT, VX_HOT_TX, VX_HOT_TX_BYTES, VX_HOT_RX, VX_HOT_RX_BYTES, VX_HOT_NAMES } vx_hot_t;
+typedef enum {
+    VX_HOT_IN, VX_HOT_OUT, VX_HOT_TX, VX_HOT_TX_BYTES, VX_HOT_RX, VX_HOT_RX_BYTES,
+    VX_HOT_NOT_ECHOED, /* an engine's copy kept off the one-domain link it came from: once a message on CAN */
+    VX_HOT_NAMES
+} vx_hot_t;
 
 typedef struct {
     PyObject_HEAD
