@@ -36,6 +36,7 @@ MIRRORED = {
     ("path.h", "VX_READ_UDP"): "vstig_hw.gateway.compiled:READS_UDP",
     ("path.h", "VX_READ_PYTHONCAN"): "vstig_hw.gateway.compiled:READS_PYTHONCAN",
     ("path.c", "STATE_POLL_S"): "vstig_hw.transports.can:_STATE_POLL_S",
+    ("path.c", "ALONE_S"): "vstig_hw.transports.can:_ALONE_S",
     ("path.c", "DATAGRAMS_PER_READ"): "vstig_hw.transports.mavlink:_DATAGRAMS_PER_READ",
     ("path.c", "DATAGRAM"): "vstig_hw.transports.mavlink:_DATAGRAM",
     ("mavlink.h", "VX_STREAMS_KEPT"): "vstig_hw.framing.mavlink:STREAMS_KEPT",

@@ -41,6 +41,7 @@
 #define DRAIN_LIMIT 512 /* CAN frames one read takes after the first (CanTransport's _DRAIN_LIMIT) */
 #define POLL_COUNTS_S 1.0 /* how often a SocketCAN bus's own drop counts are polled (socketcan_drops) */
 #define STATE_POLL_S 1.0  /* how often a python-can bus's read is the transport's (CanTransport's _STATE_POLL_S) */
+#define ALONE_S 0.001     /* a frame read within this of its timestamp ends the read (CanTransport's _ALONE_S) */
 #define DATAGRAMS_PER_READ 64 /* datagrams one UDP read takes at most (MavlinkUdpTransport's _DATAGRAMS_PER_READ) */
 #define DATAGRAM 65535        /* bytes a datagram read takes at most (its _DATAGRAM) */
 
@@ -1006,32 +1007,44 @@ static PyObject *pump_socketcan(vx_path_t *p, Py_ssize_t index, double timeout) 
 }
 #endif
 
-/* One frame a python-can bus's recv returned, as CanTransport._read_device takes it: an error frame goes to the
- * transport's own look (counted; a bus-off ends the device). 0, or -1 with an exception. */
-static int took_frame(vx_link_t *link, PyObject *frame) {
-    PyObject *flag = vx_can_field(frame, VX_CAN_ERROR), *done;
-    int error = flag == NULL ? -1 : PyObject_IsTrue(flag);
-    Py_XDECREF(flag);
-    if (error <= 0) return error;
-    done = PyObject_CallMethodOneArg(link->transport, vx_n.note_error_frame, frame);
-    Py_XDECREF(done);
-    return done == NULL ? -1 : 0;
+/* One frame a python-can bus's recv returned, into `units`, as CanTransport._read_device takes it (an error frame
+ * to the transport's own look): 1 when the bus may hold more (the frame waited longer than ALONE_S), 0 when the
+ * read ends there, -1 with an exception. */
+static int took_frame(vx_link_t *link, PyObject *units, PyObject *frame) {
+    PyObject *flag, *stamp;
+    double age;
+    int error;
+    if (PyList_Append(units, frame) < 0 || (flag = vx_can_field(frame, VX_CAN_ERROR)) == NULL) return -1;
+    error = PyObject_IsTrue(flag);
+    Py_DECREF(flag);
+    if (error < 0) return -1;
+    if (error) {
+        PyObject *done = PyObject_CallMethodOneArg(link->transport, vx_n.note_error_frame, frame), *device;
+        if (done == NULL) return -1;
+        Py_DECREF(done);
+        if ((device = PyObject_GetAttr(link->handle, vx_n.device)) == NULL) return -1;
+        Py_DECREF(device);
+        if (device == Py_None) return 0; /* the transport lost the bus (bus-off) */
+    }
+    if (PyList_GET_SIZE(units) > DRAIN_LIMIT) return 0;
+    if ((stamp = vx_can_field(frame, VX_CAN_TIMESTAMP)) == NULL) return -1;
+    age = wall_clock() - PyFloat_AsDouble(stamp);
+    Py_DECREF(stamp);
+    return PyErr_Occurred() ? -1 : age >= ALONE_S;
 }
 
 /* CanTransport's read of a python-can bus that is not SocketCAN (slcan, PCAN, Kvaser, Vector, virtual...), here:
- * one frame a call, by the bus's own recv(timeout), delivered with no Python of ours around it. A backlog is read
- * by the next calls, each of which finds its frame at once: no recv(0) asks whether more wait, which costs
- * python-can as much as a frame when none does, while what a delivery costs a batch rather than a frame (the
- * Node's lock, the spread) is a few percent of a frame's recv and send (DECISIONS.md, "python-can buses that are
- * not SocketCAN"). The transport's own read takes the turn (None) while it holds no bus or an outage to end, every
- * STATE_POLL_S (its look at the bus's state), and once python-can raised: it meets the same, and handles it as its
- * own. */
+ * the bus's own recv(timeout), then recv(0) while the frame read had waited (took_frame), the batch delivered with
+ * no Python of ours around it. The transport's own read takes the turn (None) while it holds no bus or an outage
+ * to end, every STATE_POLL_S (its look at the bus's state), and once python-can raised (after what was read before
+ * is delivered): it meets the same, and handles it as its own. */
 static PyObject *pump_pythoncan(vx_path_t *p, Py_ssize_t index, double timeout) {
     vx_link_t *link = &p->links[index];
-    PyObject *bus, *units = NULL, *wait, *frame = NULL, *result = NULL;
+    PyObject *bus, *units = NULL, *wait = NULL, *zero = NULL, *frame, *result = NULL;
+    Py_ssize_t n;
     double now, t;
     vx_batch_t batch;
-    int handled;
+    int handled, failed;
     if (!p->fast) return Py_NewRef(Py_None); /* a listener wants each unit: the transport's read, Python's delivery */
     if ((now = monotonic()) == -1.0 && PyErr_Occurred()) return NULL;
     if (now - link->polled >= STATE_POLL_S) {
@@ -1039,32 +1052,35 @@ static PyObject *pump_pythoncan(vx_path_t *p, Py_ssize_t index, double timeout) 
         return Py_NewRef(Py_None);
     }
     if ((bus = vx_live_device(link->handle)) == NULL || bus == Py_None) return bus;
-    if ((wait = PyFloat_FromDouble(timeout)) == NULL) goto done;
+    if ((units = PyList_New(0)) == NULL || (wait = PyFloat_FromDouble(timeout)) == NULL ||
+        (zero = PyFloat_FromDouble(0.0)) == NULL)
+        goto done;
     frame = PyObject_CallMethodOneArg(bus, vx_n.recv, wait);
-    Py_DECREF(wait);
-    if (frame == NULL) { /* the transport's read meets it next, and handles it */
-        if (PyErr_ExceptionMatches(PyExc_Exception)) {
-            PyErr_Clear();
-            result = Py_NewRef(Py_None);
-        }
-        goto done;
+    while (frame != NULL && frame != Py_None) {
+        int more = took_frame(link, units, frame);
+        Py_DECREF(frame);
+        if (more < 0) goto done;
+        frame = more ? PyObject_CallMethodOneArg(bus, vx_n.recv, zero) : Py_NewRef(Py_None);
     }
-    if (frame == Py_None) {
-        result = PyLong_FromLong(0);
-        goto done;
+    if ((failed = frame == NULL)) { /* the transport's read meets it next, and handles it */
+        if (!PyErr_ExceptionMatches(PyExc_Exception)) goto done;
+        PyErr_Clear();
+    } else {
+        Py_DECREF(frame);
     }
-    if (took_frame(link, frame) < 0 || (units = PyList_New(1)) == NULL) goto done;
-    PyList_SET_ITEM(units, 0, Py_NewRef(frame));
-    if (VX_HOT_T(link, RX, 1) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred())) goto done;
-    batch.kind = 0;
-    batch.units = units;
-    handled = deliver_fast(p, index, t, &batch, NULL);
-    if (handled < 0 || (handled == 0 && deliver_slow(p, index, t, units) < 0)) goto done;
-    result = PyLong_FromLong(1);
+    if ((n = PyList_GET_SIZE(units)) > 0) {
+        if (VX_HOT_T(link, RX, n) < 0 || ((t = wall_clock()) == -1.0 && PyErr_Occurred())) goto done;
+        batch.kind = 0;
+        batch.units = units;
+        handled = deliver_fast(p, index, t, &batch, NULL);
+        if (handled < 0 || (handled == 0 && deliver_slow(p, index, t, units) < 0)) goto done;
+    }
+    result = failed ? Py_NewRef(Py_None) : PyLong_FromSsize_t(n);
 done:
     Py_DECREF(bus);
-    Py_XDECREF(frame);
     Py_XDECREF(units);
+    Py_XDECREF(wait);
+    Py_XDECREF(zero);
     return result;
 }
 

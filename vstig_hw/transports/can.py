@@ -47,10 +47,8 @@ _CAN_ERR_BUSOFF = 0x40
 _DRAIN_LIMIT = 512  # frames taken per read() after the first, so one busy bus cannot starve the loop
 # A frame read within this long of its arrival (its timestamp) had most likely nothing queued behind it: the read
 # ends there rather than ask once more (a python-can recv(0) that finds nothing costs as much as one that finds a
-# frame). A frame that waited longer drains the queue, one batch for Python's delivery, which costs more a batch
-# than python-can's recv a frame; a bus whose timestamps are on another clock drains always or never, and either
-# way every frame is read (the next read takes what came since). The compiled read (path.c) takes one frame a
-# recv: there a batch costs a few percent of a frame's recv and send.
+# frame). A frame that waited longer drains the queue; a bus whose timestamps are on another clock drains always
+# or never, and either way every frame is read (the next read takes what came since).
 _ALONE_S = 0.001
 _STATE_POLL_S = 1.0  # how often to ask interfaces that report it (pcan, kvaser...) for bus-off
 # Send failures that mean "the bus is busy", not "the device is gone".
