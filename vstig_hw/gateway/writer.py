@@ -68,6 +68,7 @@ class LinkWriter:
         self._queued = 0  # messages in _queue
         self._rest: tuple[Any, int] | None = None  # the tail of a unit the loop began
         self._busy = False  # the thread is in a device write
+        self._writing = 0  # messages the unit in that write carries: they still wait for the device
         # Nothing queued or being written: the loop's write goes straight to the device (the compiled outlets
         # look at this alone). Changed only under the lock, in one step, so it is never True while a unit waits.
         self.idle = True
@@ -107,10 +108,10 @@ class LinkWriter:
 
     def room(self) -> int:
         """How many more messages the outlet may hand over now (at most `hold` wait for the device)."""
-        if not self._queued and self._rest is None:  # holds nothing (only this caller adds; the thread takes away)
+        if not (self._queued or self._writing) and self._rest is None:  # holds nothing (only this caller adds)
             return self.hold
         with self._lock:  # as the writer's thread looks at `_full` after each write: no wake-up lost between
-            held = self._queued if self._rest is None else self._queued + self._rest[1]
+            held = self._queued + self._writing + (0 if self._rest is None else self._rest[1])
             room = self.hold - held
             if room <= 0:
                 self._full = True
@@ -186,10 +187,15 @@ class LinkWriter:
             with cond:
                 while not self._queue and self._rest is None and not self._closing:
                     cond.wait()
+                # a unit is counted as in the write before it leaves the queue: `room` reads without the lock
                 if self._rest is not None:
-                    (unit, count), self._rest = self._rest, None
+                    unit, count = self._rest
+                    self._writing = count
+                    self._rest = None
                 elif self._queue:
-                    unit, count = self._queue.popleft()
+                    unit, count = self._queue[0]
+                    self._writing = count
+                    self._queue.popleft()
                     self._queued -= count
                 else:
                     return  # closing, and nothing left
@@ -202,6 +208,7 @@ class LinkWriter:
                 self.link.counters["out"] += count
             with cond:
                 self._busy = False
+                self._writing = 0
                 room_again = self._full and self._queued < self.hold
                 if room_again:
                     self._full = False
