@@ -3,7 +3,7 @@
     many    open N connections with foxglove.sdk.v1, each subscribing to channels 1-4 and then never reading,
             print `opened N`, and hold them until stdin closes
     garbage open one connection and send N invalid messages quoting newlines, ANSI and OSC escape sequences
-            (as text frames and as binary ones), print `sent N`
+            (as text frames and as binary ones), reading what the server answers, print `sent N`
 
 Frames are written by hand (a client masks each frame, RFC 6455 5.3), so N connections cost one socket each.
 """
@@ -18,6 +18,7 @@ import resource
 import socket
 import struct
 import sys
+import threading
 import time
 
 EVIL = "\n\x1b[31mRED\x1b]0;pwned\x07\r\nfake: line\x1b[2J"
@@ -61,8 +62,17 @@ def many(host: str, port: int, count: int) -> None:
     sys.stdin.read()
 
 
+def _read_all(sock: socket.socket) -> None:
+    with contextlib.suppress(OSError):
+        while sock.recv(65536):
+            pass
+
+
 def garbage(host: str, port: int, count: int) -> None:
     sock = _connect(host, port)
+    # it reads the server's answers (a status for each invalid message), as a viewer does: one that never reads
+    # is `many`'s attack, and the server lets it go once its answers pile up (a reset here, now and then)
+    threading.Thread(target=_read_all, args=(sock,), daemon=True).start()
     sent = 0
     for i in range(count):
         message = [json.dumps({"op": EVIL + str(i)}).encode(), (EVIL + "not json").encode()][i % 2]
