@@ -16,6 +16,7 @@ static PyObject **hot_name(vx_hot_t name) {
     case VX_HOT_TX_BYTES: return &vx_n.tx_bytes;
     case VX_HOT_RX: return &vx_n.rx;
     case VX_HOT_NOT_ECHOED: return &vx_n.not_echoed;
+    case VX_HOT_RX_BYTES:
     default: return &vx_n.rx_bytes;
     }
 }
@@ -40,8 +41,8 @@ vx_pending_t *vx_pending_of(PyObject *counters) {
         Py_DECREF(kept);
     }
     if (!PyObject_TypeCheck(pending, &vx_PendingCountsType)) {
-        Py_DECREF(pending);
         PyErr_Format(PyExc_TypeError, "a Counters' pending must be a PendingCounts or None, got %R", pending);
+        Py_DECREF(pending);
         return NULL;
     }
     return (vx_pending_t *)pending;
