@@ -8,6 +8,11 @@
 -- table; 29-bit frames of the default base (0x18000000) through a CAN heuristic, since
 -- 2^24 extended IDs are too many to register one by one. A classic frame carries one
 -- 8-byte message; a CAN FD frame 1, 2, 3, 4, 6 or 8 of them, each shown as its own subtree.
+--
+-- Tagged units (SPEC.md 10.5) on every link here: a CAN FD frame of data length 20, XBee RF data 0xA1 || N
+-- records, a TUNNEL of payload_type 46450 with N records. Each 20-byte record (message || epoch || tag, 10.3) is
+-- a subtree with the message's fields (the same `vstig.key`... as untagged messages: a filter finds both) and
+-- `vstig.epoch`, `vstig.tag`; the tag is shown, not checked (the key is not Wireshark's).
 
 local vstig = Proto("vstig", "vstig-hw virtual stigmergy")
 
@@ -24,11 +29,14 @@ f.key = ProtoField.uint16("vstig.key", "Key", base.DEC)
 f.value = ProtoField.uint16("vstig.value", "Value", base.DEC)
 f.timestamp = ProtoField.uint16("vstig.timestamp", "Timestamp", base.DEC, nil, nil, "Lamport timestamp (0: no entry)")
 f.robot = ProtoField.uint16("vstig.robot", "Robot", base.DEC, nil, nil, "robot that wrote the value")
+f.epoch = ProtoField.uint32("vstig.epoch", "Epoch", base.DEC, nil, nil, "the entry's epoch (SPEC.md 10.4)")
+f.tag = ProtoField.bytes("vstig.tag", "Tag", base.NONE, "the writer's MAC over the entry (SPEC.md 10.2)")
 
 local e_op = ProtoExpert.new("vstig.op_mismatch", "op bit differs from the ID's op (dropped by receivers)",
     expert.group.MALFORMED, expert.severity.WARN)
-local e_len = ProtoExpert.new("vstig.bad_dlc", "length is not a whole number of 8-byte messages (dropped)",
-    expert.group.MALFORMED, expert.severity.WARN)
+local e_len = ProtoExpert.new("vstig.bad_dlc",
+    "length is neither 1, 2, 3, 4, 6 or 8 messages nor one 20-byte record (dropped)", expert.group.MALFORMED,
+    expert.severity.WARN)
 vstig.experts = { e_op, e_len }
 
 local can_id_field = Field.new("can.id")
@@ -36,7 +44,8 @@ local can_xtd_field = Field.new("can.flags.xtd")
 
 local BASE_11 = 0x600
 local BASE_29 = 0x18000000
-local VALID_LENGTHS = { [8] = true, [16] = true, [24] = true, [32] = true, [48] = true, [64] = true }
+local MESSAGE, RECORD = 8, 20  -- bytes of a message (SPEC.md 2) and of a tagged record (10.3)
+local VALID_LENGTHS = { [8] = true, [16] = true, [24] = true, [32] = true, [48] = true, [64] = true, [RECORD] = true }
 
 -- The ID fields per SPEC.md: returns base, stigmergy, op, sender (or nil if not ours).
 local function id_fields()
@@ -49,6 +58,50 @@ local function id_fields()
     end
     if bit.band(id, 0x600) ~= BASE_11 then return nil end
     return BASE_11, 0, bit.band(bit.rshift(id, 8), 1), bit.band(id, 0xFF)
+end
+
+-- One message (the 8 bytes of `m`) as a subtree of `root` over `span` (the message, or the record holding it):
+-- its fields, the sender when `link` names one (XBee, MAVLink: on CAN it is the ID's), and an expert info when its
+-- op differs from the CAN ID's `link.id_op`. Returns the subtree and a summary for the Info column.
+local function add_message(root, span, m, link)
+    local head = m(0, 2):uint()
+    local op, key = bit.rshift(head, 15), bit.band(head, 0x7FFF)
+    local value, ts, robot = m(2, 2):uint(), m(4, 2):uint(), m(6, 2):uint()
+    local label = string.format("%s key=%d value=%d ts=%d robot=%d", ops[op], key, value, ts, robot)
+    local sub = root:add(vstig, span, label)
+    if link.sender then sub:add(link.sender_field, link.sender):set_generated() end
+    sub:add(f.op, m(0, 1), op)
+    sub:add(f.key, m(0, 2), key)
+    sub:add(f.value, m(2, 2))
+    sub:add(f.timestamp, m(4, 2))
+    sub:add(f.robot, m(6, 2))
+    if link.id_op and op ~= link.id_op then sub:add_proto_expert_info(e_op) end
+    return sub, string.format("%s k=%d v=%d ts=%d r=%d", ops[op], key, value, ts, robot)
+end
+
+-- One record (20 bytes: message || epoch || tag): its message's subtree, with the epoch and the tag added.
+local function add_record(root, r, link)
+    local sub, info = add_message(root, r, r(0, MESSAGE), link)
+    local epoch, tag = r(8, 4), r(12, 8)
+    sub:add(f.epoch, epoch)
+    sub:add(f.tag, tag):append_text(" (not checked: the key is not Wireshark's)")
+    sub:append_text(string.format(" epoch=%d tag=%s", epoch:uint(), tag:bytes():tohex(true)))
+    return info .. " e=" .. epoch:uint()
+end
+
+-- `count` messages (or records, when `tagged`) back to back from `offset` of `data`; a summary for the Info column.
+local function add_units(root, data, offset, count, tagged, link)
+    local info = {}
+    for i = 0, count - 1 do
+        if tagged then
+            info[#info + 1] = add_record(root, data(offset + i * RECORD, RECORD), link)
+        else
+            local m = data(offset + i * MESSAGE, MESSAGE)
+            local _, text = add_message(root, m, m, link)
+            info[#info + 1] = text
+        end
+    end
+    return table.concat(info, "; ")
 end
 
 local function dissect(tvb, pinfo, tree, base_, stigmergy, id_op, sender)
@@ -64,25 +117,11 @@ local function dissect(tvb, pinfo, tree, base_, stigmergy, id_op, sender)
         pinfo.cols.info = string.format("vstig %s from 0x%x: bad length %d", ops[id_op], sender, len)
         return len
     end
-    local n = len / 8
+    local tagged = len == RECORD  -- one record (SPEC.md 10.5); 20 is no whole number of messages
+    local n = tagged and 1 or len / MESSAGE
     root:add(f.count, n):set_generated()
-    local info = {}
-    for i = 0, n - 1 do
-        local m = tvb(i * 8, 8)
-        local head = m(0, 2):uint()
-        local op = bit.rshift(head, 15)
-        local key = bit.band(head, 0x7FFF)
-        local value, ts, robot = m(2, 2):uint(), m(4, 2):uint(), m(6, 2):uint()
-        local sub = root:add(vstig, m, string.format("%s key=%d value=%d ts=%d robot=%d", ops[op], key, value, ts, robot))
-        sub:add(f.op, m(0, 1), op)
-        sub:add(f.key, m(0, 2), key)
-        sub:add(f.value, m(2, 2))
-        sub:add(f.timestamp, m(4, 2))
-        sub:add(f.robot, m(6, 2))
-        if op ~= id_op then sub:add_proto_expert_info(e_op) end
-        info[#info + 1] = string.format("%s k=%d v=%d ts=%d r=%d", ops[op], key, value, ts, robot)
-    end
-    pinfo.cols.info = string.format("vstig from 0x%x: %s", sender, table.concat(info, "; "))
+    local info = add_units(root, tvb, 0, n, tagged, { id_op = id_op })
+    pinfo.cols.info = string.format("vstig from 0x%x: %s", sender, info)
     return len
 end
 
@@ -108,7 +147,8 @@ vstig:register_heuristic("can", heuristic)
 -- XBee API frames (SPEC.md 6.9), one per packet: what `vstig record` writes per line for an XBee link, turned into
 -- a pcap of link type USER0 (147), e.g. with text2pcap -l 147 (docs/how-to/xbee.md). API mode 2 frames are
 -- unescaped first (a frame whose length does not match its size as it stands). Receive Packets (0x90) and
--- Transmit Requests (0x10) carry N messages each; the 64-bit source of a 0x90 is the sender (vstig.xbee_sender).
+-- Transmit Requests (0x10) carry N messages each, or 0xA1 and N records (SPEC.md 10.5: never 8*N bytes); the 64-bit
+-- source of a 0x90 is the sender (vstig.xbee_sender).
 
 local xbee = Proto("vstig_xbee", "XBee API frame (vstig-hw)")
 
@@ -124,15 +164,19 @@ xf.dest = ProtoField.uint64("vstig_xbee.dest", "64-bit destination", base.HEX)
 xf.source = ProtoField.uint64("vstig_xbee.source", "64-bit source", base.HEX)
 xf.options = ProtoField.uint8("vstig_xbee.options", "Options", base.HEX)
 xf.checksum = ProtoField.uint8("vstig_xbee.checksum", "Checksum", base.HEX)
+xf.marker = ProtoField.uint8("vstig_xbee.tagged_marker", "Tagged batch marker", base.HEX)
 f.xbee_sender = ProtoField.uint64("vstig.xbee_sender", "Sender (XBee 64-bit source)", base.HEX)
 
 local e_sum = ProtoExpert.new("vstig_xbee.checksum_bad", "frame data and checksum do not sum to 0xFF (dropped)",
     expert.group.CHECKSUM, expert.severity.WARN)
 local e_xlen = ProtoExpert.new("vstig_xbee.bad_length", "RF data is not a whole number of 8-byte messages (dropped)",
     expert.group.MALFORMED, expert.severity.WARN)
+local e_xtag = ProtoExpert.new("vstig_xbee.bad_tagged_length",
+    "RF data 0xA1 is not followed by whole 20-byte records (dropped)", expert.group.MALFORMED, expert.severity.WARN)
 local e_frame = ProtoExpert.new("vstig_xbee.not_a_frame", "not one whole API frame (dropped)",
     expert.group.MALFORMED, expert.severity.WARN)
-xbee.experts = { e_sum, e_xlen, e_frame }
+xbee.experts = { e_sum, e_xlen, e_xtag, e_frame }
+local BATCH_MARKER = 0xA1
 
 -- The frame with mode 2's escapes undone, as a new tvb; nil when it holds a bad escape.
 local function unescaped(tvb)
@@ -153,29 +197,21 @@ local function unescaped(tvb)
     return bytes:tvb("Unescaped frame")
 end
 
--- The messages in the RF data from `offset` of a frame's data; a summary for the Info column.
-local function messages(data, offset, root, sender, sender_field)
-    local size = data:len() - offset
-    if size == 0 or size % 8 ~= 0 then
+-- The messages, or the marker and records, in the RF data from `offset` of a frame's data; a summary for the Info
+-- column.
+local function rf_data(data, offset, root, sender)
+    local size, link = data:len() - offset, { sender = sender, sender_field = f.xbee_sender }
+    if size > 0 and size % MESSAGE == 0 then return add_units(root, data, offset, size / MESSAGE, false, link) end
+    if size == 0 or data(offset, 1):uint() ~= BATCH_MARKER then
         root:add_proto_expert_info(e_xlen)
         return "bad length " .. size
     end
-    local info = {}
-    for i = 0, size / 8 - 1 do
-        local m = data(offset + i * 8, 8)
-        local head = m(0, 2):uint()
-        local op, key = bit.rshift(head, 15), bit.band(head, 0x7FFF)
-        local value, ts, robot = m(2, 2):uint(), m(4, 2):uint(), m(6, 2):uint()
-        local sub = root:add(vstig, m, string.format("%s key=%d value=%d ts=%d robot=%d", ops[op], key, value, ts, robot))
-        if sender then sub:add(sender_field or f.xbee_sender, sender):set_generated() end
-        sub:add(f.op, m(0, 1), op)
-        sub:add(f.key, m(0, 2), key)
-        sub:add(f.value, m(2, 2))
-        sub:add(f.timestamp, m(4, 2))
-        sub:add(f.robot, m(6, 2))
-        info[#info + 1] = string.format("%s k=%d v=%d ts=%d r=%d", ops[op], key, value, ts, robot)
+    root:add(xf.marker, data(offset, 1))
+    if size == 1 or (size - 1) % RECORD ~= 0 then
+        root:add_proto_expert_info(e_xtag)
+        return "bad tagged length " .. size
     end
-    return table.concat(info, "; ")
+    return add_units(root, data, offset + 1, (size - 1) / RECORD, true, link)
 end
 
 function xbee.dissector(tvb, pinfo, tree)
@@ -208,11 +244,11 @@ function xbee.dissector(tvb, pinfo, tree)
         local source = data(1, 8):uint64()
         root:add(xf.source, data(1, 8))
         root:add(xf.options, data(11, 1))
-        pinfo.cols.info = string.format("XBee from %s: %s", source:tohex(), messages(data, 12, root, source))
+        pinfo.cols.info = string.format("XBee from %s: %s", source:tohex(), rf_data(data, 12, root, source))
     elseif kind == 0x10 and length >= 14 then
         root:add(xf.frame_id, data(1, 1))
         root:add(xf.dest, data(2, 8))
-        pinfo.cols.info = string.format("XBee to %s: %s", data(2, 8):uint64():tohex(), messages(data, 14, root, nil))
+        pinfo.cols.info = string.format("XBee to %s: %s", data(2, 8):uint64():tohex(), rf_data(data, 14, root, nil))
     else
         pinfo.cols.info = string.format("XBee %s", frame_types[kind] or string.format("frame type 0x%02X", kind))
     end
@@ -223,12 +259,12 @@ DissectorTable.get("wtap_encap"):add(wtap.USER0, xbee)
 
 -- MAVLink 2 TUNNEL messages carrying our messages (SPEC.md 6.10): one or more frames per packet, from a pcap of
 -- link type USER1 (148) made of a mavlink link's capture (text2pcap -l 148, docs/how-to/mavlink.md), or any UDP
--- datagram that starts with one (a heuristic: 0xFD, msgid 385). Our TUNNELs (payload_type 46449) show their
--- messages, the sender as sysid << 8 | compid (vstig.mavlink_sender); crc (with TUNNEL's CRC_EXTRA 147) checked,
--- a signature shown, not checked (the key is not Wireshark's).
+-- datagram that starts with one (a heuristic: 0xFD, msgid 385). Our TUNNELs (payload_type 46449; 46450: records)
+-- show their messages, the sender as sysid << 8 | compid (vstig.mavlink_sender); crc (with TUNNEL's CRC_EXTRA 147)
+-- checked, a signature's link id shown, the signature not checked (the key is not Wireshark's).
 
 local mav = Proto("vstig_mavlink", "MAVLink TUNNEL (vstig-hw)")
-local PAYLOAD_TYPE, TUNNEL = 46449, 385
+local PAYLOAD_TYPE, PAYLOAD_TYPE_TAGGED, TUNNEL = 46449, 46450, 385
 
 local mf = mav.fields
 mf.length = ProtoField.uint8("vstig_mavlink.length", "Payload length", base.DEC)
@@ -249,7 +285,9 @@ local e_mlen = ProtoExpert.new("vstig_mavlink.bad_length", "payload_length is no
     expert.group.MALFORMED, expert.severity.WARN)
 local e_cut = ProtoExpert.new("vstig_mavlink.truncated", "not a whole MAVLink 2 frame (dropped)",
     expert.group.MALFORMED, expert.severity.WARN)
-mav.experts = { e_crc, e_mlen, e_cut }
+local e_mtag = ProtoExpert.new("vstig_mavlink.bad_tagged_length",
+    "payload_length is not 1 to 6 whole 20-byte records (dropped)", expert.group.MALFORMED, expert.severity.WARN)
+mav.experts = { e_crc, e_mlen, e_mtag, e_cut }
 
 -- CRC-16/MCRF4XX (MAVLink's X.25) of tvb bytes [from, from + n), then the CRC_EXTRA byte.
 local function x25(tvb, from, n, extra)
@@ -297,14 +335,17 @@ local function mavlink_frame(tvb, at, tree)
     local ptype, carried = p(0, 2):le_uint(), p(4, 1):uint()
     root:add_le(mf.payload_type, p(0, 2))
     root:add(mf.target, p(2, 1))
-    if ptype ~= PAYLOAD_TYPE then return size, string.format("MAVLink TUNNEL payload_type %d", ptype) end
-    if carried == 0 or carried > 128 or carried % 8 ~= 0 then
-        root:add_proto_expert_info(e_mlen)
+    local tagged = ptype == PAYLOAD_TYPE_TAGGED
+    if ptype ~= PAYLOAD_TYPE and not tagged then return size, string.format("MAVLink TUNNEL payload_type %d", ptype) end
+    local unit, most = MESSAGE, 16
+    if tagged then unit, most = RECORD, 6 end
+    if carried == 0 or carried > unit * most or carried % unit ~= 0 then
+        root:add_proto_expert_info(tagged and e_mtag or e_mlen)
         return size, "MAVLink TUNNEL: bad length " .. carried
     end
-    local sender = sysid * 256 + compid
-    return size, string.format("MAVLink from %d/%d: %s", sysid, compid,
-        messages(p(0, 5 + carried):tvb(), 5, root, sender, f.mavlink_sender))
+    local link = { sender = sysid * 256 + compid, sender_field = f.mavlink_sender }
+    local info = add_units(root, p, 5, carried / unit, tagged, link)
+    return size, string.format("MAVLink from %d/%d: %s", sysid, compid, info)
 end
 
 function mav.dissector(tvb, pinfo, tree)

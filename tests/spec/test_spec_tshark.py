@@ -53,11 +53,13 @@ def _expected(frame: can.Message) -> list[str]:
             column(m.timestamp for m in msgs), column(m.robot for m in msgs)]
 
 
-def _tshark(capture: Path) -> list[list[str]]:
+def tshark_fields(capture: Path, fields: list[str]) -> list[list[str]]:
+    """The `fields` tshark shows for each packet of `capture` with our dissector, every occurrence joined by commas;
+    no Lua error allowed."""
     tshark = require_tool("tshark")
     command = [tshark, "-X", f"lua_script:{LUA}", "-r", str(capture), "-T", "fields",
                "-E", "separator=/t", "-E", "occurrence=a", "-E", "aggregator=,"]
-    for name in FIELDS:
+    for name in fields:
         command += ["-e", name]
     done = subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
     assert done.returncode == 0, done.stderr
@@ -66,7 +68,7 @@ def _tshark(capture: Path) -> list[list[str]]:
 
 
 def _compare(capture: Path, frames: list[can.Message]) -> None:
-    rows = _tshark(capture)
+    rows = tshark_fields(capture, FIELDS)
     assert len(rows) == len(frames)
     for frame, row in zip(frames, rows, strict=True):
         assert row == _expected(frame), frame
@@ -105,11 +107,9 @@ def test_malformed_frames_are_flagged(tmp_path: Path) -> None:
     with PcapWriter(path) as writer:
         for frame in frames:
             writer.on_message_received(frame)
-    tshark = require_tool("tshark")
-    done = subprocess.run([tshark, "-X", f"lua_script:{LUA}", "-r", str(path), "-T", "fields",
-                           "-e", "_ws.expert.message"], capture_output=True, text=True, timeout=120, check=True)
-    assert done.stdout.splitlines() == ["op bit differs from the ID's op (dropped by receivers)",
-                                        "length is not a whole number of 8-byte messages (dropped)"]
+    assert tshark_fields(path, ["_ws.expert.message"]) == [
+        ["op bit differs from the ID's op (dropped by receivers)"],
+        ["length is neither 1, 2, 3, 4, 6 or 8 messages nor one 20-byte record (dropped)"]]
 
 
 # -- XBee API frames (SPEC.md 6.9): one per packet of link type USER0, made by text2pcap as a user would ------------
@@ -171,20 +171,13 @@ def frames_through_tshark(tmp_path: Path, frames: list[bytes], link_type: int, f
     """Each frame one packet of `link_type` (text2pcap makes the pcap, as a user would), and the `fields` tshark
     shows for each, with every occurrence joined by commas."""
     text2pcap = require_tool("text2pcap", "wireshark-common")
-    tshark = require_tool("tshark")
     dump = tmp_path / "frames.txt"
     dump.write_text("".join("".join(f"{i:06x} {frame[i:i + 16].hex(' ')}\n" for i in range(0, len(frame), 16)) + "\n"
                             for frame in frames))
     pcap = tmp_path / "frames.pcap"
     subprocess.run([text2pcap, "-q", "-l", str(link_type), str(dump), str(pcap)], check=True, capture_output=True,
                    timeout=60)
-    command = [tshark, "-X", f"lua_script:{LUA}", "-r", str(pcap), "-T", "fields",
-               "-E", "separator=/t", "-E", "occurrence=a", "-E", "aggregator=,"]
-    for name in fields:
-        command += ["-e", name]
-    done = subprocess.run(command, capture_output=True, text=True, timeout=120, check=False)
-    assert done.returncode == 0 and "Lua" not in done.stderr and "rror" not in done.stderr, done.stderr
-    rows = [line.split("\t") for line in done.stdout.splitlines()]
+    rows = tshark_fields(pcap, fields)
     assert len(rows) == len(frames)
     return rows
 
