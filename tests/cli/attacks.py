@@ -241,4 +241,6 @@ class Bridge:
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
                  trace: TracebackType | None) -> None:
         self.stderr = stop(self.process)[1]
+        if kind is not None:  # the test failed inside: what the bridge said goes into pytest's report
+            print(f"bridge exited {self.process.returncode}; its stderr:\n{self.stderr[-4000:]}", file=sys.stderr)
 
