@@ -261,7 +261,8 @@ DissectorTable.get("wtap_encap"):add(wtap.USER0, xbee)
 -- link type USER1 (148) made of a mavlink link's capture (text2pcap -l 148, docs/how-to/mavlink.md), or any UDP
 -- datagram that starts with one (a heuristic: 0xFD, msgid 385). Our TUNNELs (payload_type 46449; 46450: records)
 -- show their messages, the sender as sysid << 8 | compid (vstig.mavlink_sender); crc (with TUNNEL's CRC_EXTRA 147)
--- checked, a signature's link id shown, the signature not checked (the key is not Wireshark's).
+-- checked; a signed frame's link id, timestamp (10 us units since 2015) and signature shown, the signature not
+-- checked (the key is not Wireshark's).
 
 local mav = Proto("vstig_mavlink", "MAVLink TUNNEL (vstig-hw)")
 local PAYLOAD_TYPE, PAYLOAD_TYPE_TAGGED, TUNNEL = 46449, 46450, 385
@@ -277,6 +278,10 @@ mf.payload_type = ProtoField.uint16("vstig_mavlink.payload_type", "TUNNEL payloa
 mf.target = ProtoField.uint8("vstig_mavlink.target_system", "Target system", base.DEC)
 mf.crc = ProtoField.uint16("vstig_mavlink.crc", "crc", base.HEX)
 mf.link_id = ProtoField.uint8("vstig_mavlink.link_id", "Signing link id", base.DEC)
+mf.sign_time = ProtoField.uint64("vstig_mavlink.signing_timestamp", "Signing timestamp", base.DEC, nil, nil,
+    "10 us units since 2015-01-01 UTC (SPEC.md 6.10.1)")
+mf.signature = ProtoField.bytes("vstig_mavlink.signature", "Signature", base.NONE,
+    "the first 6 bytes of SHA-256(key || frame || link_id || timestamp) (SPEC.md 6.10.1)")
 f.mavlink_sender = ProtoField.uint16("vstig.mavlink_sender", "Sender (sysid << 8 | compid)", base.DEC)
 
 local e_crc = ProtoExpert.new("vstig_mavlink.crc_bad", "crc does not match (dropped)", expert.group.CHECKSUM,
@@ -322,7 +327,11 @@ local function mavlink_frame(tvb, at, tree)
     root:add(mf.compid, tvb(at + 6, 1))
     root:add_le(mf.msgid, tvb(at + 7, 3))
     root:add_le(mf.crc, tvb(at + 10 + len, 2))
-    if bit.band(flags, 1) == 1 then root:add(mf.link_id, tvb(at + 12 + len, 1)) end
+    if bit.band(flags, 1) == 1 then
+        root:add(mf.link_id, tvb(at + 12 + len, 1))
+        root:add_le(mf.sign_time, tvb(at + 13 + len, 6))
+        root:add(mf.signature, tvb(at + 19 + len, 6)):append_text(" (not checked: the key is not Wireshark's)")
+    end
     if msgid ~= TUNNEL then return size, string.format("MAVLink %d/%d message %d", sysid, compid, msgid) end
     if x25(tvb, at + 1, 9 + len, 147) ~= tvb(at + 10 + len, 2):le_uint() then
         root:add_proto_expert_info(e_crc)

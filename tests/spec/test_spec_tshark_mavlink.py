@@ -12,7 +12,8 @@ from vstig_hw.framing.mavlink import PAYLOAD_TYPE, MavlinkFraming, Signing
 from vstig_hw.wire import Message, Op
 
 FIELDS = ["vstig_mavlink.sysid", "vstig_mavlink.signed", "vstig.mavlink_sender", "vstig.op", "vstig.key",
-          "vstig.value", "vstig.timestamp", "vstig.robot", "_ws.expert.message"]
+          "vstig.value", "vstig.timestamp", "vstig.robot", "_ws.expert.message", "vstig_mavlink.link_id",
+          "vstig_mavlink.signing_timestamp", "vstig_mavlink.signature"]
 
 
 class _Sink:
@@ -44,9 +45,13 @@ def _expected(frame: bytes) -> list[str]:
         expert = "payload_length is not 1 to 16 whole messages (dropped)"
     elif frame[7:10] == (385).to_bytes(3, "little") and not msgs and not framing.drops["other_payload_type"]:
         expert = "crc does not match (dropped)"
+    signing = ["", "", ""]
+    if frame[2] & 1:  # the signature block after the crc: link_id, timestamp (u48 LE), signature (SPEC.md 6.10.1)
+        block = frame[12 + frame[1]:]
+        signing = [str(block[0]), str(int.from_bytes(block[1:7], "little")), block[7:13].hex()]
     return [str(frame[5]), str(frame[2] & 1), col(sender for _ in msgs), col(int(m.op) for m in msgs),
             col(m.key for m in msgs), col(m.value for m in msgs), col(m.timestamp for m in msgs),
-            col(m.robot for m in msgs), expert]
+            col(m.robot for m in msgs), expert, *signing]
 
 
 def test_mavlink_frames_from_a_capture(tmp_path: Path) -> None:
